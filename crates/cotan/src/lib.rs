@@ -1,0 +1,1 @@
+//! Cotangent Laplacian in the reference convention, mixed-Voronoi mass, pinned sparse Cholesky.

@@ -1,0 +1,79 @@
+//! Score distillation (SDS, stage I) and Cascaded Score Distillation (stage II) for DeepFloyd IF.
+//!
+//! This crate holds the math and talks to models only through [`Denoiser`] and [`TextEmbedding`].
+//! Tensors are `f32`, NCHW, row-major.
+
+/// A dense `f32` tensor in NCHW (or any row-major) layout.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Tensor {
+    /// Shape, outermost first.
+    pub shape: Vec<usize>,
+    /// Row-major values, `shape.iter().product()` of them.
+    pub data: Vec<f32>,
+}
+
+/// A prompt embedding, e.g. T5 output `(77, 4096)`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Embedding {
+    /// `(tokens, dim)`.
+    pub shape: [usize; 2],
+    /// Row-major values.
+    pub data: Vec<f32>,
+}
+
+/// Errors from models or guidance.
+#[derive(Debug, thiserror::Error)]
+pub enum GuidanceError {
+    /// A model backend failed.
+    #[error("model error: {0}")]
+    Model(String),
+    /// Inputs are inconsistent.
+    #[error("invalid guidance input: {0}")]
+    InvalidInput(String),
+}
+
+/// One UNet stage. `sample` is `(N, C, H, W)`; `embeddings[i]` conditions sample `i`;
+/// `class_labels` is the stage-II noise level (None for stage I). Returns the model output
+/// `(N, C_out, H, W)` (IF: ε in the first 3 channels, learned variance after).
+pub trait Denoiser: Send {
+    /// Runs the UNet once on a batch.
+    fn predict(
+        &mut self,
+        sample: &Tensor,
+        timesteps: &[i64],
+        embeddings: &[&Embedding],
+        class_labels: Option<&[i64]>,
+    ) -> Result<Tensor, GuidanceError>;
+}
+
+/// Text prompt → embedding.
+pub trait TextEmbedding {
+    /// Encodes one prompt.
+    fn embed(&mut self, prompt: &str) -> Result<Embedding, GuidanceError>;
+}
+
+/// What the loop receives from a guidance evaluation.
+#[derive(Clone, Debug, Default)]
+pub struct GuidanceOutput {
+    /// Stage-I loss value (for logging; the gradient is what matters).
+    pub loss_stage1: f64,
+    /// Stage-II loss value (0 when skipped).
+    pub loss_stage2: f64,
+    /// dL/dimages, same layout and size as the input images: `(view, row, column, channel)`.
+    pub grad_images: Vec<f32>,
+}
+
+/// The seam between the loop and the semantic loss: images in `[0, 1]`, `(view, row, col, channel)`.
+pub trait Guidance: Send {
+    /// Evaluates the loss and its image gradient. `stage2_weight` is w_II for this iteration;
+    /// all randomness (timesteps, noise) comes from `rng`.
+    fn evaluate(
+        &mut self,
+        images: &[f32],
+        views: usize,
+        height: usize,
+        width: usize,
+        stage2_weight: f64,
+        rng: &mut dyn rand::RngCore,
+    ) -> Result<GuidanceOutput, GuidanceError>;
+}

@@ -1,0 +1,1 @@
+//! DeepFloyd IF through ONNX Runtime, behind the `csd` traits.

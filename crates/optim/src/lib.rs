@@ -1,0 +1,1 @@
+//! Adam with the reference semantics and the schedule grammar.

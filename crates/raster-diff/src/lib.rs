@@ -1,0 +1,65 @@
+//! Differentiable triangle rasterizer with the reference cameras and shading.
+//!
+//! Images are `f32` RGB in `[0, 1]`, laid out `(view, row, column, channel)` with row 0 at the top.
+
+/// One camera view and its light.
+#[derive(Clone, Debug, PartialEq)]
+pub struct View {
+    /// Camera position (world space).
+    pub eye: [f64; 3],
+    /// Point the camera looks at.
+    pub target: [f64; 3],
+    /// World up direction (+y by default).
+    pub up: [f64; 3],
+    /// Vertical field of view in degrees (90° = focal length 1, the reference's effective value).
+    pub fov_y_deg: f64,
+    /// Point light position; only its direction from the shaded point matters (no falloff).
+    pub light_pos: [f64; 3],
+}
+
+/// A batch of rendered RGB images, `(view, row, column, channel)` row-major.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Images {
+    /// Number of views.
+    pub count: usize,
+    /// Image height in pixels.
+    pub height: usize,
+    /// Image width in pixels.
+    pub width: usize,
+    /// `count * height * width * 3` values.
+    pub rgb: Vec<f32>,
+}
+
+/// Errors from rendering.
+#[derive(Debug, thiserror::Error)]
+pub enum RenderError {
+    /// The inputs are inconsistent (for example a face index out of range).
+    #[error("invalid render input: {0}")]
+    InvalidInput(String),
+    /// `backward` was called before any `render`.
+    #[error("backward called without a preceding render")]
+    NoForwardState,
+    /// A GPU backend failed.
+    #[error("GPU backend error: {0}")]
+    Gpu(String),
+}
+
+/// The seam between the optimization loop and a rendering backend.
+///
+/// `backward` is the vector-Jacobian product of the **most recent** `render` call: it may be
+/// called several times for one render (the loop takes two Adam steps per render batch).
+pub trait Renderer: Send {
+    /// Backend name for logs ("cpu", "wgpu (lavapipe)", …).
+    fn name(&self) -> String;
+    /// Renders `views` of the mesh at `width`×`height`.
+    fn render(
+        &mut self,
+        vertices: &[[f64; 3]],
+        faces: &[[u32; 3]],
+        views: &[View],
+        width: usize,
+        height: usize,
+    ) -> Result<Images, RenderError>;
+    /// Maps dL/dimages (same layout as the last render's output) to dL/dvertices.
+    fn backward(&mut self, d_images: &Images) -> Result<Vec<[f64; 3]>, RenderError>;
+}

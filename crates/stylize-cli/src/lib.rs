@@ -1,0 +1,1 @@
+//! Library side of the `stylize` command line: configuration, the loop, run directories.

@@ -1,0 +1,34 @@
+//! Dependency rules: crates that must stay light do not pull in heavy ones.
+
+use std::process::Command;
+
+/// (crate, forbidden dependencies in its normal dependency tree)
+const RULES: &[(&str, &[&str])] = &[
+    ("darap", &["wgpu", "ort", "tokenizers", "tobj", "gltf", "naga", "tokio"]),
+    ("cotan", &["wgpu", "ort", "tokenizers", "tobj", "gltf"]),
+    ("csd", &["ort", "wgpu", "tokenizers"]),
+    ("optim", &["wgpu", "ort", "faer", "tokenizers"]),
+    ("raster-diff", &["ort", "tokenizers"]),
+    ("diffusion-onnx", &["wgpu"]),
+];
+
+pub fn run() -> anyhow::Result<()> {
+    let mut violations = Vec::new();
+    for (krate, forbidden) in RULES {
+        let out = Command::new(env!("CARGO"))
+            .args(["tree", "--quiet", "--edges", "normal", "--prefix", "none", "--format", "{p}", "-p", krate])
+            .output()?;
+        anyhow::ensure!(out.status.success(), "cargo tree -p {krate} failed: {}", String::from_utf8_lossy(&out.stderr));
+        let tree = String::from_utf8_lossy(&out.stdout);
+        let names: Vec<&str> = tree.lines().filter_map(|l| l.split_whitespace().next()).collect();
+        for f in *forbidden {
+            if names.contains(f) {
+                violations.push(format!("{krate} depends on {f}"));
+            }
+        }
+        println!("{krate}: {} crates in its normal dependency tree, none forbidden: {}", names.len(), !names.iter().any(|n| forbidden.contains(n)));
+    }
+    anyhow::ensure!(violations.is_empty(), "dependency rules violated:\n  {}", violations.join("\n  "));
+    println!("check-deps: all rules hold");
+    Ok(())
+}
