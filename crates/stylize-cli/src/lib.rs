@@ -1,1 +1,4 @@
-//! Library side of the `stylize` command line: configuration, the loop, run directories.
+//! Library side of the `stylize` command line: configuration, the loop, run directories, and
+//! one module per subcommand under [`cmd`].
+
+pub mod cmd;

@@ -1,4 +1,50 @@
-fn main() {
-    eprintln!("stylize: no commands yet");
-    std::process::exit(2);
+//! `stylize`: text-guided, identity-preserving mesh stylization (Geometry in Style).
+
+use clap::{Parser, Subcommand};
+use stylize_cli::cmd;
+
+/// Text-guided, identity-preserving stylization of triangle meshes (Geometry in Style).
+#[derive(Parser, Debug)]
+#[command(name = "stylize", version, about, long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Re-apply a saved deformation (.npz) at one or several strengths λ.
+    Apply(cmd::apply::Args),
+    /// Mesh utilities (`mesh check FILE`: validation report).
+    Mesh(cmd::mesh::Args),
+    /// Render a mesh: turntable frames and a contact sheet.
+    Render(cmd::render::Args),
+    /// Precompute and cache prompt embeddings with the T5 encoder.
+    Embed(cmd::embed::Args),
+    /// Stylize one mesh (text-guided with --model, or a model-free normal style).
+    Run(cmd::run::Args),
+    /// Stylize every row of a manifest (sharded across a job array).
+    Batch(cmd::batch::Args),
+    /// Identity-preservation metrics (and CLIP similarity with a CLIP model).
+    Eval(cmd::eval::Args),
+}
+
+fn main() -> std::process::ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Apply(a) => cmd::apply::run(a),
+        Command::Mesh(a) => cmd::mesh::run(a),
+        Command::Render(a) => cmd::render::run(a),
+        Command::Embed(a) => cmd::embed::run(a),
+        Command::Run(a) => cmd::run::run(a),
+        Command::Batch(a) => cmd::batch::run(a),
+        Command::Eval(a) => cmd::eval::run(a),
+    };
+    match result {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
 }

@@ -1,0 +1,9 @@
+//! One module per `stylize` subcommand; each has `Args` (clap) and `run(Args)`.
+
+pub mod apply;
+pub mod batch;
+pub mod embed;
+pub mod eval;
+pub mod mesh;
+pub mod render;
+pub mod run;
