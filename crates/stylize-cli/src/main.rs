@@ -27,6 +27,9 @@ enum Command {
     Batch(cmd::batch::Args),
     /// Identity-preservation metrics (and CLIP similarity with a CLIP model).
     Eval(cmd::eval::Args),
+    /// Run one guidance evaluation with given noise/timesteps and dump every intermediate to .npz.
+    #[command(hide = true, name = "debug-guidance")]
+    DebugGuidance(cmd::debug_guidance::Args),
 }
 
 fn main() -> std::process::ExitCode {
@@ -39,6 +42,7 @@ fn main() -> std::process::ExitCode {
         Command::Run(a) => cmd::run::run(a),
         Command::Batch(a) => cmd::batch::run(a),
         Command::Eval(a) => cmd::eval::run(a),
+        Command::DebugGuidance(a) => cmd::debug_guidance::run(a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

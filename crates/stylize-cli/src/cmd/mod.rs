@@ -2,6 +2,7 @@
 
 pub mod apply;
 pub mod batch;
+pub mod debug_guidance;
 pub mod embed;
 pub mod eval;
 pub mod mesh;
