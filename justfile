@@ -1,0 +1,33 @@
+# Everyday commands. `just --list` shows them. (Install just with `cargo install just`.)
+
+# Stylize the bundled bunny with the model-free cube style (writes runs/demo).
+demo:
+    cargo run --release --bin stylize -- run fixtures/meshes/bunny.obj --style cube --out runs/demo
+
+# Everything CI runs: setup, fmt, clippy, tests, check-deps, gradcheck.
+test:
+    bash scripts/test.sh
+
+# Finite-difference checks of every hand-written adjoint (optionally filtered by name).
+gradcheck filter="":
+    cargo xtask gradcheck {{filter}}
+
+# Dependency rules (darap stays light).
+check-deps:
+    cargo xtask check-deps
+
+fmt:
+    cargo fmt --all
+
+lint:
+    cargo clippy --workspace --all-targets -- -D warnings
+
+# Release benchmarks (results go into docs/benchmarks.md by hand, with the machine).
+bench-darap:
+    cargo run --release -p darap --example bench
+
+bench-render:
+    cargo run --release -p raster-diff --example bench
+
+bench-csd:
+    cargo run --release -p csd --example bench

@@ -1,0 +1,14 @@
+#!/usr/bin/env bash
+# Sets up and runs every check CI runs: format, lints, tests, gradient checks, dependency rules.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bash scripts/setup.sh
+export XDG_RUNTIME_DIR="${XDG_RUNTIME_DIR:-/tmp}"   # silences Mesa's warnings under lavapipe
+
+step() { echo; echo "==> $*"; }
+step "cargo fmt --check";          cargo fmt --all -- --check
+step "cargo clippy -D warnings";   cargo clippy --workspace --all-targets --locked -- -D warnings
+step "cargo test";                 cargo test --workspace --locked
+step "cargo xtask check-deps";     cargo xtask check-deps
+step "cargo xtask gradcheck";      cargo xtask gradcheck
+echo; echo "test.sh: all checks passed"
