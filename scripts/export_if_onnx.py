@@ -1,0 +1,581 @@
+#!/usr/bin/env python3
+"""Export DeepFloyd IF (stage I UNet, stage II UNet, T5 encoder) to ONNX for `diffusion-onnx`.
+
+Two modes, one output layout (``manifest.toml`` + ``.onnx`` files, see docs/models.md):
+
+  --tiny OUT_DIR
+      Randomly initialised, seeded, *tiny* models with IF's architecture (diffusers'
+      ``UNet2DConditionModel`` configured like IF-I-XL / IF-II-L, transformers' ``T5EncoderModel``
+      configured like T5-v1.1), plus PyTorch reference inputs/outputs under ``reference/``.
+      Used as test fixtures (fixtures/models/tiny-if). No weights are downloaded.
+
+  --from-pretrained STAGE1_DIR_OR_ID OUT_DIR [--stage2 DIR_OR_ID] [--text-encoder DIR_OR_ID]
+      The real models for users who have them (DeepFloyd/IF-I-XL-v1.0, DeepFloyd/IF-II-L-v1.0;
+      the T5-v1.1-XXL encoder is the ``text_encoder`` subfolder of the stage-I repository).
+      ``--dtype fp16`` (default, as IF runs) or ``fp32``. Models over 2 GB are written with ONNX
+      external data (``<file>.onnx.data`` beside the ``.onnx``); the manifest lists those files.
+
+Every exported model is run once in ONNX Runtime and in PyTorch on the same random inputs; the
+maximum absolute difference is printed and the script fails above the tolerance
+(fp32: 1e-4 + 1e-4 * max|torch output|; fp16: 2e-2 + 2e-2 * max|torch output|).
+
+Needs: torch (CPU is enough), diffusers, transformers, onnx, onnxscript, onnxruntime, numpy, tokenizers.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+SCRIPT_DIR = Path(__file__).resolve().parent
+REPO_ROOT = SCRIPT_DIR.parent
+TOKENIZER_JSON = REPO_ROOT / "crates" / "diffusion-onnx" / "assets" / "t5_tokenizer.json"
+MAX_TOKENS = 77
+FORMAT_VERSION = 1
+
+TOLERANCE = {"fp32": (1e-4, 1e-4), "fp16": (2e-2, 2e-2)}  # (absolute, relative to max |reference|)
+
+
+# --------------------------------------------------------------------------------------------
+# wrappers: fixed positional signatures with the input names the manifest declares
+# --------------------------------------------------------------------------------------------
+
+
+def _torch():
+    import torch
+
+    return torch
+
+
+def make_wrappers():
+    torch = _torch()
+
+    class Stage1(torch.nn.Module):
+        def __init__(self, unet):
+            super().__init__()
+            self.unet = unet
+
+        def forward(self, sample, timestep, encoder_hidden_states):
+            return self.unet(sample, timestep, encoder_hidden_states=encoder_hidden_states, return_dict=False)[0]
+
+    class Stage2(torch.nn.Module):
+        def __init__(self, unet):
+            super().__init__()
+            self.unet = unet
+
+        def forward(self, sample, timestep, encoder_hidden_states, class_labels):
+            return self.unet(
+                sample,
+                timestep,
+                encoder_hidden_states=encoder_hidden_states,
+                class_labels=class_labels,
+                return_dict=False,
+            )[0]
+
+    class TextEncoder(torch.nn.Module):
+        def __init__(self, t5):
+            super().__init__()
+            self.t5 = t5
+
+        def forward(self, input_ids, attention_mask):
+            return self.t5(input_ids=input_ids, attention_mask=attention_mask).last_hidden_state
+
+    return Stage1, Stage2, TextEncoder
+
+
+# --------------------------------------------------------------------------------------------
+# tiny models with IF's architecture
+# --------------------------------------------------------------------------------------------
+
+TINY_T5 = dict(
+    vocab_size=32128,  # T5 vocabulary size (the tokenizer's 32,100 ids + 28 unused), as T5-v1.1
+    d_model=8,
+    d_kv=4,
+    d_ff=16,
+    num_layers=1,
+    num_heads=2,
+    relative_attention_num_buckets=32,
+    relative_attention_max_distance=128,
+    feed_forward_proj="gated-gelu",  # T5-v1.1
+    dropout_rate=0.0,
+    tie_word_embeddings=False,
+)
+
+
+def tiny_unet_common(text_dim: int) -> dict:
+    """Shared shape of IF's UNets, scaled down: ResNet down/up blocks, simple cross-attention,
+    text cross-attention through ``encoder_hid_dim`` (text_proj) and ``addition_embed_type="text"``."""
+    return dict(
+        down_block_types=("ResnetDownsampleBlock2D", "SimpleCrossAttnDownBlock2D"),
+        up_block_types=("SimpleCrossAttnUpBlock2D", "ResnetUpsampleBlock2D"),
+        mid_block_type="UNetMidBlock2DSimpleCrossAttn",
+        block_out_channels=(16, 32),
+        layers_per_block=1,
+        norm_num_groups=4,
+        attention_head_dim=8,
+        cross_attention_dim=32,
+        encoder_hid_dim=text_dim,
+        encoder_hid_dim_type="text_proj",
+        addition_embed_type="text",
+        addition_embed_type_num_heads=2,
+        act_fn="gelu",
+        resnet_time_scale_shift="scale_shift",
+        resnet_skip_time_act=True,
+        resnet_out_scale_factor=1.414,
+        only_cross_attention=False,
+        upcast_attention=False,
+        use_linear_projection=False,
+    )
+
+
+def build_tiny(seed: int):
+    torch = _torch()
+    from diffusers import UNet2DConditionModel
+    from transformers import T5Config, T5EncoderModel
+
+    torch.manual_seed(seed)
+    t5 = T5EncoderModel(T5Config(**TINY_T5)).eval()
+    text_dim = TINY_T5["d_model"]
+
+    torch.manual_seed(seed + 1)
+    stage1 = UNet2DConditionModel(
+        sample_size=64, in_channels=3, out_channels=6, **tiny_unet_common(text_dim)
+    ).eval()
+
+    torch.manual_seed(seed + 2)
+    stage2 = UNet2DConditionModel(
+        sample_size=256,
+        in_channels=6,
+        out_channels=6,
+        class_embed_type="timestep",  # IF-II: the noise level of the upsampled low-res image
+        **tiny_unet_common(text_dim),
+    ).eval()
+    return t5, stage1, stage2
+
+
+# --------------------------------------------------------------------------------------------
+# export + verification
+# --------------------------------------------------------------------------------------------
+
+
+def tokenize(prompts: list[str]) -> tuple[np.ndarray, np.ndarray]:
+    """T5 tokenization as the Rust side does it: lower-case + strip, 77 tokens padded/truncated."""
+    from tokenizers import Tokenizer
+
+    tok = Tokenizer.from_file(str(TOKENIZER_JSON))
+    ids = np.zeros((len(prompts), MAX_TOKENS), dtype=np.int64)
+    mask = np.zeros((len(prompts), MAX_TOKENS), dtype=np.int64)
+    for i, p in enumerate(prompts):
+        enc = tok.encode(p.lower().strip()).ids[:MAX_TOKENS]
+        ids[i, : len(enc)] = enc
+        mask[i, : len(enc)] = 1
+    return ids, mask
+
+
+def external_files(onnx_path: Path) -> list[str]:
+    import onnx
+
+    model = onnx.load(str(onnx_path), load_external_data=False)
+    files: set[str] = set()
+    for t in model.graph.initializer:
+        if t.data_location == onnx.TensorProto.EXTERNAL:
+            for kv in t.external_data:
+                if kv.key == "location":
+                    files.add(kv.value)
+    return sorted(files)
+
+
+def strip_debug_info(path: Path):
+    """Drop the exporter's per-node stack traces and metadata (more than half of a tiny model's bytes).
+    Weights are untouched; external-data references are kept as they are."""
+    import onnx
+
+    model = onnx.load(str(path), load_external_data=False)
+
+    def strip_graph(g):
+        g.doc_string = ""
+        for node in g.node:
+            node.doc_string = ""
+            del node.metadata_props[:]
+            for attr in node.attribute:
+                if attr.type == onnx.AttributeProto.GRAPH:
+                    strip_graph(attr.g)
+                elif attr.type == onnx.AttributeProto.GRAPHS:
+                    for sub in attr.graphs:
+                        strip_graph(sub)
+        for vi in list(g.value_info):
+            del vi.metadata_props[:]
+        for t in g.initializer:
+            del t.metadata_props[:]
+
+    strip_graph(model.graph)
+    del model.metadata_props[:]
+    onnx.save(model, str(path))
+
+
+def export_module(module, args: tuple, names_in: list[str], name_out: str, path: Path, dynamic: dict, big: bool):
+    torch = _torch()
+
+    dyn = {}
+    for name, axes in dynamic.items():
+        dyn[name] = {ax: torch.export.Dim.DYNAMIC for ax in axes}
+    with torch.no_grad():
+        torch.onnx.export(
+            module,
+            args,
+            str(path),
+            input_names=names_in,
+            output_names=[name_out],
+            dynamic_shapes=dyn,
+            dynamo=True,
+            external_data=big,
+            opset_version=18,
+        )
+    strip_debug_info(path)
+    # The dynamo exporter may leave an empty external-data file next to a small model: drop it.
+    data = path.with_name(path.name + ".data")
+    if not big and data.exists():
+        if external_files(path):
+            raise RuntimeError(f"{path} references external data although it is small")
+        data.unlink()
+
+
+def verify(path: Path, module, feeds: dict[str, np.ndarray], dtype: str, label: str) -> np.ndarray:
+    torch = _torch()
+    import onnxruntime as ort
+
+    sess = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    got = sess.run(None, feeds)[0]
+    with torch.no_grad():
+        ref = module(*[torch.from_numpy(v) for v in feeds.values()]).float().numpy()
+    got32 = got.astype(np.float32)
+    err = float(np.max(np.abs(got32 - ref)))
+    scale = float(np.max(np.abs(ref)))
+    atol, rtol = TOLERANCE[dtype]
+    tol = atol + rtol * scale
+    print(f"[verify] {label}: max |onnx - torch| = {err:.3e} (max |torch| = {scale:.3e}, tolerance {tol:.3e})")
+    if not np.isfinite(got32).all() or err > tol:
+        raise SystemExit(f"error: {label} disagrees with PyTorch beyond tolerance")
+    return ref
+
+
+@dataclass
+class StageSpec:
+    key: str
+    file: str
+    in_channels: int
+    out_channels: int
+    sample_size: int
+    class_labels: bool
+    external: list[str] = field(default_factory=list)
+
+
+def scheduler_toml(cfg: dict) -> str:
+    keep = [
+        "num_train_timesteps",
+        "beta_schedule",
+        "beta_start",
+        "beta_end",
+        "variance_type",
+        "prediction_type",
+        "clip_sample",
+        "thresholding",
+    ]
+    lines = [f'name = "{cfg.get("_class_name", "DDPMScheduler")}"']
+    for k in keep:
+        if k in cfg and cfg[k] is not None:
+            v = cfg[k]
+            lines.append(f"{k} = {json.dumps(v) if not isinstance(v, bool) else str(v).lower()}")
+    return "\n".join(lines)
+
+
+DEFAULT_SCHEDULER = {
+    "_class_name": "DDPMScheduler",
+    "num_train_timesteps": 1000,
+    "beta_schedule": "squaredcos_cap_v2",
+    "variance_type": "learned_range",
+    "prediction_type": "epsilon",
+    "clip_sample": True,
+    "thresholding": False,
+}
+
+
+def write_manifest(
+    out: Path,
+    name: str,
+    description: str,
+    dtype: str,
+    text: dict | None,
+    stages: list[StageSpec],
+    schedulers: dict[str, dict],
+    stage2_noising: dict | None,
+):
+    lines = [
+        "# diffusion-onnx model directory manifest (see docs/models.md)",
+        f"format_version = {FORMAT_VERSION}",
+        f'name = "{name}"',
+        f"description = {json.dumps(description)}",
+        "",
+    ]
+    if text is not None:
+        lines += [
+            "[text_encoder]",
+            f'file = "{text["file"]}"',
+            f"external_data = {json.dumps(text['external'])}",
+            f'dtype = "{dtype}"',
+            f"max_tokens = {MAX_TOKENS}",
+            f"embedding_dim = {text['dim']}",
+            'tokenizer = "builtin:t5"',
+            'input_ids = "input_ids"',
+            'attention_mask = "attention_mask"',
+            'output = "last_hidden_state"',
+            "",
+        ]
+    lines += [
+        "[embeddings]",
+        f"dim = {text['dim'] if text else 4096}",
+        f"tokens = {MAX_TOKENS}",
+    ]
+    if text is not None and text.get("uncond"):
+        lines.append(f'uncond = "{text["uncond"]}"')
+    else:
+        lines.append('uncond = "builtin:if-t5-v1_1-xxl-empty"')
+    lines.append("")
+    for s in stages:
+        lines += [
+            f"[{s.key}]",
+            f'file = "{s.file}"',
+            f"external_data = {json.dumps(s.external)}",
+            f'dtype = "{dtype}"',
+            f"in_channels = {s.in_channels}",
+            f"out_channels = {s.out_channels}",
+            f"sample_size = {s.sample_size}",
+            'sample = "sample"',
+            'timestep = "timestep"',
+            'encoder_hidden_states = "encoder_hidden_states"',
+        ]
+        if s.class_labels:
+            lines.append('class_labels = "class_labels"')
+        lines += ['output = "noise_pred"', "", f"[{s.key}.scheduler]", scheduler_toml(schedulers[s.key]), ""]
+        if s.class_labels and stage2_noising is not None:
+            lines += [f"[{s.key}.noising_scheduler]", scheduler_toml(stage2_noising), ""]
+    (out / "manifest.toml").write_text("\n".join(lines))
+
+
+def export_all(t5, stage1, stage2, out: Path, dtype: str, seed: int, big: bool, save_reference: bool):
+    torch = _torch()
+    Stage1, Stage2, TextEncoder = make_wrappers()
+    out.mkdir(parents=True, exist_ok=True)
+    np_dtype = np.float16 if dtype == "fp16" else np.float32
+    rng = np.random.default_rng(seed)
+    ref_dir = out / "reference"
+    if save_reference:
+        ref_dir.mkdir(exist_ok=True)
+
+    def save(name: str, arr: np.ndarray):
+        if save_reference:
+            np.save(ref_dir / f"{name}.npy", arr)
+
+    text = None
+    prompts = ["a photo of a cat", "  A Wooden CHAIR, Ornate!  "]
+    if t5 is not None:
+        text_dim = t5.config.d_model
+        enc = TextEncoder(t5).eval()
+        ids, mask = tokenize(prompts)
+        path = out / "text_encoder.onnx"
+        export_module(enc, (torch.from_numpy(ids), torch.from_numpy(mask)), ["input_ids", "attention_mask"],
+                      "last_hidden_state", path, {"input_ids": [0], "attention_mask": [0]}, big)
+        emb = verify(path, enc, {"input_ids": ids, "attention_mask": mask}, dtype, "text_encoder")
+        text = {"file": path.name, "external": external_files(path), "dim": text_dim}
+        save("t5_input_ids", ids)
+        save("t5_attention_mask", mask)
+        save("t5_last_hidden_state", emb.astype(np.float32))
+        # The unconditional embedding: this encoder's output for the empty prompt. The real
+        # T5-v1.1-XXL (dim 4096) uses IF's own shipped empty-prompt vector instead (builtin).
+        if save_reference or text_dim != 4096:
+            e_ids, e_mask = tokenize([""])
+            with torch.no_grad():
+                uncond = enc(torch.from_numpy(e_ids), torch.from_numpy(e_mask))[0].float().numpy()
+            np.save(out / "uncond_embedding.npy", uncond.astype(np.float32 if dtype == "fp32" else np.float16))
+            text["uncond"] = "uncond_embedding.npy"
+    else:
+        text_dim = stage1.config.encoder_hid_dim
+
+    # Conditioning for the UNet checks: the reference prompt embeddings when available.
+    if t5 is not None:
+        cond = emb.astype(np_dtype)
+    else:
+        cond = rng.standard_normal((2, MAX_TOKENS, text_dim)).astype(np_dtype)
+
+    stages = []
+    check_px = 64  # spatial size of the verification/reference batch (both UNets take any multiple of 4)
+    for key, unet, wrapper, in_ch, has_class in (
+        ("stage1", stage1, Stage1, 3, False),
+        ("stage2", stage2, Stage2, 6, True),
+    ):
+        mod = wrapper(unet).eval()
+        sample = rng.standard_normal((2, in_ch, check_px, check_px)).astype(np_dtype)
+        timestep = np.array([20, 980], dtype=np.int64)
+        feeds = {"sample": sample, "timestep": timestep, "encoder_hidden_states": cond}
+        args = [torch.from_numpy(sample), torch.from_numpy(timestep), torch.from_numpy(cond)]
+        names = ["sample", "timestep", "encoder_hidden_states"]
+        dyn = {"sample": [0, 2, 3], "timestep": [0], "encoder_hidden_states": [0]}
+        if has_class:
+            labels = np.array([250, 0], dtype=np.int64)
+            feeds["class_labels"] = labels
+            args.append(torch.from_numpy(labels))
+            names.append("class_labels")
+            dyn["class_labels"] = [0]
+        path = out / f"unet_{key}.onnx"
+        export_module(mod, tuple(args), names, "noise_pred", path, dyn, big)
+        ref = verify(path, mod, feeds, dtype, f"unet_{key}")
+        for n, v in feeds.items():
+            save(f"{key}_{n}", v)
+        save(f"{key}_noise_pred", ref.astype(np.float32))
+        stages.append(
+            StageSpec(key, path.name, in_ch, unet.config.out_channels, int(unet.config.sample_size), has_class,
+                      external_files(path))
+        )
+    return text, stages
+
+
+def versions() -> dict:
+    import diffusers
+    import onnx
+    import onnxruntime
+    import onnxscript
+    import torch
+    import transformers
+
+    return {
+        "torch": torch.__version__,
+        "diffusers": diffusers.__version__,
+        "transformers": transformers.__version__,
+        "onnx": onnx.__version__,
+        "onnxscript": onnxscript.__version__,
+        "onnxruntime": onnxruntime.__version__,
+        "python": sys.version.split()[0],
+    }
+
+
+def run_tiny(out: Path, seed: int):
+    t5, stage1, stage2 = build_tiny(seed)
+    text, stages = export_all(t5, stage1, stage2, out, "fp32", seed, big=False, save_reference=True)
+    schedulers = {"stage1": DEFAULT_SCHEDULER, "stage2": DEFAULT_SCHEDULER}
+    write_manifest(
+        out,
+        name=f"tiny-if-seed{seed}",
+        description="Randomly initialised tiny models with DeepFloyd IF's architecture (test fixture, not a real model)",
+        dtype="fp32",
+        text=text,
+        stages=stages,
+        schedulers=schedulers,
+        stage2_noising=DEFAULT_SCHEDULER,
+    )
+    (out / "versions.json").write_text(json.dumps({"seed": seed, **versions()}, indent=2) + "\n")
+    print(f"wrote {out}")
+
+
+def save_tiny_diffusers(out: Path, seed: int):
+    """Write the tiny models in diffusers' on-disk layout (``stage1/{unet,text_encoder,scheduler}``,
+    ``stage2/{unet,scheduler,image_noising_scheduler}``) so ``--from-pretrained`` can be exercised
+    without the real weights."""
+    from diffusers import DDPMScheduler
+
+    t5, stage1, stage2 = build_tiny(seed)
+    s1, s2 = out / "stage1", out / "stage2"
+    stage1.save_pretrained(s1 / "unet")
+    t5.save_pretrained(s1 / "text_encoder")
+    stage2.save_pretrained(s2 / "unet")
+    cfg = {k: v for k, v in DEFAULT_SCHEDULER.items() if not k.startswith("_")}
+    DDPMScheduler(**cfg).save_pretrained(s1 / "scheduler")
+    DDPMScheduler(**cfg).save_pretrained(s2 / "scheduler")
+    DDPMScheduler(**cfg).save_pretrained(s2 / "image_noising_scheduler")
+    print(f"wrote {s1} and {s2}")
+
+
+def load_scheduler_config(src: str, subfolder: str) -> dict:
+    from diffusers import DDPMScheduler
+
+    try:
+        return dict(DDPMScheduler.load_config(src, subfolder=subfolder))
+    except Exception as e:  # noqa: BLE001 - fall back, but say so
+        print(f"warning: no {subfolder} config in {src} ({e}); writing IF's documented DDPM squaredcos_cap_v2")
+        return DEFAULT_SCHEDULER
+
+
+def run_pretrained(stage1_src: str, out: Path, dtype: str, stage2_src: str, text_src: str | None, seed: int,
+                   skip_text: bool, name: str | None):
+    torch = _torch()
+    from diffusers import UNet2DConditionModel
+    from transformers import T5EncoderModel
+
+    tdtype = torch.float16 if dtype == "fp16" else torch.float32
+    stage1 = UNet2DConditionModel.from_pretrained(stage1_src, subfolder="unet", torch_dtype=tdtype).eval()
+    stage2 = UNet2DConditionModel.from_pretrained(stage2_src, subfolder="unet", torch_dtype=tdtype).eval()
+    t5 = None
+    if not skip_text:
+        if text_src is None:
+            t5 = T5EncoderModel.from_pretrained(stage1_src, subfolder="text_encoder", torch_dtype=tdtype).eval()
+        else:
+            t5 = T5EncoderModel.from_pretrained(text_src, torch_dtype=tdtype).eval()
+
+    def n_bytes(m):
+        return sum(p.numel() * p.element_size() for p in m.parameters())
+
+    big = any(m is not None and n_bytes(m) > 1.9e9 for m in (t5, stage1, stage2))
+    text, stages = export_all(t5, stage1, stage2, out, dtype, seed, big=big, save_reference=False)
+    schedulers = {
+        "stage1": load_scheduler_config(stage1_src, "scheduler"),
+        "stage2": load_scheduler_config(stage2_src, "scheduler"),
+    }
+    noising = load_scheduler_config(stage2_src, "image_noising_scheduler")
+    write_manifest(
+        out,
+        name=name or f"{Path(stage1_src).name}+{Path(stage2_src).name}-{dtype}",
+        description=f"exported from {stage1_src} and {stage2_src} ({dtype})",
+        dtype=dtype,
+        text=text,
+        stages=stages,
+        schedulers=schedulers,
+        stage2_noising=noising,
+    )
+    (out / "versions.json").write_text(json.dumps({"seed": seed, **versions()}, indent=2) + "\n")
+    print(f"wrote {out}")
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    g = p.add_mutually_exclusive_group(required=True)
+    g.add_argument("--tiny", metavar="OUT_DIR", help="write seeded random tiny IF-architecture models")
+    g.add_argument("--from-pretrained", nargs=2, metavar=("STAGE1_DIR_OR_ID", "OUT_DIR"),
+                   help="export real IF weights (diffusers layout: unet/, text_encoder/, scheduler/)")
+    g.add_argument("--save-tiny-diffusers", metavar="OUT_DIR",
+                   help="write the tiny models in diffusers' layout (to test --from-pretrained)")
+    p.add_argument("--stage2", default="DeepFloyd/IF-II-L-v1.0", help="stage-II directory or hub id")
+    p.add_argument("--text-encoder", default=None,
+                   help="T5 encoder directory or id (default: STAGE1/text_encoder)")
+    p.add_argument("--skip-text-encoder", action="store_true",
+                   help="do not export T5 (embeddings then come from `stylize embed` caches made elsewhere)")
+    p.add_argument("--dtype", choices=["fp16", "fp32"], default="fp16")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--name", default=None, help="model identity written to the manifest (embedding cache key)")
+    a = p.parse_args(argv)
+    os.environ.setdefault("HF_HUB_DISABLE_TELEMETRY", "1")
+    if a.tiny:
+        run_tiny(Path(a.tiny), a.seed)
+    elif a.save_tiny_diffusers:
+        save_tiny_diffusers(Path(a.save_tiny_diffusers), a.seed)
+    else:
+        src, out = a.from_pretrained
+        run_pretrained(src, Path(out), a.dtype, a.stage2, a.text_encoder, a.seed, a.skip_text_encoder, a.name)
+
+
+if __name__ == "__main__":
+    main()
