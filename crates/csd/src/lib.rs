@@ -2,6 +2,24 @@
 //!
 //! This crate holds the math and talks to models only through [`Denoiser`] and [`TextEmbedding`].
 //! Tensors are `f32`, NCHW, row-major.
+//!
+//! - [`schedule`]: the DDPM "squaredcos_cap_v2" schedule (ᾱ_t in `f64`), `add_noise`, w(t) = 1 − ᾱ_t,
+//!   timestep sampling and Gaussian noise from a caller's RNG.
+//! - [`resize`]: antialiased cubic and bilinear resizes as separable linear operators with exact adjoints.
+//! - [`sds`]: classifier-free guidance, the SDS gradient with NaN/∞ handling, the logged loss.
+//! - [`guidance`]: [`CascadedGuidance`] (stage-I SDS + stage-II CSD) implementing [`Guidance`], with a traced
+//!   evaluation for debugging. The full chain rule is derived in `docs/guidance.md`.
+
+pub mod guidance;
+pub mod resize;
+pub mod schedule;
+pub mod sds;
+
+pub use guidance::{
+    CascadedGuidance, GuidanceConfig, GuidanceTrace, InjectedDraws, Stage1Trace, Stage2Trace,
+};
+pub use resize::{Resize1d, Resize2d};
+pub use schedule::{NoiseSchedule, TimestepRange};
 
 /// A dense `f32` tensor in NCHW (or any row-major) layout.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -10,6 +28,29 @@ pub struct Tensor {
     pub shape: Vec<usize>,
     /// Row-major values, `shape.iter().product()` of them.
     pub data: Vec<f32>,
+}
+
+impl Tensor {
+    /// A tensor from a shape and its row-major values; an error when the counts disagree.
+    pub fn new(shape: Vec<usize>, data: Vec<f32>) -> Result<Self, GuidanceError> {
+        let expected: usize = shape.iter().product();
+        if expected != data.len() {
+            return Err(GuidanceError::InvalidInput(format!(
+                "tensor of shape {shape:?} needs {expected} values, got {}",
+                data.len()
+            )));
+        }
+        Ok(Self { shape, data })
+    }
+
+    /// A tensor of zeros.
+    pub fn zeros(shape: Vec<usize>) -> Self {
+        let n = shape.iter().product();
+        Self {
+            shape,
+            data: vec![0.0; n],
+        }
+    }
 }
 
 /// A prompt embedding, e.g. T5 output `(77, 4096)`.
@@ -55,9 +96,11 @@ pub trait TextEmbedding {
 /// What the loop receives from a guidance evaluation.
 #[derive(Clone, Debug, Default)]
 pub struct GuidanceOutput {
-    /// Stage-I loss value (for logging; the gradient is what matters).
+    /// Stage-I loss value (for logging; the gradient is what matters). [`CascadedGuidance`] reports the
+    /// weighted term `S·a·L_I` with `L_I = ½‖grad_I‖²/B`, so `loss_stage1 + loss_stage2` is the surrogate
+    /// objective whose gradient is `grad_images`.
     pub loss_stage1: f64,
-    /// Stage-II loss value (0 when skipped).
+    /// Stage-II loss value (0 when skipped); [`CascadedGuidance`]: `S·w_II·L_II`, `L_II = ½‖grad_II‖²/B`.
     pub loss_stage2: f64,
     /// dL/dimages, same layout and size as the input images: `(view, row, column, channel)`.
     pub grad_images: Vec<f32>,

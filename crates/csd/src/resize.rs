@@ -1,0 +1,502 @@
+//! Image resizes as explicit separable linear operators, each with its exact adjoint (transpose).
+//!
+//! Images are planar `(N, C, H, W)`, row-major. A 2-D resize is `A = A_rows ⊗ A_cols`: every output pixel
+//! `(i, j)` is `Σ_{k,l} R[i,k] · C[j,l] · in[k,l]` with 1-D operators `R` (height) and `C` (width). Both 1-D
+//! operators here have rows that sum to 1, so constants are preserved and `resize(2·img − 1) =
+//! 2·resize(img) − 1`. The adjoint applies `Aᵀ = R_rowsᵀ ⊗ C_colsᵀ`, accumulating in `f64`.
+//!
+//! Kernels (they reproduce PyTorch's `F.interpolate` for these modes, apart from the border rule stated):
+//! - [`Resize1d::cubic_antialias`]: Keys cubic with a = −0.5 (as `mode="bicubic", antialias=True`). With
+//!   scale = in/out ≥ 1 (downsampling) the kernel is stretched by `scale` (support 2·scale input pixels
+//!   each side); output pixel i is centred at `scale·(i + 0.5)` in input pixel units. Taps that fall
+//!   outside the image are dropped and the remaining weights are renormalized to sum to 1 (no zero
+//!   padding, so borders are not darkened).
+//! - [`Resize1d::bilinear`]: `align_corners=False`, no antialias (as `mode="bilinear"`). Source coordinate
+//!   `src = (i + 0.5)·in/out − 0.5`, clamped below at 0; taps `⌊src⌋` and `⌊src⌋ + 1` (clamped to the last
+//!   pixel) with weights `1 − λ`, `λ`.
+
+use crate::GuidanceError;
+use rayon::prelude::*;
+
+/// One output sample of a 1-D resize: `out = Σ_k weights[k] · in[start + k]`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Taps {
+    /// First input index.
+    pub start: usize,
+    /// Weights of inputs `start, start + 1, …`.
+    pub weights: Vec<f64>,
+}
+
+/// A 1-D resize `in_len → out_len` as a sparse matrix of `out_len` rows.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Resize1d {
+    in_len: usize,
+    rows: Vec<Taps>,
+}
+
+fn check_lengths(in_len: usize, out_len: usize) -> Result<(), GuidanceError> {
+    if in_len == 0 || out_len == 0 {
+        return Err(GuidanceError::InvalidInput(format!(
+            "cannot resize {in_len} → {out_len} pixels"
+        )));
+    }
+    Ok(())
+}
+
+/// Keys' cubic convolution kernel with a = −0.5.
+fn keys_cubic(x: f64) -> f64 {
+    const A: f64 = -0.5;
+    let x = x.abs();
+    if x < 1.0 {
+        ((A + 2.0) * x - (A + 3.0)) * x * x + 1.0
+    } else if x < 2.0 {
+        (((x - 5.0) * x + 8.0) * x - 4.0) * A
+    } else {
+        0.0
+    }
+}
+
+impl Resize1d {
+    /// Antialiased Keys cubic (a = −0.5), weights renormalized over the taps inside the image.
+    pub fn cubic_antialias(in_len: usize, out_len: usize) -> Result<Self, GuidanceError> {
+        check_lengths(in_len, out_len)?;
+        let scale = in_len as f64 / out_len as f64;
+        let (support, inv_scale) = if scale >= 1.0 {
+            (2.0 * scale, 1.0 / scale)
+        } else {
+            (2.0, 1.0)
+        };
+        let mut rows = Vec::with_capacity(out_len);
+        for i in 0..out_len {
+            let center = scale * (i as f64 + 0.5);
+            // Same tap window as PyTorch's antialiased kernels: [⌊c − s + ½⌋, ⌊c + s + ½⌋) ∩ [0, in).
+            let lo = ((center - support + 0.5).floor().max(0.0)) as usize;
+            let hi = ((center + support + 0.5).floor() as usize).min(in_len);
+            let mut weights: Vec<f64> = (lo..hi)
+                .map(|j| keys_cubic((j as f64 - center + 0.5) * inv_scale))
+                .collect();
+            let total: f64 = weights.iter().sum();
+            if total != 0.0 {
+                weights.iter_mut().for_each(|w| *w /= total);
+            }
+            rows.push(Taps { start: lo, weights });
+        }
+        Ok(Self { in_len, rows })
+    }
+
+    /// Bilinear, `align_corners = False`, no antialias.
+    pub fn bilinear(in_len: usize, out_len: usize) -> Result<Self, GuidanceError> {
+        check_lengths(in_len, out_len)?;
+        let scale = in_len as f64 / out_len as f64;
+        let rows = (0..out_len)
+            .map(|i| {
+                let src = ((i as f64 + 0.5) * scale - 0.5).max(0.0);
+                let i0 = (src.floor() as usize).min(in_len - 1);
+                let lambda = (src - i0 as f64).clamp(0.0, 1.0);
+                if i0 + 1 < in_len {
+                    Taps {
+                        start: i0,
+                        weights: vec![1.0 - lambda, lambda],
+                    }
+                } else {
+                    // Both taps hit the last pixel: weights (1 − λ) + λ = 1.
+                    Taps {
+                        start: i0,
+                        weights: vec![1.0],
+                    }
+                }
+            })
+            .collect();
+        Ok(Self { in_len, rows })
+    }
+
+    /// Input length.
+    pub fn in_len(&self) -> usize {
+        self.in_len
+    }
+
+    /// Output length.
+    pub fn out_len(&self) -> usize {
+        self.rows.len()
+    }
+
+    /// The sparse rows of the matrix.
+    pub fn rows(&self) -> &[Taps] {
+        &self.rows
+    }
+
+    /// The dense `out_len × in_len` matrix (row-major), for tests and inspection.
+    pub fn to_dense(&self) -> Vec<f64> {
+        let mut m = vec![0.0; self.out_len() * self.in_len];
+        for (i, row) in self.rows.iter().enumerate() {
+            for (k, &w) in row.weights.iter().enumerate() {
+                m[i * self.in_len + row.start + k] += w;
+            }
+        }
+        m
+    }
+}
+
+/// A scalar type images can be stored in: `f32` (the product path) or `f64` (finite-difference checks).
+/// Arithmetic is done in `f64` either way.
+pub trait Sample: Copy + Send + Sync + Default + 'static {
+    /// Widens to `f64`.
+    fn to_f64(self) -> f64;
+    /// Rounds from `f64` (to nearest; out-of-range values become ±∞ for `f32`).
+    fn from_f64(v: f64) -> Self;
+}
+
+impl Sample for f32 {
+    fn to_f64(self) -> f64 {
+        self as f64
+    }
+    fn from_f64(v: f64) -> Self {
+        v as f32
+    }
+}
+
+impl Sample for f64 {
+    fn to_f64(self) -> f64 {
+        self
+    }
+    fn from_f64(v: f64) -> Self {
+        v
+    }
+}
+
+/// A separable 2-D resize `(in_h, in_w) → (out_h, out_w)` of planar images.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Resize2d {
+    /// Operator along the height (rows).
+    pub rows: Resize1d,
+    /// Operator along the width (columns).
+    pub cols: Resize1d,
+}
+
+impl Resize2d {
+    /// Antialiased Keys cubic in both directions (the 512 → 224 resize of spec §6).
+    pub fn cubic_antialias(
+        in_hw: (usize, usize),
+        out_hw: (usize, usize),
+    ) -> Result<Self, GuidanceError> {
+        Ok(Self {
+            rows: Resize1d::cubic_antialias(in_hw.0, out_hw.0)?,
+            cols: Resize1d::cubic_antialias(in_hw.1, out_hw.1)?,
+        })
+    }
+
+    /// Bilinear (`align_corners = False`, no antialias) in both directions.
+    pub fn bilinear(in_hw: (usize, usize), out_hw: (usize, usize)) -> Result<Self, GuidanceError> {
+        Ok(Self {
+            rows: Resize1d::bilinear(in_hw.0, out_hw.0)?,
+            cols: Resize1d::bilinear(in_hw.1, out_hw.1)?,
+        })
+    }
+
+    /// Input plane size `(h, w)`.
+    pub fn in_hw(&self) -> (usize, usize) {
+        (self.rows.in_len(), self.cols.in_len())
+    }
+
+    /// Output plane size `(h, w)`.
+    pub fn out_hw(&self) -> (usize, usize) {
+        (self.rows.out_len(), self.cols.out_len())
+    }
+
+    fn planes(&self, len: usize, plane: usize, what: &str) -> Result<usize, GuidanceError> {
+        if plane == 0 || len % plane != 0 {
+            return Err(GuidanceError::InvalidInput(format!(
+                "{what}: {len} values are not a whole number of {plane}-value planes"
+            )));
+        }
+        Ok(len / plane)
+    }
+
+    /// Applies the resize to every plane of `input` (`planes × in_h × in_w` values).
+    pub fn apply<T: Sample>(&self, input: &[T]) -> Result<Vec<T>, GuidanceError> {
+        let (ih, iw) = self.in_hw();
+        let (oh, ow) = self.out_hw();
+        let n = self.planes(input.len(), ih * iw, "resize")?;
+        let mut out = vec![T::default(); n * oh * ow];
+        out.par_chunks_mut(oh * ow)
+            .zip(input.par_chunks(ih * iw))
+            .for_each(|(o, i)| self.apply_plane(i, o));
+        Ok(out)
+    }
+
+    /// Applies the adjoint (transpose) to every plane of `grad_out` (`planes × out_h × out_w` values).
+    pub fn adjoint<T: Sample>(&self, grad_out: &[T]) -> Result<Vec<T>, GuidanceError> {
+        let (ih, iw) = self.in_hw();
+        let (oh, ow) = self.out_hw();
+        let n = self.planes(grad_out.len(), oh * ow, "resize adjoint")?;
+        let mut out = vec![T::default(); n * ih * iw];
+        out.par_chunks_mut(ih * iw)
+            .zip(grad_out.par_chunks(oh * ow))
+            .for_each(|(gi, go)| self.adjoint_plane(go, gi));
+        Ok(out)
+    }
+
+    fn apply_plane<T: Sample>(&self, input: &[T], out: &mut [T]) {
+        let (ih, iw) = self.in_hw();
+        let ow = self.cols.out_len();
+        // Columns first: tmp (ih × ow).
+        let mut tmp = vec![0.0f64; ih * ow];
+        for r in 0..ih {
+            let src = &input[r * iw..(r + 1) * iw];
+            for (j, taps) in self.cols.rows.iter().enumerate() {
+                tmp[r * ow + j] = taps
+                    .weights
+                    .iter()
+                    .zip(&src[taps.start..])
+                    .map(|(w, x)| w * x.to_f64())
+                    .sum::<f64>();
+            }
+        }
+        // Then rows: out (oh × ow).
+        let mut acc = vec![0.0f64; ow];
+        for (i, taps) in self.rows.rows.iter().enumerate() {
+            acc.iter_mut().for_each(|a| *a = 0.0);
+            for (k, &w) in taps.weights.iter().enumerate() {
+                let r = taps.start + k;
+                for (a, t) in acc.iter_mut().zip(&tmp[r * ow..(r + 1) * ow]) {
+                    *a += w * t;
+                }
+            }
+            for (o, a) in out[i * ow..(i + 1) * ow].iter_mut().zip(&acc) {
+                *o = T::from_f64(*a);
+            }
+        }
+    }
+
+    fn adjoint_plane<T: Sample>(&self, grad_out: &[T], grad_in: &mut [T]) {
+        let (ih, iw) = self.in_hw();
+        let ow = self.cols.out_len();
+        // Rowsᵀ: tmp (ih × ow).
+        let mut tmp = vec![0.0f64; ih * ow];
+        for (i, taps) in self.rows.rows.iter().enumerate() {
+            let g = &grad_out[i * ow..(i + 1) * ow];
+            for (k, &w) in taps.weights.iter().enumerate() {
+                let r = taps.start + k;
+                for (t, x) in tmp[r * ow..(r + 1) * ow].iter_mut().zip(g) {
+                    *t += w * x.to_f64();
+                }
+            }
+        }
+        // Colsᵀ: grad_in (ih × iw).
+        let mut acc = vec![0.0f64; iw];
+        for r in 0..ih {
+            acc.iter_mut().for_each(|a| *a = 0.0);
+            for (j, taps) in self.cols.rows.iter().enumerate() {
+                let g = tmp[r * ow + j];
+                for (a, &w) in acc[taps.start..].iter_mut().zip(&taps.weights) {
+                    *a += w * g;
+                }
+            }
+            for (o, a) in grad_in[r * iw..(r + 1) * iw].iter_mut().zip(&acc) {
+                *o = T::from_f64(*a);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    fn random(n: usize, seed: u64) -> Vec<f64> {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        (0..n).map(|_| rng.random::<f64>() * 2.0 - 1.0).collect()
+    }
+
+    fn dot(a: &[f64], b: &[f64]) -> f64 {
+        a.iter().zip(b).map(|(x, y)| x * y).sum()
+    }
+
+    #[test]
+    fn keys_cubic_kernel_values() {
+        // Keys (a = −0.5): 1 at 0, 0 at the integers ±1, ±2, C¹ and symmetric.
+        assert_eq!(keys_cubic(0.0), 1.0);
+        assert_eq!(keys_cubic(1.0), 0.0);
+        assert_eq!(keys_cubic(-2.0), 0.0);
+        assert_eq!(keys_cubic(0.5), keys_cubic(-0.5));
+        // At 0.5: (1.5·0.5 − 2.5)·0.25 + 1 = 0.5625; at 1.5: ((−3.5·1.5 + 8)·1.5 − 4)·(−0.5) = −0.0625.
+        assert!((keys_cubic(0.5) - 0.5625).abs() < 1e-15);
+        assert!((keys_cubic(1.5) + 0.0625).abs() < 1e-15);
+    }
+
+    #[test]
+    fn cubic_antialias_weights_match_hand_derivation_for_4_to_2() {
+        // scale 2, support 4, inverse scale ½. Output 0 is centred at 1.0: window [⌊1 − 4 + ½⌋, ⌊1 + 4 + ½⌋)
+        // ∩ [0, 4) = {0, 1, 2, 3}; arguments (j − 1 + ½)/2 = −0.25, 0.25, 0.75, 1.25 with kernel values
+        // 0.8671875, 0.8671875, 0.2265625, −0.0703125, sum 1.890625 (the taps −1, −2, … outside the image
+        // are dropped, then the weights are renormalized).
+        let r = Resize1d::cubic_antialias(4, 2).expect("valid sizes");
+        let raw = [0.8671875, 0.8671875, 0.2265625, -0.0703125];
+        let total = 1.890625;
+        assert_eq!(r.rows()[0].start, 0);
+        for (w, e) in r.rows()[0].weights.iter().zip(raw) {
+            assert!((w - e / total).abs() < 1e-15, "{w} vs {}", e / total);
+        }
+        // Output 1 mirrors output 0.
+        let mirrored: Vec<f64> = r.rows()[1].weights.iter().rev().copied().collect();
+        for (a, b) in mirrored.iter().zip(&r.rows()[0].weights) {
+            assert!((a - b).abs() < 1e-15);
+        }
+    }
+
+    #[test]
+    fn cubic_antialias_at_scale_one_is_the_identity() {
+        let r = Resize1d::cubic_antialias(7, 7).expect("valid sizes");
+        let m = r.to_dense();
+        for i in 0..7 {
+            for j in 0..7 {
+                assert!((m[i * 7 + j] - f64::from(u8::from(i == j))).abs() < 1e-15);
+            }
+        }
+    }
+
+    #[test]
+    fn every_row_sums_to_one_so_constants_survive_up_to_the_border() {
+        for r in [
+            Resize1d::cubic_antialias(512, 224),
+            Resize1d::cubic_antialias(100, 37),
+            Resize1d::cubic_antialias(20, 50),
+            Resize1d::bilinear(224, 64),
+            Resize1d::bilinear(224, 256),
+            Resize1d::bilinear(64, 256),
+        ] {
+            let r = r.expect("valid sizes");
+            for taps in r.rows() {
+                let s: f64 = taps.weights.iter().sum();
+                assert!((s - 1.0).abs() < 1e-12, "row sum {s}");
+                assert!(taps.start + taps.weights.len() <= r.in_len());
+            }
+        }
+        // A constant image stays constant, borders included (zero padding would darken them).
+        let a = Resize2d::cubic_antialias((512, 512), (224, 224)).expect("valid sizes");
+        let out = a.apply(&vec![0.7f32; 512 * 512]).expect("one plane");
+        assert!(out.iter().all(|&v| (v - 0.7).abs() < 1e-6));
+    }
+
+    #[test]
+    fn bilinear_matches_align_corners_false_closed_form() {
+        // 64 → 256 (scale ¼): output i samples src = (i + ½)/4 − ½. Output 0, 1: src < 0 → clamped to 0 →
+        // pixel 0. Output 2: src = 0.125 → 0.875·p0 + 0.125·p1. Output 255: src = 63.375 → pixel 63 only.
+        let up = Resize1d::bilinear(64, 256).expect("valid sizes");
+        assert_eq!(
+            up.rows()[0],
+            Taps {
+                start: 0,
+                weights: vec![1.0, 0.0]
+            }
+        );
+        assert_eq!(
+            up.rows()[1],
+            Taps {
+                start: 0,
+                weights: vec![1.0, 0.0]
+            }
+        );
+        assert_eq!(
+            up.rows()[2],
+            Taps {
+                start: 0,
+                weights: vec![0.875, 0.125]
+            }
+        );
+        assert_eq!(
+            up.rows()[255],
+            Taps {
+                start: 63,
+                weights: vec![1.0]
+            }
+        );
+        // 224 → 64 (scale 3.5): output 0 samples src = 1.25 → 0.75·p1 + 0.25·p2 (no antialias: 2 taps).
+        let down = Resize1d::bilinear(224, 64).expect("valid sizes");
+        assert_eq!(down.rows()[0].start, 1);
+        assert!((down.rows()[0].weights[0] - 0.75).abs() < 1e-15);
+        assert!((down.rows()[0].weights[1] - 0.25).abs() < 1e-15);
+        // A linear ramp is reproduced exactly away from the clamped borders.
+        let ramp: Vec<f64> = (0..64).map(|k| k as f64).collect();
+        let a = Resize2d {
+            rows: Resize1d::bilinear(1, 1).expect("valid"),
+            cols: up,
+        };
+        let out = a.apply(&ramp).expect("one plane");
+        for i in 2..254 {
+            let src = (i as f64 + 0.5) / 4.0 - 0.5;
+            assert!((out[i] - src).abs() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn adjoint_identity_holds_for_every_resize() {
+        // ⟨A x, y⟩ = ⟨x, Aᵀ y⟩ for random x, y over 2 planes, in f64.
+        let cases = [
+            Resize2d::cubic_antialias((512, 480), (224, 224)),
+            Resize2d::cubic_antialias((30, 20), (45, 11)),
+            Resize2d::bilinear((224, 224), (64, 64)),
+            Resize2d::bilinear((224, 224), (256, 256)),
+            Resize2d::bilinear((64, 64), (256, 256)),
+        ];
+        for (k, a) in cases.into_iter().enumerate() {
+            let a = a.expect("valid sizes");
+            let (ih, iw) = a.in_hw();
+            let (oh, ow) = a.out_hw();
+            let x = random(2 * ih * iw, 10 + k as u64);
+            let y = random(2 * oh * ow, 20 + k as u64);
+            let lhs = dot(&a.apply(&x).expect("shape"), &y);
+            let rhs = dot(&x, &a.adjoint(&y).expect("shape"));
+            assert!(
+                (lhs - rhs).abs() <= 1e-12 * lhs.abs().max(1.0),
+                "case {k}: {lhs} vs {rhs}"
+            );
+        }
+    }
+
+    #[test]
+    fn separable_apply_equals_dense_kronecker_product() {
+        let a = Resize2d {
+            rows: Resize1d::cubic_antialias(9, 4).expect("valid"),
+            cols: Resize1d::bilinear(5, 7).expect("valid"),
+        };
+        let (r, c) = (a.rows.to_dense(), a.cols.to_dense());
+        let x = random(9 * 5, 1);
+        let out = a.apply(&x).expect("one plane");
+        for i in 0..4 {
+            for j in 0..7 {
+                let mut e = 0.0;
+                for k in 0..9 {
+                    for l in 0..5 {
+                        e += r[i * 9 + k] * c[j * 5 + l] * x[k * 5 + l];
+                    }
+                }
+                assert!((out[i * 7 + j] - e).abs() < 1e-13);
+            }
+        }
+    }
+
+    #[test]
+    fn f32_and_f64_paths_agree() {
+        let a = Resize2d::cubic_antialias((64, 64), (24, 24)).expect("valid sizes");
+        let x = random(64 * 64, 4);
+        let x32: Vec<f32> = x.iter().map(|&v| v as f32).collect();
+        let y64 = a.apply(&x).expect("shape");
+        let y32 = a.apply(&x32).expect("shape");
+        for (p, q) in y64.iter().zip(&y32) {
+            assert!((p - *q as f64).abs() < 1e-6);
+        }
+    }
+
+    #[test]
+    fn bad_shapes_are_errors() {
+        assert!(Resize1d::bilinear(0, 4).is_err());
+        assert!(Resize1d::cubic_antialias(4, 0).is_err());
+        let a = Resize2d::bilinear((4, 4), (2, 2)).expect("valid sizes");
+        assert!(a.apply(&[0.0f32; 15]).is_err());
+        assert!(a.adjoint(&[0.0f32; 5]).is_err());
+        assert!(a.apply::<f32>(&[]).is_ok_and(|v| v.is_empty()));
+    }
+}
