@@ -1,0 +1,790 @@
+//! `CascadedGuidance` against fake denoisers whose outputs are known in closed form. Each test derives the
+//! expected values in a comment from the formulas of spec §7 (see also docs/guidance.md).
+
+use csd::resize::Resize2d;
+use csd::{
+    CascadedGuidance, Denoiser, Embedding, Guidance, GuidanceConfig, GuidanceError, InjectedDraws,
+    NoiseSchedule, Tensor,
+};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use std::sync::{Arc, Mutex};
+
+/// One recorded `predict` call.
+#[derive(Clone, Debug)]
+struct Call {
+    sample: Tensor,
+    timesteps: Vec<i64>,
+    embeddings: Vec<Embedding>,
+    class_labels: Option<Vec<i64>>,
+}
+
+type Rule = Box<dyn FnMut(&Tensor, &[i64]) -> Tensor + Send>;
+
+/// A denoiser computed by a closure of (sample, timesteps), recording every call.
+struct Fake {
+    rule: Rule,
+    calls: Arc<Mutex<Vec<Call>>>,
+}
+
+impl Fake {
+    fn new(
+        rule: impl FnMut(&Tensor, &[i64]) -> Tensor + Send + 'static,
+    ) -> (Box<dyn Denoiser>, Arc<Mutex<Vec<Call>>>) {
+        let calls = Arc::new(Mutex::new(Vec::new()));
+        (
+            Box::new(Self {
+                rule: Box::new(rule),
+                calls: calls.clone(),
+            }),
+            calls,
+        )
+    }
+}
+
+impl Denoiser for Fake {
+    fn predict(
+        &mut self,
+        sample: &Tensor,
+        timesteps: &[i64],
+        embeddings: &[&Embedding],
+        class_labels: Option<&[i64]>,
+    ) -> Result<Tensor, GuidanceError> {
+        self.calls.lock().expect("not poisoned").push(Call {
+            sample: sample.clone(),
+            timesteps: timesteps.to_vec(),
+            embeddings: embeddings.iter().map(|e| (*e).clone()).collect(),
+            class_labels: class_labels.map(<[i64]>::to_vec),
+        });
+        Ok((self.rule)(sample, timesteps))
+    }
+}
+
+/// IF-shaped output `(N, 6, H, W)`: channel c < 3 of sample n is `value(n, c, pixel)`; the variance
+/// channels 3..6 hold 1e6 (they must be ignored).
+fn output(sample: &Tensor, value: impl Fn(usize, usize, usize) -> f32) -> Tensor {
+    let (n, h, w) = (sample.shape[0], sample.shape[2], sample.shape[3]);
+    let plane = h * w;
+    let mut data = vec![1e6f32; n * 6 * plane];
+    for s in 0..n {
+        for c in 0..3 {
+            for p in 0..plane {
+                data[(s * 6 + c) * plane + p] = value(s, c, p);
+            }
+        }
+    }
+    Tensor {
+        shape: vec![n, 6, h, w],
+        data,
+    }
+}
+
+/// Cond rows [1, 2, 3, ...], uncond rows [−1, −2, ...] in a (2, 3) embedding: distinguishable halves.
+fn embeddings() -> (Embedding, Embedding) {
+    let cond = Embedding {
+        shape: [2, 3],
+        data: (1..=6).map(|v| v as f32).collect(),
+    };
+    let uncond = Embedding {
+        shape: [2, 3],
+        data: (1..=6).map(|v| -(v as f32)).collect(),
+    };
+    (cond, uncond)
+}
+
+/// Smooth test renders `(view, row, col, channel)` in [0, 1].
+fn renders(views: usize, h: usize, w: usize) -> Vec<f32> {
+    let mut v = Vec::with_capacity(views * h * w * 3);
+    for b in 0..views {
+        for r in 0..h {
+            for c in 0..w {
+                for ch in 0..3 {
+                    let phase = 0.37 * b as f32 + 1.3 * ch as f32;
+                    v.push(
+                        0.5 + 0.45
+                            * ((r as f32 * 0.05 + phase).sin() * (c as f32 * 0.031 - phase).cos()),
+                    );
+                }
+            }
+        }
+    }
+    v
+}
+
+/// The clean model inputs computed independently of `CascadedGuidance`: x at `res`, z0 at `r1`, x0 at `r2`.
+fn clean_inputs(
+    img: &[f32],
+    views: usize,
+    h: usize,
+    w: usize,
+    cfg: &GuidanceConfig,
+) -> (Vec<f32>, Vec<f32>, Vec<f32>) {
+    let plane = h * w;
+    let mut nchw = vec![0.0f64; img.len()];
+    for b in 0..views {
+        for p in 0..plane {
+            for c in 0..3 {
+                nchw[(b * 3 + c) * plane + p] = img[(b * plane + p) * 3 + c] as f64;
+            }
+        }
+    }
+    let (r, r1, r2) = (cfg.resolution, cfg.stage1_resolution, cfg.stage2_resolution);
+    let x: Vec<f64> = Resize2d::cubic_antialias((h, w), (r, r))
+        .expect("sizes")
+        .apply(&nchw)
+        .expect("shape");
+    let x: Vec<f64> = x.iter().map(|v| 2.0 * v - 1.0).collect();
+    let z0 = Resize2d::bilinear((r, r), (r1, r1))
+        .expect("sizes")
+        .apply(&x)
+        .expect("shape");
+    let x0 = Resize2d::bilinear((r, r), (r2, r2))
+        .expect("sizes")
+        .apply(&x)
+        .expect("shape");
+    let f = |v: Vec<f64>| v.into_iter().map(|x| x as f32).collect::<Vec<f32>>();
+    (f(x), f(z0), f(x0))
+}
+
+fn schedule() -> NoiseSchedule {
+    NoiseSchedule::squaredcos_cap_v2(1000).expect("valid")
+}
+
+fn max_abs(v: &[f32]) -> f32 {
+    v.iter().fold(0.0f32, |m, x| m.max(x.abs()))
+}
+
+#[test]
+fn denoiser_returning_the_true_noise_gives_zero_gradient() {
+    // The oracle recovers ε from its noisy input with the clean image known to the test:
+    // ε = (z_t − √ᾱ_t z0) / √(1 − ᾱ_t). Both halves agree, so ε̂ = ε_c + g·0 = ε and grad = w(t)(ε − ε) = 0
+    // up to f32 rounding of z_t (|Δε|·w ≤ √(1 − ᾱ) · |Δz_t| ≈ 1e-6).
+    let (views, h, w) = (3, 96, 80);
+    let cfg = GuidanceConfig::default();
+    let img = renders(views, h, w);
+    let (_, z0, x0) = clean_inputs(&img, views, h, w, &cfg);
+    let oracle = |clean: Vec<f32>| {
+        let s = schedule();
+        move |sample: &Tensor, t: &[i64]| {
+            let (c_in, plane) = (sample.shape[1], sample.shape[2] * sample.shape[3]);
+            let b = t.len() / 2;
+            output(sample, |n, c, p| {
+                let a = s.alpha_bar(t[n]).expect("in range");
+                let zt = sample.data[(n * c_in + c) * plane + p] as f64;
+                let z = clean[((n % b) * 3 + c) * plane + p] as f64;
+                ((zt - a.sqrt() * z) / (1.0 - a).sqrt()) as f32
+            })
+        }
+    };
+    let (stage1, _) = Fake::new(oracle(z0));
+    let (stage2, _) = Fake::new(oracle(x0));
+    let (cond, uncond) = embeddings();
+    let mut g = CascadedGuidance::new(stage1, Some(stage2), cond, uncond, cfg).expect("valid");
+    let mut rng = ChaCha8Rng::seed_from_u64(11);
+    let trace = g
+        .evaluate_traced(&img, views, h, w, 0.3, &mut rng, &InjectedDraws::default())
+        .expect("runs");
+    let stage2 = trace.stage2.as_ref().expect("stage II ran");
+    assert!(
+        max_abs(&trace.stage1.grad.data) < 1e-5,
+        "stage I {}",
+        max_abs(&trace.stage1.grad.data)
+    );
+    assert!(
+        max_abs(&stage2.grad.data) < 1e-5,
+        "stage II {}",
+        max_abs(&stage2.grad.data)
+    );
+    // Compare with the scale of a wrong prediction (ε̂ = 0 gives |grad| ~ w·|ε| ~ 1).
+    assert!(
+        max_abs(&trace.output.grad_images) < 1e-3,
+        "{}",
+        max_abs(&trace.output.grad_images)
+    );
+}
+
+#[test]
+fn zero_prediction_gives_minus_weighted_noise() {
+    // ε_c = ε_u = 0 ⇒ ε̂ = 0 ⇒ grad = w(t_b)·(0 − ε) = −w(t_b)·ε, per view b, in both stages.
+    let (views, h, w) = (2, 64, 64);
+    let (stage1, _) = Fake::new(|s: &Tensor, _: &[i64]| output(s, |_, _, _| 0.0));
+    let (stage2, _) = Fake::new(|s: &Tensor, _: &[i64]| output(s, |_, _, _| 0.0));
+    let (cond, uncond) = embeddings();
+    let mut g = CascadedGuidance::new(
+        stage1,
+        Some(stage2),
+        cond,
+        uncond,
+        GuidanceConfig::default(),
+    )
+    .expect("valid");
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
+    let trace = g
+        .evaluate_traced(
+            &renders(views, h, w),
+            views,
+            h,
+            w,
+            1.0,
+            &mut rng,
+            &InjectedDraws::default(),
+        )
+        .expect("runs");
+    let s = schedule();
+    let st2 = trace.stage2.as_ref().expect("ran");
+    for (grad, noise, t) in [
+        (
+            &trace.stage1.grad,
+            &trace.stage1.noise,
+            &trace.stage1.timesteps,
+        ),
+        (&st2.grad, &st2.noise, &st2.timesteps),
+    ] {
+        let per = grad.data.len() / views;
+        for (i, (&gv, &e)) in grad.data.iter().zip(&noise.data).enumerate() {
+            let wt = s.weight(t[i / per]).expect("in range");
+            assert!(
+                (gv as f64 + wt * e as f64).abs() < 1e-6 * (1.0 + e.abs() as f64),
+                "{i}: {gv} vs {}",
+                -wt * e as f64
+            );
+        }
+        assert!(t.iter().all(|&t| (20..=980).contains(&t)));
+    }
+    // The loss is ½‖grad‖²/B, scaled by S·a (stage I) and S·w_II (stage II).
+    let half_sq =
+        |v: &[f32]| 0.5 * v.iter().map(|&x| (x as f64).powi(2)).sum::<f64>() / views as f64;
+    assert!(
+        (trace.output.loss_stage1 - 100.0 * half_sq(&trace.stage1.grad.data)).abs()
+            < 1e-9 * trace.output.loss_stage1
+    );
+    assert!(
+        (trace.output.loss_stage2 - 100.0 * 1.0 * half_sq(&st2.grad.data)).abs()
+            < 1e-9 * trace.output.loss_stage2
+    );
+}
+
+#[test]
+fn distinct_cond_and_uncond_constants_give_the_cfg_combination() {
+    // ε_c = 0.5, ε_u = 0.25, g = 100 ⇒ ε̂ = 0.5 + 100·(0.5 − 0.25) = 25.5; grad = w(t)·(25.5 − ε).
+    // The batch is [cond × B; uncond × B], so sample n < B is conditional.
+    let (views, h, w) = (4, 32, 48);
+    let rule = move |s: &Tensor, t: &[i64]| {
+        let b = t.len() / 2;
+        output(s, move |n, _, _| if n < b { 0.5 } else { 0.25 })
+    };
+    let (stage1, _) = Fake::new(rule);
+    let (stage2, _) = Fake::new(rule);
+    let (cond, uncond) = embeddings();
+    let mut g = CascadedGuidance::new(
+        stage1,
+        Some(stage2),
+        cond,
+        uncond,
+        GuidanceConfig::default(),
+    )
+    .expect("valid");
+    let mut rng = ChaCha8Rng::seed_from_u64(9);
+    let trace = g
+        .evaluate_traced(
+            &renders(views, h, w),
+            views,
+            h,
+            w,
+            0.5,
+            &mut rng,
+            &InjectedDraws::default(),
+        )
+        .expect("runs");
+    let s = schedule();
+    let st2 = trace.stage2.as_ref().expect("ran");
+    for (guided, grad, noise, t) in [
+        (
+            &trace.stage1.eps_guided,
+            &trace.stage1.grad,
+            &trace.stage1.noise,
+            &trace.stage1.timesteps,
+        ),
+        (&st2.eps_guided, &st2.grad, &st2.noise, &st2.timesteps),
+    ] {
+        assert!(guided.data.iter().all(|&v| v == 25.5));
+        let per = grad.data.len() / views;
+        for (i, (&gv, &e)) in grad.data.iter().zip(&noise.data).enumerate() {
+            let expected = s.weight(t[i / per]).expect("in range") * (25.5 - e as f64);
+            assert!(
+                (gv as f64 - expected).abs() < 1e-5 * (1.0 + expected.abs()),
+                "{gv} vs {expected}"
+            );
+        }
+    }
+}
+
+#[test]
+fn stage2_is_not_called_at_weight_zero() {
+    // With w_II = 0 the stage-II model is never run, the stage-II loss is 0 and the image gradient equals
+    // that of a guidance built without a stage-II model (same seed ⇒ same draws).
+    let (views, h, w) = (2, 40, 40);
+    let img = renders(views, h, w);
+    let run = |with_stage2: bool| {
+        let (stage1, _) = Fake::new(|s: &Tensor, _: &[i64]| {
+            output(s, |n, c, p| 0.01 * (n + c) as f32 + 1e-4 * p as f32)
+        });
+        let (stage2, calls2) = Fake::new(|s: &Tensor, _: &[i64]| output(s, |_, _, _| 1.0));
+        let (cond, uncond) = embeddings();
+        let mut g = CascadedGuidance::new(
+            stage1,
+            with_stage2.then_some(stage2),
+            cond,
+            uncond,
+            GuidanceConfig::default(),
+        )
+        .expect("valid");
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let trace = g
+            .evaluate_traced(&img, views, h, w, 0.0, &mut rng, &InjectedDraws::default())
+            .expect("runs");
+        let n_calls = calls2.lock().expect("not poisoned").len();
+        (trace, n_calls)
+    };
+    let (with, calls) = run(true);
+    let (without, _) = run(false);
+    assert_eq!(calls, 0);
+    assert!(with.stage2.is_none());
+    assert_eq!(with.output.loss_stage2, 0.0);
+    assert_eq!(with.output.grad_images, without.output.grad_images);
+    assert!(max_abs(&with.output.grad_images) > 0.0);
+}
+
+#[test]
+fn nan_and_infinite_predictions_give_finite_gradients() {
+    // Pixel pattern p mod 4 of the conditional ε_c: NaN, +∞, −∞, +∞ with ε_u = 0, 0, 0, +∞:
+    //   ε̂ = NaN                      → grad NaN → 0
+    //   ε̂ = ∞ + 100(∞ − 0) = ∞        → w(∞ − ε) = ∞ → f32::MAX
+    //   ε̂ = −∞ + 100(−∞ − 0) = −∞     → f32::MIN
+    //   ε̂ = ∞ + 100(∞ − ∞) = NaN      → 0
+    // The image gradient sums many ±MAX values: it must still come out finite (no NaN, no ∞).
+    let rule = |s: &Tensor, t: &[i64]| {
+        let b = t.len() / 2;
+        output(s, move |n, _, p| match (n < b, p % 4) {
+            (true, 0) => f32::NAN,
+            (true, 1) | (true, 3) | (false, 3) => f32::INFINITY,
+            (true, _) => f32::NEG_INFINITY,
+            (false, _) => 0.0,
+        })
+    };
+    let (stage1, _) = Fake::new(rule);
+    let (stage2, _) = Fake::new(rule);
+    let (cond, uncond) = embeddings();
+    let mut g = CascadedGuidance::new(
+        stage1,
+        Some(stage2),
+        cond,
+        uncond,
+        GuidanceConfig::default(),
+    )
+    .expect("valid");
+    let (views, h, w) = (2, 64, 64);
+    let mut rng = ChaCha8Rng::seed_from_u64(1);
+    let trace = g
+        .evaluate_traced(
+            &renders(views, h, w),
+            views,
+            h,
+            w,
+            0.2,
+            &mut rng,
+            &InjectedDraws::default(),
+        )
+        .expect("runs");
+    let st2 = trace.stage2.as_ref().expect("ran");
+    for grad in [&trace.stage1.grad, &st2.grad] {
+        for (p, &v) in grad.data.iter().enumerate() {
+            let expected = [0.0, f32::MAX, f32::MIN, 0.0][p % 4];
+            assert_eq!(v, expected, "pixel {p}");
+        }
+    }
+    assert!(trace.output.grad_images.iter().all(|v| v.is_finite()));
+    assert!(trace.grad_x.data.iter().all(|v| v.is_finite()));
+    assert!(trace.output.loss_stage1.is_finite() && trace.output.loss_stage2.is_finite());
+}
+
+/// Total gradient for a tiny case where every operator is known in closed form. Config: resolution 64,
+/// stage I 64, stage II 256, renders 64×64. Then R (cubic 64→64) and D (bilinear 64→64) are identities,
+/// and Uᵀ (adjoint of bilinear 64→256, align_corners = False) maps a constant field c to 16·c: along each
+/// axis every input pixel receives total weight 4 (interior: λ = 1/8, 3/8, 5/8, 7/8 from each side = 2 + 2;
+/// border pixel 0: 1 + 1 from the clamped outputs 0, 1, then 7/8 + 5/8 + 3/8 + 1/8).
+/// Stage I: ε_c = a_c, ε_u = a_c/2 ⇒ ε̂ = a_c + 100·a_c/2 = 51·a_c; injected ε = 0 ⇒ grad_I = 51·w(t_b)·a_c.
+/// Stage II: ε_c = ε_u = β_c ⇒ ε̂ = β_c; ε_t = 0 ⇒ grad_II = w(t'_b)·β_c.
+/// With S = 100, a = 1: ∂L/∂img[b, ·, ·, c] = 2·(100/B)·[51·w(t_b)·a_c + w_II·16·w(t'_b)·β_c].
+fn check_total_gradient_by_hand(views: usize) {
+    let alpha = [0.1f32, -0.2, 0.3];
+    let beta = [0.4f32, 0.5, -0.6];
+    let (cfg, n) = (
+        GuidanceConfig {
+            resolution: 64,
+            ..GuidanceConfig::default()
+        },
+        64,
+    );
+    let (stage1, _) = Fake::new(move |s: &Tensor, t: &[i64]| {
+        let b = t.len() / 2;
+        output(
+            s,
+            move |k, c, _| if k < b { alpha[c] } else { alpha[c] / 2.0 },
+        )
+    });
+    let (stage2, _) = Fake::new(move |s: &Tensor, _: &[i64]| output(s, move |_, c, _| beta[c]));
+    let (cond, uncond) = embeddings();
+    let mut g = CascadedGuidance::new(stage1, Some(stage2), cond, uncond, cfg).expect("valid");
+    let t1: Vec<i64> = (0..views as i64).map(|b| 30 + 100 * b).collect();
+    let t2: Vec<i64> = (0..views as i64).map(|b| 950 - 110 * b).collect();
+    let injected = InjectedDraws {
+        stage1_timesteps: Some(t1.clone()),
+        stage1_noise: Some(vec![0.0; views * 3 * 64 * 64]),
+        stage2_timesteps: Some(t2.clone()),
+        stage2_noise_levels: Some(vec![500; views]),
+        stage2_noise_lowres: Some(vec![0.0; views * 3 * 256 * 256]),
+        stage2_noise: Some(vec![0.0; views * 3 * 256 * 256]),
+    };
+    let w2 = 0.25;
+    let mut rng = ChaCha8Rng::seed_from_u64(0);
+    let out = g
+        .evaluate_traced(&renders(views, n, n), views, n, n, w2, &mut rng, &injected)
+        .expect("runs")
+        .output;
+    let s = schedule();
+    for b in 0..views {
+        let (wi, wii) = (s.weight(t1[b]).expect("ok"), s.weight(t2[b]).expect("ok"));
+        for p in 0..n * n {
+            for c in 0..3 {
+                let (term1, term2) = (
+                    51.0 * wi * alpha[c] as f64,
+                    w2 * 16.0 * wii * beta[c] as f64,
+                );
+                let k = 2.0 * (100.0 / views as f64);
+                let expected = k * (term1 + term2);
+                let got = out.grad_images[(b * n * n + p) * 3 + c] as f64;
+                let tol = 1e-5 * k * (term1.abs() + term2.abs());
+                assert!(
+                    (got - expected).abs() < tol,
+                    "view {b} pixel {p} ch {c}: {got} vs {expected}"
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn total_gradient_scale_matches_hand_derivation_batch_1() {
+    check_total_gradient_by_hand(1);
+}
+
+#[test]
+fn total_gradient_scale_matches_hand_derivation_batch_8() {
+    check_total_gradient_by_hand(8);
+}
+
+#[test]
+fn gradient_sum_is_preserved_through_every_resize_adjoint() {
+    // Every resize row sums to 1, so Σ (Aᵀ y) = Σ y for all of R, D, U. Hence at 512 px:
+    // Σ ∂L/∂img = 2·[(S·a/B)·Σ grad_I + (S·w_II/B)·Σ grad_II].
+    let (views, n) = (2, 512);
+    let (stage1, _) = Fake::new(|s: &Tensor, _: &[i64]| {
+        output(s, |k, c, p| ((k * 7 + c * 3 + p) % 11) as f32 * 0.01)
+    });
+    let (stage2, _) = Fake::new(|s: &Tensor, _: &[i64]| {
+        output(s, |k, c, p| ((k * 5 + c + p) % 13) as f32 * -0.01)
+    });
+    let (cond, uncond) = embeddings();
+    let mut g = CascadedGuidance::new(
+        stage1,
+        Some(stage2),
+        cond,
+        uncond,
+        GuidanceConfig::default(),
+    )
+    .expect("valid");
+    let mut rng = ChaCha8Rng::seed_from_u64(21);
+    let w2 = 0.7;
+    let trace = g
+        .evaluate_traced(
+            &renders(views, n, n),
+            views,
+            n,
+            n,
+            w2,
+            &mut rng,
+            &InjectedDraws::default(),
+        )
+        .expect("runs");
+    let sum = |v: &[f32]| v.iter().map(|&x| x as f64).sum::<f64>();
+    let st2 = trace.stage2.as_ref().expect("ran");
+    let expected =
+        2.0 * (100.0 / views as f64) * (sum(&trace.stage1.grad.data) + w2 * sum(&st2.grad.data));
+    let got = sum(&trace.output.grad_images);
+    assert!(
+        (got - expected).abs() < 1e-4 * expected.abs().max(1.0),
+        "{got} vs {expected}"
+    );
+}
+
+#[test]
+fn model_inputs_have_the_specified_layout() {
+    // Stage I: sample (2B, 3, 64, 64) = [z_t; z_t], timesteps [t; t], embeddings [cond × B; uncond × B],
+    // no class labels. Stage II: sample (2B, 6, 256, 256), sample n = [x_t(n mod B), ẑ_s(n mod B)] on the
+    // channel axis, timesteps [t; t], class labels [s; s]. x_t = √ᾱ_t x0 + √(1−ᾱ_t) ε_t with x0 =
+    // bilinear₂₅₆(x), ẑ_s = √ᾱ_s ẑ + √(1−ᾱ_s) ε_s with ẑ = bilinear₂₅₆(bilinear₆₄(x)), all recomputed here.
+    let (views, h, w) = (3, 100, 90);
+    let cfg = GuidanceConfig::default();
+    let img = renders(views, h, w);
+    let (_, z0, x0) = clean_inputs(&img, views, h, w, &cfg);
+    let z_hat = Resize2d::bilinear((64, 64), (256, 256))
+        .expect("sizes")
+        .apply(&z0)
+        .expect("shape");
+    let (stage1, calls1) = Fake::new(|s: &Tensor, _: &[i64]| output(s, |_, _, _| 0.0));
+    let (stage2, calls2) = Fake::new(|s: &Tensor, _: &[i64]| output(s, |_, _, _| 0.0));
+    let (cond, uncond) = embeddings();
+    let mut g = CascadedGuidance::new(stage1, Some(stage2), cond.clone(), uncond.clone(), cfg)
+        .expect("valid");
+    let injected = InjectedDraws {
+        stage1_timesteps: Some(vec![25, 400, 975]),
+        stage2_timesteps: Some(vec![100, 600, 30]),
+        stage2_noise_levels: Some(vec![700, 21, 333]),
+        ..InjectedDraws::default()
+    };
+    let mut rng = ChaCha8Rng::seed_from_u64(77);
+    let trace = g
+        .evaluate_traced(&img, views, h, w, 0.1, &mut rng, &injected)
+        .expect("runs");
+    let s = schedule();
+    let noised = |clean: &[f32], noise: &[f32], t: i64| -> Vec<f64> {
+        let a = s.alpha_bar(t).expect("ok");
+        clean
+            .iter()
+            .zip(noise)
+            .map(|(&c, &e)| a.sqrt() * c as f64 + (1.0 - a).sqrt() * e as f64)
+            .collect()
+    };
+    let close = |got: &[f32], expected: &[f64]| {
+        assert_eq!(got.len(), expected.len());
+        got.iter()
+            .zip(expected)
+            .all(|(&g, &e)| (g as f64 - e).abs() < 1e-5)
+    };
+
+    let calls1 = calls1.lock().expect("not poisoned");
+    assert_eq!(calls1.len(), 1);
+    let c1 = &calls1[0];
+    assert_eq!(c1.sample.shape, vec![6, 3, 64, 64]);
+    assert_eq!(c1.timesteps, vec![25, 400, 975, 25, 400, 975]);
+    assert!(c1.class_labels.is_none());
+    let per1 = 3 * 64 * 64;
+    for n in 0..6 {
+        let v = n % 3;
+        let exp = noised(
+            &z0[v * per1..(v + 1) * per1],
+            &trace.stage1.noise.data[v * per1..(v + 1) * per1],
+            c1.timesteps[n],
+        );
+        assert!(
+            close(&c1.sample.data[n * per1..(n + 1) * per1], &exp),
+            "stage-I sample {n}"
+        );
+        assert_eq!(
+            c1.embeddings[n],
+            if n < 3 { cond.clone() } else { uncond.clone() }
+        );
+    }
+
+    let calls2 = calls2.lock().expect("not poisoned");
+    assert_eq!(calls2.len(), 1);
+    let c2 = &calls2[0];
+    let st2 = trace.stage2.as_ref().expect("ran");
+    assert_eq!(c2.sample.shape, vec![6, 6, 256, 256]);
+    assert_eq!(c2.timesteps, vec![100, 600, 30, 100, 600, 30]);
+    assert_eq!(c2.class_labels, Some(vec![700, 21, 333, 700, 21, 333]));
+    let per = 3 * 256 * 256;
+    for n in 0..6 {
+        let v = n % 3;
+        let x_t = noised(
+            &x0[v * per..(v + 1) * per],
+            &st2.noise.data[v * per..(v + 1) * per],
+            [100, 600, 30][v],
+        );
+        let z_s = noised(
+            &z_hat[v * per..(v + 1) * per],
+            &st2.noise_lowres.data[v * per..(v + 1) * per],
+            [700, 21, 333][v],
+        );
+        let base = n * 2 * per;
+        assert!(
+            close(&c2.sample.data[base..base + per], &x_t),
+            "stage-II x_t of sample {n}"
+        );
+        assert!(
+            close(&c2.sample.data[base + per..base + 2 * per], &z_s),
+            "stage-II ẑ_s of sample {n}"
+        );
+        assert_eq!(
+            c2.embeddings[n],
+            if n < 3 { cond.clone() } else { uncond.clone() }
+        );
+    }
+    // The noises of the two stage-II branches are independent draws.
+    assert_ne!(st2.noise.data, st2.noise_lowres.data);
+}
+
+#[test]
+fn evaluate_is_deterministic_per_seed_and_matches_the_trace() {
+    let (views, h, w) = (2, 48, 48);
+    let img = renders(views, h, w);
+    let make = || {
+        let (stage1, _) = Fake::new(|s: &Tensor, _: &[i64]| {
+            output(s, |n, c, p| {
+                0.1 * (n as f32 - c as f32) + 1e-3 * (p % 17) as f32
+            })
+        });
+        let (stage2, _) = Fake::new(|s: &Tensor, _: &[i64]| {
+            output(s, |n, _, p| 0.05 * n as f32 - 1e-3 * (p % 5) as f32)
+        });
+        let (cond, uncond) = embeddings();
+        CascadedGuidance::new(
+            stage1,
+            Some(stage2),
+            cond,
+            uncond,
+            GuidanceConfig::default(),
+        )
+        .expect("valid")
+    };
+    let eval = |seed: u64| {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        make()
+            .evaluate(&img, views, h, w, 0.2, &mut rng)
+            .expect("runs")
+    };
+    let (a, b, c) = (eval(4), eval(4), eval(5));
+    assert_eq!(a.grad_images, b.grad_images);
+    assert_eq!(a.loss_stage1, b.loss_stage1);
+    assert_ne!(a.grad_images, c.grad_images);
+    let mut rng = ChaCha8Rng::seed_from_u64(4);
+    let traced = make()
+        .evaluate_traced(&img, views, h, w, 0.2, &mut rng, &InjectedDraws::default())
+        .expect("runs");
+    assert_eq!(traced.output.grad_images, a.grad_images);
+    assert_eq!(a.grad_images.len(), img.len());
+}
+
+#[test]
+fn bad_inputs_are_typed_errors() {
+    let make = |stage2: bool| {
+        let (stage1, _) = Fake::new(|s: &Tensor, _: &[i64]| output(s, |_, _, _| 0.0));
+        let (s2, _) = Fake::new(|s: &Tensor, _: &[i64]| output(s, |_, _, _| 0.0));
+        let (cond, uncond) = embeddings();
+        CascadedGuidance::new(
+            stage1,
+            stage2.then_some(s2),
+            cond,
+            uncond,
+            GuidanceConfig::default(),
+        )
+        .expect("valid")
+    };
+    let img = renders(1, 8, 8);
+    let mut rng = ChaCha8Rng::seed_from_u64(0);
+    let invalid = |r: Result<csd::GuidanceOutput, GuidanceError>| {
+        matches!(r, Err(GuidanceError::InvalidInput(_)))
+    };
+    assert!(invalid(make(true).evaluate(
+        &img[1..],
+        1,
+        8,
+        8,
+        0.0,
+        &mut rng
+    )));
+    assert!(invalid(make(true).evaluate(&img, 0, 8, 8, 0.0, &mut rng)));
+    assert!(invalid(make(true).evaluate(&img, 1, 8, 8, -0.1, &mut rng)));
+    assert!(invalid(make(true).evaluate(
+        &img,
+        1,
+        8,
+        8,
+        f64::NAN,
+        &mut rng
+    )));
+    assert!(invalid(make(false).evaluate(&img, 1, 8, 8, 0.5, &mut rng)));
+    let bad = InjectedDraws {
+        stage1_timesteps: Some(vec![20, 30]),
+        ..InjectedDraws::default()
+    };
+    assert!(
+        make(true)
+            .evaluate_traced(&img, 1, 8, 8, 0.0, &mut rng, &bad)
+            .is_err()
+    );
+    let out_of_range = InjectedDraws {
+        stage1_timesteps: Some(vec![1000]),
+        ..InjectedDraws::default()
+    };
+    assert!(
+        make(true)
+            .evaluate_traced(&img, 1, 8, 8, 0.0, &mut rng, &out_of_range)
+            .is_err()
+    );
+
+    // A model returning the wrong shape is a model error, not a panic.
+    let (wrong, _) = Fake::new(|_: &Tensor, _: &[i64]| Tensor {
+        shape: vec![1, 6, 64, 64],
+        data: vec![0.0; 6 * 64 * 64],
+    });
+    let (cond, uncond) = embeddings();
+    let mut g = CascadedGuidance::new(
+        wrong,
+        None,
+        cond.clone(),
+        uncond.clone(),
+        GuidanceConfig::default(),
+    )
+    .expect("valid");
+    assert!(matches!(
+        g.evaluate(&img, 1, 8, 8, 0.0, &mut rng),
+        Err(GuidanceError::Model(_))
+    ));
+
+    // Construction checks the embeddings and the config.
+    let short = Embedding {
+        shape: [2, 3],
+        data: vec![0.0; 5],
+    };
+    let other = Embedding {
+        shape: [3, 2],
+        data: vec![0.0; 6],
+    };
+    let fake = || Fake::new(|s: &Tensor, _: &[i64]| output(s, |_, _, _| 0.0)).0;
+    assert!(
+        CascadedGuidance::new(
+            fake(),
+            None,
+            short,
+            uncond.clone(),
+            GuidanceConfig::default()
+        )
+        .is_err()
+    );
+    assert!(
+        CascadedGuidance::new(fake(), None, cond.clone(), other, GuidanceConfig::default())
+            .is_err()
+    );
+    let bad_cfg = GuidanceConfig {
+        timesteps: csd::TimestepRange { min: 20, max: 1000 },
+        ..GuidanceConfig::default()
+    };
+    assert!(CascadedGuidance::new(fake(), None, cond.clone(), uncond.clone(), bad_cfg).is_err());
+    let bad_clip = GuidanceConfig {
+        grad_clip: Some(0.0),
+        ..GuidanceConfig::default()
+    };
+    assert!(CascadedGuidance::new(fake(), None, cond, uncond, bad_clip).is_err());
+}
