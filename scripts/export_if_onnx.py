@@ -165,14 +165,18 @@ def build_tiny(seed: int):
 
 
 def tokenize(prompts: list[str]) -> tuple[np.ndarray, np.ndarray]:
-    """T5 tokenization as the Rust side does it: lower-case + strip, 77 tokens padded/truncated."""
+    """T5 tokenization as the Rust side does it: lower-case + strip, content truncated to 76 tokens,
+    then `</s>` (1), then padding (0) to 77 -- as HF's T5 tokenizer with truncation and max_length."""
     from tokenizers import Tokenizer
 
     tok = Tokenizer.from_file(str(TOKENIZER_JSON))
     ids = np.zeros((len(prompts), MAX_TOKENS), dtype=np.int64)
     mask = np.zeros((len(prompts), MAX_TOKENS), dtype=np.int64)
     for i, p in enumerate(prompts):
-        enc = tok.encode(p.lower().strip()).ids[:MAX_TOKENS]
+        enc = list(tok.encode(p.lower().strip(), add_special_tokens=False).ids)
+        while enc and enc[-1] == 1:
+            enc.pop()
+        enc = enc[: MAX_TOKENS - 1] + [1]
         ids[i, : len(enc)] = enc
         mask[i, : len(enc)] = 1
     return ids, mask
