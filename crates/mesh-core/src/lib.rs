@@ -1,7 +1,30 @@
 //! Triangle meshes for Geometry in Style.
 //!
-//! Conventions: positions are `f64` triples, faces are `u32` index triples in counter-clockwise
-//! order (outward normals by the right-hand rule). Vectors are column vectors in the math docs.
+//! Conventions used throughout the crate:
+//! - positions are `f64` triples `[x, y, z]` (no units; meshes are usually normalized to the side-2
+//!   cube of [`normalize::side2_cube`] before anything else happens);
+//! - faces are `u32` index triples in counter-clockwise order seen from outside, so the right-hand
+//!   rule `(p1 − p0) × (p2 − p0)` gives the outward normal;
+//! - vectors are column vectors in the math of the docs; arrays are row-major (`Vec<[f64; 3]>`).
+//!
+//! Layers: plain slice functions ([`geometry`], [`normals`], [`normalize`], [`topology`],
+//! [`subdivide`]) work on `&[[f64; 3]]` / `&[[u32; 3]]`; [`validate`] checks and repairs a
+//! [`TriMesh`]; with the default feature `io`, [`io`] reads and writes OBJ, OFF, PLY and glTF/GLB
+//! and [`npz`] reads and writes `.npz` files (including the reference's saved-deformation format).
+
+mod error;
+pub mod geometry;
+pub mod normalize;
+pub mod normals;
+pub mod subdivide;
+pub mod topology;
+
+#[cfg(feature = "io")]
+pub mod io;
+#[cfg(feature = "io")]
+pub mod npz;
+
+pub use error::MeshError;
 
 /// An indexed triangle mesh: `f64` positions, `u32` CCW faces.
 #[derive(Clone, Debug, Default, PartialEq)]

@@ -1,0 +1,278 @@
+//! `.npz` files (a zip of `.npy` arrays, as NumPy's `np.savez` / `np.savez_compressed` write them)
+//! and the reference's saved-deformation layout (spec §8), [`SavedDeformation`].
+//!
+//! The `.npy` parser and writer are in [`npy`]: little-endian, C order, dtypes
+//! `<f4 <f8 <i8 <i4 <u4 |u1 |b1 <U…` of any shape, including 0-d unicode strings. Zip entries may
+//! be stored or deflated; we write stored entries (like `np.savez`).
+
+mod npy;
+mod saved;
+
+pub use npy::{NpyArray, NpyData, parse_npy, write_npy};
+pub use saved::{FORMAT_VERSION, SavedDeformation};
+
+use std::fs::File;
+use std::io::{BufWriter, Read, Write};
+use std::path::{Path, PathBuf};
+
+use crate::MeshError;
+
+/// All arrays of an `.npz` file, read eagerly, in the order of the zip's entries.
+#[derive(Clone, Debug)]
+pub struct NpzReader {
+    path: PathBuf,
+    arrays: Vec<(String, NpyArray)>,
+}
+
+impl NpzReader {
+    /// Opens and parses every `*.npy` entry of the zip (entries with other names are ignored).
+    /// The key of `verts.npy` is `verts`.
+    pub fn open(path: impl AsRef<Path>) -> Result<Self, MeshError> {
+        let path = path.as_ref().to_path_buf();
+        let file = File::open(&path).map_err(|source| MeshError::Io {
+            path: path.clone(),
+            source,
+        })?;
+        let mut zip =
+            zip::ZipArchive::new(std::io::BufReader::new(file)).map_err(|e| MeshError::Parse {
+                path: path.clone(),
+                message: format!("not a readable .npz (zip) archive: {e}"),
+            })?;
+        let mut arrays = Vec::with_capacity(zip.len());
+        for i in 0..zip.len() {
+            let mut entry = zip.by_index(i).map_err(|e| MeshError::Parse {
+                path: path.clone(),
+                message: format!("zip entry {i} is unreadable: {e}"),
+            })?;
+            let name = entry.name().to_string();
+            let Some(key) = name.strip_suffix(".npy") else {
+                continue;
+            };
+            let key = key.to_string();
+            let mut bytes = Vec::with_capacity(entry.size().min(1 << 30) as usize);
+            entry.read_to_end(&mut bytes).map_err(|e| MeshError::Npy {
+                path: path.clone(),
+                key: key.clone(),
+                message: format!("cannot decompress the zip entry: {e}"),
+            })?;
+            let array = parse_npy(&bytes).map_err(|message| MeshError::Npy {
+                path: path.clone(),
+                key: key.clone(),
+                message,
+            })?;
+            arrays.push((key, array));
+        }
+        Ok(Self { path, arrays })
+    }
+
+    /// The file this was read from.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Keys in file order.
+    pub fn keys(&self) -> impl Iterator<Item = &str> {
+        self.arrays.iter().map(|(k, _)| k.as_str())
+    }
+
+    /// The array stored under `key`, if any.
+    pub fn get(&self, key: &str) -> Option<&NpyArray> {
+        self.arrays.iter().find(|(k, _)| k == key).map(|(_, a)| a)
+    }
+
+    /// The array under `key`, or an error naming the missing key.
+    pub fn require(&self, key: &str) -> Result<&NpyArray, MeshError> {
+        self.get(key)
+            .ok_or_else(|| self.err(key, "missing from the file".into()))
+    }
+
+    /// Consumes the reader, returning `(key, array)` pairs in file order.
+    pub fn into_arrays(self) -> Vec<(String, NpyArray)> {
+        self.arrays
+    }
+
+    /// An `(n, 3)` float array (`<f4` or `<f8`, converted) as `f32` rows.
+    pub fn rows3_f32(&self, key: &str) -> Result<Vec<[f32; 3]>, MeshError> {
+        let a = self.require(key)?;
+        let flat: Vec<f32> = match &a.data {
+            NpyData::F32(v) => v.clone(),
+            NpyData::F64(v) => v.iter().map(|&x| x as f32).collect(),
+            _ => {
+                return Err(self.err(
+                    key,
+                    format!("expected float32 data, found {}", a.data.descr()),
+                ));
+            }
+        };
+        self.check_rows3(key, a)?;
+        Ok(flat.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect())
+    }
+
+    /// An `(n, 3)` float array as `f64` rows.
+    pub fn rows3_f64(&self, key: &str) -> Result<Vec<[f64; 3]>, MeshError> {
+        let a = self.require(key)?;
+        let flat = match &a.data {
+            NpyData::F32(_) | NpyData::F64(_) => a.to_f64_vec().unwrap_or_default(),
+            _ => {
+                return Err(self.err(
+                    key,
+                    format!("expected float data, found {}", a.data.descr()),
+                ));
+            }
+        };
+        self.check_rows3(key, a)?;
+        Ok(flat.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect())
+    }
+
+    /// An `(n, 3)` integer array (any integer dtype) as `u32` index rows; negative or too large
+    /// values are an error naming the first bad row.
+    pub fn rows3_u32(&self, key: &str) -> Result<Vec<[u32; 3]>, MeshError> {
+        let a = self.require(key)?;
+        let flat = a.to_i64_vec().ok_or_else(|| {
+            self.err(
+                key,
+                format!("expected integer indices, found {}", a.data.descr()),
+            )
+        })?;
+        self.check_rows3(key, a)?;
+        let mut out = Vec::with_capacity(flat.len() / 3);
+        for (row, c) in flat.chunks_exact(3).enumerate() {
+            let mut t = [0u32; 3];
+            for k in 0..3 {
+                t[k] = u32::try_from(c[k]).map_err(|_| {
+                    self.err(
+                        key,
+                        format!("row {row} holds index {} (must be 0 ≤ i < 2³²)", c[k]),
+                    )
+                })?;
+            }
+            out.push(t);
+        }
+        Ok(out)
+    }
+
+    /// The string of a 0-d unicode array.
+    pub fn string(&self, key: &str) -> Result<String, MeshError> {
+        let a = self.require(key)?;
+        a.as_str().map(str::to_owned).ok_or_else(|| {
+            self.err(
+                key,
+                format!(
+                    "expected a 0-d unicode string, found {} of shape {:?}",
+                    a.data.descr(),
+                    a.shape
+                ),
+            )
+        })
+    }
+
+    fn check_rows3(&self, key: &str, a: &NpyArray) -> Result<(), MeshError> {
+        if a.shape.len() == 2 && a.shape[1] == 3 {
+            Ok(())
+        } else {
+            Err(self.err(key, format!("expected shape (N, 3), found {:?}", a.shape)))
+        }
+    }
+
+    fn err(&self, key: &str, message: String) -> MeshError {
+        MeshError::Npy {
+            path: self.path.clone(),
+            key: key.to_string(),
+            message,
+        }
+    }
+}
+
+/// Writes an `.npz` (stored, uncompressed entries named `<key>.npy`, like `np.savez`).
+///
+/// Missing parent folders are created. Call [`NpzWriter::finish`] to complete the file; a writer
+/// dropped without it leaves an incomplete zip.
+pub struct NpzWriter {
+    path: PathBuf,
+    zip: zip::ZipWriter<BufWriter<File>>,
+    keys: Vec<String>,
+}
+
+impl std::fmt::Debug for NpzWriter {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("NpzWriter")
+            .field("path", &self.path)
+            .field("keys", &self.keys)
+            .finish()
+    }
+}
+
+impl NpzWriter {
+    /// Creates (or truncates) the file.
+    pub fn create(path: impl AsRef<Path>) -> Result<Self, MeshError> {
+        let path = path.as_ref().to_path_buf();
+        crate::io::create_parent_dirs(&path)?;
+        let file = File::create(&path).map_err(|source| MeshError::Io {
+            path: path.clone(),
+            source,
+        })?;
+        Ok(Self {
+            path,
+            zip: zip::ZipWriter::new(BufWriter::new(file)),
+            keys: Vec::new(),
+        })
+    }
+
+    /// Adds one array under `key` (written as `<key>.npy`). Keys must be unique.
+    pub fn add(&mut self, key: &str, array: &NpyArray) -> Result<(), MeshError> {
+        if self.keys.iter().any(|k| k == key) {
+            return Err(MeshError::Npy {
+                path: self.path.clone(),
+                key: key.into(),
+                message: "written twice".into(),
+            });
+        }
+        let options = zip::write::SimpleFileOptions::default()
+            .compression_method(zip::CompressionMethod::Stored)
+            .large_file(true);
+        let bytes = write_npy(array);
+        self.zip
+            .start_file(format!("{key}.npy"), options)
+            .map_err(|e| self.io_err(e.to_string()))?;
+        self.zip
+            .write_all(&bytes)
+            .map_err(|e| self.io_err(e.to_string()))?;
+        self.keys.push(key.to_string());
+        Ok(())
+    }
+
+    /// Completes the zip and flushes the file.
+    pub fn finish(self) -> Result<(), MeshError> {
+        let path = self.path.clone();
+        let w = self.zip.finish().map_err(|e| MeshError::Io {
+            path: path.clone(),
+            source: std::io::Error::other(e.to_string()),
+        })?;
+        w.into_inner()
+            .map_err(|e| MeshError::Io {
+                path: path.clone(),
+                source: e.into_error(),
+            })?
+            .sync_all()
+            .map_err(|source| MeshError::Io { path, source })
+    }
+
+    fn io_err(&self, msg: String) -> MeshError {
+        MeshError::Io {
+            path: self.path.clone(),
+            source: std::io::Error::other(msg),
+        }
+    }
+}
+
+/// Writes `arrays` to a new `.npz` in the given order.
+pub fn write_npz<'a>(
+    path: impl AsRef<Path>,
+    arrays: impl IntoIterator<Item = (&'a str, &'a NpyArray)>,
+) -> Result<(), MeshError> {
+    let mut w = NpzWriter::create(path)?;
+    for (k, a) in arrays {
+        w.add(k, a)?;
+    }
+    w.finish()
+}

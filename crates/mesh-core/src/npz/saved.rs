@@ -1,0 +1,210 @@
+//! The reference's saved-deformation `.npz` (spec §8).
+
+use std::path::Path;
+
+use serde_json::Value;
+
+use super::{NpyArray, NpzReader, NpzWriter};
+use crate::MeshError;
+
+/// Value of the extra key `format_version` that we add to files we write.
+pub const FORMAT_VERSION: i64 = 1;
+
+/// A saved deformation in the reference's format (spec §8):
+///
+/// | key | dtype, shape | meaning |
+/// |---|---|---|
+/// | `verts` | `<f4` (V, 3) | rest mesh after side-2 cube normalization |
+/// | `faces` | `<i8` (F, 3) | CCW triangles |
+/// | `verts_normals` | `<f4` (V, 3) | the raw optimized target normals x (not unit length) |
+/// | `deform_by_csd_cfg` | `<U…` 0-d | JSON: `local_step_procrustes.{lamb, normalize_target_normals}`, `arap_energy_type`, `solve_method`, `pin_first_vertex` |
+/// | `dataset_cfg` | `<U…` 0-d | JSON describing the input |
+///
+/// Any other keys (ours: `format_version`, `seed`, `rotation_rule`, …) are kept in [`extra`]
+/// in file order and written back after the five standard keys; readers that ignore unknown keys
+/// (the reference) are unaffected.
+///
+/// [`extra`]: SavedDeformation::extra
+#[derive(Clone, Debug, PartialEq)]
+pub struct SavedDeformation {
+    /// Rest vertices (side-2 cube normalized), f32.
+    pub verts: Vec<[f32; 3]>,
+    /// Faces (stored as i64 on disk).
+    pub faces: Vec<[u32; 3]>,
+    /// Raw optimized target normals, one per vertex.
+    pub verts_normals: Vec<[f32; 3]>,
+    /// JSON text of the optimization config.
+    pub deform_by_csd_cfg: String,
+    /// JSON text of the dataset config.
+    pub dataset_cfg: String,
+    /// Every other array in the file, in file order.
+    pub extra: Vec<(String, NpyArray)>,
+}
+
+const STANDARD_KEYS: [&str; 5] = [
+    "verts",
+    "faces",
+    "verts_normals",
+    "deform_by_csd_cfg",
+    "dataset_cfg",
+];
+
+impl SavedDeformation {
+    /// Reads a saved deformation. `verts`/`verts_normals` may be f32 or f64 (converted to f32),
+    /// `faces` any integer dtype; shapes must be (V, 3), (F, 3), (V, 3), and face indices must be
+    /// below V.
+    pub fn read(path: impl AsRef<Path>) -> Result<Self, MeshError> {
+        let r = NpzReader::open(path)?;
+        let verts = r.rows3_f32("verts")?;
+        let faces = r.rows3_u32("faces")?;
+        let verts_normals = r.rows3_f32("verts_normals")?;
+        let deform_by_csd_cfg = r.string("deform_by_csd_cfg")?;
+        let dataset_cfg = r.string("dataset_cfg")?;
+        let npy_err = |key: &str, message: String| MeshError::Npy {
+            path: r.path().to_path_buf(),
+            key: key.into(),
+            message,
+        };
+        if verts_normals.len() != verts.len() {
+            return Err(npy_err(
+                "verts_normals",
+                format!(
+                    "has {} rows but `verts` has {}",
+                    verts_normals.len(),
+                    verts.len()
+                ),
+            ));
+        }
+        if let Some((fi, f)) = faces
+            .iter()
+            .enumerate()
+            .find(|(_, f)| f.iter().any(|&v| v as usize >= verts.len()))
+        {
+            return Err(npy_err(
+                "faces",
+                format!(
+                    "face {fi} = {f:?} refers to a vertex beyond the {} in `verts`",
+                    verts.len()
+                ),
+            ));
+        }
+        let extra = r
+            .into_arrays()
+            .into_iter()
+            .filter(|(k, _)| !STANDARD_KEYS.contains(&k.as_str()))
+            .collect();
+        Ok(Self {
+            verts,
+            faces,
+            verts_normals,
+            deform_by_csd_cfg,
+            dataset_cfg,
+            extra,
+        })
+    }
+
+    /// Writes the five standard keys (in the order above), then [`Self::extra`].
+    pub fn write(&self, path: impl AsRef<Path>) -> Result<(), MeshError> {
+        if self.verts_normals.len() != self.verts.len() {
+            return Err(MeshError::LengthMismatch {
+                what: "verts_normals (one per vertex)",
+                expected: self.verts.len(),
+                got: self.verts_normals.len(),
+            });
+        }
+        let mut w = NpzWriter::create(path)?;
+        w.add("verts", &NpyArray::f32_rows3(&self.verts))?;
+        w.add("faces", &NpyArray::i64_rows3(&self.faces))?;
+        w.add("verts_normals", &NpyArray::f32_rows3(&self.verts_normals))?;
+        w.add(
+            "deform_by_csd_cfg",
+            &NpyArray::scalar_str(&self.deform_by_csd_cfg),
+        )?;
+        w.add("dataset_cfg", &NpyArray::scalar_str(&self.dataset_cfg))?;
+        for (k, a) in &self.extra {
+            w.add(k, a)?;
+        }
+        w.finish()
+    }
+
+    /// The extra array under `key`.
+    pub fn extra(&self, key: &str) -> Option<&NpyArray> {
+        self.extra.iter().find(|(k, _)| k == key).map(|(_, a)| a)
+    }
+
+    /// Sets (replacing) the extra array under `key`. Standard keys cannot be set this way.
+    pub fn set_extra(&mut self, key: &str, array: NpyArray) -> Result<(), MeshError> {
+        if STANDARD_KEYS.contains(&key) {
+            return Err(MeshError::Invalid(format!(
+                "`{key}` is a standard key of the saved-deformation format, not an extra"
+            )));
+        }
+        match self.extra.iter_mut().find(|(k, _)| k == key) {
+            Some(slot) => slot.1 = array,
+            None => self.extra.push((key.to_string(), array)),
+        }
+        Ok(())
+    }
+
+    /// The parsed `deform_by_csd_cfg` JSON (`Value::Null` if it is not valid JSON).
+    pub fn csd_cfg(&self) -> Value {
+        serde_json::from_str(&self.deform_by_csd_cfg).unwrap_or(Value::Null)
+    }
+
+    /// `local_step_procrustes.lamb`: the λ used in training, if recorded.
+    pub fn lambda(&self) -> Option<f64> {
+        self.csd_cfg()
+            .get("local_step_procrustes")?
+            .get("lamb")?
+            .as_f64()
+    }
+
+    /// `pin_first_vertex` (default `true`).
+    pub fn pin_first_vertex(&self) -> bool {
+        self.csd_cfg()
+            .get("pin_first_vertex")
+            .and_then(Value::as_bool)
+            .unwrap_or(true)
+    }
+
+    /// `local_step_procrustes.normalize_target_normals` (default `true`, as the reference).
+    pub fn normalize_target_normals(&self) -> bool {
+        self.csd_cfg()
+            .get("local_step_procrustes")
+            .and_then(|v| v.get("normalize_target_normals"))
+            .and_then(Value::as_bool)
+            .unwrap_or(true)
+    }
+
+    /// `arap_energy_type` (e.g. `"spokes_and_rims_mine"`), if recorded.
+    pub fn arap_energy_type(&self) -> Option<String> {
+        self.csd_cfg()
+            .get("arap_energy_type")
+            .and_then(Value::as_str)
+            .map(str::to_owned)
+    }
+
+    /// `solve_method` (e.g. `"arap"`), if recorded.
+    pub fn solve_method(&self) -> Option<String> {
+        self.csd_cfg()
+            .get("solve_method")
+            .and_then(Value::as_str)
+            .map(str::to_owned)
+    }
+
+    /// Rest vertices as f64.
+    pub fn verts_f64(&self) -> Vec<[f64; 3]> {
+        self.verts
+            .iter()
+            .map(|v| [f64::from(v[0]), f64::from(v[1]), f64::from(v[2])])
+            .collect()
+    }
+
+    /// Target normals as f64.
+    pub fn verts_normals_f64(&self) -> Vec<[f64; 3]> {
+        self.verts_normals
+            .iter()
+            .map(|v| [f64::from(v[0]), f64::from(v[1]), f64::from(v[2])])
+            .collect()
+    }
+}

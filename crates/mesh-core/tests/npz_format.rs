@@ -1,0 +1,187 @@
+//! NPZ reading/writing against the golden saved-deformation file and by round trips.
+#![cfg(feature = "io")]
+
+mod common;
+
+use mesh_core::npz::{NpyArray, NpyData, NpzReader, NpzWriter, SavedDeformation};
+use mesh_core::{MeshError, io::read_mesh, normalize::side2_cube};
+
+#[test]
+fn golden_saved_deformation_reads_with_reference_keys_and_config() {
+    let s = SavedDeformation::read(common::fixture("bunny_targets.npz")).expect("golden npz reads");
+    assert_eq!(s.verts.len(), 1839);
+    assert_eq!(s.faces.len(), 3674);
+    assert_eq!(s.verts_normals.len(), 1839);
+    assert_eq!(s.lambda(), Some(8.0));
+    assert!(s.pin_first_vertex());
+    assert!(s.normalize_target_normals());
+    assert_eq!(
+        s.arap_energy_type().as_deref(),
+        Some("spokes_and_rims_mine")
+    );
+    assert_eq!(s.solve_method().as_deref(), Some("arap"));
+    assert!(s.dataset_cfg.contains("bunny.obj"));
+    assert!(s.extra.is_empty());
+    // Target normals are documented as not unit length.
+    let lens: Vec<f32> = s
+        .verts_normals
+        .iter()
+        .map(|n| (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt())
+        .collect();
+    assert!(lens.iter().any(|&l| (l - 1.0).abs() > 1e-3));
+}
+
+#[test]
+fn golden_verts_are_the_side2_normalized_bunny_obj_in_file_order() {
+    // Independent check of both readers: the npz's `verts` are bunny.obj after §1.1, as f32,
+    // vertex for vertex (so the OBJ reader must keep file order).
+    let s = SavedDeformation::read(common::fixture("bunny_targets.npz")).expect("golden npz reads");
+    let mut m = read_mesh(common::fixture("bunny.obj")).expect("bunny.obj reads");
+    side2_cube(&mut m.positions);
+    assert_eq!(m.positions.len(), s.verts.len());
+    for (p, v) in m.positions.iter().zip(&s.verts) {
+        for k in 0..3 {
+            assert!((p[k] - f64::from(v[k])).abs() < 1e-6, "{p:?} vs {v:?}");
+        }
+    }
+    assert_eq!(m.faces, s.faces);
+}
+
+#[test]
+fn saved_deformation_round_trips_with_extra_keys_kept() {
+    let mut s =
+        SavedDeformation::read(common::fixture("bunny_targets.npz")).expect("golden npz reads");
+    s.set_extra(
+        "format_version",
+        NpyArray::new(vec![], NpyData::I64(vec![1])).expect("0-d"),
+    )
+    .expect("extra key");
+    s.set_extra("rotation_rule", NpyArray::scalar_str("gis"))
+        .expect("extra key");
+    s.set_extra(
+        "seed",
+        NpyArray::new(vec![], NpyData::I64(vec![42])).expect("0-d"),
+    )
+    .expect("extra key");
+    assert!(s.set_extra("verts", NpyArray::scalar_str("x")).is_err());
+    let dir = tempfile::tempdir().expect("tempdir");
+    let path = dir.path().join("nested/missing/out.npz");
+    s.write(&path).expect("writes, creating parent folders");
+    let back = SavedDeformation::read(&path).expect("reads back");
+    assert_eq!(back, s);
+    assert_eq!(
+        back.extra("rotation_rule").and_then(|a| a.as_str()),
+        Some("gis")
+    );
+    // On-disk dtypes are the reference's: f4, i8, 0-d <U.
+    let r = NpzReader::open(&path).expect("opens");
+    let keys: Vec<&str> = r.keys().collect();
+    assert_eq!(
+        &keys[..5],
+        &[
+            "verts",
+            "faces",
+            "verts_normals",
+            "deform_by_csd_cfg",
+            "dataset_cfg"
+        ]
+    );
+    assert!(matches!(
+        r.get("faces").map(|a| &a.data),
+        Some(NpyData::I64(_))
+    ));
+    assert!(matches!(
+        r.get("verts").map(|a| &a.data),
+        Some(NpyData::F32(_))
+    ));
+    assert_eq!(r.get("deform_by_csd_cfg").map(|a| a.shape.len()), Some(0));
+}
+
+#[test]
+fn written_npy_headers_match_the_golden_files_bytes() {
+    // The golden file was written by numpy; our header for the same array must be identical.
+    let r = NpzReader::open(common::fixture("bunny_targets.npz")).expect("opens");
+    let dir = tempfile::tempdir().expect("tempdir");
+    let path = dir.path().join("same.npz");
+    let mut w = NpzWriter::create(&path).expect("create");
+    for k in ["verts", "faces", "deform_by_csd_cfg"] {
+        w.add(k, r.get(k).expect("present")).expect("add");
+    }
+    w.finish().expect("finish");
+    // Compare the raw .npy bytes inside both zips.
+    let raw = |p: &std::path::Path, k: &str| -> Vec<u8> {
+        use std::io::Read;
+        let mut z = zip::ZipArchive::new(std::fs::File::open(p).expect("open")).expect("zip");
+        let mut e = z.by_name(&format!("{k}.npy")).expect("entry");
+        let mut b = Vec::new();
+        e.read_to_end(&mut b).expect("read");
+        b
+    };
+    for k in ["verts", "faces", "deform_by_csd_cfg"] {
+        assert_eq!(
+            raw(&path, k),
+            raw(&common::fixture("bunny_targets.npz"), k),
+            "{k}.npy differs"
+        );
+    }
+}
+
+#[test]
+fn missing_keys_wrong_shapes_and_garbage_are_clear_errors() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let p = dir.path().join("partial.npz");
+    let mut w = NpzWriter::create(&p).expect("create");
+    w.add("verts", &NpyArray::f32_rows3(&[[0.0; 3]]))
+        .expect("add");
+    w.add(
+        "faces",
+        &NpyArray::new(vec![3], NpyData::I64(vec![0, 0, 0])).expect("1-d"),
+    )
+    .expect("add");
+    assert!(
+        w.add("verts", &NpyArray::f32_rows3(&[])).is_err(),
+        "duplicate key"
+    );
+    w.finish().expect("finish");
+    let e = SavedDeformation::read(&p).expect_err("bad input must be rejected");
+    assert!(
+        matches!(&e, MeshError::Npy { key, .. } if key == "faces"),
+        "{e}"
+    );
+    assert!(e.to_string().contains("(N, 3)"), "{e}");
+
+    let garbage = dir.path().join("garbage.npz");
+    std::fs::write(&garbage, b"this is not a zip file at all").expect("write");
+    let e = SavedDeformation::read(&garbage).expect_err("bad input must be rejected");
+    assert!(e.to_string().contains("garbage.npz"), "{e}");
+
+    // A truncated copy of the golden file.
+    let bytes = std::fs::read(common::fixture("bunny_targets.npz")).expect("read");
+    let cut = dir.path().join("cut.npz");
+    std::fs::write(&cut, &bytes[..bytes.len() / 2]).expect("write");
+    assert!(SavedDeformation::read(&cut).is_err());
+
+    let e = SavedDeformation::read(dir.path().join("absent.npz"))
+        .expect_err("bad input must be rejected");
+    assert!(matches!(e, MeshError::Io { .. }));
+}
+
+#[test]
+fn out_of_range_face_in_saved_file_is_refused() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let s = SavedDeformation {
+        verts: vec![[0.0; 3]; 3],
+        faces: vec![[0, 1, 3]],
+        verts_normals: vec![[0.0, 0.0, 1.0]; 3],
+        deform_by_csd_cfg: "{}".into(),
+        dataset_cfg: "{}".into(),
+        extra: vec![],
+    };
+    let p = dir.path().join("bad.npz");
+    s.write(&p).expect("writing does not validate");
+    let e = SavedDeformation::read(&p).expect_err("bad input must be rejected");
+    assert!(e.to_string().contains("face 0"), "{e}");
+    // Defaults when the config lacks the keys.
+    assert_eq!(s.lambda(), None);
+    assert!(s.pin_first_vertex());
+}
