@@ -85,10 +85,10 @@ impl GuidanceConfig {
                 self.loss_scale, self.stage1_weight
             ));
         }
-        if let Some(c) = self.grad_clip {
-            if c.is_nan() || c <= 0.0 {
-                return bad(format!("gradient clip {c} must be positive"));
-            }
+        if let Some(c) = self.grad_clip
+            && (c.is_nan() || c <= 0.0)
+        {
+            return bad(format!("gradient clip {c} must be positive"));
         }
         Ok(())
     }

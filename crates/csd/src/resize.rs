@@ -204,7 +204,7 @@ impl Resize2d {
     }
 
     fn planes(&self, len: usize, plane: usize, what: &str) -> Result<usize, GuidanceError> {
-        if plane == 0 || len % plane != 0 {
+        if plane == 0 || !len.is_multiple_of(plane) {
             return Err(GuidanceError::InvalidInput(format!(
                 "{what}: {len} values are not a whole number of {plane}-value planes"
             )));

@@ -86,7 +86,7 @@ impl NoiseSchedule {
                 noise.len()
             )));
         }
-        if timesteps.is_empty() || z0.len() % timesteps.len() != 0 {
+        if timesteps.is_empty() || !z0.len().is_multiple_of(timesteps.len()) {
             return Err(GuidanceError::InvalidInput(format!(
                 "add_noise: {} values cannot be split into {} samples",
                 z0.len(),

@@ -78,7 +78,10 @@ pub fn sds_gradient(
     weights: &[f64],
     clip: Option<f32>,
 ) -> Result<Vec<f32>, GuidanceError> {
-    if eps_hat.len() != noise.len() || weights.is_empty() || eps_hat.len() % weights.len() != 0 {
+    if eps_hat.len() != noise.len()
+        || weights.is_empty()
+        || !eps_hat.len().is_multiple_of(weights.len())
+    {
         return Err(GuidanceError::InvalidInput(format!(
             "sds_gradient: {} predictions, {} noise values, {} samples",
             eps_hat.len(),

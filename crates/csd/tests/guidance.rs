@@ -28,7 +28,7 @@ struct Fake {
 }
 
 impl Fake {
-    fn new(
+    fn boxed(
         rule: impl FnMut(&Tensor, &[i64]) -> Tensor + Send + 'static,
     ) -> (Box<dyn Denoiser>, Arc<Mutex<Vec<Call>>>) {
         let calls = Arc::new(Mutex::new(Vec::new()));
@@ -176,8 +176,8 @@ fn denoiser_returning_the_true_noise_gives_zero_gradient() {
             })
         }
     };
-    let (stage1, _) = Fake::new(oracle(z0));
-    let (stage2, _) = Fake::new(oracle(x0));
+    let (stage1, _) = Fake::boxed(oracle(z0));
+    let (stage2, _) = Fake::boxed(oracle(x0));
     let (cond, uncond) = embeddings();
     let mut g = CascadedGuidance::new(stage1, Some(stage2), cond, uncond, cfg).expect("valid");
     let mut rng = ChaCha8Rng::seed_from_u64(11);
@@ -207,8 +207,8 @@ fn denoiser_returning_the_true_noise_gives_zero_gradient() {
 fn zero_prediction_gives_minus_weighted_noise() {
     // ε_c = ε_u = 0 ⇒ ε̂ = 0 ⇒ grad = w(t_b)·(0 − ε) = −w(t_b)·ε, per view b, in both stages.
     let (views, h, w) = (2, 64, 64);
-    let (stage1, _) = Fake::new(|s: &Tensor, _: &[i64]| output(s, |_, _, _| 0.0));
-    let (stage2, _) = Fake::new(|s: &Tensor, _: &[i64]| output(s, |_, _, _| 0.0));
+    let (stage1, _) = Fake::boxed(|s: &Tensor, _: &[i64]| output(s, |_, _, _| 0.0));
+    let (stage2, _) = Fake::boxed(|s: &Tensor, _: &[i64]| output(s, |_, _, _| 0.0));
     let (cond, uncond) = embeddings();
     let mut g = CascadedGuidance::new(
         stage1,
@@ -273,8 +273,8 @@ fn distinct_cond_and_uncond_constants_give_the_cfg_combination() {
         let b = t.len() / 2;
         output(s, move |n, _, _| if n < b { 0.5 } else { 0.25 })
     };
-    let (stage1, _) = Fake::new(rule);
-    let (stage2, _) = Fake::new(rule);
+    let (stage1, _) = Fake::boxed(rule);
+    let (stage2, _) = Fake::boxed(rule);
     let (cond, uncond) = embeddings();
     let mut g = CascadedGuidance::new(
         stage1,
@@ -326,10 +326,10 @@ fn stage2_is_not_called_at_weight_zero() {
     let (views, h, w) = (2, 40, 40);
     let img = renders(views, h, w);
     let run = |with_stage2: bool| {
-        let (stage1, _) = Fake::new(|s: &Tensor, _: &[i64]| {
+        let (stage1, _) = Fake::boxed(|s: &Tensor, _: &[i64]| {
             output(s, |n, c, p| 0.01 * (n + c) as f32 + 1e-4 * p as f32)
         });
-        let (stage2, calls2) = Fake::new(|s: &Tensor, _: &[i64]| output(s, |_, _, _| 1.0));
+        let (stage2, calls2) = Fake::boxed(|s: &Tensor, _: &[i64]| output(s, |_, _, _| 1.0));
         let (cond, uncond) = embeddings();
         let mut g = CascadedGuidance::new(
             stage1,
@@ -372,8 +372,8 @@ fn nan_and_infinite_predictions_give_finite_gradients() {
             (false, _) => 0.0,
         })
     };
-    let (stage1, _) = Fake::new(rule);
-    let (stage2, _) = Fake::new(rule);
+    let (stage1, _) = Fake::boxed(rule);
+    let (stage2, _) = Fake::boxed(rule);
     let (cond, uncond) = embeddings();
     let mut g = CascadedGuidance::new(
         stage1,
@@ -426,14 +426,14 @@ fn check_total_gradient_by_hand(views: usize) {
         },
         64,
     );
-    let (stage1, _) = Fake::new(move |s: &Tensor, t: &[i64]| {
+    let (stage1, _) = Fake::boxed(move |s: &Tensor, t: &[i64]| {
         let b = t.len() / 2;
         output(
             s,
             move |k, c, _| if k < b { alpha[c] } else { alpha[c] / 2.0 },
         )
     });
-    let (stage2, _) = Fake::new(move |s: &Tensor, _: &[i64]| output(s, move |_, c, _| beta[c]));
+    let (stage2, _) = Fake::boxed(move |s: &Tensor, _: &[i64]| output(s, move |_, c, _| beta[c]));
     let (cond, uncond) = embeddings();
     let mut g = CascadedGuidance::new(stage1, Some(stage2), cond, uncond, cfg).expect("valid");
     let t1: Vec<i64> = (0..views as i64).map(|b| 30 + 100 * b).collect();
@@ -489,10 +489,10 @@ fn gradient_sum_is_preserved_through_every_resize_adjoint() {
     // Every resize row sums to 1, so Σ (Aᵀ y) = Σ y for all of R, D, U. Hence at 512 px:
     // Σ ∂L/∂img = 2·[(S·a/B)·Σ grad_I + (S·w_II/B)·Σ grad_II].
     let (views, n) = (2, 512);
-    let (stage1, _) = Fake::new(|s: &Tensor, _: &[i64]| {
+    let (stage1, _) = Fake::boxed(|s: &Tensor, _: &[i64]| {
         output(s, |k, c, p| ((k * 7 + c * 3 + p) % 11) as f32 * 0.01)
     });
-    let (stage2, _) = Fake::new(|s: &Tensor, _: &[i64]| {
+    let (stage2, _) = Fake::boxed(|s: &Tensor, _: &[i64]| {
         output(s, |k, c, p| ((k * 5 + c + p) % 13) as f32 * -0.01)
     });
     let (cond, uncond) = embeddings();
@@ -542,8 +542,8 @@ fn model_inputs_have_the_specified_layout() {
         .expect("sizes")
         .apply(&z0)
         .expect("shape");
-    let (stage1, calls1) = Fake::new(|s: &Tensor, _: &[i64]| output(s, |_, _, _| 0.0));
-    let (stage2, calls2) = Fake::new(|s: &Tensor, _: &[i64]| output(s, |_, _, _| 0.0));
+    let (stage1, calls1) = Fake::boxed(|s: &Tensor, _: &[i64]| output(s, |_, _, _| 0.0));
+    let (stage2, calls2) = Fake::boxed(|s: &Tensor, _: &[i64]| output(s, |_, _, _| 0.0));
     let (cond, uncond) = embeddings();
     let mut g = CascadedGuidance::new(stage1, Some(stage2), cond.clone(), uncond.clone(), cfg)
         .expect("valid");
@@ -640,12 +640,12 @@ fn evaluate_is_deterministic_per_seed_and_matches_the_trace() {
     let (views, h, w) = (2, 48, 48);
     let img = renders(views, h, w);
     let make = || {
-        let (stage1, _) = Fake::new(|s: &Tensor, _: &[i64]| {
+        let (stage1, _) = Fake::boxed(|s: &Tensor, _: &[i64]| {
             output(s, |n, c, p| {
                 0.1 * (n as f32 - c as f32) + 1e-3 * (p % 17) as f32
             })
         });
-        let (stage2, _) = Fake::new(|s: &Tensor, _: &[i64]| {
+        let (stage2, _) = Fake::boxed(|s: &Tensor, _: &[i64]| {
             output(s, |n, _, p| 0.05 * n as f32 - 1e-3 * (p % 5) as f32)
         });
         let (cond, uncond) = embeddings();
@@ -679,8 +679,8 @@ fn evaluate_is_deterministic_per_seed_and_matches_the_trace() {
 #[test]
 fn bad_inputs_are_typed_errors() {
     let make = |stage2: bool| {
-        let (stage1, _) = Fake::new(|s: &Tensor, _: &[i64]| output(s, |_, _, _| 0.0));
-        let (s2, _) = Fake::new(|s: &Tensor, _: &[i64]| output(s, |_, _, _| 0.0));
+        let (stage1, _) = Fake::boxed(|s: &Tensor, _: &[i64]| output(s, |_, _, _| 0.0));
+        let (s2, _) = Fake::boxed(|s: &Tensor, _: &[i64]| output(s, |_, _, _| 0.0));
         let (cond, uncond) = embeddings();
         CascadedGuidance::new(
             stage1,
@@ -735,7 +735,7 @@ fn bad_inputs_are_typed_errors() {
     );
 
     // A model returning the wrong shape is a model error, not a panic.
-    let (wrong, _) = Fake::new(|_: &Tensor, _: &[i64]| Tensor {
+    let (wrong, _) = Fake::boxed(|_: &Tensor, _: &[i64]| Tensor {
         shape: vec![1, 6, 64, 64],
         data: vec![0.0; 6 * 64 * 64],
     });
@@ -762,7 +762,7 @@ fn bad_inputs_are_typed_errors() {
         shape: [3, 2],
         data: vec![0.0; 6],
     };
-    let fake = || Fake::new(|s: &Tensor, _: &[i64]| output(s, |_, _, _| 0.0)).0;
+    let fake = || Fake::boxed(|s: &Tensor, _: &[i64]| output(s, |_, _, _| 0.0)).0;
     assert!(
         CascadedGuidance::new(
             fake(),
