@@ -2,3 +2,4 @@
 //! one module per subcommand under [`cmd`].
 
 pub mod cmd;
+pub mod config;
