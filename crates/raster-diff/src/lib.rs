@@ -1,6 +1,21 @@
 //! Differentiable triangle rasterizer with the reference cameras and shading.
 //!
 //! Images are `f32` RGB in `[0, 1]`, laid out `(view, row, column, channel)` with row 0 at the top.
+//!
+//! - [`camera`]: the reference view sampler, turntable orbits, the adaptive distance multiplier.
+//! - [`cpu`]: the CPU reference backend [`CpuRenderer`] (forward and VJP, silhouette antialiasing).
+//! - [`image`]: PNG output and contact sheets.
+//!
+//! Conventions (projection, pixel centres, fill rule, shading) are in `docs/renderer.md` and in the
+//! module docs of [`cpu::raster`], [`cpu::shading`] and [`cpu::antialias`].
+
+pub mod camera;
+pub mod cpu;
+pub mod image;
+pub mod shapes;
+
+pub use camera::{CameraConfig, adapt_multiplier, orbit_views, sample_views};
+pub use cpu::{CpuRenderer, RenderSettings};
 
 /// One camera view and its light.
 #[derive(Clone, Debug, PartialEq)]
@@ -62,4 +77,19 @@ pub trait Renderer: Send {
     ) -> Result<Images, RenderError>;
     /// Maps dL/dimages (same layout as the last render's output) to dL/dvertices.
     fn backward(&mut self, d_images: &Images) -> Result<Vec<[f64; 3]>, RenderError>;
+}
+
+/// Chooses a backend: returns the renderer and a sentence saying what was chosen and why.
+///
+/// This build has only the CPU backend (the wgpu backend is not implemented yet), so the CPU
+/// renderer is always returned; `prefer_gpu` only changes the explanation.
+pub fn select_renderer(prefer_gpu: bool) -> (Box<dyn Renderer>, String) {
+    let why = if prefer_gpu {
+        "cpu: a GPU was preferred, but this build has no wgpu backend yet"
+    } else {
+        "cpu: requested"
+    };
+    let renderer = CpuRenderer::default();
+    let reason = format!("{} — {why}", renderer.name());
+    (Box::new(renderer), reason)
 }

@@ -1,0 +1,219 @@
+//! Silhouette antialiasing with a visibility gradient, after nvdiffrast's `antialias`
+//! (Laine et al. 2020, "Modular Primitives for High-Performance Differentiable Rendering", §3.4).
+//!
+//! Forward. For every pair of horizontally or vertically adjacent pixels A, B whose triangle ids
+//! differ, the *front* pixel F is the covered one (if the other is background) or the nearer one.
+//! Let T be F's triangle. If the segment between the two pixel centres leaves T through one of T's
+//! **silhouette edges** — a boundary edge, a non-manifold edge, or an edge whose two faces face
+//! opposite ways as seen from the eye — let t ∈ [0, 1] be where the edge crosses the segment,
+//! measured from F's centre towards the other pixel O's centre. Then
+//! - t > 1/2 (the edge lies in O's half): O is partly covered by T:
+//!   c_O += (t − 1/2)·(c_F − c_O);
+//! - t < 1/2 (the edge lies in F's half): F is partly uncovered:
+//!   c_F += (1/2 − t)·(c_O − c_F).
+//!
+//! All colours on the right are the pre-antialiasing colours, so the deltas of all pairs add up in
+//! any order. The result is continuous in the edge position while the edge stays between the two
+//! pixel centres, which is what gives silhouettes a gradient.
+//!
+//! Adjoint. The blend is linear in the colours for a fixed weight α, and α = ±(t − 1/2) is a smooth
+//! function of the edge's screen end points; t follows the screen end points through the line
+//! crossing, and those follow the two edge vertices through the perspective projection.
+
+use glam::DVec3;
+
+use super::raster::{Camera, NO_TRIANGLE, Projected};
+
+/// Neighbour of a face across its edge k (corners k → k+1): a face index, or one of these markers.
+pub const BOUNDARY_EDGE: u32 = u32::MAX;
+/// Marker for an edge shared by more than two faces.
+pub const NON_MANIFOLD_EDGE: u32 = u32::MAX - 1;
+
+/// Face adjacency across each edge: `adj[f][k]` is the face across the edge (f[k], f[k+1]).
+pub fn face_adjacency(faces: &[[u32; 3]]) -> Vec<[u32; 3]> {
+    let mut keyed: Vec<(u32, u32, u32, u8)> = Vec::with_capacity(faces.len() * 3);
+    for (fi, f) in faces.iter().enumerate() {
+        for k in 0..3 {
+            let (a, b) = (f[k], f[(k + 1) % 3]);
+            keyed.push((a.min(b), a.max(b), fi as u32, k as u8));
+        }
+    }
+    keyed.sort_unstable();
+    let mut adj = vec![[BOUNDARY_EDGE; 3]; faces.len()];
+    let mut i = 0;
+    while i < keyed.len() {
+        let mut j = i + 1;
+        while j < keyed.len() && keyed[j].0 == keyed[i].0 && keyed[j].1 == keyed[i].1 {
+            j += 1;
+        }
+        let group = &keyed[i..j];
+        if group.len() == 2 {
+            adj[group[0].2 as usize][group[0].3 as usize] = group[1].2;
+            adj[group[1].2 as usize][group[1].3 as usize] = group[0].2;
+        } else if group.len() > 2 {
+            for e in group {
+                adj[e.2 as usize][e.3 as usize] = NON_MANIFOLD_EDGE;
+            }
+        }
+        i = j;
+    }
+    adj
+}
+
+/// One antialiasing blend: `c[target] += alpha · (c[source] − c[target])`.
+#[derive(Clone, Copy, Debug)]
+pub struct Blend {
+    /// Pixel whose colour changes (index within the view).
+    pub target: u32,
+    /// Pixel whose colour is blended in.
+    pub source: u32,
+    /// The silhouette edge's vertices.
+    pub edge: [u32; 2],
+    /// Blend weight in [0, 1/2].
+    pub alpha: f64,
+    /// dα/dx of the two edge vertices (world space).
+    pub d_alpha: [DVec3; 2],
+}
+
+/// Is face `f` front-facing from `eye` (its normal g_f points towards the eye)?
+#[inline]
+fn front_facing(g: DVec3, x0: DVec3, eye: DVec3) -> bool {
+    g.dot(eye - x0) > 0.0
+}
+
+/// Finds the blends of one view. `ids` and `depth` come from the rasterizer, `face_raw` are the
+/// unnormalized face normals, `proj` the projected vertices.
+pub fn find_blends(
+    vertices: &[[f64; 3]],
+    faces: &[[u32; 3]],
+    adjacency: &[[u32; 3]],
+    face_raw: &[DVec3],
+    camera: &Camera,
+    proj: &[Projected],
+    ids: &[u32],
+    depth: &[f64],
+) -> Vec<Blend> {
+    let facing = |f: u32| {
+        let x0 = DVec3::from(vertices[faces[f as usize][0] as usize]);
+        front_facing(face_raw[f as usize], x0, camera.eye)
+    };
+    let silhouette = |f: u32, k: usize| -> bool {
+        match adjacency[f as usize][k] {
+            BOUNDARY_EDGE | NON_MANIFOLD_EDGE => true,
+            other => facing(f) != facing(other),
+        }
+    };
+    let (w, h) = (camera.width, camera.height);
+    let mut blends = Vec::new();
+    for row in 0..h {
+        for col in 0..w {
+            let a = row * w + col;
+            // axis 0: horizontal neighbour (centres differ in x); axis 1: vertical neighbour.
+            for axis in 0..2 {
+                let b = if axis == 0 {
+                    if col + 1 >= w {
+                        continue;
+                    }
+                    a + 1
+                } else {
+                    if row + 1 >= h {
+                        continue;
+                    }
+                    a + w
+                };
+                let (ia, ib) = (ids[a], ids[b]);
+                if ia == ib {
+                    continue;
+                }
+                let a_front = ib == NO_TRIANGLE || (ia != NO_TRIANGLE && depth[a] <= depth[b]);
+                let (front, other) = if a_front { (a, b) } else { (b, a) };
+                let tri = ids[front];
+                let centre = |p: usize| [(p % w) as f64 + 0.5, (p / w) as f64 + 0.5];
+                let (cf, co) = (centre(front), centre(other));
+                let face = faces[tri as usize];
+                for k in 0..3 {
+                    if !silhouette(tri, k) {
+                        continue;
+                    }
+                    let (va, vb) = (face[k], face[(k + 1) % 3]);
+                    let (sa, sb) = (proj[va as usize].screen, proj[vb as usize].screen);
+                    // The segment runs along `axis`; the crossing line is coordinate `o` = const.
+                    let o = 1 - axis;
+                    let line = cf[o];
+                    let (da, db) = (sa[o] - line, sb[o] - line);
+                    if da * db >= 0.0 {
+                        continue;
+                    }
+                    let den = sb[o] - sa[o];
+                    let s = (line - sa[o]) / den;
+                    let cross = sa[axis] + s * (sb[axis] - sa[axis]);
+                    let step = co[axis] - cf[axis]; // ±1
+                    let t = (cross - cf[axis]) / step;
+                    if !(0.0..=1.0).contains(&t) {
+                        continue;
+                    }
+                    // d cross / d(screen of a, b) along `axis` and `o`.
+                    let slope = (sb[axis] - sa[axis]) / den;
+                    let mut ds_a = [0.0; 2];
+                    let mut ds_b = [0.0; 2];
+                    ds_a[axis] = 1.0 - s;
+                    ds_b[axis] = s;
+                    ds_a[o] = slope * (s - 1.0);
+                    ds_b[o] = -slope * s;
+                    let (target, source, alpha, dalpha_dt) = if t > 0.5 {
+                        (other, front, t - 0.5, 1.0)
+                    } else {
+                        (front, other, 0.5 - t, -1.0)
+                    };
+                    let scale = dalpha_dt / step;
+                    let ja = camera.screen_jacobian(proj[va as usize].cam);
+                    let jb = camera.screen_jacobian(proj[vb as usize].cam);
+                    let d_alpha = [
+                        (ja[0] * ds_a[0] + ja[1] * ds_a[1]) * scale,
+                        (jb[0] * ds_b[0] + jb[1] * ds_b[1]) * scale,
+                    ];
+                    blends.push(Blend {
+                        target: target as u32,
+                        source: source as u32,
+                        edge: [va, vb],
+                        alpha,
+                        d_alpha,
+                    });
+                    break;
+                }
+            }
+        }
+    }
+    blends
+}
+
+/// Applies the blends to one view's colours: returns the antialiased colours.
+pub fn apply(colour: &[f64], blends: &[Blend]) -> Vec<f64> {
+    let mut out = colour.to_vec();
+    for b in blends {
+        let (t, s) = (b.target as usize, b.source as usize);
+        out[t] += b.alpha * (colour[s] - colour[t]);
+    }
+    out
+}
+
+/// Adjoint of [`apply`]: from dL/d(out) returns dL/d(colour) and adds the visibility gradient
+/// dL/dα · dα/dx to `d_vertices`.
+pub fn apply_adjoint(
+    colour: &[f64],
+    blends: &[Blend],
+    d_out: &[f64],
+    d_vertices: &mut [DVec3],
+) -> Vec<f64> {
+    let mut d_colour = d_out.to_vec();
+    for b in blends {
+        let (t, s) = (b.target as usize, b.source as usize);
+        let g = d_out[t];
+        d_colour[s] += g * b.alpha;
+        d_colour[t] -= g * b.alpha;
+        let d_alpha = g * (colour[s] - colour[t]);
+        d_vertices[b.edge[0] as usize] += b.d_alpha[0] * d_alpha;
+        d_vertices[b.edge[1] as usize] += b.d_alpha[1] * d_alpha;
+    }
+    d_colour
+}

@@ -1,0 +1,366 @@
+//! The CPU reference backend: exact, deterministic, multithreaded over views (rayon).
+//!
+//! Geometry is f64 throughout; the f32 images of the [`Renderer`] trait are the f64 values cast at
+//! the end. [`CpuRenderer::render_grey`] / [`CpuRenderer::backward_grey`] expose the f64 grey
+//! image (all three channels are equal) for gradient checks.
+//!
+//! Gradient accumulation is deterministic: every view accumulates into its own buffers, which are
+//! summed in view order; within a view pixels are visited in a fixed order.
+
+pub mod antialias;
+pub mod math;
+pub mod normals;
+pub mod raster;
+pub mod shading;
+
+use glam::DVec3;
+use rayon::prelude::*;
+
+use crate::{Images, RenderError, Renderer, View};
+use antialias::Blend;
+use raster::{Camera, NO_TRIANGLE};
+use shading::Fragment;
+
+/// Options of the CPU renderer.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RenderSettings {
+    /// Silhouette antialiasing (and its visibility gradient). On by default.
+    pub antialias: bool,
+    /// Near-plane depth; triangles with a vertex nearer than this are not drawn. Default 0.5.
+    pub near: f64,
+}
+
+impl Default for RenderSettings {
+    fn default() -> Self {
+        Self {
+            antialias: true,
+            near: 0.5,
+        }
+    }
+}
+
+/// Background value (white) composited behind the mesh.
+pub const BACKGROUND: f64 = 1.0;
+
+struct ViewState {
+    camera: Camera,
+    ids: Vec<u32>,
+    /// Colour before antialiasing (background = 1).
+    colour: Vec<f64>,
+    blends: Vec<Blend>,
+}
+
+struct ForwardState {
+    vertices: Vec<[f64; 3]>,
+    faces: Vec<[u32; 3]>,
+    normals: Vec<DVec3>,
+    normal_sums: Vec<DVec3>,
+    views: Vec<ViewState>,
+    width: usize,
+    height: usize,
+}
+
+struct AdjacencyCache {
+    faces: Vec<[u32; 3]>,
+    adjacency: Vec<[u32; 3]>,
+}
+
+/// The CPU reference renderer. Keeps the state of its most recent render for `backward`.
+#[derive(Default)]
+pub struct CpuRenderer {
+    /// Rendering options.
+    pub settings: RenderSettings,
+    state: Option<ForwardState>,
+    /// Face adjacency of the last face list (faces rarely change between renders).
+    adjacency_cache: Option<AdjacencyCache>,
+}
+
+impl std::fmt::Debug for CpuRenderer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("CpuRenderer")
+            .field("settings", &self.settings)
+            .finish_non_exhaustive()
+    }
+}
+
+fn validate(
+    vertices: &[[f64; 3]],
+    faces: &[[u32; 3]],
+    width: usize,
+    height: usize,
+) -> Result<(), RenderError> {
+    if width == 0 || height == 0 {
+        return Err(RenderError::InvalidInput(format!(
+            "image size {width}×{height} is empty"
+        )));
+    }
+    if width.checked_mul(height).is_none_or(|n| n > (1 << 28)) {
+        return Err(RenderError::InvalidInput(format!(
+            "image size {width}×{height} is too large"
+        )));
+    }
+    if let Some(i) = vertices
+        .iter()
+        .position(|v| v.iter().any(|c| !c.is_finite()))
+    {
+        return Err(RenderError::InvalidInput(format!(
+            "vertex {i} has a non-finite coordinate"
+        )));
+    }
+    let n = vertices.len();
+    if let Some((fi, f)) = faces
+        .iter()
+        .enumerate()
+        .find(|(_, f)| f.iter().any(|&v| v as usize >= n))
+    {
+        return Err(RenderError::InvalidInput(format!(
+            "face {fi} {f:?} indexes past the {n} vertices"
+        )));
+    }
+    Ok(())
+}
+
+impl CpuRenderer {
+    /// A renderer with the given settings.
+    pub fn new(settings: RenderSettings) -> Self {
+        Self {
+            settings,
+            state: None,
+            adjacency_cache: None,
+        }
+    }
+
+    fn adjacency(&mut self, faces: &[[u32; 3]]) -> Vec<[u32; 3]> {
+        match &self.adjacency_cache {
+            Some(c) if c.faces.as_slice() == faces => c.adjacency.clone(),
+            _ => {
+                let adjacency = antialias::face_adjacency(faces);
+                self.adjacency_cache = Some(AdjacencyCache {
+                    faces: faces.to_vec(),
+                    adjacency: adjacency.clone(),
+                });
+                adjacency
+            }
+        }
+    }
+
+    /// Renders the grey value of every pixel, `(view, row, column)` row-major, in f64.
+    pub fn render_grey(
+        &mut self,
+        vertices: &[[f64; 3]],
+        faces: &[[u32; 3]],
+        views: &[View],
+        width: usize,
+        height: usize,
+    ) -> Result<Vec<f64>, RenderError> {
+        self.state = None;
+        validate(vertices, faces, width, height)?;
+        let cameras = views
+            .iter()
+            .map(|v| Camera::new(v, width, height))
+            .collect::<Result<Vec<_>, _>>()?;
+        let adjacency = if self.settings.antialias {
+            self.adjacency(faces)
+        } else {
+            Vec::new()
+        };
+        let face_raw = normals::face_normals_raw(vertices, faces);
+        let (vnormals, sums) = normals::smooth_normals(vertices, faces, &face_raw);
+        let settings = &self.settings;
+        let results: Vec<(ViewState, Vec<f64>)> = cameras
+            .into_par_iter()
+            .map(|camera| {
+                let proj = raster::project_vertices(&camera, vertices);
+                let (ids, depth) = raster::rasterize(faces, &proj, settings.near, width, height);
+                let mut colour = vec![BACKGROUND; width * height];
+                for (i, (&t, c)) in ids.iter().zip(colour.iter_mut()).enumerate() {
+                    if t != NO_TRIANGLE {
+                        *c = shading::shade(&fragment(&camera, vertices, faces, &vnormals, t, i));
+                    }
+                }
+                let (blends, out) = if settings.antialias {
+                    let blends = antialias::find_blends(
+                        vertices, faces, &adjacency, &face_raw, &camera, &proj, &ids, &depth,
+                    );
+                    let out = antialias::apply(&colour, &blends);
+                    (blends, out)
+                } else {
+                    (Vec::new(), colour.clone())
+                };
+                (
+                    ViewState {
+                        camera,
+                        ids,
+                        colour,
+                        blends,
+                    },
+                    out,
+                )
+            })
+            .collect();
+        let mut grey = Vec::with_capacity(views.len() * width * height);
+        let mut states = Vec::with_capacity(views.len());
+        for (s, out) in results {
+            grey.extend_from_slice(&out);
+            states.push(s);
+        }
+        self.state = Some(ForwardState {
+            vertices: vertices.to_vec(),
+            faces: faces.to_vec(),
+            normals: vnormals,
+            normal_sums: sums,
+            views: states,
+            width,
+            height,
+        });
+        Ok(grey)
+    }
+
+    /// VJP of the most recent [`render_grey`](Self::render_grey): dL/d(grey) → dL/dvertices.
+    pub fn backward_grey(&self, d_grey: &[f64]) -> Result<Vec<[f64; 3]>, RenderError> {
+        let st = self.state.as_ref().ok_or(RenderError::NoForwardState)?;
+        let npix = st.width * st.height;
+        if d_grey.len() != st.views.len() * npix {
+            return Err(RenderError::InvalidInput(format!(
+                "gradient has {} values, the last render had {}",
+                d_grey.len(),
+                st.views.len() * npix
+            )));
+        }
+        let nv = st.vertices.len();
+        let per_view: Vec<(Vec<DVec3>, Vec<DVec3>)> = st
+            .views
+            .par_iter()
+            .enumerate()
+            .map(|(vi, view)| {
+                let d_out = &d_grey[vi * npix..(vi + 1) * npix];
+                let mut dx = vec![DVec3::ZERO; nv];
+                let mut dn = vec![DVec3::ZERO; nv];
+                let d_colour = if view.blends.is_empty() {
+                    d_out.to_vec()
+                } else {
+                    antialias::apply_adjoint(&view.colour, &view.blends, d_out, &mut dx)
+                };
+                for (i, (&t, &dc)) in view.ids.iter().zip(&d_colour).enumerate() {
+                    if t == NO_TRIANGLE || dc == 0.0 {
+                        continue;
+                    }
+                    let frag = fragment(&view.camera, &st.vertices, &st.faces, &st.normals, t, i);
+                    let (d_pos, d_nrm) = shading::shade_adjoint(&frag, dc);
+                    let f = st.faces[t as usize];
+                    for k in 0..3 {
+                        dx[f[k] as usize] += d_pos[k];
+                        dn[f[k] as usize] += d_nrm[k];
+                    }
+                }
+                (dx, dn)
+            })
+            .collect();
+        let mut dx = vec![DVec3::ZERO; nv];
+        let mut dn = vec![DVec3::ZERO; nv];
+        for (x, n) in &per_view {
+            for v in 0..nv {
+                dx[v] += x[v];
+                dn[v] += n[v];
+            }
+        }
+        normals::smooth_normals_adjoint(
+            &st.vertices,
+            &st.faces,
+            &st.normals,
+            &st.normal_sums,
+            &dn,
+            &mut dx,
+        );
+        Ok(dx.into_iter().map(Into::into).collect())
+    }
+
+    /// Visible triangle per pixel of the most recent render, `(view, row, column)`
+    /// ([`raster::NO_TRIANGLE`] for background).
+    pub fn triangle_ids(&self) -> Option<Vec<u32>> {
+        self.state
+            .as_ref()
+            .map(|s| s.views.iter().flat_map(|v| v.ids.iter().copied()).collect())
+    }
+}
+
+fn fragment(
+    camera: &Camera,
+    vertices: &[[f64; 3]],
+    faces: &[[u32; 3]],
+    vnormals: &[DVec3],
+    t: u32,
+    pixel: usize,
+) -> Fragment {
+    let f = faces[t as usize];
+    let (col, row) = (pixel % camera.width, pixel / camera.width);
+    Fragment {
+        x: [
+            DVec3::from(vertices[f[0] as usize]),
+            DVec3::from(vertices[f[1] as usize]),
+            DVec3::from(vertices[f[2] as usize]),
+        ],
+        n: [
+            vnormals[f[0] as usize],
+            vnormals[f[1] as usize],
+            vnormals[f[2] as usize],
+        ],
+        eye: camera.eye,
+        light: camera.light,
+        ray: camera.pixel_ray(col as f64 + 0.5, row as f64 + 0.5),
+    }
+}
+
+impl Renderer for CpuRenderer {
+    fn name(&self) -> String {
+        format!("cpu ({} threads)", rayon::current_num_threads())
+    }
+
+    fn render(
+        &mut self,
+        vertices: &[[f64; 3]],
+        faces: &[[u32; 3]],
+        views: &[View],
+        width: usize,
+        height: usize,
+    ) -> Result<Images, RenderError> {
+        let grey = self.render_grey(vertices, faces, views, width, height)?;
+        let rgb = grey.iter().flat_map(|&g| [g as f32; 3]).collect();
+        Ok(Images {
+            count: views.len(),
+            height,
+            width,
+            rgb,
+        })
+    }
+
+    fn backward(&mut self, d_images: &Images) -> Result<Vec<[f64; 3]>, RenderError> {
+        let st = self.state.as_ref().ok_or(RenderError::NoForwardState)?;
+        if d_images.count != st.views.len()
+            || d_images.width != st.width
+            || d_images.height != st.height
+        {
+            return Err(RenderError::InvalidInput(format!(
+                "gradient images are {}×{}×{}, the last render was {}×{}×{}",
+                d_images.count,
+                d_images.height,
+                d_images.width,
+                st.views.len(),
+                st.height,
+                st.width
+            )));
+        }
+        if d_images.rgb.len() != d_images.count * d_images.height * d_images.width * 3 {
+            return Err(RenderError::InvalidInput(
+                "gradient images have the wrong number of values".into(),
+            ));
+        }
+        // All three channels carry the same grey value, so dL/d(grey) is the channel sum.
+        let d_grey: Vec<f64> = d_images
+            .rgb
+            .chunks_exact(3)
+            .map(|c| f64::from(c[0]) + f64::from(c[1]) + f64::from(c[2]))
+            .collect();
+        self.backward_grey(&d_grey)
+    }
+}

@@ -1,0 +1,282 @@
+//! Camera frames, perspective projection and rasterization with a depth test.
+//!
+//! Camera frame (right-handed world, +y up): forward f = normalize(target − eye),
+//! right r = normalize(f × up), camera up u = r × f. Camera coordinates of a point X are
+//! (r·(X − eye), u·(X − eye), f·(X − eye)); the third is the depth z (positive in front).
+//!
+//! Screen coordinates are in pixels with the origin at the top-left image corner, x to the right,
+//! y down: sx = W/2 + k·x_c/z, sy = H/2 − k·y_c/z with k = (H/2)/tan(fov_y/2) (square pixels).
+//! Pixel (column i, row j) has its centre at (i + 0.5, j + 0.5) and is covered by a triangle when
+//! its centre is inside. Centres exactly on an edge follow the top-left rule (in the y-down frame,
+//! after orienting the triangle clockwise on screen: an edge is owned when it goes up, dy < 0, or is
+//! horizontal going right, dy = 0 and dx > 0), so a centre on an edge shared by two triangles is
+//! covered exactly once. The edge function E(a, b, p) = (a − p) × (b − p) is evaluated in a form
+//! that is exactly antisymmetric in (a, b), so shared edges are watertight in floating point.
+//!
+//! Clipping: a triangle with any vertex nearer than the near plane (depth 0.5 by default) is not
+//! drawn (no partial clipping); the far plane is at infinity. No back-face culling.
+//! Depth test: nearest depth wins; equal depths go to the smaller triangle index (deterministic).
+
+use glam::DVec3;
+use rayon::prelude::*;
+
+use crate::{RenderError, View};
+
+/// Triangle id of a pixel that no triangle covers.
+pub const NO_TRIANGLE: u32 = u32::MAX;
+
+/// Rows per rasterization band (the unit of parallel work within a view).
+const BAND_ROWS: usize = 32;
+
+/// One view's camera frame, projection and light.
+#[derive(Clone, Debug)]
+pub struct Camera {
+    pub eye: DVec3,
+    pub right: DVec3,
+    pub up: DVec3,
+    pub forward: DVec3,
+    pub light: DVec3,
+    /// Pixels per unit of x_c/z (and y_c/z).
+    pub k: f64,
+    pub cx: f64,
+    pub cy: f64,
+    pub width: usize,
+    pub height: usize,
+}
+
+impl Camera {
+    /// Builds the frame of `view` for a `width`×`height` image.
+    pub fn new(view: &View, width: usize, height: usize) -> Result<Self, RenderError> {
+        let eye = DVec3::from(view.eye);
+        let target = DVec3::from(view.target);
+        let light = DVec3::from(view.light_pos);
+        let world_up = DVec3::from(view.up);
+        if !(eye.is_finite() && target.is_finite() && light.is_finite() && world_up.is_finite()) {
+            return Err(RenderError::InvalidInput(
+                "view has a non-finite eye, target, up or light".into(),
+            ));
+        }
+        if !(view.fov_y_deg > 0.0 && view.fov_y_deg < 180.0) {
+            return Err(RenderError::InvalidInput(format!(
+                "field of view {}° is not in (0°, 180°)",
+                view.fov_y_deg
+            )));
+        }
+        let forward = (target - eye)
+            .try_normalize()
+            .ok_or_else(|| RenderError::InvalidInput("view eye equals its target".into()))?;
+        let right = forward.cross(world_up).try_normalize().ok_or_else(|| {
+            RenderError::InvalidInput("view up is parallel to the viewing direction".into())
+        })?;
+        let up = right.cross(forward);
+        let k = 0.5 * height as f64 / (0.5 * view.fov_y_deg.to_radians()).tan();
+        Ok(Self {
+            eye,
+            right,
+            up,
+            forward,
+            light,
+            k,
+            cx: 0.5 * width as f64,
+            cy: 0.5 * height as f64,
+            width,
+            height,
+        })
+    }
+
+    /// Camera coordinates (x_c, y_c, z) of a world point.
+    #[inline]
+    pub fn to_camera(&self, x: DVec3) -> DVec3 {
+        let p = x - self.eye;
+        DVec3::new(p.dot(self.right), p.dot(self.up), p.dot(self.forward))
+    }
+
+    /// Screen position (sx, sy) in pixels of camera coordinates `c` (z > 0).
+    #[inline]
+    pub fn project(&self, c: DVec3) -> [f64; 2] {
+        [self.cx + self.k * c.x / c.z, self.cy - self.k * c.y / c.z]
+    }
+
+    /// Gradients of (sx, sy) with respect to the world point whose camera coordinates are `c`.
+    #[inline]
+    pub fn screen_jacobian(&self, c: DVec3) -> [DVec3; 2] {
+        let iz = 1.0 / c.z;
+        [
+            (self.right - self.forward * (c.x * iz)) * (self.k * iz),
+            -(self.up - self.forward * (c.y * iz)) * (self.k * iz),
+        ]
+    }
+
+    /// World direction of the ray through screen point (sx, sy) (unit depth along `forward`).
+    #[inline]
+    pub fn pixel_ray(&self, sx: f64, sy: f64) -> DVec3 {
+        self.right * ((sx - self.cx) / self.k) - self.up * ((sy - self.cy) / self.k) + self.forward
+    }
+}
+
+/// Projected vertex: camera coordinates and screen position.
+#[derive(Clone, Copy, Debug)]
+pub struct Projected {
+    pub cam: DVec3,
+    pub screen: [f64; 2],
+}
+
+/// Projects every vertex (screen positions are meaningless for z ≤ 0; such faces are not drawn).
+pub fn project_vertices(camera: &Camera, vertices: &[[f64; 3]]) -> Vec<Projected> {
+    vertices
+        .iter()
+        .map(|x| {
+            let cam = camera.to_camera(DVec3::from(*x));
+            Projected {
+                cam,
+                screen: camera.project(cam),
+            }
+        })
+        .collect()
+}
+
+/// Exactly antisymmetric edge function E(a, b, p) = (a − p) × (b − p): twice the signed area of
+/// (p, a, b); positive when p lies to the interior side of a clockwise-on-screen edge a → b.
+#[inline]
+fn edge(a: [f64; 2], b: [f64; 2], p: [f64; 2]) -> f64 {
+    (a[0] - p[0]) * (b[1] - p[1]) - (a[1] - p[1]) * (b[0] - p[0])
+}
+
+/// Top-left ownership of edge a → b (triangle oriented clockwise on screen, y down).
+#[inline]
+fn owns(a: [f64; 2], b: [f64; 2]) -> bool {
+    let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+    dy < 0.0 || (dy == 0.0 && dx > 0.0)
+}
+
+/// Triangle set up for scan conversion.
+struct Setup {
+    s: [[f64; 2]; 3],
+    inv_z: [f64; 3],
+    inv_area2: f64,
+    owned: [bool; 3],
+    cols: (usize, usize),
+    rows: (usize, usize),
+}
+
+fn setup(
+    face: &[u32; 3],
+    proj: &[Projected],
+    near: f64,
+    width: usize,
+    height: usize,
+) -> Option<Setup> {
+    let mut c = [
+        proj[face[0] as usize],
+        proj[face[1] as usize],
+        proj[face[2] as usize],
+    ];
+    if c.iter().any(|p| p.cam.z < near || p.cam.z.is_nan()) {
+        return None;
+    }
+    let mut area2 = edge(c[0].screen, c[1].screen, c[2].screen);
+    if area2 == 0.0 || !area2.is_finite() {
+        return None;
+    }
+    if area2 < 0.0 {
+        c.swap(1, 2);
+        area2 = -area2;
+    }
+    let s = [c[0].screen, c[1].screen, c[2].screen];
+    let (mut x0, mut x1, mut y0, mut y1) = (
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+    );
+    for p in &s {
+        x0 = x0.min(p[0]);
+        x1 = x1.max(p[0]);
+        y0 = y0.min(p[1]);
+        y1 = y1.max(p[1]);
+    }
+    // Pixel centres i + 0.5 inside [x0, x1].
+    let (c0, c1) = (
+        (x0 - 0.5).ceil().max(0.0),
+        (x1 - 0.5).floor().min(width as f64 - 1.0),
+    );
+    let (r0, r1) = (
+        (y0 - 0.5).ceil().max(0.0),
+        (y1 - 0.5).floor().min(height as f64 - 1.0),
+    );
+    if c0 > c1 || r0 > r1 {
+        return None;
+    }
+    Some(Setup {
+        s,
+        inv_z: [1.0 / c[0].cam.z, 1.0 / c[1].cam.z, 1.0 / c[2].cam.z],
+        inv_area2: 1.0 / area2,
+        // Edge opposite corner i is (i+1 → i+2).
+        owned: [owns(s[1], s[2]), owns(s[2], s[0]), owns(s[0], s[1])],
+        cols: (c0 as usize, c1 as usize),
+        rows: (r0 as usize, r1 as usize),
+    })
+}
+
+/// Rasterizes one view: per pixel (row-major, row 0 at the top) the visible triangle id
+/// ([`NO_TRIANGLE`] for background) and its depth (+∞ for background).
+pub fn rasterize(
+    faces: &[[u32; 3]],
+    proj: &[Projected],
+    near: f64,
+    width: usize,
+    height: usize,
+) -> (Vec<u32>, Vec<f64>) {
+    let setups: Vec<Option<Setup>> = faces
+        .iter()
+        .map(|f| setup(f, proj, near, width, height))
+        .collect();
+    let bands = height.div_ceil(BAND_ROWS);
+    let mut bins: Vec<Vec<u32>> = vec![Vec::new(); bands];
+    for (t, s) in setups.iter().enumerate() {
+        if let Some(s) = s {
+            for b in s.rows.0 / BAND_ROWS..=s.rows.1 / BAND_ROWS {
+                bins[b].push(t as u32);
+            }
+        }
+    }
+    let mut ids = vec![NO_TRIANGLE; width * height];
+    let mut depth = vec![f64::INFINITY; width * height];
+    ids.par_chunks_mut(BAND_ROWS * width)
+        .zip(depth.par_chunks_mut(BAND_ROWS * width))
+        .zip(bins.par_iter())
+        .enumerate()
+        .for_each(|(band, ((ids, depth), bin))| {
+            let row_base = band * BAND_ROWS;
+            let row_end = (row_base + BAND_ROWS).min(height);
+            for &t in bin {
+                let Some(s) = &setups[t as usize] else {
+                    continue;
+                };
+                for row in s.rows.0.max(row_base)..=s.rows.1.min(row_end - 1) {
+                    let py = row as f64 + 0.5;
+                    for col in s.cols.0..=s.cols.1 {
+                        let p = [col as f64 + 0.5, py];
+                        let e0 = edge(s.s[1], s.s[2], p);
+                        let e1 = edge(s.s[2], s.s[0], p);
+                        let e2 = edge(s.s[0], s.s[1], p);
+                        let inside = (e0 > 0.0 || (e0 == 0.0 && s.owned[0]))
+                            && (e1 > 0.0 || (e1 == 0.0 && s.owned[1]))
+                            && (e2 > 0.0 || (e2 == 0.0 && s.owned[2]));
+                        if !inside {
+                            continue;
+                        }
+                        let inv_z =
+                            (e0 * s.inv_z[0] + e1 * s.inv_z[1] + e2 * s.inv_z[2]) * s.inv_area2;
+                        let z = 1.0 / inv_z;
+                        let i = (row - row_base) * width + col;
+                        if z < depth[i] || (z == depth[i] && t < ids[i]) {
+                            depth[i] = z;
+                            ids[i] = t;
+                        }
+                    }
+                }
+            }
+        });
+    (ids, depth)
+}

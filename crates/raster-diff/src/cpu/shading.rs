@@ -1,0 +1,208 @@
+//! Per-pixel shading of spec §6 and its adjoint, side by side.
+//!
+//! For a pixel whose centre ray `eye + s·d` hits face (x0, x1, x2):
+//! - perspective-correct barycentrics from the ray: with P_i = x_i − eye,
+//!   a_0 = d·(P_1 × P_2), a_1 = d·(P_2 × P_0), a_2 = d·(P_0 × P_1), w_i = a_i / Σ a_j
+//!   (the barycentrics of the ray–plane intersection, equal to screen-space barycentrics
+//!   interpolated with 1/z weights);
+//! - p = eye + Σ w_i P_i; n_s = normalize(Σ w_i n_i) (n_i smooth vertex normals);
+//!   n_g = normalize((x1 − x0) × (x2 − x0)); v = normalize(eye − p);
+//! - two-sided: if v·n_g < 0, n_s ← −n_s and n_g ← −n_g;
+//! - bent normal: τ = clamp((v·n_s)/0.1, 0, 1), n = (1 − τ) n_g + τ n_s (not renormalized);
+//! - l = normalize(light − p); colour c = kd · max(n·l, 0)/π · light_power with kd = 0.5 and
+//!   light_power = 5, the same value in the three channels.
+
+use glam::DVec3;
+
+use super::math::{cross_adjoint, normalize, normalize_adjoint};
+
+/// Diffuse albedo (grey).
+pub const KD: f64 = 0.5;
+/// Light intensity (no falloff).
+pub const LIGHT_POWER: f64 = 5.0;
+/// Width of the bent-normal blend in v·n_s.
+pub const BENT_WIDTH: f64 = 0.1;
+
+/// Geometry of one shaded pixel.
+#[derive(Clone, Copy, Debug)]
+pub struct Fragment {
+    /// Face corner positions.
+    pub x: [DVec3; 3],
+    /// Smooth vertex normals at the corners (unit).
+    pub n: [DVec3; 3],
+    /// Camera position.
+    pub eye: DVec3,
+    /// Light position.
+    pub light: DVec3,
+    /// World direction of the pixel-centre ray (any length).
+    pub ray: DVec3,
+}
+
+/// Perspective-correct barycentrics of the ray hit (see module docs).
+#[inline]
+pub fn barycentrics(x: &[DVec3; 3], eye: DVec3, ray: DVec3) -> [f64; 3] {
+    let p = [x[0] - eye, x[1] - eye, x[2] - eye];
+    let a = [
+        ray.dot(p[1].cross(p[2])),
+        ray.dot(p[2].cross(p[0])),
+        ray.dot(p[0].cross(p[1])),
+    ];
+    let s = a[0] + a[1] + a[2];
+    [a[0] / s, a[1] / s, a[2] / s]
+}
+
+struct Forward {
+    p: [DVec3; 3],
+    s: f64,
+    w: [f64; 3],
+    q: DVec3,
+    ns_raw: DVec3,
+    ns: DVec3,
+    ns_inv: f64,
+    e1: DVec3,
+    e2: DVec3,
+    g: DVec3,
+    ng: DVec3,
+    ng_inv: f64,
+    vv: DVec3,
+    v: DVec3,
+    v_inv: f64,
+    sign: f64,
+    tau_raw: f64,
+    tau: f64,
+    n: DVec3,
+    ll: DVec3,
+    l: DVec3,
+    l_inv: f64,
+    dot: f64,
+}
+
+fn forward(f: &Fragment) -> Forward {
+    let p = [f.x[0] - f.eye, f.x[1] - f.eye, f.x[2] - f.eye];
+    let a = [
+        f.ray.dot(p[1].cross(p[2])),
+        f.ray.dot(p[2].cross(p[0])),
+        f.ray.dot(p[0].cross(p[1])),
+    ];
+    let s = a[0] + a[1] + a[2];
+    let w = [a[0] / s, a[1] / s, a[2] / s];
+    let q = p[0] * w[0] + p[1] * w[1] + p[2] * w[2];
+    let ns_raw = f.n[0] * w[0] + f.n[1] * w[1] + f.n[2] * w[2];
+    let (ns, ns_inv) = normalize(ns_raw);
+    let (e1, e2) = (p[1] - p[0], p[2] - p[0]);
+    let g = e1.cross(e2);
+    let (ng, ng_inv) = normalize(g);
+    let vv = -q;
+    let (v, v_inv) = normalize(vv);
+    let sign = if v.dot(ng) < 0.0 { -1.0 } else { 1.0 };
+    let tau_raw = v.dot(ns * sign) / BENT_WIDTH;
+    let tau = tau_raw.clamp(0.0, 1.0);
+    let n = ng * (sign * (1.0 - tau)) + ns * (sign * tau);
+    let ll = f.light - (f.eye + q);
+    let (l, l_inv) = normalize(ll);
+    let dot = n.dot(l);
+    Forward {
+        p,
+        s,
+        w,
+        q,
+        ns_raw,
+        ns,
+        ns_inv,
+        e1,
+        e2,
+        g,
+        ng,
+        ng_inv,
+        vv,
+        v,
+        v_inv,
+        sign,
+        tau_raw,
+        tau,
+        n,
+        ll,
+        l,
+        l_inv,
+        dot,
+    }
+}
+
+/// Scale from max(n·l, 0) to colour: kd · light_power / π.
+pub const RADIANCE_SCALE: f64 = KD * LIGHT_POWER / std::f64::consts::PI;
+
+/// Shaded grey value of the fragment, in [0, kd·light_power/π] ≈ [0, 0.796].
+pub fn shade(f: &Fragment) -> f64 {
+    RADIANCE_SCALE * forward(f).dot.max(0.0)
+}
+
+/// Adjoint of [`shade`]: given dL/dc returns (dL/dx_i, dL/dn_i) for the three corners.
+///
+/// Piecewise choices (the two-sided sign, the clamp of τ and the max in the diffuse term) are
+/// treated as constants; their kinks have measure zero.
+pub fn shade_adjoint(f: &Fragment, dc: f64) -> ([DVec3; 3], [DVec3; 3]) {
+    let fw = forward(f);
+    let mut dp = [DVec3::ZERO; 3];
+    let mut dn_corner = [DVec3::ZERO; 3];
+    if fw.dot <= 0.0 || dc == 0.0 {
+        return (dp, dn_corner);
+    }
+    let ddot = dc * RADIANCE_SCALE;
+    let dn = fw.l * ddot;
+    let dl = fw.n * ddot;
+    let dll = normalize_adjoint(fw.ll, fw.l, fw.l_inv, dl);
+    // ll = light − eye − q
+    let mut dq = -dll;
+    // n = sign·((1 − τ) n_g + τ n_s)
+    let ns_s = fw.ns * fw.sign;
+    let ng_s = fw.ng * fw.sign;
+    let dtau = dn.dot(ns_s - ng_s);
+    let mut dns_s = dn * fw.tau;
+    let dng_s = dn * (1.0 - fw.tau);
+    let mut dv = DVec3::ZERO;
+    if fw.tau_raw > 0.0 && fw.tau_raw < 1.0 {
+        let dtau_raw = dtau / BENT_WIDTH;
+        dv += ns_s * dtau_raw;
+        dns_s += fw.v * dtau_raw;
+    }
+    let dns = dns_s * fw.sign;
+    let dng = dng_s * fw.sign;
+    // v = normalize(−q)
+    dq -= normalize_adjoint(fw.vv, fw.v, fw.v_inv, dv);
+    // n_g = normalize(e1 × e2)
+    let dg = normalize_adjoint(fw.g, fw.ng, fw.ng_inv, dng);
+    let (de1, de2) = cross_adjoint(fw.e1, fw.e2, dg);
+    dp[1] += de1;
+    dp[2] += de2;
+    dp[0] -= de1 + de2;
+    // n_s = normalize(Σ w_i n_i)
+    let dns_raw = normalize_adjoint(fw.ns_raw, fw.ns, fw.ns_inv, dns);
+    let mut dw = [0.0; 3];
+    for i in 0..3 {
+        dn_corner[i] = dns_raw * fw.w[i];
+        dw[i] += f.n[i].dot(dns_raw);
+        // q = Σ w_i P_i
+        dp[i] += dq * fw.w[i];
+        dw[i] += fw.p[i].dot(dq);
+    }
+    // w_i = a_i / S
+    let wdw = fw.w[0] * dw[0] + fw.w[1] * dw[1] + fw.w[2] * dw[2];
+    let da = [
+        (dw[0] - wdw) / fw.s,
+        (dw[1] - wdw) / fw.s,
+        (dw[2] - wdw) / fw.s,
+    ];
+    let d = f.ray;
+    // a_0 = d·(P1 × P2) = P1·(P2 × d) = P2·(d × P1), and cyclically.
+    for i in 0..3 {
+        let (j, k) = ((i + 1) % 3, (i + 2) % 3);
+        dp[j] += fw.p[k].cross(d) * da[i];
+        dp[k] += d.cross(fw.p[j]) * da[i];
+    }
+    (dp, dn_corner)
+}
+
+/// The interpolated point p = eye + Σ w_i (x_i − eye) (for tests and depth).
+pub fn hit_point(f: &Fragment) -> DVec3 {
+    f.eye + forward(f).q
+}
