@@ -6,6 +6,10 @@
 //! `|fd − an| ≤ atol + rtol · max(|fd|, |an|)`. Every mismatch is collected and reported together;
 //! the command exits non-zero if any check fails.
 
+mod csd;
+
+mod raster;
+
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -103,6 +107,8 @@ pub fn run(filter: Option<&str>) -> anyhow::Result<()> {
     let mut report = Report::default();
     let suites: &[(&str, fn(&mut Report) -> anyhow::Result<()>)] = &[
         // Each crate's checks live in a sibling module and register here.
+        ("raster", raster::suite),
+        ("csd", csd::suite),
     ];
     for (name, suite) in suites {
         if filter.is_none_or(|f| name.contains(f)) {
