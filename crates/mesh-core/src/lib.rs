@@ -18,6 +18,7 @@ pub mod normalize;
 pub mod normals;
 pub mod subdivide;
 pub mod topology;
+pub mod validate;
 
 #[cfg(feature = "io")]
 pub mod io;
