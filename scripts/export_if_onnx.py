@@ -149,12 +149,20 @@ def build_tiny(seed: int):
     ).eval()
 
     torch.manual_seed(seed + 2)
+    # Stage II works at 256 px: like IF-II, attention only at the coarsest level (here 32 px), after
+    # three ResNet downsampling blocks -- attention at 128 px would need ~70 GB for a batch of 16.
+    common2 = tiny_unet_common(text_dim)
+    common2.update(
+        down_block_types=("ResnetDownsampleBlock2D",) * 3 + ("SimpleCrossAttnDownBlock2D",),
+        up_block_types=("SimpleCrossAttnUpBlock2D",) + ("ResnetUpsampleBlock2D",) * 3,
+        block_out_channels=(8, 16, 16, 32),
+    )
     stage2 = UNet2DConditionModel(
         sample_size=256,
         in_channels=6,
         out_channels=6,
         class_embed_type="timestep",  # IF-II: the noise level of the upsampled low-res image
-        **tiny_unet_common(text_dim),
+        **common2,
     ).eval()
     return t5, stage1, stage2
 
@@ -418,7 +426,7 @@ def export_all(t5, stage1, stage2, out: Path, dtype: str, seed: int, big: bool, 
         cond = rng.standard_normal((2, MAX_TOKENS, text_dim)).astype(np_dtype)
 
     stages = []
-    check_px = 64  # spatial size of the verification/reference batch (both UNets take any multiple of 4)
+    check_px = 64  # spatial size of the verification/reference batch (stage I: multiples of 4, stage II: of 8)
     for key, unet, wrapper, in_ch, has_class in (
         ("stage1", stage1, Stage1, 3, False),
         ("stage2", stage2, Stage2, 6, True),
@@ -515,7 +523,7 @@ def load_scheduler_config(src: str, subfolder: str) -> dict:
 
 
 def run_pretrained(stage1_src: str, out: Path, dtype: str, stage2_src: str, text_src: str | None, seed: int,
-                   skip_text: bool, name: str | None):
+                   skip_text: bool, name: str | None, external: str = "auto"):
     torch = _torch()
     from diffusers import UNet2DConditionModel
     from transformers import T5EncoderModel
@@ -533,7 +541,7 @@ def run_pretrained(stage1_src: str, out: Path, dtype: str, stage2_src: str, text
     def n_bytes(m):
         return sum(p.numel() * p.element_size() for p in m.parameters())
 
-    big = any(m is not None and n_bytes(m) > 1.9e9 for m in (t5, stage1, stage2))
+    big = external == "always" or any(m is not None and n_bytes(m) > 1.9e9 for m in (t5, stage1, stage2))
     text, stages = export_all(t5, stage1, stage2, out, dtype, seed, big=big, save_reference=False)
     schedulers = {
         "stage1": load_scheduler_config(stage1_src, "scheduler"),
@@ -569,6 +577,8 @@ def main(argv=None):
                    help="do not export T5 (embeddings then come from `stylize embed` caches made elsewhere)")
     p.add_argument("--dtype", choices=["fp16", "fp32"], default="fp16")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--external-data", choices=["auto", "always"], default="auto",
+                   help="auto: ONNX external data only when a model exceeds 2 GB; always: for every model")
     p.add_argument("--name", default=None, help="model identity written to the manifest (embedding cache key)")
     a = p.parse_args(argv)
     os.environ.setdefault("HF_HUB_DISABLE_TELEMETRY", "1")
@@ -578,7 +588,8 @@ def main(argv=None):
         save_tiny_diffusers(Path(a.save_tiny_diffusers), a.seed)
     else:
         src, out = a.from_pretrained
-        run_pretrained(src, Path(out), a.dtype, a.stage2, a.text_encoder, a.seed, a.skip_text_encoder, a.name)
+        run_pretrained(src, Path(out), a.dtype, a.stage2, a.text_encoder, a.seed, a.skip_text_encoder, a.name,
+                       a.external_data)
 
 
 if __name__ == "__main__":

@@ -20,13 +20,20 @@ pub const IF_UNCOND_DIM: usize = 4096;
 pub fn if_empty_prompt_embedding() -> Result<csd::Embedding, OnnxError> {
     let path = Path::new("<builtin zero_t5-v1_1-xxl_vector.npy>");
     let arr = parse_npy(IF_EMPTY_PROMPT_NPY, path)?;
-    let data = arr
-        .to_f32()
-        .ok_or_else(|| OnnxError::Npy { path: path.to_path_buf(), message: "not float data".into() })?;
+    let data = arr.to_f32().ok_or_else(|| OnnxError::Npy {
+        path: path.to_path_buf(),
+        message: "not float data".into(),
+    })?;
     if arr.shape != [IF_UNCOND_TOKENS, IF_UNCOND_DIM] {
-        return Err(OnnxError::Npy { path: path.to_path_buf(), message: format!("unexpected shape {:?}", arr.shape) });
+        return Err(OnnxError::Npy {
+            path: path.to_path_buf(),
+            message: format!("unexpected shape {:?}", arr.shape),
+        });
     }
-    Ok(csd::Embedding { shape: [IF_UNCOND_TOKENS, IF_UNCOND_DIM], data })
+    Ok(csd::Embedding {
+        shape: [IF_UNCOND_TOKENS, IF_UNCOND_DIM],
+        data,
+    })
 }
 
 #[cfg(test)]
@@ -38,7 +45,12 @@ mod tests {
         let e = if_empty_prompt_embedding().expect("builtin embedding parses");
         assert_eq!(e.shape, [77, 4096]);
         assert!(e.data.iter().all(|v| v.is_finite()));
-        let norm: f64 = e.data.iter().map(|&v| f64::from(v) * f64::from(v)).sum::<f64>().sqrt();
+        let norm: f64 = e
+            .data
+            .iter()
+            .map(|&v| f64::from(v) * f64::from(v))
+            .sum::<f64>()
+            .sqrt();
         assert!(norm > 1.0, "an encoder output, not zeros: |e| = {norm}");
     }
 }

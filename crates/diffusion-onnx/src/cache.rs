@@ -32,7 +32,11 @@ impl EmbeddingCache {
     /// `$STYLIZE_EMBEDDING_CACHE`, else `$XDG_CACHE_HOME/stylize/embeddings`, else
     /// `$HOME/.cache/stylize/embeddings`.
     pub fn default_dir() -> Result<PathBuf, OnnxError> {
-        let non_empty = |k: &str| std::env::var_os(k).filter(|v| !v.is_empty()).map(PathBuf::from);
+        let non_empty = |k: &str| {
+            std::env::var_os(k)
+                .filter(|v| !v.is_empty())
+                .map(PathBuf::from)
+        };
         if let Some(d) = non_empty(CACHE_ENV) {
             return Ok(d);
         }
@@ -69,12 +73,17 @@ impl EmbeddingCache {
 
     /// The file an entry lives in.
     pub fn path(&self, model_identity: &str, prompt: &str) -> PathBuf {
-        self.dir.join(format!("{}.npy", Self::key(model_identity, prompt)))
+        self.dir
+            .join(format!("{}.npy", Self::key(model_identity, prompt)))
     }
 
     /// A cached embedding, if present. A present but unreadable entry is an error (delete it to
     /// recompute).
-    pub fn get(&self, model_identity: &str, prompt: &str) -> Result<Option<csd::Embedding>, OnnxError> {
+    pub fn get(
+        &self,
+        model_identity: &str,
+        prompt: &str,
+    ) -> Result<Option<csd::Embedding>, OnnxError> {
         let path = self.path(model_identity, prompt);
         if !path.is_file() {
             return Ok(None);
@@ -86,11 +95,19 @@ impl EmbeddingCache {
                 path.display()
             )));
         };
-        Ok(Some(csd::Embedding { shape: [*t, *d], data }))
+        Ok(Some(csd::Embedding {
+            shape: [*t, *d],
+            data,
+        }))
     }
 
     /// Stores an embedding.
-    pub fn put(&self, model_identity: &str, prompt: &str, embedding: &csd::Embedding) -> Result<PathBuf, OnnxError> {
+    pub fn put(
+        &self,
+        model_identity: &str,
+        prompt: &str,
+        embedding: &csd::Embedding,
+    ) -> Result<PathBuf, OnnxError> {
         let [t, d] = embedding.shape;
         if embedding.data.len() != t * d {
             return Err(OnnxError::Cache(format!(
@@ -101,7 +118,13 @@ impl EmbeddingCache {
         }
         std::fs::create_dir_all(&self.dir).map_err(|e| OnnxError::io(&self.dir, e))?;
         let path = self.path(model_identity, prompt);
-        write_npy(&path, &NpyArray { shape: vec![t, d], data: NpyData::F32(embedding.data.clone()) })?;
+        write_npy(
+            &path,
+            &NpyArray {
+                shape: vec![t, d],
+                data: NpyData::F32(embedding.data.clone()),
+            },
+        )?;
         Ok(path)
     }
 }
@@ -124,24 +147,32 @@ pub fn prompt_embeddings(
         if T5Tokenizer::preprocess(p).is_empty() {
             return model.uncond_embedding();
         }
-        if let Some(c) = cache {
-            if let Some(e) = c.get(&identity, p)? {
-                let want = [model.manifest().embeddings.tokens, model.manifest().embeddings.dim];
-                if e.shape == want {
-                    return Ok(e);
-                }
-                return Err(OnnxError::Cache(format!(
-                    "{} has shape {:?} but this model's embeddings are {want:?}; delete it to recompute",
-                    c.path(&identity, p).display(),
-                    e.shape
-                )));
+        if let Some(c) = cache
+            && let Some(e) = c.get(&identity, p)?
+        {
+            let want = [
+                model.manifest().embeddings.tokens,
+                model.manifest().embeddings.dim,
+            ];
+            if e.shape == want {
+                return Ok(e);
             }
+            return Err(OnnxError::Cache(format!(
+                "{} has shape {:?} but this model's embeddings are {want:?}; delete it to recompute",
+                c.path(&identity, p).display(),
+                e.shape
+            )));
         }
         if encoder.is_none() {
             encoder = Some(T5Encoder::open(model, options)?);
         }
-        let enc = encoder.as_mut().ok_or_else(|| OnnxError::Cache("text encoder unavailable".into()))?;
-        let e = enc.embed_batch(&[p])?.pop().ok_or_else(|| OnnxError::Cache("the text encoder returned nothing".into()))?;
+        let enc = encoder
+            .as_mut()
+            .ok_or_else(|| OnnxError::Cache("text encoder unavailable".into()))?;
+        let e = enc
+            .embed_batch(&[p])?
+            .pop()
+            .ok_or_else(|| OnnxError::Cache("the text encoder returned nothing".into()))?;
         if let Some(c) = cache {
             c.put(&identity, p, &e)?;
         }
@@ -160,7 +191,10 @@ mod tests {
     fn cache_round_trips_an_embedding_exactly() {
         let dir = tempfile::tempdir().expect("tempdir");
         let cache = EmbeddingCache::new(dir.path().join("nested").join("cache"));
-        let e = csd::Embedding { shape: [3, 2], data: vec![0.5, -1.25, 3.0e-7, 1.0e6, -0.0, 7.0] };
+        let e = csd::Embedding {
+            shape: [3, 2],
+            data: vec![0.5, -1.25, 3.0e-7, 1.0e6, -0.0, 7.0],
+        };
         assert_eq!(cache.get("model-a", "a cat").ok(), Some(None));
         cache.put("model-a", "a cat", &e).expect("put");
         assert_eq!(cache.get("model-a", "a cat").ok(), Some(Some(e.clone())));
@@ -175,7 +209,10 @@ mod tests {
         assert_ne!(k, EmbeddingCache::key("m2", "a cat"));
         assert_ne!(k, EmbeddingCache::key("m", "a dog"));
         // The separator keeps (identity, prompt) pairs apart.
-        assert_ne!(EmbeddingCache::key("ab", "c"), EmbeddingCache::key("a", "bc"));
+        assert_ne!(
+            EmbeddingCache::key("ab", "c"),
+            EmbeddingCache::key("a", "bc")
+        );
     }
 
     #[test]

@@ -4,10 +4,10 @@ use std::borrow::Cow;
 
 use ort::session::{Session, SessionInputValue};
 
+use crate::OnnxError;
 use crate::manifest::{Dtype, ModelDir, Stage, StageManifest};
 use crate::runtime::{SessionOptions, open_session};
 use crate::session::{Kind, check_signature, float_input, float_output, int_input};
-use crate::OnnxError;
 
 /// One IF UNet. Inputs: `sample` `(N, C_in, H, W)` f32 NCHW, one timestep, one embedding (and for
 /// stage II one noise-level class label) per sample; output `(N, C_out, H, W)` f32 (ε in channels
@@ -35,7 +35,11 @@ impl std::fmt::Debug for OnnxDenoiser {
 
 impl OnnxDenoiser {
     /// Opens one stage of a model directory and checks the graph against the manifest.
-    pub fn open(model: &ModelDir, stage: Stage, options: &SessionOptions) -> Result<Self, OnnxError> {
+    pub fn open(
+        model: &ModelDir,
+        stage: Stage,
+        options: &SessionOptions,
+    ) -> Result<Self, OnnxError> {
         let label = format!("{} UNet", stage.key());
         let spec = model
             .stage(stage)
@@ -56,9 +60,21 @@ impl OnnxDenoiser {
         if let Some(c) = &spec.class_labels {
             inputs.push((c.as_str(), Kind::Int64, 1));
         }
-        check_signature(&session, &label, spec.dtype, &inputs, (&spec.output, Kind::Float, 4))?;
+        check_signature(
+            &session,
+            &label,
+            spec.dtype,
+            &inputs,
+            (&spec.output, Kind::Float, 4),
+        )?;
         let e = &model.manifest().embeddings;
-        Ok(Self { session, stage, spec, embedding_shape: [e.tokens, e.dim], label })
+        Ok(Self {
+            session,
+            stage,
+            spec,
+            embedding_shape: [e.tokens, e.dim],
+            label,
+        })
     }
 
     /// Which stage.
@@ -77,7 +93,10 @@ impl OnnxDenoiser {
     }
 
     fn shape_error(&self, message: String) -> OnnxError {
-        OnnxError::Shape { model: self.label.clone(), message }
+        OnnxError::Shape {
+            model: self.label.clone(),
+            message,
+        }
     }
 
     /// Runs the UNet once; see the type's docs for layouts.
@@ -89,7 +108,10 @@ impl OnnxDenoiser {
         class_labels: Option<&[i64]>,
     ) -> Result<csd::Tensor, OnnxError> {
         let &[n, c, h, w] = sample.shape.as_slice() else {
-            return Err(self.shape_error(format!("sample must be (N, C, H, W), got shape {:?}", sample.shape)));
+            return Err(self.shape_error(format!(
+                "sample must be (N, C, H, W), got shape {:?}",
+                sample.shape
+            )));
         };
         if n == 0 || h == 0 || w == 0 {
             return Err(self.shape_error(format!("empty sample of shape {:?}", sample.shape)));
@@ -101,7 +123,11 @@ impl OnnxDenoiser {
             )));
         }
         if sample.data.len() != n * c * h * w {
-            return Err(self.shape_error(format!("sample of shape {:?} has {} values", sample.shape, sample.data.len())));
+            return Err(self.shape_error(format!(
+                "sample of shape {:?} has {} values",
+                sample.shape,
+                sample.data.len()
+            )));
         }
         if timesteps.len() != n || embeddings.len() != n {
             return Err(self.shape_error(format!(
@@ -126,16 +152,27 @@ impl OnnxDenoiser {
         let labels = match (&self.spec.class_labels, class_labels) {
             (Some(_), Some(l)) if l.len() == n => Some(l.to_vec()),
             (Some(_), Some(l)) => {
-                return Err(self.shape_error(format!("{n} samples need {n} class labels, got {}", l.len())));
+                return Err(self.shape_error(format!(
+                    "{n} samples need {n} class labels, got {}",
+                    l.len()
+                )));
             }
-            (Some(_), None) => return Err(self.shape_error("stage II needs noise-level class labels".into())),
+            (Some(_), None) => {
+                return Err(self.shape_error("stage II needs noise-level class labels".into()));
+            }
             (None, Some(_)) => return Err(self.shape_error("stage I takes no class labels".into())),
             (None, None) => None,
         };
         let dtype = self.spec.dtype;
         let mut inputs: Vec<(Cow<'_, str>, SessionInputValue<'_>)> = vec![
-            (Cow::from(self.spec.sample.as_str()), float_input(dtype, vec![n, c, h, w], sample.data.clone())?.into()),
-            (Cow::from(self.spec.timestep.as_str()), int_input(vec![n], timesteps.to_vec())?.into()),
+            (
+                Cow::from(self.spec.sample.as_str()),
+                float_input(dtype, vec![n, c, h, w], sample.data.clone())?.into(),
+            ),
+            (
+                Cow::from(self.spec.timestep.as_str()),
+                int_input(vec![n], timesteps.to_vec())?.into(),
+            ),
             (
                 Cow::from(self.spec.encoder_hidden_states.as_str()),
                 float_input(dtype, vec![n, tokens, dim], text)?.into(),
@@ -145,16 +182,24 @@ impl OnnxDenoiser {
             inputs.push((Cow::from(name.as_str()), int_input(vec![n], l)?.into()));
         }
         let label = self.label.clone();
-        let outputs = self.session.run(inputs).map_err(|e| OnnxError::ort(format!("running the {label}"), e))?;
-        let value = outputs.get(&self.spec.output).ok_or_else(|| OnnxError::Signature {
-            model: label.clone(),
-            message: format!("output `{}` missing from the results", self.spec.output),
-        })?;
+        let outputs = self
+            .session
+            .run(inputs)
+            .map_err(|e| OnnxError::ort(format!("running the {label}"), e))?;
+        let value = outputs
+            .get(&self.spec.output)
+            .ok_or_else(|| OnnxError::Signature {
+                model: label.clone(),
+                message: format!("output `{}` missing from the results", self.spec.output),
+            })?;
         let (shape, data) = float_output(value, dtype, &format!("the {label} output"))?;
         if shape != [n, self.spec.out_channels, h, w] {
             return Err(OnnxError::Shape {
                 model: label,
-                message: format!("output shape {shape:?}, expected [{n}, {}, {h}, {w}]", self.spec.out_channels),
+                message: format!(
+                    "output shape {shape:?}, expected [{n}, {}, {h}, {w}]",
+                    self.spec.out_channels
+                ),
             });
         }
         Ok(csd::Tensor { shape, data })

@@ -120,11 +120,17 @@ pub enum OnnxError {
 
 impl OnnxError {
     pub(crate) fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
-        Self::Io { path: path.into(), source }
+        Self::Io {
+            path: path.into(),
+            source,
+        }
     }
 
     pub(crate) fn ort(context: impl Into<String>, e: impl std::fmt::Display) -> Self {
-        Self::Ort { context: context.into(), message: e.to_string() }
+        Self::Ort {
+            context: context.into(),
+            message: e.to_string(),
+        }
     }
 }
 

@@ -25,8 +25,8 @@ pub use cache::{CACHE_ENV, EmbeddingCache, prompt_embeddings};
 pub use denoiser::OnnxDenoiser;
 pub use error::OnnxError;
 pub use manifest::{
-    BUILTIN_IF_UNCOND, BUILTIN_T5_TOKENIZER, Dtype, EmbeddingsManifest, FORMAT_VERSION, Manifest, ModelDir,
-    SchedulerManifest, Stage, StageManifest, TextEncoderManifest,
+    BUILTIN_IF_UNCOND, BUILTIN_T5_TOKENIZER, Dtype, EmbeddingsManifest, FORMAT_VERSION, Manifest,
+    ModelDir, SchedulerManifest, Stage, StageManifest, TextEncoderManifest,
 };
 pub use runtime::{Device, SessionOptions};
 pub use text::T5Encoder;

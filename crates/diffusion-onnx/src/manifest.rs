@@ -193,9 +193,14 @@ impl ModelDir {
     /// it names (models, external data, tokenizer, uncond embedding) exists.
     pub fn open(dir: impl AsRef<Path>) -> Result<Self, OnnxError> {
         let root = dir.as_ref().to_path_buf();
-        let err = |message: String| OnnxError::Manifest { dir: root.clone(), message };
+        let err = |message: String| OnnxError::Manifest {
+            dir: root.clone(),
+            message,
+        };
         if !root.is_dir() {
-            return Err(err("is not a directory; pass the folder written by scripts/export_if_onnx.py".into()));
+            return Err(err(
+                "is not a directory; pass the folder written by scripts/export_if_onnx.py".into(),
+            ));
         }
         let path = root.join("manifest.toml");
         let text = std::fs::read_to_string(&path).map_err(|e| {
@@ -203,7 +208,8 @@ impl ModelDir {
                 "cannot read manifest.toml ({e}); a model directory is made by scripts/export_if_onnx.py (see docs/models.md)"
             ))
         })?;
-        let manifest: Manifest = toml::from_str(&text).map_err(|e| err(format!("manifest.toml is invalid: {e}")))?;
+        let manifest: Manifest =
+            toml::from_str(&text).map_err(|e| err(format!("manifest.toml is invalid: {e}")))?;
         let dir = Self { root, manifest };
         dir.validate()?;
         Ok(dir)
@@ -257,7 +263,10 @@ impl ModelDir {
             [t, d] => [*t, *d],
             [1, t, d] => [*t, *d],
             s => {
-                return Err(OnnxError::Npy { path, message: format!("expected shape ({}, {}), found {s:?}", e.tokens, e.dim) });
+                return Err(OnnxError::Npy {
+                    path,
+                    message: format!("expected shape ({}, {}), found {s:?}", e.tokens, e.dim),
+                });
             }
         };
         if shape != [e.tokens, e.dim] {
@@ -270,13 +279,22 @@ impl ModelDir {
     }
 
     fn require_file(&self, what: &str, file: &str, hint: &str) -> Result<(), OnnxError> {
-        let err = |message: String| OnnxError::Manifest { dir: self.root.clone(), message };
+        let err = |message: String| OnnxError::Manifest {
+            dir: self.root.clone(),
+            message,
+        };
         if file.is_empty() {
             return Err(err(format!("{what}: the file name is empty")));
         }
         let rel = Path::new(file);
-        if rel.is_absolute() || rel.components().any(|c| matches!(c, std::path::Component::ParentDir)) {
-            return Err(err(format!("{what} `{file}` must be a path inside the model directory")));
+        if rel.is_absolute()
+            || rel
+                .components()
+                .any(|c| matches!(c, std::path::Component::ParentDir))
+        {
+            return Err(err(format!(
+                "{what} `{file}` must be a path inside the model directory"
+            )));
         }
         let path = self.path_of(file);
         if !path.is_file() {
@@ -293,7 +311,12 @@ impl ModelDir {
 
     fn validate(&self) -> Result<(), OnnxError> {
         let m = &self.manifest;
-        let err = |message: String| Err(OnnxError::Manifest { dir: self.root.clone(), message });
+        let err = |message: String| {
+            Err(OnnxError::Manifest {
+                dir: self.root.clone(),
+                message,
+            })
+        };
         if m.format_version != FORMAT_VERSION {
             return err(format!(
                 "format_version = {} but this program reads version {FORMAT_VERSION}; re-export with this \
@@ -302,11 +325,16 @@ impl ModelDir {
             ));
         }
         if m.name.trim().is_empty() {
-            return err("`name` must not be empty (it identifies the model in the embedding cache)".into());
+            return err(
+                "`name` must not be empty (it identifies the model in the embedding cache)".into(),
+            );
         }
         let e = &m.embeddings;
         if e.dim == 0 || e.tokens == 0 {
-            return err(format!("[embeddings] dim = {} and tokens = {} must be positive", e.dim, e.tokens));
+            return err(format!(
+                "[embeddings] dim = {} and tokens = {} must be positive",
+                e.dim, e.tokens
+            ));
         }
         if e.uncond == BUILTIN_IF_UNCOND {
             if (e.tokens, e.dim) != (builtin::IF_UNCOND_TOKENS, builtin::IF_UNCOND_DIM) {
@@ -341,10 +369,17 @@ impl ModelDir {
                 ));
             }
             if t.tokenizer != BUILTIN_T5_TOKENIZER {
-                self.require_file("tokenizer", &t.tokenizer, "name a tokenizers JSON file or use \"builtin:t5\"")?;
+                self.require_file(
+                    "tokenizer",
+                    &t.tokenizer,
+                    "name a tokenizers JSON file or use \"builtin:t5\"",
+                )?;
             }
-            Self::distinct_names("text_encoder", &[&t.input_ids, &t.attention_mask, &t.output])
-                .or_else(|msg| err(msg))?;
+            Self::distinct_names(
+                "text_encoder",
+                &[&t.input_ids, &t.attention_mask, &t.output],
+            )
+            .or_else(&err)?;
         }
         for stage in [Stage::One, Stage::Two] {
             let Some(s) = self.stage(stage) else { continue };
@@ -358,24 +393,38 @@ impl ModelDir {
                 Stage::Two => (6, true),
             };
             if s.in_channels != want_in {
-                return err(format!("[{key}] in_channels = {} but IF's {key} takes {want_in}", s.in_channels));
+                return err(format!(
+                    "[{key}] in_channels = {} but IF's {key} takes {want_in}",
+                    s.in_channels
+                ));
             }
             if s.out_channels < 3 {
-                return err(format!("[{key}] out_channels = {} but ε needs at least 3", s.out_channels));
+                return err(format!(
+                    "[{key}] out_channels = {} but ε needs at least 3",
+                    s.out_channels
+                ));
             }
             if s.class_labels.is_some() != label {
                 return err(if label {
                     "[stage2] must name its noise-level input: class_labels = \"…\"".into()
                 } else {
-                    "[stage1] takes no class_labels (only IF stage II has a noise-level input)".into()
+                    "[stage1] takes no class_labels (only IF stage II has a noise-level input)"
+                        .into()
                 });
             }
-            let mut names = vec![s.sample.as_str(), &s.timestep, &s.encoder_hidden_states, &s.output];
+            let mut names = vec![
+                s.sample.as_str(),
+                &s.timestep,
+                &s.encoder_hidden_states,
+                &s.output,
+            ];
             if let Some(c) = &s.class_labels {
                 names.push(c);
             }
-            Self::distinct_names(key, &names).or_else(|msg| err(msg))?;
-            for (which, sch) in std::iter::once(("scheduler", &s.scheduler)).chain(s.noising_scheduler.iter().map(|n| ("noising_scheduler", n))) {
+            Self::distinct_names(key, &names).or_else(&err)?;
+            for (which, sch) in std::iter::once(("scheduler", &s.scheduler))
+                .chain(s.noising_scheduler.iter().map(|n| ("noising_scheduler", n)))
+            {
                 if sch.beta_schedule != "squaredcos_cap_v2" || sch.num_train_timesteps == 0 {
                     return err(format!(
                         "[{key}.{which}] beta_schedule = \"{}\" with {} steps: only DeepFloyd IF's \"squaredcos_cap_v2\" \
@@ -383,10 +432,12 @@ impl ModelDir {
                         sch.beta_schedule, sch.num_train_timesteps
                     ));
                 }
-                if let Some(p) = &sch.prediction_type {
-                    if p != "epsilon" {
-                        return err(format!("[{key}.{which}] prediction_type = \"{p}\": only \"epsilon\" is supported"));
-                    }
+                if let Some(p) = &sch.prediction_type
+                    && p != "epsilon"
+                {
+                    return err(format!(
+                        "[{key}.{which}] prediction_type = \"{p}\": only \"epsilon\" is supported"
+                    ));
                 }
             }
         }

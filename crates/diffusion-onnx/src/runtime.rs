@@ -38,13 +38,18 @@ pub fn default_dylib_path() -> PathBuf {
 
 /// Chooses the library path from the value of `$ORT_DYLIB_PATH` (if any) and the default location.
 /// Pure apart from checking that files exist.
-pub fn resolve_dylib_path(env_value: Option<&std::ffi::OsStr>, default: &Path) -> Result<PathBuf, OnnxError> {
+pub fn resolve_dylib_path(
+    env_value: Option<&std::ffi::OsStr>,
+    default: &Path,
+) -> Result<PathBuf, OnnxError> {
     if let Some(v) = env_value.filter(|v| !v.is_empty()) {
         let p = PathBuf::from(v);
         return if p.is_file() {
             Ok(p)
         } else {
-            Err(OnnxError::RuntimeMissing { searched: format!("{ORT_DYLIB_ENV}={} (no such file)", p.display()) })
+            Err(OnnxError::RuntimeMissing {
+                searched: format!("{ORT_DYLIB_ENV}={} (no such file)", p.display()),
+            })
         };
     }
     if default.is_file() {
@@ -71,11 +76,16 @@ pub fn environment_from(path: &Path) -> Result<Environment, OnnxError> {
     if let Some(env) = ENVIRONMENT.get() {
         return Ok(env.clone());
     }
-    let _guard = INIT_LOCK.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+    let _guard = INIT_LOCK
+        .lock()
+        .unwrap_or_else(|poisoned| poisoned.into_inner());
     if let Some(env) = ENVIRONMENT.get() {
         return Ok(env.clone());
     }
-    let unusable = |reason: String| OnnxError::RuntimeUnusable { path: path.to_path_buf(), reason };
+    let unusable = |reason: String| OnnxError::RuntimeUnusable {
+        path: path.to_path_buf(),
+        reason,
+    };
     // ort validates the file and its version in `init_from`; the panic guard is a second line of
     // defence for libraries that pass that check but misbehave when the API table is fetched.
     let built = std::panic::catch_unwind(|| -> Result<Environment, OnnxError> {
@@ -124,21 +134,31 @@ pub struct SessionOptions {
 }
 
 /// Opens an ONNX model file as a session (graph optimizations: all).
-pub(crate) fn open_session(model: &Path, options: &SessionOptions, what: &str) -> Result<Session, OnnxError> {
+pub(crate) fn open_session(
+    model: &Path,
+    options: &SessionOptions,
+    what: &str,
+) -> Result<Session, OnnxError> {
     let env = environment()?;
     let ctx = |step: &str| format!("{step} for the {what} ({})", model.display());
-    let mut builder = Session::builder(&env).map_err(|e| OnnxError::ort(ctx("creating a session"), e))?;
+    let mut builder =
+        Session::builder(&env).map_err(|e| OnnxError::ort(ctx("creating a session"), e))?;
     builder = builder
         .with_optimization_level(GraphOptimizationLevel::All)
         .map_err(|e| OnnxError::ort(ctx("setting the optimization level"), e))?;
     if let Some(n) = options.intra_threads {
-        builder = builder.with_intra_threads(n).map_err(|e| OnnxError::ort(ctx("setting the thread count"), e))?;
+        builder = builder
+            .with_intra_threads(n)
+            .map_err(|e| OnnxError::ort(ctx("setting the thread count"), e))?;
     }
     match options.device {
         Device::Cpu => {}
         #[cfg(feature = "cuda")]
         Device::Cuda { device_id } => {
-            let ep = ort::ep::CUDA::default().with_device_id(device_id).build().error_on_failure();
+            let ep = ort::ep::CUDA::default()
+                .with_device_id(device_id)
+                .build()
+                .error_on_failure();
             builder = builder
                 .with_execution_providers([ep])
                 .map_err(|e| OnnxError::ort(ctx("registering the CUDA execution provider"), e))?;
@@ -147,7 +167,9 @@ pub(crate) fn open_session(model: &Path, options: &SessionOptions, what: &str) -
         Device::Cuda { .. } => {
             return Err(OnnxError::Ort {
                 context: ctx("registering the CUDA execution provider"),
-                message: "this build has no CUDA support; rebuild with `--features diffusion-onnx/cuda`".into(),
+                message:
+                    "this build has no CUDA support; rebuild with `--features diffusion-onnx/cuda`"
+                        .into(),
             });
         }
     }
@@ -179,7 +201,10 @@ mod tests {
         let missing = dir.path().join("libonnxruntime.so.0");
         let err = resolve_dylib_path(Some(missing.as_os_str()), &default_dylib_path()).err();
         let msg = err.map(|e| e.to_string()).unwrap_or_default();
-        assert!(msg.contains("ORT_DYLIB_PATH") && msg.contains("setup-onnxruntime.sh"), "{msg}");
+        assert!(
+            msg.contains("ORT_DYLIB_PATH") && msg.contains("setup-onnxruntime.sh"),
+            "{msg}"
+        );
     }
 
     #[test]
@@ -187,7 +212,12 @@ mod tests {
         let dir = tempfile::tempdir().expect("tempdir");
         let err = resolve_dylib_path(None, &dir.path().join("nothing.so")).err();
         let msg = err.map(|e| e.to_string()).unwrap_or_default();
-        assert!(msg.contains("not set") && msg.contains("nothing.so") && msg.contains("setup-onnxruntime.sh"), "{msg}");
+        assert!(
+            msg.contains("not set")
+                && msg.contains("nothing.so")
+                && msg.contains("setup-onnxruntime.sh"),
+            "{msg}"
+        );
     }
 
     #[test]

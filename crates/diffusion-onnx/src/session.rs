@@ -36,7 +36,10 @@ pub(crate) fn check_signature(
 ) -> Result<(), OnnxError> {
     let actual_in: Vec<&str> = session.inputs().iter().map(|o| o.name()).collect();
     let actual_out: Vec<&str> = session.outputs().iter().map(|o| o.name()).collect();
-    let sig = |message: String| OnnxError::Signature { model: model.to_string(), message };
+    let sig = |message: String| OnnxError::Signature {
+        model: model.to_string(),
+        message,
+    };
     for (name, _, _) in inputs {
         if !actual_in.contains(name) {
             return Err(sig(format!(
@@ -44,7 +47,10 @@ pub(crate) fn check_signature(
             )));
         }
     }
-    if let Some(extra) = actual_in.iter().find(|n| !inputs.iter().any(|(m, _, _)| m == *n)) {
+    if let Some(extra) = actual_in
+        .iter()
+        .find(|n| !inputs.iter().any(|(m, _, _)| m == *n))
+    {
         return Err(sig(format!(
             "the graph has an input `{extra}` the manifest does not declare (declared: {:?})",
             inputs.iter().map(|i| i.0).collect::<Vec<_>>()
@@ -62,8 +68,10 @@ pub(crate) fn check_signature(
     };
     let outlets = session.inputs().iter().chain(session.outputs().iter());
     for outlet in outlets {
-        let Some(&(name, kind, rank)) =
-            inputs.iter().chain(std::iter::once(&output)).find(|(n, _, _)| *n == outlet.name())
+        let Some(&(name, kind, rank)) = inputs
+            .iter()
+            .chain(std::iter::once(&output))
+            .find(|(n, _, _)| *n == outlet.name())
         else {
             continue;
         };
@@ -75,7 +83,12 @@ pub(crate) fn check_signature(
                 let suggested = match ty {
                     TensorElementType::Float16 => "fp16",
                     TensorElementType::Float32 => "fp32",
-                    _ => return Err(sig(format!("`{name}` is {} but must be a float tensor", type_name(ty)))),
+                    _ => {
+                        return Err(sig(format!(
+                            "`{name}` is {} but must be a float tensor",
+                            type_name(ty)
+                        )));
+                    }
                 };
                 return Err(OnnxError::DtypeMismatch {
                     model: model.to_string(),
@@ -86,21 +99,32 @@ pub(crate) fn check_signature(
                 });
             }
             Kind::Int64 if ty != TensorElementType::Int64 => {
-                return Err(sig(format!("`{name}` is {} but must be int64", type_name(ty))));
+                return Err(sig(format!(
+                    "`{name}` is {} but must be int64",
+                    type_name(ty)
+                )));
             }
             _ => {}
         }
-        if let Some(shape) = outlet.dtype().tensor_shape() {
-            if shape.len() != rank {
-                return Err(sig(format!("`{name}` has rank {} (shape {:?}) but must have rank {rank}", shape.len(), &**shape)));
-            }
+        if let Some(shape) = outlet.dtype().tensor_shape()
+            && shape.len() != rank
+        {
+            return Err(sig(format!(
+                "`{name}` has rank {} (shape {:?}) but must have rank {rank}",
+                shape.len(),
+                &**shape
+            )));
         }
     }
     Ok(())
 }
 
 /// A float input tensor of the model's dtype from f32 values (rounded to nearest for fp16).
-pub(crate) fn float_input(dtype: Dtype, shape: Vec<usize>, data: Vec<f32>) -> Result<DynValue, OnnxError> {
+pub(crate) fn float_input(
+    dtype: Dtype,
+    shape: Vec<usize>,
+    data: Vec<f32>,
+) -> Result<DynValue, OnnxError> {
     let v = match dtype {
         Dtype::Fp32 => Tensor::from_array((shape, data)).map(|t| t.into_dyn()),
         Dtype::Fp16 => {
@@ -113,20 +137,33 @@ pub(crate) fn float_input(dtype: Dtype, shape: Vec<usize>, data: Vec<f32>) -> Re
 
 /// An i64 input tensor.
 pub(crate) fn int_input(shape: Vec<usize>, data: Vec<i64>) -> Result<DynValue, OnnxError> {
-    Tensor::from_array((shape, data)).map(|t| t.into_dyn()).map_err(|e| OnnxError::ort("creating an input tensor", e))
+    Tensor::from_array((shape, data))
+        .map(|t| t.into_dyn())
+        .map_err(|e| OnnxError::ort("creating an input tensor", e))
 }
 
 /// A float output as (shape, f32 values), widening fp16.
-pub(crate) fn float_output(value: &DynValue, dtype: Dtype, what: &str) -> Result<(Vec<usize>, Vec<f32>), OnnxError> {
-    let to_shape = |s: &ort::value::Shape| s.iter().map(|&d| usize::try_from(d).unwrap_or(0)).collect::<Vec<_>>();
+pub(crate) fn float_output(
+    value: &DynValue,
+    dtype: Dtype,
+    what: &str,
+) -> Result<(Vec<usize>, Vec<f32>), OnnxError> {
+    let to_shape = |s: &ort::value::Shape| {
+        s.iter()
+            .map(|&d| usize::try_from(d).unwrap_or(0))
+            .collect::<Vec<_>>()
+    };
     match dtype {
         Dtype::Fp32 => {
-            let (s, d) = value.try_extract_tensor::<f32>().map_err(|e| OnnxError::ort(format!("reading {what}"), e))?;
+            let (s, d) = value
+                .try_extract_tensor::<f32>()
+                .map_err(|e| OnnxError::ort(format!("reading {what}"), e))?;
             Ok((to_shape(s), d.to_vec()))
         }
         Dtype::Fp16 => {
-            let (s, d) =
-                value.try_extract_tensor::<half::f16>().map_err(|e| OnnxError::ort(format!("reading {what}"), e))?;
+            let (s, d) = value
+                .try_extract_tensor::<half::f16>()
+                .map_err(|e| OnnxError::ort(format!("reading {what}"), e))?;
             Ok((to_shape(s), d.iter().map(|x| x.to_f32()).collect()))
         }
     }

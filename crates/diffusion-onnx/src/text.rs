@@ -4,11 +4,11 @@ use std::borrow::Cow;
 
 use ort::session::{Session, SessionInputValue};
 
+use crate::OnnxError;
 use crate::manifest::{BUILTIN_T5_TOKENIZER, Dtype, ModelDir};
 use crate::runtime::{SessionOptions, open_session};
 use crate::session::{Kind, check_signature, float_output, int_input};
 use crate::tokenizer::T5Tokenizer;
-use crate::OnnxError;
 
 /// T5 encoder + tokenizer: prompt → `(tokens, dim)` embedding (IF: `(77, 4096)`), f32.
 pub struct T5Encoder {
@@ -23,7 +23,10 @@ pub struct T5Encoder {
 
 impl std::fmt::Debug for T5Encoder {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("T5Encoder").field("shape", &self.shape).field("dtype", &self.dtype).finish_non_exhaustive()
+        f.debug_struct("T5Encoder")
+            .field("shape", &self.shape)
+            .field("dtype", &self.dtype)
+            .finish_non_exhaustive()
     }
 }
 
@@ -47,7 +50,10 @@ impl T5Encoder {
             &session,
             "text encoder",
             t.dtype,
-            &[(&t.input_ids, Kind::Int64, 2), (&t.attention_mask, Kind::Int64, 2)],
+            &[
+                (&t.input_ids, Kind::Int64, 2),
+                (&t.attention_mask, Kind::Int64, 2),
+            ],
             (&t.output, Kind::Float, 3),
         )?;
         Ok(Self {
@@ -81,14 +87,25 @@ impl T5Encoder {
         }
         let n = prompts.len();
         let inputs: Vec<(Cow<'_, str>, SessionInputValue<'_>)> = vec![
-            (Cow::from(self.input_ids.as_str()), int_input(vec![n, tokens], ids)?.into()),
-            (Cow::from(self.attention_mask.as_str()), int_input(vec![n, tokens], mask)?.into()),
+            (
+                Cow::from(self.input_ids.as_str()),
+                int_input(vec![n, tokens], ids)?.into(),
+            ),
+            (
+                Cow::from(self.attention_mask.as_str()),
+                int_input(vec![n, tokens], mask)?.into(),
+            ),
         ];
-        let outputs = self.session.run(inputs).map_err(|e| OnnxError::ort("running the text encoder", e))?;
-        let value = outputs.get(&self.output).ok_or_else(|| OnnxError::Signature {
-            model: "text encoder".into(),
-            message: format!("output `{}` missing from the results", self.output),
-        })?;
+        let outputs = self
+            .session
+            .run(inputs)
+            .map_err(|e| OnnxError::ort("running the text encoder", e))?;
+        let value = outputs
+            .get(&self.output)
+            .ok_or_else(|| OnnxError::Signature {
+                model: "text encoder".into(),
+                message: format!("output `{}` missing from the results", self.output),
+            })?;
         let (shape, data) = float_output(value, self.dtype, "the text encoder output")?;
         if shape != [n, tokens, dim] {
             return Err(OnnxError::Shape {
@@ -96,13 +113,20 @@ impl T5Encoder {
                 message: format!("output shape {shape:?}, expected [{n}, {tokens}, {dim}]"),
             });
         }
-        Ok(data.chunks_exact(tokens * dim).map(|c| csd::Embedding { shape: [tokens, dim], data: c.to_vec() }).collect())
+        Ok(data
+            .chunks_exact(tokens * dim)
+            .map(|c| csd::Embedding {
+                shape: [tokens, dim],
+                data: c.to_vec(),
+            })
+            .collect())
     }
 }
 
 impl csd::TextEmbedding for T5Encoder {
     fn embed(&mut self, prompt: &str) -> Result<csd::Embedding, csd::GuidanceError> {
         let mut v = self.embed_batch(&[prompt])?;
-        v.pop().ok_or_else(|| csd::GuidanceError::Model("the text encoder returned nothing".into()))
+        v.pop()
+            .ok_or_else(|| csd::GuidanceError::Model("the text encoder returned nothing".into()))
     }
 }

@@ -29,7 +29,9 @@ pub struct T5Tokenizer {
 
 impl std::fmt::Debug for T5Tokenizer {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("T5Tokenizer").field("max_tokens", &self.max_tokens).finish_non_exhaustive()
+        f.debug_struct("T5Tokenizer")
+            .field("max_tokens", &self.max_tokens)
+            .finish_non_exhaustive()
     }
 }
 
@@ -49,7 +51,8 @@ impl T5Tokenizer {
         if max_tokens < 1 {
             return Err(OnnxError::Tokenizer("max_tokens must be at least 1".into()));
         }
-        let inner = Tokenizer::from_bytes(bytes).map_err(|e| OnnxError::Tokenizer(format!("cannot load: {e}")))?;
+        let inner = Tokenizer::from_bytes(bytes)
+            .map_err(|e| OnnxError::Tokenizer(format!("cannot load: {e}")))?;
         Ok(Self { inner, max_tokens })
     }
 
@@ -82,7 +85,10 @@ impl T5Tokenizer {
         ids.resize(self.max_tokens, PAD_ID);
         let mut attention_mask = vec![1; real];
         attention_mask.resize(self.max_tokens, 0);
-        Ok(Tokens { input_ids: ids, attention_mask })
+        Ok(Tokens {
+            input_ids: ids,
+            attention_mask,
+        })
     }
 }
 
@@ -104,7 +110,10 @@ mod tests {
     #[test]
     fn case_and_surrounding_space_do_not_matter() {
         let tok = T5Tokenizer::builtin(77).expect("builtin tokenizer");
-        assert_eq!(tok.encode("  A Photo of a CAT \n").ok(), tok.encode("a photo of a cat").ok());
+        assert_eq!(
+            tok.encode("  A Photo of a CAT \n").ok(),
+            tok.encode("a photo of a cat").ok()
+        );
     }
 
     #[test]
