@@ -1,6 +1,6 @@
 //! Small vector helpers with their adjoints.
 
-use glam::DVec3;
+pub use glam::DVec3;
 
 /// Squared-length floor of the guarded normalization (spec §6): x / sqrt(max(|x|², 1e-20)).
 pub const NORMALIZE_EPS2: f64 = 1e-20;
