@@ -1,10 +1,192 @@
-//! `stylize render`.
+//! `stylize render`: turntable frames and a contact sheet of a mesh.
+//!
+//! The mesh is read with `mesh_core::io::read_mesh`, normalized to the side-2 cube (spec §1.1) and
+//! rendered with the project's renderer (`raster_diff`, the shading the guidance sees) from
+//! `--turntable N` cameras on a circle (azimuth 360°·k/N, fixed elevation and distance, light at the
+//! camera). Pixel values are written as they are, byte = round(255·v) (see `raster_diff::image`);
+//! `--srgb` applies the sRGB transfer curve first.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use raster_diff::image::{Encoding, contact_sheet, write_png};
+use raster_diff::{Images, orbit_views, select_renderer};
+
+/// Views rendered per batch (bounds the renderer's per-render memory).
+const BATCH: usize = 8;
 
 /// Arguments of `stylize render`.
 #[derive(clap::Args, Debug)]
-pub struct Args {}
+pub struct Args {
+    /// Mesh file (OBJ; other formats as `mesh_core::io` supports them).
+    pub mesh: PathBuf,
+    /// Number of turntable frames.
+    #[arg(long, default_value_t = 8)]
+    pub turntable: usize,
+    /// Output folder (created if missing).
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Image width and height in pixels.
+    #[arg(long, default_value_t = 512)]
+    pub size: usize,
+    /// Camera elevation in degrees.
+    #[arg(long, default_value_t = 20.0)]
+    pub elevation: f64,
+    /// Camera distance from the origin (the mesh fills the side-2 cube).
+    #[arg(long, default_value_t = 2.5)]
+    pub distance: f64,
+    /// Vertical field of view in degrees (90° is the reference's effective value).
+    #[arg(long, default_value_t = 90.0)]
+    pub fov: f64,
+    /// Columns of the contact sheet (default: ceil(sqrt(N))).
+    #[arg(long)]
+    pub columns: Option<usize>,
+    /// Apply the sRGB transfer curve to the values before 8-bit quantization.
+    #[arg(long)]
+    pub srgb: bool,
+    /// Use the CPU renderer even if a GPU backend is available.
+    #[arg(long)]
+    pub cpu: bool,
+    /// Overwrite existing frames and contact sheet.
+    #[arg(long)]
+    pub force: bool,
+}
+
+fn frame_path(dir: &Path, k: usize) -> PathBuf {
+    dir.join(format!("frame_{k:03}.png"))
+}
+
+fn save(path: &Path, images: &Images, index: usize, encoding: Encoding) -> anyhow::Result<()> {
+    let file =
+        std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
+    write_png(std::io::BufWriter::new(file), images, index, encoding)
+        .with_context(|| format!("writing {}", path.display()))
+}
 
 /// Runs `stylize render`.
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("`stylize render` is not implemented yet")
+pub fn run(args: Args) -> anyhow::Result<()> {
+    anyhow::ensure!(args.turntable >= 1, "--turntable must be at least 1");
+    anyhow::ensure!(
+        (1..=8192).contains(&args.size),
+        "--size must be in 1..=8192"
+    );
+    anyhow::ensure!(
+        args.distance.is_finite() && args.distance > 0.0,
+        "--distance must be positive"
+    );
+    let mut mesh = mesh_core::io::read_mesh(&args.mesh)
+        .with_context(|| format!("reading mesh {}", args.mesh.display()))?;
+    mesh_core::normalize::side2_cube(&mut mesh.positions);
+
+    let dir = &args.output;
+    let sheet_path = dir.join("contact_sheet.png");
+    if !args.force {
+        let existing = (0..args.turntable)
+            .map(|k| frame_path(dir, k))
+            .chain([sheet_path.clone()])
+            .find(|p| p.exists());
+        if let Some(p) = existing {
+            anyhow::bail!("{} already exists (use --force to overwrite)", p.display());
+        }
+    }
+    std::fs::create_dir_all(dir)
+        .with_context(|| format!("creating output folder {}", dir.display()))?;
+
+    let (mut renderer, why) = select_renderer(!args.cpu);
+    eprintln!("renderer: {why}");
+    let views = orbit_views(args.turntable, args.elevation, args.distance, args.fov);
+    let encoding = if args.srgb {
+        Encoding::SrgbFromLinear
+    } else {
+        Encoding::Direct
+    };
+    let mut all = Images {
+        count: 0,
+        height: args.size,
+        width: args.size,
+        rgb: Vec::new(),
+    };
+    for (b, chunk) in views.chunks(BATCH).enumerate() {
+        let images = renderer
+            .render(&mesh.positions, &mesh.faces, chunk, args.size, args.size)
+            .with_context(|| format!("rendering {}", args.mesh.display()))?;
+        for i in 0..images.count {
+            save(&frame_path(dir, b * BATCH + i), &images, i, encoding)?;
+        }
+        all.count += images.count;
+        all.rgb.extend_from_slice(&images.rgb);
+    }
+    let columns = args
+        .columns
+        .unwrap_or_else(|| (args.turntable as f64).sqrt().ceil() as usize);
+    save(&sheet_path, &contact_sheet(&all, columns), 0, encoding)?;
+    eprintln!(
+        "wrote {} frames and contact_sheet.png to {}",
+        args.turntable,
+        dir.display()
+    );
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn args(mesh: PathBuf, output: PathBuf, force: bool) -> Args {
+        Args {
+            mesh,
+            turntable: 3,
+            output,
+            size: 24,
+            elevation: 20.0,
+            distance: 2.5,
+            fov: 90.0,
+            columns: None,
+            srgb: false,
+            cpu: true,
+            force,
+        }
+    }
+
+    /// Width and height from the PNG signature and IHDR chunk (bytes 16..24, big-endian).
+    fn png_size(path: &Path) -> (u32, u32) {
+        let bytes = std::fs::read(path).expect("png exists");
+        assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n");
+        assert_eq!(&bytes[12..16], b"IHDR");
+        let be =
+            |i: usize| u32::from_be_bytes([bytes[i], bytes[i + 1], bytes[i + 2], bytes[i + 3]]);
+        (be(16), be(20))
+    }
+
+    #[test]
+    fn writes_frames_and_contact_sheet_and_refuses_to_overwrite_without_force() {
+        let tmp = tempfile::tempdir().expect("tempdir");
+        let mesh = tmp.path().join("tet.obj");
+        std::fs::write(
+            &mesh,
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n",
+        )
+        .expect("write obj");
+        let out = tmp.path().join("renders/nested");
+        run(args(mesh.clone(), out.clone(), false)).expect("first render");
+        for k in 0..3 {
+            assert_eq!(png_size(&frame_path(&out, k)), (24, 24));
+        }
+        // 3 frames, ceil(sqrt 3) = 2 columns → 2×2 grid.
+        assert_eq!(png_size(&out.join("contact_sheet.png")), (48, 48));
+        assert!(run(args(mesh.clone(), out.clone(), false)).is_err());
+        run(args(mesh, out, true)).expect("forced render");
+    }
+
+    #[test]
+    fn missing_mesh_is_an_error_not_a_panic() {
+        let tmp = tempfile::tempdir().expect("tempdir");
+        let err = run(args(
+            tmp.path().join("nope.obj"),
+            tmp.path().join("out"),
+            false,
+        ))
+        .expect_err("must fail");
+        assert!(format!("{err:#}").contains("nope.obj"));
+    }
 }
