@@ -18,6 +18,7 @@ use crate::schedule::{NoiseSchedule, TimestepRange, standard_normal};
 use crate::sds::{classifier_free_guidance, nan_to_num, sds_gradient, sds_loss, split_cond_uncond};
 use crate::{Denoiser, Embedding, Guidance, GuidanceError, GuidanceOutput, Tensor};
 use rand::RngCore;
+use rayon::prelude::*;
 
 /// Image channels the guidance works on (RGB).
 pub const CHANNELS: usize = 3;
@@ -339,13 +340,15 @@ impl CascadedGuidance {
         // Renders (view, row, col, channel) → NCHW.
         let plane = height * width;
         let mut img = vec![0.0f32; images.len()];
-        for v in 0..b {
-            for p in 0..plane {
-                for c in 0..CHANNELS {
-                    img[(v * CHANNELS + c) * plane + p] = images[(v * plane + p) * CHANNELS + c];
+        img.par_chunks_mut(CHANNELS * plane)
+            .zip(images.par_chunks(CHANNELS * plane))
+            .for_each(|(dst, src)| {
+                for (p, px) in src.chunks_exact(CHANNELS).enumerate() {
+                    for (c, &v) in px.iter().enumerate() {
+                        dst[c * plane + p] = v;
+                    }
                 }
-            }
-        }
+            });
         let resize = Resize2d::cubic_antialias((height, width), (r, r))?;
         let down1 = Resize2d::bilinear((r, r), (r1, r1))?;
         let mut x = resize.apply(&img)?;
@@ -476,18 +479,22 @@ impl CascadedGuidance {
             None
         };
 
-        // x = 2·R(img) − 1 ⇒ ∂L/∂img = Rᵀ(2·∂L/∂x). Then NCHW → (view, row, col, channel), NaN/∞ guarded.
-        let twice: Vec<f64> = grad_x.iter().map(|g| 2.0 * g).collect();
-        let grad_img = resize.adjoint(&twice)?;
+        // x = 2·R(img) − 1 ⇒ ∂L/∂img = 2·Rᵀ(∂L/∂x). ∂L/∂x is rounded to f32 (±∞ → ±f32::MAX) for the
+        // 224-resize adjoint (which accumulates in f64); the factor 2 is applied while converting
+        // NCHW → (view, row, col, channel), with a final NaN/∞ guard.
+        let grad_x: Vec<f32> = grad_x.iter().map(|&g| nan_to_num(g as f32)).collect();
+        let grad_img = resize.adjoint(&grad_x)?;
         let mut grad_images = vec![0.0f32; images.len()];
-        for v in 0..b {
-            for p in 0..plane {
-                for c in 0..CHANNELS {
-                    grad_images[(v * plane + p) * CHANNELS + c] =
-                        nan_to_num(grad_img[(v * CHANNELS + c) * plane + p] as f32);
+        grad_images
+            .par_chunks_mut(CHANNELS * plane)
+            .zip(grad_img.par_chunks(CHANNELS * plane))
+            .for_each(|(dst, src)| {
+                for (p, px) in dst.chunks_exact_mut(CHANNELS).enumerate() {
+                    for (c, v) in px.iter_mut().enumerate() {
+                        *v = nan_to_num((2.0 * src[c * plane + p] as f64) as f32);
+                    }
                 }
-            }
-        }
+            });
         let output = GuidanceOutput {
             loss_stage1: cfg.loss_scale * cfg.stage1_weight * stage1.loss,
             loss_stage2: stage2
@@ -501,10 +508,7 @@ impl CascadedGuidance {
             x: tensor(shape, x),
             stage1,
             stage2,
-            grad_x: tensor(
-                shape,
-                grad_x.iter().map(|&g| nan_to_num(g as f32)).collect(),
-            ),
+            grad_x: tensor(shape, grad_x),
             output,
         })
     }

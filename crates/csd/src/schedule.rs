@@ -11,7 +11,9 @@
 //! Score-distillation weight w(t) = 1 − ᾱ_t. Forward noising z_t = √ᾱ_t · z0 + √(1 − ᾱ_t) · ε.
 
 use crate::GuidanceError;
-use rand::{Rng, RngCore};
+use rand::{Rng, RngCore, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
 
 /// A DDPM noise schedule: `alphas_cumprod[t]` = ᾱ_t for integer timesteps `t ∈ [0, T)`.
 #[derive(Clone, Debug, PartialEq)]
@@ -146,21 +148,35 @@ impl TimestepRange {
     }
 }
 
+/// Samples per independent noise stream in [`fill_standard_normal`] (even, so pairs never straddle).
+pub const NOISE_CHUNK: usize = 1 << 16;
+
 /// Fills a buffer with independent standard normal samples drawn from `rng`.
 ///
-/// Method: Marsaglia's polar method in `f64` (two uniforms u, v in (−1, 1), rejected unless
-/// 0 < s = u² + v² < 1, then both u·√(−2 ln s / s) and v·√(−2 ln s / s) are used), rounded to `f32`.
-/// Deterministic for a given RNG state; the stream is consumed in buffer order.
+/// Method: 32 bytes are taken from `rng` as the key of a ChaCha8 generator; chunk `k` of
+/// [`NOISE_CHUNK`] samples is filled from that generator's stream `k` (so chunks are filled in parallel
+/// and the result does not depend on the number of threads). Within a chunk, Marsaglia's polar method in
+/// `f64`: each `u64` gives two uniforms u, v ∈ (−1, 1) from its high and low 32 bits, rejected unless
+/// 0 < s = u² + v² < 1, then both u·√(−2 ln s / s) and v·√(−2 ln s / s) are used, rounded to `f32`.
+/// Deterministic for a given RNG state; the caller's RNG advances by exactly 32 bytes per call.
 pub fn fill_standard_normal(out: &mut [f32], rng: &mut dyn RngCore) {
-    let mut chunks = out.chunks_exact_mut(2);
-    for pair in &mut chunks {
-        let (a, b) = polar_pair(rng);
-        pair[0] = a as f32;
-        pair[1] = b as f32;
-    }
-    if let [last] = chunks.into_remainder() {
-        *last = polar_pair(rng).0 as f32;
-    }
+    let mut key = [0u8; 32];
+    rng.fill_bytes(&mut key);
+    out.par_chunks_mut(NOISE_CHUNK)
+        .enumerate()
+        .for_each(|(k, chunk)| {
+            let mut stream = ChaCha8Rng::from_seed(key);
+            stream.set_stream(k as u64);
+            let mut pairs = chunk.chunks_exact_mut(2);
+            for pair in &mut pairs {
+                let (a, b) = polar_pair(&mut stream);
+                pair[0] = a as f32;
+                pair[1] = b as f32;
+            }
+            if let [last] = pairs.into_remainder() {
+                *last = polar_pair(&mut stream).0 as f32;
+            }
+        });
 }
 
 /// A vector of `len` standard normal samples (see [`fill_standard_normal`]).
@@ -170,10 +186,12 @@ pub fn standard_normal(len: usize, rng: &mut dyn RngCore) -> Vec<f32> {
     v
 }
 
-fn polar_pair(rng: &mut dyn RngCore) -> (f64, f64) {
+fn polar_pair(rng: &mut ChaCha8Rng) -> (f64, f64) {
+    const SCALE: f64 = 1.0 / (1u64 << 31) as f64;
     loop {
-        let u = rng.random::<f64>() * 2.0 - 1.0;
-        let v = rng.random::<f64>() * 2.0 - 1.0;
+        let bits = rng.next_u64();
+        let u = ((bits >> 32) as f64 + 0.5) * SCALE - 1.0;
+        let v = ((bits & 0xffff_ffff) as f64 + 0.5) * SCALE - 1.0;
         let s = u * u + v * v;
         if s > 0.0 && s < 1.0 {
             let f = (-2.0 * s.ln() / s).sqrt();
@@ -185,8 +203,6 @@ fn polar_pair(rng: &mut dyn RngCore) -> (f64, f64) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use rand::SeedableRng;
-    use rand_chacha::ChaCha8Rng;
 
     fn if_schedule() -> NoiseSchedule {
         NoiseSchedule::squaredcos_cap_v2(1000).expect("T = 1000 is valid")
@@ -284,11 +300,13 @@ mod tests {
 
     #[test]
     fn standard_normal_has_unit_moments_and_is_deterministic() {
-        let n = 200_001; // odd: exercises the remainder path
+        let n = 3 * NOISE_CHUNK + 1; // several streams, and an odd length: exercises the remainder path
         let mut rng = ChaCha8Rng::seed_from_u64(3);
         let v = standard_normal(n, &mut rng);
         let mut rng2 = ChaCha8Rng::seed_from_u64(3);
         assert_eq!(v, standard_normal(n, &mut rng2));
+        // Streams differ from each other (no repeated chunk).
+        assert_ne!(v[..NOISE_CHUNK], v[NOISE_CHUNK..2 * NOISE_CHUNK]);
         let mean = v.iter().map(|&x| x as f64).sum::<f64>() / n as f64;
         let var = v.iter().map(|&x| (x as f64 - mean).powi(2)).sum::<f64>() / n as f64;
         let kurt =
