@@ -15,18 +15,13 @@ use faer::{Conj, MatMut, Par, Side};
 /// (vertex 0 for a connected mesh, as the reference). Vertices referenced by no face form their
 /// own components and are therefore pinned (they stay at rest). Returned sorted.
 pub fn component_pins(num_vertices: usize, faces: &[[u32; 3]]) -> Vec<usize> {
-    let mut parent: Vec<usize> = (0..num_vertices).collect();
-    for f in faces {
-        let f = f.map(|v| v as usize);
-        if f.iter().any(|&v| v >= num_vertices) {
-            continue;
-        }
-        union(&mut parent, f[0], f[1]);
-        union(&mut parent, f[1], f[2]);
-    }
-    (0..num_vertices)
-        .filter(|&v| find(&mut parent, v) == v)
-        .collect()
+    let (labels, count) = mesh_core::topology::connected_components(num_vertices, faces);
+    let mut pins: Vec<usize> = mesh_core::topology::component_representatives(&labels, count)
+        .into_iter()
+        .map(|v| v as usize)
+        .collect();
+    pins.sort_unstable();
+    pins
 }
 
 /// Union–find whose root is always the lowest index of its set.

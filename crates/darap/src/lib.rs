@@ -1,1 +1,349 @@
-//! Differentiable ARAP (dARAP): per-vertex target normals to a deformed mesh, with adjoints.
+//! Differentiable ARAP (dARAP): per-vertex target normals to a deformed mesh, with hand-written
+//! adjoints (spec §1–§4 of `docs/darap.md` and the project's method contract).
+//!
+//! # Pipeline and conventions
+//! `x` (raw targets, V×3) → `t̂ = x / max(|x|, 1e-12)` → local step (one rotation `R_v` per vertex
+//! from `S_v = K_v + λ a_v n0_v t̂_vᵀ`, see [`RotationRule`]) → right-hand side `b` (spec §4.1) →
+//! pinned solve `L x = b` (vertex 0, or the lowest vertex of each component, kept at rest) →
+//! post-processing ([`PostProcess`]).
+//!
+//! - Laplacian: `L = diag(Σ_j c_ij) − C`, positive semi-definite, `c_ij = cot α + cot β` (**twice**
+//!   libigl's weights); λ is defined with respect to these weights.
+//! - Matrices act on column vectors: a deformed edge is `R·e`. [`Mat3`] is row-major.
+//! - Positions are used as given: callers normalize to the side-2 cube first (spec §1.1).
+//!
+//! ```no_run
+//! # fn main() -> Result<(), darap::DarapError> {
+//! # let (positions, faces): (Vec<[f64; 3]>, Vec<[u32; 3]>) = (vec![], vec![]);
+//! let layer = darap::Darap::new(&positions, &faces, darap::DarapOptions::default())?;
+//! let x = layer.rest_normals().to_vec(); // the optimization starts from the rest normals
+//! let state = layer.forward(&x)?;
+//! let grad_x = layer.backward(&state, &state.positions); // ∂(½|p|²)/∂x
+//! # let _ = grad_x; Ok(()) }
+//! ```
+
+#![cfg_attr(test, allow(clippy::unwrap_used))]
+
+mod global;
+mod local;
+pub mod mat3;
+mod post;
+pub mod procedural;
+pub mod rotation_rule;
+pub mod svd3;
+
+pub use cotan::CotanError;
+pub use global::{RhsPrecompute, rhs, rhs_vjp};
+pub use local::{
+    LocalTape, covariance, local_step, local_step_vjp, normalize_targets, normalize_targets_vjp,
+    rest_covariances,
+};
+pub use mat3::Mat3;
+pub use post::{PostTape, post_process, post_process_vjp};
+
+use cotan::PinnedCholesky;
+
+/// Which rotation the local step computes from the covariance.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum RotationRule {
+    /// The reference rule (spec §3.3, the default): full weights `w = −c` (negative for
+    /// well-shaped meshes), `S = K + λ a n0 t̂ᵀ`, `R = −U·diag(1, 1, −s)·Vᵀ`. The paper's λ values
+    /// (8; "try 5 or 10") and every saved normals file mean what they mean under this rule.
+    #[default]
+    Gis,
+    /// The textbook rule (spec §3.4): positive weights, `S = −K + λ a n0 t̂ᵀ`, Kabsch
+    /// `R = V·diag(1, 1, s)·Uᵀ`. Needs a larger λ for a similar strength.
+    Procrustes,
+}
+
+/// Post-processing of the solved positions (spec §4.3).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum PostProcess {
+    /// Subtract the centroid, then rescale so the bounding-box diagonal equals the rest mesh's.
+    #[default]
+    RecenterRescale,
+    /// Subtract the centroid only.
+    RecenterOnly,
+    /// Return the solved positions as they are (vertex 0 — each pin — stays at rest).
+    None,
+}
+
+/// Options of a [`Darap`] layer.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DarapOptions {
+    /// Strength λ of the normal term (default 8, in the reference weight convention).
+    pub lambda: f64,
+    /// Rotation rule (default [`RotationRule::Gis`]).
+    pub rotation_rule: RotationRule,
+    /// Post-processing (default [`PostProcess::RecenterRescale`]).
+    pub post_process: PostProcess,
+}
+
+impl Default for DarapOptions {
+    fn default() -> Self {
+        Self {
+            lambda: 8.0,
+            rotation_rule: RotationRule::Gis,
+            post_process: PostProcess::RecenterRescale,
+        }
+    }
+}
+
+/// Errors of the dARAP layer.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum DarapError {
+    /// The Laplacian could not be built or factored.
+    #[error(transparent)]
+    Cotan(#[from] CotanError),
+    /// The mesh has no faces.
+    #[error("the mesh has no faces")]
+    NoFaces,
+    /// An input has the wrong length.
+    #[error("{what} has {got} entries, expected {expected} (one per vertex)")]
+    LengthMismatch {
+        /// Which input.
+        what: &'static str,
+        /// Expected length.
+        expected: usize,
+        /// Actual length.
+        got: usize,
+    },
+    /// An input is NaN or infinite.
+    #[error("{what} {index} is not finite")]
+    NonFinite {
+        /// Which input.
+        what: &'static str,
+        /// Where.
+        index: usize,
+    },
+}
+
+/// A dARAP layer for one rest mesh: everything λ-independent is precomputed once (cotangent
+/// weights, rest covariances `K_v`, masses, rest normals, right-hand-side vectors, and the pinned
+/// Cholesky factorization).
+#[derive(Debug)]
+pub struct Darap {
+    rest_positions: Vec<[f64; 3]>,
+    rest_normals: Vec<[f64; 3]>,
+    mass: Vec<f64>,
+    covariance_rest: Vec<Mat3>,
+    rhs: RhsPrecompute,
+    solver: PinnedCholesky,
+    pinned_values: Vec<[f64; 3]>,
+    rest_diag: f64,
+    options: DarapOptions,
+    free: Option<Vec<bool>>,
+}
+
+/// The result of [`Darap::forward`]: deformed positions plus the tape for [`Darap::backward`].
+#[derive(Clone, Debug)]
+pub struct Deformation {
+    /// Deformed positions (after post-processing).
+    pub positions: Vec<[f64; 3]>,
+    /// Per-vertex rotations of the local step (applied as `R·x`).
+    pub rotations: Vec<Mat3>,
+    /// The raw targets `x` the forward pass saw.
+    targets: Vec<[f64; 3]>,
+    local: LocalTape,
+    post: PostTape,
+    lambda: f64,
+}
+
+impl Darap {
+    /// Precomputes the layer for a rest mesh (positions used as given).
+    ///
+    /// One vertex per connected component is pinned at rest (the lowest index; vertex 0 for a
+    /// connected mesh). Vertices referenced by no face are their own components: they stay at rest.
+    pub fn new(
+        rest_positions: &[[f64; 3]],
+        faces: &[[u32; 3]],
+        options: DarapOptions,
+    ) -> Result<Darap, DarapError> {
+        if faces.is_empty() {
+            return Err(DarapError::NoFaces);
+        }
+        let weights = cotan::cot_weights(rest_positions, faces)?;
+        let laplacian = cotan::laplacian_from_weights(rest_positions.len(), &weights)?;
+        let mass = cotan::voronoi_mass(rest_positions, faces)?;
+        let rest_normals = mesh_core::normals::vertex_normals_area_weighted(rest_positions, faces);
+        let covariance_rest = rest_covariances(rest_positions, faces, &weights);
+        let rhs = RhsPrecompute::new(rest_positions, faces, &weights);
+        let pins = cotan::component_pins(rest_positions.len(), faces);
+        let solver = PinnedCholesky::new(&laplacian, &pins)?;
+        let pinned_values = solver.pins().iter().map(|&p| rest_positions[p]).collect();
+        let rest_diag = mesh_core::geometry::bbox_diagonal(rest_positions);
+        Ok(Darap {
+            rest_positions: rest_positions.to_vec(),
+            rest_normals,
+            mass,
+            covariance_rest,
+            rhs,
+            solver,
+            pinned_values,
+            rest_diag,
+            options,
+            free: None,
+        })
+    }
+
+    /// Changes λ; everything else is reused (the normal weight `λ·a_v` is formed per call).
+    pub fn set_lambda(&mut self, lambda: f64) {
+        self.options.lambda = lambda;
+    }
+
+    /// Changes the rotation rule (nothing is recomputed).
+    pub fn set_rotation_rule(&mut self, rule: RotationRule) {
+        self.options.rotation_rule = rule;
+    }
+
+    /// Changes the post-processing.
+    pub fn set_post_process(&mut self, mode: PostProcess) {
+        self.options.post_process = mode;
+    }
+
+    /// Sets a region mask: `free[v] == false` forces `R_v = I` at vertex `v` (it keeps its rest
+    /// one-ring shape and receives no gradient). `None` lets every vertex rotate.
+    pub fn set_mask(&mut self, free: Option<Vec<bool>>) -> Result<(), DarapError> {
+        if let Some(m) = &free
+            && m.len() != self.num_vertices()
+        {
+            return Err(DarapError::LengthMismatch {
+                what: "mask",
+                expected: self.num_vertices(),
+                got: m.len(),
+            });
+        }
+        self.free = free;
+        Ok(())
+    }
+
+    /// The current options.
+    pub fn options(&self) -> DarapOptions {
+        self.options
+    }
+
+    /// Rest vertex normals `n0` (area weighted, spec §1.2): the initial `x` of an optimization.
+    pub fn rest_normals(&self) -> &[[f64; 3]] {
+        &self.rest_normals
+    }
+
+    /// Rest positions as given to [`Darap::new`].
+    pub fn rest_positions(&self) -> &[[f64; 3]] {
+        &self.rest_positions
+    }
+
+    /// Mixed-Voronoi vertex areas `a_v`.
+    pub fn mass(&self) -> &[f64] {
+        &self.mass
+    }
+
+    /// Pinned vertices (sorted).
+    pub fn pins(&self) -> &[usize] {
+        self.solver.pins()
+    }
+
+    /// Number of vertices.
+    pub fn num_vertices(&self) -> usize {
+        self.rest_positions.len()
+    }
+
+    /// The deformation for raw targets `x` (any length per row; only directions matter).
+    pub fn forward(&self, x: &[[f64; 3]]) -> Result<Deformation, DarapError> {
+        let n = self.num_vertices();
+        if x.len() != n {
+            return Err(DarapError::LengthMismatch {
+                what: "targets",
+                expected: n,
+                got: x.len(),
+            });
+        }
+        if let Some(index) = x.iter().position(|v| !v.iter().all(|c| c.is_finite())) {
+            return Err(DarapError::NonFinite {
+                what: "target",
+                index,
+            });
+        }
+        if !self.options.lambda.is_finite() {
+            return Err(DarapError::NonFinite {
+                what: "lambda",
+                index: 0,
+            });
+        }
+        let unit = normalize_targets(x);
+        let (rotations, local) = local_step(
+            &self.covariance_rest,
+            &self.mass,
+            self.options.lambda,
+            &self.rest_normals,
+            &unit,
+            self.options.rotation_rule,
+            self.free.as_deref(),
+        );
+        let solved = self.global_step(&rotations);
+        let (positions, post) = post_process(&solved, self.rest_diag, self.options.post_process);
+        Ok(Deformation {
+            positions,
+            rotations,
+            targets: x.to_vec(),
+            local,
+            post,
+            lambda: self.options.lambda,
+        })
+    }
+
+    /// The global step alone: positions (before post-processing) for given rotations.
+    /// With all `R = I` this returns the rest positions.
+    pub fn global_step(&self, rotations: &[Mat3]) -> Vec<[f64; 3]> {
+        let b = rhs(&self.rhs, rotations);
+        self.solver.solve_pinned(&b, &self.pinned_values)
+    }
+
+    /// `∂ℓ/∂x` for `∂ℓ/∂positions` at the state of a previous [`Darap::forward`].
+    ///
+    /// # Panics
+    /// If `grad_positions.len()` is not the number of vertices (a programming error; see
+    /// [`Darap::try_backward`] for a checked version).
+    pub fn backward(&self, state: &Deformation, grad_positions: &[[f64; 3]]) -> Vec<[f64; 3]> {
+        match self.try_backward(state, grad_positions) {
+            Ok(g) => g,
+            Err(e) => panic!("Darap::backward: {e}"),
+        }
+    }
+
+    /// Checked [`Darap::backward`].
+    pub fn try_backward(
+        &self,
+        state: &Deformation,
+        grad_positions: &[[f64; 3]],
+    ) -> Result<Vec<[f64; 3]>, DarapError> {
+        let n = self.num_vertices();
+        if grad_positions.len() != n {
+            return Err(DarapError::LengthMismatch {
+                what: "gradient",
+                expected: n,
+                got: grad_positions.len(),
+            });
+        }
+        if state.positions.len() != n {
+            return Err(DarapError::LengthMismatch {
+                what: "deformation state",
+                expected: n,
+                got: state.positions.len(),
+            });
+        }
+        let grad_solved = post_process_vjp(&state.post, grad_positions);
+        let grad_b = self.solver.solve_pinned_adjoint(&grad_solved);
+        let grad_r = rhs_vjp(&self.rhs, &grad_b);
+        let grad_unit = local_step_vjp(
+            &state.local,
+            &self.mass,
+            state.lambda,
+            &self.rest_normals,
+            &grad_r,
+        );
+        Ok(normalize_targets_vjp(&state.targets, &grad_unit))
+    }
+}
+
+#[cfg(test)]
+mod tests;

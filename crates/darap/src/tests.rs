@@ -1,0 +1,359 @@
+//! Property tests of the whole layer on procedural meshes (golden data: `tests/golden.rs`).
+
+use super::*;
+use crate::mat3::IDENTITY;
+use crate::procedural::{icosphere, obtuse_wavy_grid};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+fn random_targets(n0: &[[f64; 3]], spread: f64, seed: u64) -> Vec<[f64; 3]> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    n0.iter()
+        .map(|n| {
+            let s = 0.5 + rng.random::<f64>();
+            std::array::from_fn(|c| s * (n[c] + spread * (rng.random::<f64>() * 2.0 - 1.0)))
+        })
+        .collect()
+}
+
+fn max_diff(a: &[[f64; 3]], b: &[[f64; 3]]) -> f64 {
+    a.iter()
+        .zip(b)
+        .flat_map(|(p, q)| (0..3).map(move |c| (p[c] - q[c]).abs()))
+        .fold(0.0, f64::max)
+}
+
+fn recentred(p: &[[f64; 3]]) -> Vec<[f64; 3]> {
+    let n = p.len() as f64;
+    let m: [f64; 3] = std::array::from_fn(|c| p.iter().map(|x| x[c]).sum::<f64>() / n);
+    p.iter()
+        .map(|x| [x[0] - m[0], x[1] - m[1], x[2] - m[2]])
+        .collect()
+}
+
+/// A closed mesh with many obtuse triangles (negative weights): a squashed icosphere.
+fn squashed_sphere() -> mesh_core::TriMesh {
+    let mut m = icosphere(2);
+    for p in &mut m.positions {
+        *p = [3.0 * p[0], p[1], 0.4 * p[2]];
+    }
+    m
+}
+
+#[test]
+fn identity_rotations_reproduce_rest_mesh() {
+    // Closed meshes: every edge has two faces, so b = L p exactly (spec §4.1).
+    let squashed = squashed_sphere();
+    let w = cotan::cot_weights(&squashed.positions, &squashed.faces).unwrap();
+    assert!(
+        w.weights.iter().any(|&c| c < 0.0),
+        "the squashed sphere should have negative weights"
+    );
+    for mesh in [icosphere(2), squashed] {
+        let layer = Darap::new(&mesh.positions, &mesh.faces, DarapOptions::default()).unwrap();
+        let rot = vec![IDENTITY; mesh.positions.len()];
+        // b = L p exactly …
+        let w = cotan::cot_weights(&mesh.positions, &mesh.faces).unwrap();
+        let l = cotan::laplacian_from_weights(mesh.positions.len(), &w).unwrap();
+        let lp = l.mul_vec3(&mesh.positions);
+        let b = rhs(&layer.rhs, &rot);
+        assert!(
+            max_diff(&b, &lp) < 1e-12,
+            "b ≠ L p: {} on {} vertices",
+            max_diff(&b, &lp),
+            mesh.positions.len()
+        );
+        // … so the solve gives back the rest positions.
+        let x = layer.global_step(&rot);
+        assert!(
+            max_diff(&x, &mesh.positions) < 1e-11,
+            "{}",
+            max_diff(&x, &mesh.positions)
+        );
+    }
+}
+
+#[test]
+fn open_boundary_edges_enter_rhs_with_half_weight_as_in_reference() {
+    // The reference right-hand side gives each face half of the full edge weight, so a boundary
+    // edge (one face) contributes c/2: with R = I, b = L' p where L' halves boundary weights.
+    let mesh = obtuse_wavy_grid(9);
+    let layer = Darap::new(&mesh.positions, &mesh.faces, DarapOptions::default()).unwrap();
+    let mut w = cotan::cot_weights(&mesh.positions, &mesh.faces).unwrap();
+    let boundary = mesh_core::topology::boundary_edges(&mesh.faces);
+    assert!(!boundary.is_empty());
+    for e in boundary {
+        let key = if e[0] < e[1] { e } else { [e[1], e[0]] };
+        let k = w.edges.binary_search(&key).unwrap();
+        w.weights[k] *= 0.5;
+    }
+    let l_half = cotan::laplacian_from_weights(mesh.positions.len(), &w).unwrap();
+    let b = rhs(&layer.rhs, &vec![IDENTITY; mesh.positions.len()]);
+    assert!(max_diff(&b, &l_half.mul_vec3(&mesh.positions)) < 1e-12);
+}
+
+#[test]
+fn rest_normals_as_targets_leave_a_well_shaped_sphere_at_rest_with_small_lambda() {
+    // On an icosphere every weight is positive and the gis rule gives R = I when t = n0 and
+    // λ·a is small against the one-ring stiffness.
+    let mesh = icosphere(2);
+    let opts = DarapOptions {
+        lambda: 0.5,
+        ..Default::default()
+    };
+    let layer = Darap::new(&mesh.positions, &mesh.faces, opts).unwrap();
+    let out = layer.forward(layer.rest_normals()).unwrap();
+    assert!(max_diff(&out.positions, &recentred(&mesh.positions)) < 1e-10);
+}
+
+#[test]
+fn lambda_zero_gives_back_rest_shape() {
+    // On a closed mesh with positive weights both rules give R = I at λ = 0.
+    let mesh = icosphere(2);
+    for rule in [RotationRule::Gis, RotationRule::Procrustes] {
+        let opts = DarapOptions {
+            lambda: 0.0,
+            rotation_rule: rule,
+            ..Default::default()
+        };
+        let layer = Darap::new(&mesh.positions, &mesh.faces, opts).unwrap();
+        let x = random_targets(layer.rest_normals(), 1.0, 3);
+        let out = layer.forward(&x).unwrap();
+        assert!(
+            max_diff(&out.positions, &recentred(&mesh.positions)) < 1e-10,
+            "{rule:?}"
+        );
+    }
+}
+
+#[test]
+fn all_false_mask_gives_rest_shape_and_zero_gradient() {
+    for mesh in [icosphere(2), squashed_sphere()] {
+        let mut layer = Darap::new(&mesh.positions, &mesh.faces, DarapOptions::default()).unwrap();
+        layer
+            .set_mask(Some(vec![false; mesh.positions.len()]))
+            .unwrap();
+        let x = random_targets(layer.rest_normals(), 0.8, 4);
+        let out = layer.forward(&x).unwrap();
+        assert!(max_diff(&out.positions, &recentred(&mesh.positions)) < 1e-10);
+        let g = layer.backward(&out, &out.positions);
+        assert!(g.iter().flatten().all(|v| *v == 0.0));
+    }
+}
+
+#[test]
+fn mask_with_wrong_length_is_an_error() {
+    let mesh = icosphere(1);
+    let mut layer = Darap::new(&mesh.positions, &mesh.faces, DarapOptions::default()).unwrap();
+    assert!(matches!(
+        layer.set_mask(Some(vec![true; 3])),
+        Err(DarapError::LengthMismatch { .. })
+    ));
+}
+
+#[test]
+fn translating_the_rest_mesh_does_not_change_the_result() {
+    let mesh = obtuse_wavy_grid(10);
+    let shifted: Vec<[f64; 3]> = mesh
+        .positions
+        .iter()
+        .map(|p| [p[0] + 3.0, p[1] - 7.5, p[2] + 0.25])
+        .collect();
+    for rule in [RotationRule::Gis, RotationRule::Procrustes] {
+        let opts = DarapOptions {
+            rotation_rule: rule,
+            ..Default::default()
+        };
+        let a = Darap::new(&mesh.positions, &mesh.faces, opts).unwrap();
+        let b = Darap::new(&shifted, &mesh.faces, opts).unwrap();
+        let x = random_targets(a.rest_normals(), 0.6, 5);
+        let pa = a.forward(&x).unwrap().positions;
+        let pb = b.forward(&x).unwrap().positions;
+        assert!(
+            max_diff(&pa, &pb) < 1e-10,
+            "{rule:?}: {}",
+            max_diff(&pa, &pb)
+        );
+    }
+}
+
+#[test]
+fn scaling_the_targets_does_not_change_the_result() {
+    let mesh = icosphere(2);
+    let layer = Darap::new(&mesh.positions, &mesh.faces, DarapOptions::default()).unwrap();
+    let x = random_targets(layer.rest_normals(), 0.6, 6);
+    let x3: Vec<[f64; 3]> = x.iter().map(|v| v.map(|c| 3.7 * c)).collect();
+    let a = layer.forward(&x).unwrap().positions;
+    let b = layer.forward(&x3).unwrap().positions;
+    assert!(max_diff(&a, &b) < 1e-12);
+}
+
+#[test]
+fn set_lambda_equals_fresh_layer() {
+    let mesh = obtuse_wavy_grid(8);
+    let mut layer = Darap::new(&mesh.positions, &mesh.faces, DarapOptions::default()).unwrap();
+    layer.set_lambda(3.0);
+    let fresh = Darap::new(
+        &mesh.positions,
+        &mesh.faces,
+        DarapOptions {
+            lambda: 3.0,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let x = random_targets(layer.rest_normals(), 0.7, 7);
+    let a = layer.forward(&x).unwrap();
+    let b = fresh.forward(&x).unwrap();
+    assert_eq!(a.positions, b.positions);
+    let g = &x; // any cotangent
+    assert_eq!(layer.backward(&a, g), fresh.backward(&b, g));
+}
+
+#[test]
+fn zero_targets_and_flat_meshes_stay_finite() {
+    // A flat grid: every K_v has a zero singular value along the normal; zero-length targets hit
+    // the 1e-12 clamp; identical targets make repeated singular values likely.
+    let mut flat = obtuse_wavy_grid(6);
+    for p in &mut flat.positions {
+        p[2] = 0.0;
+    }
+    for mesh in [flat, icosphere(1)] {
+        for rule in [RotationRule::Gis, RotationRule::Procrustes] {
+            for lambda in [0.0, 8.0, 1e6] {
+                let opts = DarapOptions {
+                    lambda,
+                    rotation_rule: rule,
+                    ..Default::default()
+                };
+                let layer = Darap::new(&mesh.positions, &mesh.faces, opts).unwrap();
+                for x in [
+                    vec![[0.0; 3]; mesh.positions.len()],
+                    vec![[0.0, 0.0, 1.0]; mesh.positions.len()],
+                ] {
+                    let out = layer.forward(&x).unwrap();
+                    assert!(out.positions.iter().flatten().all(|v| v.is_finite()));
+                    let g = layer.backward(&out, &out.positions);
+                    assert!(
+                        g.iter().flatten().all(|v| v.is_finite()),
+                        "{rule:?} λ={lambda}"
+                    );
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn bad_inputs_are_typed_errors() {
+    let mesh = icosphere(1);
+    let layer = Darap::new(&mesh.positions, &mesh.faces, DarapOptions::default()).unwrap();
+    assert!(matches!(
+        layer.forward(&[[1.0; 3]; 2]),
+        Err(DarapError::LengthMismatch { .. })
+    ));
+    let mut x = layer.rest_normals().to_vec();
+    x[5][1] = f64::NAN;
+    assert!(matches!(
+        layer.forward(&x),
+        Err(DarapError::NonFinite { index: 5, .. })
+    ));
+    assert!(matches!(
+        Darap::new(&mesh.positions, &[], DarapOptions::default()),
+        Err(DarapError::NoFaces)
+    ));
+    assert!(matches!(
+        Darap::new(&mesh.positions, &[[0, 1, 99]], DarapOptions::default()),
+        Err(DarapError::Cotan(CotanError::FaceIndexOutOfRange { .. }))
+    ));
+    let out = layer.forward(layer.rest_normals()).unwrap();
+    assert!(layer.try_backward(&out, &[[0.0; 3]; 3]).is_err());
+}
+
+#[test]
+fn several_components_are_each_pinned() {
+    let a = icosphere(1);
+    let n = a.positions.len() as u32;
+    let mut positions = a.positions.clone();
+    positions.extend(a.positions.iter().map(|p| [p[0] + 4.0, p[1], p[2]]));
+    let mut faces = a.faces.clone();
+    faces.extend(a.faces.iter().map(|f| f.map(|v| v + n)));
+    let layer = Darap::new(&positions, &faces, DarapOptions::default()).unwrap();
+    assert_eq!(layer.pins(), &[0, n as usize]);
+    let out = layer
+        .forward(&random_targets(layer.rest_normals(), 0.5, 8))
+        .unwrap();
+    assert!(out.positions.iter().flatten().all(|v| v.is_finite()));
+}
+
+#[test]
+fn results_are_bitwise_identical_across_thread_counts() {
+    let mesh = icosphere(3);
+    let layer = Darap::new(&mesh.positions, &mesh.faces, DarapOptions::default()).unwrap();
+    let x = random_targets(layer.rest_normals(), 0.5, 9);
+    let run = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            let out = layer.forward(&x).unwrap();
+            let g = layer.backward(&out, &x);
+            (out.positions, g)
+        })
+    };
+    assert_eq!(run(1), run(2));
+    assert_eq!(run(1), run(1));
+}
+
+#[test]
+fn backward_matches_central_differences_of_the_whole_chain() {
+    for (mesh, rule, lambda) in [
+        (icosphere(1), RotationRule::Gis, 8.0),
+        (obtuse_wavy_grid(5), RotationRule::Gis, 5.0),
+        (obtuse_wavy_grid(5), RotationRule::Procrustes, 40.0),
+    ] {
+        let opts = DarapOptions {
+            lambda,
+            rotation_rule: rule,
+            ..Default::default()
+        };
+        let layer = Darap::new(&mesh.positions, &mesh.faces, opts).unwrap();
+        let x = random_targets(layer.rest_normals(), 0.4, 10);
+        let cot = random_targets(&vec![[0.0; 3]; x.len()], 1.0, 11);
+        let loss = |x: &[[f64; 3]]| -> f64 {
+            let p = layer.forward(x).unwrap().positions;
+            p.iter()
+                .zip(&cot)
+                .map(|(a, b)| a[0] * b[0] + a[1] * b[1] + a[2] * b[2])
+                .sum()
+        };
+        let out = layer.forward(&x).unwrap();
+        let g = layer.backward(&out, &cot);
+        let dir = random_targets(&vec![[0.0; 3]; x.len()], 1.0, 12);
+        let h = 1e-6;
+        let shift = |s: f64| -> Vec<[f64; 3]> {
+            x.iter()
+                .zip(&dir)
+                .map(|(a, d)| std::array::from_fn(|c| a[c] + s * d[c]))
+                .collect()
+        };
+        let fd = (loss(&shift(h)) - loss(&shift(-h))) / (2.0 * h);
+        let an: f64 = g
+            .iter()
+            .zip(&dir)
+            .map(|(a, d)| a[0] * d[0] + a[1] * d[1] + a[2] * d[2])
+            .sum();
+        assert!(
+            (fd - an).abs() <= 1e-6 * fd.abs().max(an.abs()) + 1e-9,
+            "{rule:?}: fd {fd} vs adjoint {an}"
+        );
+    }
+}
+
+#[test]
+fn layer_is_send_and_sync() {
+    fn check<T: Send + Sync>() {}
+    check::<Darap>();
+    check::<Deformation>();
+}

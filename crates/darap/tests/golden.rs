@@ -1,0 +1,94 @@
+//! Agreement with the independent NumPy/SciPy golden data in `fixtures/golden` (see its README).
+
+#![allow(clippy::unwrap_used)]
+
+use darap::{Darap, DarapOptions, RotationRule};
+use mesh_core::npz::{NpyData, NpzReader, SavedDeformation};
+use std::path::PathBuf;
+
+fn golden(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../fixtures/golden")
+        .join(name)
+}
+
+const CASES: [(&str, f64, RotationRule); 4] = [
+    ("bunny_lambda8_gis", 8.0, RotationRule::Gis),
+    ("bunny_lambda5_gis", 5.0, RotationRule::Gis),
+    ("bunny_lambda8_procrustes", 8.0, RotationRule::Procrustes),
+    ("bunny_lambda40_procrustes", 40.0, RotationRule::Procrustes),
+];
+
+type Rows = Vec<[f64; 3]>;
+
+/// The saved deformation's rest mesh normalized to the side-2 cube in f64, and its raw targets.
+fn inputs() -> (Rows, Vec<[u32; 3]>, Rows) {
+    let saved = SavedDeformation::read(golden("bunny_targets.npz")).unwrap();
+    let mut verts = saved.verts_f64();
+    mesh_core::normalize::side2_cube(&mut verts);
+    (verts, saved.faces.clone(), saved.verts_normals_f64())
+}
+
+#[test]
+fn positions_match_golden_for_all_four_cases() {
+    let (verts, faces, x) = inputs();
+    let saved = SavedDeformation::read(golden("bunny_targets.npz")).unwrap();
+    assert_eq!(saved.lambda(), Some(8.0));
+    for (case, lambda, rule) in CASES {
+        let opts = DarapOptions {
+            lambda,
+            rotation_rule: rule,
+            ..Default::default()
+        };
+        let layer = Darap::new(&verts, &faces, opts).unwrap();
+        let out = layer.forward(&x).unwrap();
+        let expected = mesh_core::io::read_mesh(golden(&format!("{case}.obj"))).unwrap();
+        assert_eq!(expected.faces, faces, "{case}: faces differ");
+        let err = out
+            .positions
+            .iter()
+            .zip(&expected.positions)
+            .flat_map(|(a, b)| (0..3).map(move |c| (a[c] - b[c]).abs()))
+            .fold(0.0, f64::max);
+        eprintln!("{case}: max |Δposition| = {err:.2e}");
+        assert!(err < 1e-9, "{case}: max |Δposition| = {err:e}");
+    }
+}
+
+#[test]
+fn vjp_directional_derivatives_match_golden() {
+    let (verts, faces, x) = inputs();
+    let vjp = NpzReader::open(golden("bunny_vjp.npz")).unwrap();
+    let cot = vjp.rows3_f64("golden_cotangent").unwrap();
+    let dirs: Vec<Vec<[f64; 3]>> = (0..3)
+        .map(|k| vjp.rows3_f64(&format!("direction_{k}")).unwrap())
+        .collect();
+    for (case, lambda, rule) in CASES {
+        let expected = match &vjp.require(&format!("{case}_directional")).unwrap().data {
+            NpyData::F64(v) => v.clone(),
+            other => panic!("unexpected dtype {}", other.descr()),
+        };
+        let opts = DarapOptions {
+            lambda,
+            rotation_rule: rule,
+            ..Default::default()
+        };
+        let layer = Darap::new(&verts, &faces, opts).unwrap();
+        let state = layer.forward(&x).unwrap();
+        let g = layer.backward(&state, &cot);
+        for (k, d) in dirs.iter().enumerate() {
+            let an: f64 = g
+                .iter()
+                .zip(d)
+                .map(|(a, b)| a[0] * b[0] + a[1] * b[1] + a[2] * b[2])
+                .sum();
+            let rel = (an - expected[k]).abs() / expected[k].abs().max(1e-12);
+            eprintln!("{case} direction {k}: rel. error {rel:.2e}");
+            assert!(
+                rel < 1e-6,
+                "{case} direction {k}: adjoint {an:.12e} vs golden {:.12e} (rel {rel:e})",
+                expected[k]
+            );
+        }
+    }
+}
