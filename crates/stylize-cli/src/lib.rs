@@ -1,5 +1,11 @@
 //! Library side of the `stylize` command line: configuration, the loop, run directories, and
 //! one module per subcommand under [`cmd`].
 
+pub mod checkpoint;
 pub mod cmd;
 pub mod config;
+pub mod models;
+pub mod pipeline;
+pub mod rundir;
+pub mod runner;
+pub mod style;

@@ -1,10 +1,153 @@
-//! `stylize run`.
+//! `stylize run`: stylize one mesh into a run directory.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, bail};
+
+use crate::config::Config;
+use crate::runner::{LogMode, RunRequest, Task, execute};
+use crate::style::Style;
+
+/// Progress output format.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum LogFormat {
+    /// A progress bar (iteration, loss, it/s, ETA).
+    Bar,
+    /// One JSON object per iteration on stdout.
+    Jsonl,
+}
 
 /// Arguments of `stylize run`.
 #[derive(clap::Args, Debug)]
-pub struct Args {}
+pub struct Args {
+    /// Input mesh (OBJ; see `stylize mesh check` for what is repaired).
+    pub mesh: PathBuf,
+    /// Run directory (created with its parents).
+    #[arg(short, long)]
+    pub out: PathBuf,
+    /// Model-free style: `cube`, `octahedron` or `exemplar:MESH`.
+    #[arg(long, conflicts_with = "prompt", required_unless_present = "prompt")]
+    pub style: Option<String>,
+    /// Text prompt (needs --model).
+    #[arg(long)]
+    pub prompt: Option<String>,
+    /// Negative prompt (overrides guidance.negative_prompt).
+    #[arg(long)]
+    pub negative_prompt: Option<String>,
+    /// ONNX model directory for the text path (docs/models.md).
+    #[arg(long)]
+    pub model: Option<PathBuf>,
+    /// Configuration file (TOML); defaults are the reference's.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Override a config key, e.g. `--set darap.lambda=5` (repeatable).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub set: Vec<String>,
+    /// Seed (same as `--set run.seed=N`).
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Continue an interrupted run from its checkpoint.
+    #[arg(long)]
+    pub resume: bool,
+    /// Overwrite an existing run.
+    #[arg(long)]
+    pub force: bool,
+    /// No progress output.
+    #[arg(long, short)]
+    pub quiet: bool,
+    /// Progress format.
+    #[arg(long, value_enum, default_value = "bar")]
+    pub log_format: LogFormat,
+    /// Stop after this iteration without writing outputs (to test --resume).
+    #[arg(long, hide = true)]
+    pub stop_after: Option<u64>,
+}
+
+/// Builds the resolved configuration: file (or defaults), then `--set`, then shortcut flags.
+pub fn resolve_config(
+    file: Option<&std::path::Path>,
+    set: &[String],
+    seed: Option<u64>,
+    negative_prompt: Option<&str>,
+) -> anyhow::Result<Config> {
+    let base = match file {
+        Some(p) => Config::load(p)?,
+        None => Config::default(),
+    };
+    let mut config = base.with_overrides(set)?;
+    if let Some(s) = seed {
+        config.run.seed = s;
+    }
+    if let Some(n) = negative_prompt {
+        config.guidance.negative_prompt = n.to_string();
+    }
+    config.validate()?;
+    Ok(config)
+}
 
 /// Runs `stylize run`.
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("`stylize run` is not implemented yet")
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let config = resolve_config(
+        args.config.as_deref(),
+        &args.set,
+        args.seed,
+        args.negative_prompt.as_deref(),
+    )?;
+    let task = match (&args.style, &args.prompt) {
+        (Some(style), None) => Task::Style(Style::parse(style)?),
+        (None, Some(prompt)) => {
+            let Some(model) = &args.model else {
+                bail!(
+                    "--prompt needs --model DIR: an ONNX export of DeepFloyd IF (see docs/models.md for how to export it). \
+                     Without models, try a model-free style: --style cube"
+                );
+            };
+            let guidance = crate::models::load_guidance(model, prompt, &config)?;
+            Task::Text {
+                prompt: prompt.clone(),
+                guidance,
+            }
+        }
+        _ => bail!("give exactly one of --style or --prompt"),
+    };
+    let log = if args.quiet {
+        LogMode::Quiet
+    } else {
+        match args.log_format {
+            LogFormat::Bar => LogMode::Bar,
+            LogFormat::Jsonl => LogMode::Jsonl,
+        }
+    };
+    let request = RunRequest {
+        mesh: args.mesh.clone(),
+        out: args.out.clone(),
+        config,
+        force: args.force,
+        resume: args.resume,
+        log,
+        halt_after: args.stop_after,
+    };
+    let outcome =
+        execute(&request, task).with_context(|| format!("run on {}", args.mesh.display()))?;
+    if !args.quiet {
+        for w in &outcome.warnings {
+            eprintln!("warning: {w}");
+        }
+        if outcome.complete {
+            eprintln!(
+                "done: {} iterations → {}",
+                outcome.iteration,
+                args.out.display()
+            );
+            if let Some((before, after)) = outcome.alignment {
+                eprintln!("normal alignment (area-weighted mean n·t): {before:.4} → {after:.4}");
+            }
+        } else {
+            eprintln!(
+                "stopped after iteration {} (resume with --resume)",
+                outcome.iteration
+            );
+        }
+    }
+    Ok(())
 }

@@ -1,0 +1,400 @@
+//! The optimization loop (spec §5), shared by the text path and the model-free path.
+//!
+//! Per iteration `i` (1-indexed): `dARAP forward(x)` once, then `steps_per_batch` sub-steps. Sub-step
+//! `s` asks the [`Objective`] for `∂ℓ_s/∂positions` at the **same** deformed mesh (for the text path:
+//! the same renders, fresh timesteps and noise), maps it through the dARAP adjoint to `g_s`, adds it
+//! to the accumulated gradient `G ← G + g_s`, and takes an Adam step with `G`. With the reference's
+//! two steps: step 1 uses `g1`, step 2 uses `g1 + g2`, both evaluated at the pre-step `x` (spec §5,
+//! `n_accum = 2`). Adam's step counter therefore advances by `steps_per_batch` per iteration.
+//!
+//! Everything random (views, lights, timesteps, noise) comes from one `ChaCha8Rng` that is saved
+//! in checkpoints, so a resumed run continues bit-identically.
+
+use std::time::Instant;
+
+use anyhow::{Context, bail};
+use csd::Guidance;
+use darap::Darap;
+use optim::{Adam, Schedule};
+use rand_chacha::ChaCha8Rng;
+use raster_diff::{CameraConfig, Images, Renderer};
+
+use crate::style::{Style, alignment};
+
+/// What one sub-step's objective evaluation returns.
+#[derive(Clone, Debug, Default)]
+pub struct StepEval {
+    /// Named scalar terms for `metrics.jsonl` (e.g. `loss`, `loss_stage1`, `stage2_weight`).
+    pub terms: Vec<(&'static str, f64)>,
+    /// Named wall-clock timings in seconds (e.g. `render`, `guidance`).
+    pub timings: Vec<(&'static str, f64)>,
+    /// `∂ℓ/∂positions` of the deformed mesh, one row per vertex.
+    pub grad_positions: Vec<[f64; 3]>,
+}
+
+/// A loss on the deformed mesh, evaluated at sub-step `substep` of `iteration`.
+pub trait Objective {
+    /// Short description for logs.
+    fn describe(&self) -> String;
+    /// Evaluates the loss gradient at the deformed positions. Sub-step 0 of an iteration sees a new
+    /// `deformed`; later sub-steps of the same iteration see the same positions again.
+    fn evaluate(
+        &mut self,
+        iteration: u64,
+        substep: u32,
+        deformed: &[[f64; 3]],
+        rng: &mut ChaCha8Rng,
+    ) -> anyhow::Result<StepEval>;
+    /// The images of the current iteration, if the objective renders any (for previews).
+    fn current_images(&self) -> Option<&Images> {
+        None
+    }
+}
+
+/// Loop lengths and cadences.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LoopSpec {
+    /// Last iteration (1-indexed, inclusive).
+    pub iterations: u64,
+    /// Adam steps per iteration with accumulated gradients.
+    pub steps_per_batch: u32,
+    /// Checkpoint every N iterations (0: only after the last).
+    pub checkpoint_every: u64,
+    /// Preview every N iterations (0: never).
+    pub preview_every: u64,
+    /// Stop after this iteration without a final checkpoint (simulates a killed run in tests).
+    pub halt_after: Option<u64>,
+}
+
+/// The mutable state of a run: what a checkpoint holds.
+#[derive(Clone, Debug)]
+pub struct LoopState {
+    /// Last finished iteration (0 before the first).
+    pub iteration: u64,
+    /// Raw dARAP targets x (one row per vertex).
+    pub x: Vec<[f64; 3]>,
+    /// The optimizer.
+    pub adam: Adam,
+    /// The run's generator.
+    pub rng: ChaCha8Rng,
+}
+
+/// One iteration's record (a line of `metrics.jsonl`).
+#[derive(Clone, Debug, Default)]
+pub struct IterationRecord {
+    /// The iteration (1-indexed).
+    pub iteration: u64,
+    /// Named terms: `loss*` terms are summed over the sub-steps; others (`stage2_weight`,
+    /// `alignment`) keep the last sub-step's value.
+    pub terms: Vec<(&'static str, f64)>,
+    /// Timings in seconds: `darap_forward`, `objective` parts, `darap_backward`, `adam`, `total`.
+    pub timings: Vec<(&'static str, f64)>,
+    /// Norm of the accumulated gradient with respect to x after the last sub-step.
+    pub grad_norm: f64,
+}
+
+/// Receives progress from [`run_loop`].
+pub trait Observer {
+    /// After every iteration.
+    fn iteration(&mut self, record: &IterationRecord) -> anyhow::Result<()>;
+    /// When a checkpoint is due (state after `state.iteration`).
+    fn checkpoint(&mut self, state: &LoopState) -> anyhow::Result<()>;
+    /// When a preview is due.
+    fn preview(
+        &mut self,
+        iteration: u64,
+        deformed: &[[f64; 3]],
+        images: Option<&Images>,
+    ) -> anyhow::Result<()>;
+}
+
+fn add_term(terms: &mut Vec<(&'static str, f64)>, name: &'static str, value: f64, sum: bool) {
+    match terms.iter_mut().find(|(n, _)| *n == name) {
+        Some(t) if sum => t.1 += value,
+        Some(t) => t.1 = value,
+        None => terms.push((name, value)),
+    }
+}
+
+/// Runs iterations `state.iteration + 1 ..= spec.iterations`.
+pub fn run_loop(
+    darap: &Darap,
+    spec: &LoopSpec,
+    state: &mut LoopState,
+    objective: &mut dyn Objective,
+    observer: &mut dyn Observer,
+) -> anyhow::Result<()> {
+    if spec.steps_per_batch == 0 {
+        bail!("steps_per_batch must be at least 1");
+    }
+    let n = darap.num_vertices();
+    if state.x.len() != n {
+        bail!("x has {} rows, the mesh {} vertices", state.x.len(), n);
+    }
+    while state.iteration < spec.iterations && spec.halt_after.is_none_or(|h| state.iteration < h) {
+        let iteration = state.iteration + 1;
+        let start = Instant::now();
+        let deformation = darap.forward(&state.x).context("dARAP forward")?;
+        let mut record = IterationRecord {
+            iteration,
+            ..Default::default()
+        };
+        record
+            .timings
+            .push(("darap_forward", start.elapsed().as_secs_f64()));
+        let mut grad = vec![[0.0; 3]; n];
+        for substep in 0..spec.steps_per_batch {
+            let ev = objective
+                .evaluate(iteration, substep, &deformation.positions, &mut state.rng)
+                .with_context(|| format!("objective at iteration {iteration}"))?;
+            for &(name, v) in &ev.terms {
+                add_term(&mut record.terms, name, v, name.starts_with("loss"));
+            }
+            for &(name, v) in &ev.timings {
+                add_term(&mut record.timings, name, v, true);
+            }
+            let t = Instant::now();
+            let g = darap
+                .try_backward(&deformation, &ev.grad_positions)
+                .context("dARAP backward")?;
+            add_term(
+                &mut record.timings,
+                "darap_backward",
+                t.elapsed().as_secs_f64(),
+                true,
+            );
+            for (acc, gi) in grad.iter_mut().zip(&g) {
+                for c in 0..3 {
+                    acc[c] += gi[c];
+                }
+            }
+            let t = Instant::now();
+            state
+                .adam
+                .step(state.x.as_flattened_mut(), grad.as_flattened())
+                .with_context(|| format!("Adam step at iteration {iteration}"))?;
+            add_term(&mut record.timings, "adam", t.elapsed().as_secs_f64(), true);
+        }
+        record.grad_norm = grad
+            .as_flattened()
+            .iter()
+            .map(|g| g * g)
+            .sum::<f64>()
+            .sqrt();
+        state.iteration = iteration;
+        record
+            .timings
+            .push(("total", start.elapsed().as_secs_f64()));
+        observer.iteration(&record)?;
+        let due = |every: u64| every > 0 && iteration.is_multiple_of(every);
+        if due(spec.preview_every) {
+            observer.preview(
+                iteration,
+                &deformation.positions,
+                objective.current_images(),
+            )?;
+        }
+        if due(spec.checkpoint_every) || iteration == spec.iterations {
+            observer.checkpoint(state)?;
+        }
+    }
+    Ok(())
+}
+
+/// The model-free objective: `ℓ = Σ_f A_f (1 − n_f · t_f)` on the deformed mesh, `t_f` the style's
+/// target for the rest face normal (see [`crate::style`]).
+#[derive(Clone, Debug)]
+pub struct StyleObjective {
+    faces: Vec<[u32; 3]>,
+    targets: Vec<[f64; 3]>,
+    style: String,
+}
+
+impl StyleObjective {
+    /// Targets from `style` applied to the rest mesh's face normals.
+    pub fn new(style: &Style, rest_positions: &[[f64; 3]], faces: &[[u32; 3]]) -> Self {
+        Self {
+            faces: faces.to_vec(),
+            targets: style.face_targets(rest_positions, faces),
+            style: style.name(),
+        }
+    }
+
+    /// The per-face targets.
+    pub fn targets(&self) -> &[[f64; 3]] {
+        &self.targets
+    }
+
+    /// Area-weighted mean alignment of `positions` with the targets (1 = perfect).
+    pub fn mean_alignment(&self, positions: &[[f64; 3]]) -> f64 {
+        alignment::mean_alignment(positions, &self.faces, &self.targets)
+    }
+}
+
+impl Objective for StyleObjective {
+    fn describe(&self) -> String {
+        format!("normal alignment with style {}", self.style)
+    }
+
+    fn evaluate(
+        &mut self,
+        _iteration: u64,
+        _substep: u32,
+        deformed: &[[f64; 3]],
+        _rng: &mut ChaCha8Rng,
+    ) -> anyhow::Result<StepEval> {
+        let t = Instant::now();
+        let (loss, grad) = alignment::alignment_loss_and_grad(deformed, &self.faces, &self.targets);
+        let alignment = alignment::mean_alignment(deformed, &self.faces, &self.targets);
+        Ok(StepEval {
+            terms: vec![("loss", loss), ("alignment", alignment)],
+            timings: vec![("objective", t.elapsed().as_secs_f64())],
+            grad_positions: grad,
+        })
+    }
+}
+
+/// Settings of the text objective's renders.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ViewSettings {
+    /// The per-iteration view sampler.
+    pub camera: CameraConfig,
+    /// Views per iteration.
+    pub views: usize,
+    /// Render width.
+    pub width: usize,
+    /// Render height.
+    pub height: usize,
+    /// Adaptive camera distance from iteration 2 on.
+    pub adapt_distance: bool,
+}
+
+/// The text path's objective: sample views, render, guidance, renderer adjoint.
+///
+/// Sub-step 0 of an iteration samples views (distance × [`raster_diff::adapt_multiplier`] of the
+/// deformed mesh from iteration 2 on) and renders; every sub-step evaluates the guidance on those
+/// renders with fresh randomness and maps dL/dimage back through the renderer.
+pub struct TextObjective {
+    renderer: Box<dyn Renderer>,
+    guidance: Box<dyn Guidance>,
+    faces: Vec<[u32; 3]>,
+    views: ViewSettings,
+    stage2_weight: Schedule,
+    images: Option<Images>,
+}
+
+impl std::fmt::Debug for TextObjective {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("TextObjective")
+            .field("renderer", &self.renderer.name())
+            .field("views", &self.views)
+            .field("stage2_weight", &self.stage2_weight)
+            .finish_non_exhaustive()
+    }
+}
+
+impl TextObjective {
+    /// Joins a renderer and a guidance.
+    pub fn new(
+        renderer: Box<dyn Renderer>,
+        guidance: Box<dyn Guidance>,
+        faces: &[[u32; 3]],
+        views: ViewSettings,
+        stage2_weight: Schedule,
+    ) -> Self {
+        Self {
+            renderer,
+            guidance,
+            faces: faces.to_vec(),
+            views,
+            stage2_weight,
+            images: None,
+        }
+    }
+}
+
+impl Objective for TextObjective {
+    fn describe(&self) -> String {
+        format!(
+            "score distillation, {} views rendered with {}",
+            self.views.views,
+            self.renderer.name()
+        )
+    }
+
+    fn evaluate(
+        &mut self,
+        iteration: u64,
+        substep: u32,
+        deformed: &[[f64; 3]],
+        rng: &mut ChaCha8Rng,
+    ) -> anyhow::Result<StepEval> {
+        let mut timings = Vec::new();
+        let v = &self.views;
+        if substep == 0 || self.images.is_none() {
+            let t = Instant::now();
+            let multiplier = if v.adapt_distance && iteration >= 2 {
+                raster_diff::adapt_multiplier(deformed)
+            } else {
+                1.0
+            };
+            let views = raster_diff::sample_views(&v.camera, v.views, multiplier, rng);
+            let images = self
+                .renderer
+                .render(deformed, &self.faces, &views, v.width, v.height)
+                .context("render")?;
+            self.images = Some(images);
+            timings.push(("render", t.elapsed().as_secs_f64()));
+        }
+        let Some(images) = &self.images else {
+            bail!("no renders")
+        };
+        let w2 = self.stage2_weight.at(iteration);
+        let t = Instant::now();
+        let out = self
+            .guidance
+            .evaluate(
+                &images.rgb,
+                images.count,
+                images.height,
+                images.width,
+                w2,
+                rng,
+            )
+            .context("guidance")?;
+        timings.push(("guidance", t.elapsed().as_secs_f64()));
+        if out.grad_images.len() != images.rgb.len() {
+            bail!(
+                "guidance returned {} gradient values for {} image values",
+                out.grad_images.len(),
+                images.rgb.len()
+            );
+        }
+        let d_images = Images {
+            count: images.count,
+            height: images.height,
+            width: images.width,
+            rgb: out.grad_images,
+        };
+        let t = Instant::now();
+        let grad_positions = self
+            .renderer
+            .backward(&d_images)
+            .context("renderer backward")?;
+        timings.push(("render_backward", t.elapsed().as_secs_f64()));
+        Ok(StepEval {
+            terms: vec![
+                ("loss", out.loss_stage1 + out.loss_stage2),
+                ("loss_stage1", out.loss_stage1),
+                ("loss_stage2", out.loss_stage2),
+                ("stage2_weight", w2),
+            ],
+            timings,
+            grad_positions,
+        })
+    }
+
+    fn current_images(&self) -> Option<&Images> {
+        self.images.as_ref()
+    }
+}

@@ -1,0 +1,535 @@
+//! One run from mesh file to complete run directory: prepare the mesh, build dARAP, run the loop
+//! ([`crate::pipeline`]) with checkpoints, previews and metrics, then write the outputs.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, bail};
+use csd::Guidance;
+use darap::Darap;
+use mesh_core::TriMesh;
+use mesh_core::npz::{NpyArray, NpyData, SavedDeformation};
+use optim::{Adam, AdamConfig};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use raster_diff::{CameraConfig, Images, Renderer};
+
+use crate::checkpoint::{CHECKPOINT_VERSION, Checkpoint};
+use crate::config::{Backend, Config, PostProcess, RotationRule};
+use crate::pipeline::{
+    IterationRecord, LoopSpec, LoopState, Objective, Observer, StyleObjective, TextObjective,
+    ViewSettings, run_loop,
+};
+use crate::rundir::{RunDir, Start};
+use crate::style::Style;
+
+/// Format version of our extra keys in `deformation.npz`.
+pub const NPZ_FORMAT_VERSION: i64 = mesh_core::npz::FORMAT_VERSION;
+
+/// How progress is reported.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LogMode {
+    /// An indicatif progress bar on stderr.
+    Bar,
+    /// One JSON object per iteration on stdout (the `metrics.jsonl` line).
+    Jsonl,
+    /// Nothing but errors.
+    Quiet,
+}
+
+/// What to optimize.
+pub enum Task {
+    /// The model-free path.
+    Style(Style),
+    /// The text path: a prompt and a ready guidance (models loaded by the caller).
+    Text {
+        /// The prompt (recorded).
+        prompt: String,
+        /// The guidance.
+        guidance: Box<dyn Guidance>,
+    },
+}
+
+impl std::fmt::Debug for Task {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Task::Style(s) => write!(f, "Style({})", s.name()),
+            Task::Text { prompt, .. } => write!(f, "Text({prompt:?})"),
+        }
+    }
+}
+
+/// A run request.
+#[derive(Clone, Debug)]
+pub struct RunRequest {
+    /// Input mesh file.
+    pub mesh: PathBuf,
+    /// Run directory.
+    pub out: PathBuf,
+    /// Resolved configuration.
+    pub config: Config,
+    /// Overwrite a complete or partial run.
+    pub force: bool,
+    /// Continue from a checkpoint if there is one.
+    pub resume: bool,
+    /// Progress reporting.
+    pub log: LogMode,
+    /// Stop after this iteration without final outputs (tests of `--resume`).
+    pub halt_after: Option<u64>,
+}
+
+/// What a run did.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RunOutcome {
+    /// Last finished iteration.
+    pub iteration: u64,
+    /// Whether the outputs were written (false when halted early).
+    pub complete: bool,
+    /// For the style path: area-weighted mean alignment before and after.
+    pub alignment: Option<(f64, f64)>,
+    /// Warnings (e.g. an output format the mesh writer does not support).
+    pub warnings: Vec<String>,
+}
+
+/// A mesh prepared as the reference does: repaired, side-2 cube normalized, rounded to the f32
+/// values `deformation.npz` stores and normalized again in f64 — so `stylize apply` on the saved
+/// file rebuilds exactly this rest mesh.
+pub fn prepare_mesh(path: &Path) -> anyhow::Result<(TriMesh, Vec<String>)> {
+    let mesh = mesh_core::io::read_mesh(path)
+        .with_context(|| format!("cannot read mesh {}", path.display()))?;
+    let repaired =
+        mesh_core::validate::repair(&mesh, &mesh_core::validate::RepairOptions::default())
+            .with_context(|| format!("mesh {} cannot be used", path.display()))?;
+    let warnings: Vec<String> = repaired
+        .report
+        .issues
+        .iter()
+        .map(|i| i.message.clone())
+        .collect();
+    let mut m = repaired.mesh;
+    mesh_core::normalize::side2_cube(&mut m.positions);
+    for p in &mut m.positions {
+        *p = p.map(|c| f64::from(c as f32));
+    }
+    mesh_core::normalize::side2_cube(&mut m.positions);
+    Ok((m, warnings))
+}
+
+/// dARAP options from the configuration.
+pub fn darap_options(config: &Config) -> darap::DarapOptions {
+    darap::DarapOptions {
+        lambda: config.darap.lambda,
+        rotation_rule: match config.darap.rotation_rule {
+            RotationRule::Gis => darap::RotationRule::Gis,
+            RotationRule::Procrustes => darap::RotationRule::Procrustes,
+        },
+        post_process: match config.darap.post_process {
+            PostProcess::RecenterRescale => darap::PostProcess::RecenterRescale,
+            PostProcess::RecenterOnly => darap::PostProcess::RecenterOnly,
+            PostProcess::None => darap::PostProcess::None,
+        },
+    }
+}
+
+/// A renderer for the configured backend.
+pub fn renderer(config: &Config) -> (Box<dyn Renderer>, String) {
+    raster_diff::select_renderer(config.render.backend == Backend::Gpu)
+}
+
+struct RunObserver<'a> {
+    dir: &'a RunDir,
+    metrics: std::fs::File,
+    log: LogMode,
+    bar: Option<indicatif::ProgressBar>,
+    config_toml: String,
+    preview_size: usize,
+    fov: f64,
+    faces: Vec<[u32; 3]>,
+    preview_renderer: raster_diff::CpuRenderer,
+}
+
+fn record_json(r: &IterationRecord) -> serde_json::Value {
+    let mut obj = serde_json::Map::new();
+    obj.insert("iteration".into(), r.iteration.into());
+    for &(k, v) in &r.terms {
+        obj.insert(k.into(), v.into());
+    }
+    obj.insert("grad_norm".into(), r.grad_norm.into());
+    let timings: serde_json::Map<String, serde_json::Value> = r
+        .timings
+        .iter()
+        .map(|&(k, v)| (k.to_string(), v.into()))
+        .collect();
+    obj.insert("seconds".into(), timings.into());
+    obj.into()
+}
+
+/// Writes a grid of images as one PNG.
+pub fn write_grid(path: &Path, images: &Images) -> anyhow::Result<()> {
+    if let Some(parent) = path.parent() {
+        std::fs::create_dir_all(parent)
+            .with_context(|| format!("cannot create {}", parent.display()))?;
+    }
+    let columns = images.count.clamp(1, 4);
+    let sheet = raster_diff::image::contact_sheet(images, columns.max(1));
+    let file =
+        std::fs::File::create(path).with_context(|| format!("cannot create {}", path.display()))?;
+    raster_diff::image::write_png(
+        std::io::BufWriter::new(file),
+        &sheet,
+        0,
+        raster_diff::image::Encoding::Direct,
+    )
+    .with_context(|| format!("cannot write {}", path.display()))
+}
+
+/// Renders `n` turntable views of a mesh (CPU renderer, elevation 20°, distance 1.8 × the mesh's
+/// extent multiplier).
+pub fn turntable(
+    renderer: &mut raster_diff::CpuRenderer,
+    positions: &[[f64; 3]],
+    faces: &[[u32; 3]],
+    n: usize,
+    size: usize,
+    fov: f64,
+) -> anyhow::Result<Images> {
+    let distance = 1.8 * raster_diff::adapt_multiplier(positions);
+    let views = raster_diff::orbit_views(n.max(1), 20.0, distance, fov);
+    renderer
+        .render(positions, faces, &views, size, size)
+        .context("turntable render")
+}
+
+impl Observer for RunObserver<'_> {
+    fn iteration(&mut self, record: &IterationRecord) -> anyhow::Result<()> {
+        let line = record_json(record).to_string();
+        writeln!(self.metrics, "{line}").context("cannot write metrics.jsonl")?;
+        match self.log {
+            LogMode::Jsonl => println!("{line}"),
+            LogMode::Bar => {
+                if let Some(bar) = &self.bar {
+                    let loss = record
+                        .terms
+                        .iter()
+                        .find(|(k, _)| *k == "loss")
+                        .map_or(f64::NAN, |t| t.1);
+                    bar.set_position(record.iteration);
+                    bar.set_message(format!("loss {loss:.5}"));
+                }
+            }
+            LogMode::Quiet => {}
+        }
+        Ok(())
+    }
+
+    fn checkpoint(&mut self, state: &LoopState) -> anyhow::Result<()> {
+        self.metrics.flush().context("cannot flush metrics.jsonl")?;
+        Checkpoint {
+            version: CHECKPOINT_VERSION,
+            iteration: state.iteration,
+            x: state.x.clone(),
+            adam: state.adam.state().clone(),
+            rng: state.rng.clone(),
+            config_toml: self.config_toml.clone(),
+        }
+        .save_atomic(&self.dir.checkpoint())
+    }
+
+    fn preview(
+        &mut self,
+        iteration: u64,
+        deformed: &[[f64; 3]],
+        images: Option<&Images>,
+    ) -> anyhow::Result<()> {
+        let path = self.dir.previews().join(format!("iter_{iteration:06}.png"));
+        match images {
+            Some(images) => write_grid(&path, images),
+            None => {
+                let images = turntable(
+                    &mut self.preview_renderer,
+                    deformed,
+                    &self.faces,
+                    8,
+                    self.preview_size,
+                    self.fov,
+                )?;
+                write_grid(&path, &images)
+            }
+        }
+    }
+}
+
+/// Runs one request to completion (or to `halt_after`).
+pub fn execute(request: &RunRequest, task: Task) -> anyhow::Result<RunOutcome> {
+    let config = &request.config;
+    config.validate()?;
+    let dir = RunDir::new(&request.out);
+    let start = dir.prepare(request.force, request.resume)?;
+    let config_toml = config.to_toml_string()?;
+    let (mesh, mut warnings) = prepare_mesh(&request.mesh)?;
+    let setup = Instant::now();
+    let darap = Darap::new(&mesh.positions, &mesh.faces, darap_options(config))
+        .context("dARAP precomputation")?;
+    let setup_seconds = setup.elapsed().as_secs_f64();
+    let task_label = match &task {
+        Task::Style(s) => ("style", s.name()),
+        Task::Text { prompt, .. } => ("prompt", prompt.clone()),
+    };
+
+    let (mut objective, spec, lr, style_objective): (
+        Box<dyn Objective>,
+        LoopSpec,
+        f64,
+        Option<StyleObjective>,
+    ) = match task {
+        Task::Style(style) => {
+            let obj = StyleObjective::new(&style, &mesh.positions, &mesh.faces);
+            let spec = LoopSpec {
+                iterations: config.style.iterations,
+                steps_per_batch: 1,
+                checkpoint_every: config.run.checkpoint_every,
+                preview_every: config.run.preview_every,
+                halt_after: request.halt_after,
+            };
+            (Box::new(obj.clone()), spec, config.style.lr, Some(obj))
+        }
+        Task::Text { guidance, .. } => {
+            let (renderer, _why) = renderer(config);
+            let camera = CameraConfig {
+                elevation_deg: config.camera.elevation_deg,
+                azimuth_deg: config.camera.azimuth_deg,
+                distance: config.camera.distance,
+                fov_y_deg: config.camera.fov_deg,
+            };
+            let views = ViewSettings {
+                camera,
+                views: config.camera.views,
+                width: config.render.width,
+                height: config.render.height,
+                adapt_distance: config.camera.adapt_distance,
+            };
+            let obj = TextObjective::new(
+                renderer,
+                guidance,
+                &mesh.faces,
+                views,
+                config.stage2_schedule()?,
+            );
+            let spec = LoopSpec {
+                iterations: config.optim.iterations,
+                steps_per_batch: config.optim.steps_per_batch,
+                checkpoint_every: config.run.checkpoint_every,
+                preview_every: config.run.preview_every,
+                halt_after: request.halt_after,
+            };
+            (Box::new(obj), spec, config.optim.lr, None)
+        }
+    };
+    let adam_config = AdamConfig {
+        lr,
+        beta1: config.optim.beta1,
+        beta2: config.optim.beta2,
+        eps: config.optim.eps,
+    };
+
+    let mut state = match start {
+        Start::Fresh => {
+            std::fs::write(dir.config(), &config_toml)
+                .with_context(|| format!("cannot write {}", dir.config().display()))?;
+            std::fs::write(dir.metrics(), "").context("cannot create metrics.jsonl")?;
+            LoopState {
+                iteration: 0,
+                x: darap.rest_normals().to_vec(),
+                adam: Adam::new(3 * mesh.positions.len(), adam_config)?,
+                rng: ChaCha8Rng::seed_from_u64(config.run.seed),
+            }
+        }
+        Start::Resume(c) => {
+            if c.config_toml != config_toml {
+                bail!(
+                    "the checkpoint in {} was written with a different configuration; resume with the same config (see its config.toml) or pass --force",
+                    dir.root().display()
+                );
+            }
+            if c.x.len() != mesh.positions.len() {
+                bail!(
+                    "the checkpoint has {} vertices, the mesh {}: not the same mesh",
+                    c.x.len(),
+                    mesh.positions.len()
+                );
+            }
+            dir.truncate_metrics(c.iteration)?;
+            LoopState {
+                iteration: c.iteration,
+                x: c.x,
+                adam: Adam::from_state(adam_config, c.adam)?,
+                rng: c.rng,
+            }
+        }
+    };
+
+    let alignment_before = style_objective
+        .as_ref()
+        .map(|o| o.mean_alignment(&mesh.positions));
+    let metrics = std::fs::OpenOptions::new()
+        .append(true)
+        .create(true)
+        .open(dir.metrics())
+        .context("cannot open metrics.jsonl")?;
+    let bar = (request.log == LogMode::Bar).then(|| {
+        let bar = indicatif::ProgressBar::new(spec.iterations);
+        let style = indicatif::ProgressStyle::with_template(
+            "{bar:30} {pos}/{len} {msg} {per_sec} ETA {eta}",
+        )
+        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar());
+        bar.set_style(style);
+        bar.set_position(state.iteration);
+        bar
+    });
+    let mut observer = RunObserver {
+        dir: &dir,
+        metrics,
+        log: request.log,
+        bar: bar.clone(),
+        config_toml: config_toml.clone(),
+        preview_size: config.run.turntable_size,
+        fov: config.camera.fov_deg,
+        faces: mesh.faces.clone(),
+        preview_renderer: raster_diff::CpuRenderer::default(),
+    };
+    if request.log == LogMode::Bar
+        && let Some(b) = &bar
+    {
+        b.println(format!(
+            "{} on {} ({} vertices)",
+            objective.describe(),
+            request.mesh.display(),
+            mesh.positions.len()
+        ));
+    }
+    let loop_start = Instant::now();
+    run_loop(&darap, &spec, &mut state, objective.as_mut(), &mut observer)?;
+    let loop_seconds = loop_start.elapsed().as_secs_f64();
+    if let Some(b) = &bar {
+        b.finish_and_clear();
+    }
+    if state.iteration < spec.iterations {
+        return Ok(RunOutcome {
+            iteration: state.iteration,
+            complete: false,
+            alignment: None,
+            warnings,
+        });
+    }
+
+    // Outputs.
+    let result = darap.forward(&state.x).context("final dARAP forward")?;
+    let deformed = TriMesh::new(result.positions.clone(), mesh.faces.clone());
+    let normals =
+        mesh_core::normals::vertex_normals_area_weighted(&deformed.positions, &deformed.faces);
+    for ext in ["obj", "ply", "glb"] {
+        let path = dir.file(&format!("mesh.{ext}"));
+        match mesh_core::io::write_mesh(&path, &deformed, Some(&normals)) {
+            Ok(()) => {}
+            Err(mesh_core::MeshError::UnsupportedFormat { .. }) => {
+                warnings.push(format!(
+                    "mesh.{ext} not written: this build's mesh writer does not support .{ext}"
+                ));
+            }
+            Err(e) => return Err(e).with_context(|| format!("cannot write {}", path.display())),
+        }
+    }
+    write_deformation(
+        &dir,
+        &mesh,
+        &state.x,
+        config,
+        &request.mesh,
+        task_label.0,
+        &task_label.1,
+    )?;
+    let mut tt_renderer = raster_diff::CpuRenderer::default();
+    let tt = turntable(
+        &mut tt_renderer,
+        &deformed.positions,
+        &deformed.faces,
+        config.run.turntable_views,
+        config.run.turntable_size,
+        config.camera.fov_deg,
+    )?;
+    write_grid(&dir.file("turntable.png"), &tt)?;
+    let alignment = match (&style_objective, alignment_before) {
+        (Some(o), Some(before)) => Some((before, o.mean_alignment(&deformed.positions))),
+        _ => None,
+    };
+    let summary = serde_json::json!({
+        "status": "complete",
+        "mesh": request.mesh.display().to_string(),
+        "objective": objective.describe(),
+        "iterations": state.iteration,
+        "adam_steps": state.adam.state().step,
+        "seed": config.run.seed,
+        "lambda": config.darap.lambda,
+        "rotation_rule": config.darap.rotation_rule.name(),
+        "vertices": mesh.positions.len(),
+        "faces": mesh.faces.len(),
+        "alignment_before": alignment.map(|a| a.0),
+        "alignment_after": alignment.map(|a| a.1),
+        "seconds": { "setup": setup_seconds, "loop": loop_seconds },
+        "warnings": warnings,
+    });
+    std::fs::write(
+        dir.summary(),
+        serde_json::to_string_pretty(&summary).context("summary")?,
+    )
+    .context("cannot write run.json")?;
+    Ok(RunOutcome {
+        iteration: state.iteration,
+        complete: true,
+        alignment,
+        warnings,
+    })
+}
+
+/// Writes `deformation.npz` in the reference format plus our keys.
+fn write_deformation(
+    dir: &RunDir,
+    mesh: &TriMesh,
+    x: &[[f64; 3]],
+    config: &Config,
+    source: &Path,
+    task_key: &str,
+    task_value: &str,
+) -> anyhow::Result<()> {
+    let csd_cfg = serde_json::json!({
+        "local_step_procrustes": { "lamb": config.darap.lambda, "normalize_target_normals": true },
+        "arap_energy_type": "spokes_and_rims_mine",
+        "solve_method": "arap",
+        "pin_first_vertex": true,
+        "lr": config.optim.lr,
+        "n_iters": config.optim.iterations,
+    });
+    let dataset_cfg =
+        serde_json::json!({ "mesh": source.display().to_string(), task_key: task_value });
+    let mut saved = SavedDeformation {
+        verts: mesh.positions.iter().map(|p| p.map(|c| c as f32)).collect(),
+        faces: mesh.faces.clone(),
+        verts_normals: x.iter().map(|p| p.map(|c| c as f32)).collect(),
+        deform_by_csd_cfg: csd_cfg.to_string(),
+        dataset_cfg: dataset_cfg.to_string(),
+        extra: Vec::new(),
+    };
+    let scalar_i64 =
+        |v: i64| NpyArray::new(vec![], NpyData::I64(vec![v])).map_err(anyhow::Error::msg);
+    saved.set_extra("format_version", scalar_i64(NPZ_FORMAT_VERSION)?)?;
+    // The seed as i64 bits (NumPy has no portable u64 scalar in our reader).
+    saved.set_extra("seed", scalar_i64(config.run.seed as i64)?)?;
+    saved.set_extra(
+        "rotation_rule",
+        NpyArray::scalar_str(config.darap.rotation_rule.name()),
+    )?;
+    saved
+        .write(dir.deformation())
+        .with_context(|| format!("cannot write {}", dir.deformation().display()))
+}
