@@ -9,6 +9,7 @@
 mod csd;
 
 mod raster;
+mod style;
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -109,6 +110,7 @@ pub fn run(filter: Option<&str>) -> anyhow::Result<()> {
         // Each crate's checks live in a sibling module and register here.
         ("raster", raster::suite),
         ("csd", csd::suite),
+        ("style", style::suite),
     ];
     for (name, suite) in suites {
         if filter.is_none_or(|f| name.contains(f)) {
