@@ -6,7 +6,9 @@
 //! `|fd − an| ≤ atol + rtol · max(|fd|, |an|)`. Every mismatch is collected and reported together;
 //! the command exits non-zero if any check fails.
 
+mod cotan;
 mod csd;
+mod darap;
 
 mod raster;
 mod style;
@@ -110,6 +112,8 @@ pub fn run(filter: Option<&str>) -> anyhow::Result<()> {
         // Each crate's checks live in a sibling module and register here.
         ("raster", raster::suite),
         ("csd", csd::suite),
+        ("cotan", cotan::suite),
+        ("darap", darap::suite),
         ("style", style::suite),
     ];
     for (name, suite) in suites {
