@@ -20,13 +20,17 @@ pub fn run() -> anyhow::Result<()> {
             .output()?;
         anyhow::ensure!(out.status.success(), "cargo tree -p {krate} failed: {}", String::from_utf8_lossy(&out.stderr));
         let tree = String::from_utf8_lossy(&out.stdout);
-        let names: Vec<&str> = tree.lines().filter_map(|l| l.split_whitespace().next()).collect();
+        let mut names: Vec<&str> = tree.lines().filter_map(|l| l.split_whitespace().next()).collect();
+        names.sort_unstable();
+        names.dedup();
+        // Guard against a vacuous pass (an empty or unexpected `cargo tree` output).
+        anyhow::ensure!(names.contains(krate), "cargo tree -p {krate} did not list {krate} itself; output format changed?");
         for f in *forbidden {
             if names.contains(f) {
                 violations.push(format!("{krate} depends on {f}"));
             }
         }
-        println!("{krate}: {} crates in its normal dependency tree, none forbidden: {}", names.len(), !names.iter().any(|n| forbidden.contains(n)));
+        println!("{krate}: {} distinct crates in its normal dependency tree, none forbidden: {}", names.len(), !names.iter().any(|n| forbidden.contains(n)));
     }
     anyhow::ensure!(violations.is_empty(), "dependency rules violated:\n  {}", violations.join("\n  "));
     println!("check-deps: all rules hold");
