@@ -23,7 +23,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .and_then(|s| s.parse().ok())
         .unwrap_or(5usize);
     let (w, h, n_views) = (512, 512, 8);
-    let views = sample_views(&CameraConfig::default(), n_views, 1.0, &mut ChaCha8Rng::seed_from_u64(0));
+    let views = sample_views(
+        &CameraConfig::default(),
+        n_views,
+        1.0,
+        &mut ChaCha8Rng::seed_from_u64(0),
+    );
     let mut backends: Vec<Box<dyn Renderer>> = vec![Box::new(CpuRenderer::default())];
     println!("{n_views} views at {w}×{h}, median of {reps} runs (after one warm-up)");
     println!("| backend | faces | vertices | forward (ms) | forward+backward (ms) |");
@@ -32,7 +37,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let (v, f) = shapes::icosphere(subdivisions);
         for r in backends.iter_mut() {
             let img = r.render(&v, &f, &views, w, h)?;
-            let d = Images { rgb: img.rgb.iter().enumerate().map(|(i, _)| ((i % 7) as f32 - 3.0) * 1e-3).collect(), ..img };
+            let d = Images {
+                rgb: img
+                    .rgb
+                    .iter()
+                    .enumerate()
+                    .map(|(i, _)| ((i % 7) as f32 - 3.0) * 1e-3)
+                    .collect(),
+                ..img
+            };
             r.backward(&d)?;
             let mut fwd = Vec::new();
             let mut both = Vec::new();
@@ -45,7 +58,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 r.backward(&d)?;
                 both.push(t.elapsed().as_secs_f64() * 1e3);
             }
-            println!("| {} | {} | {} | {:.1} | {:.1} |", r.name(), f.len(), v.len(), median(fwd), median(both));
+            println!(
+                "| {} | {} | {} | {:.1} | {:.1} |",
+                r.name(),
+                f.len(),
+                v.len(),
+                median(fwd),
+                median(both)
+            );
         }
     }
     Ok(())

@@ -105,83 +105,83 @@ pub fn find_blends(
     };
     let (w, h) = (camera.width, camera.height);
     let mut blends = Vec::new();
+    // Candidate pairs (pixel a, axis): axis 0 pairs a with its right neighbour, axis 1 with the
+    // pixel below. Gathered in a tight scan first; almost all pairs have equal ids.
+    let mut pairs = Vec::new();
     for row in 0..h {
-        for col in 0..w {
-            let a = row * w + col;
-            // axis 0: horizontal neighbour (centres differ in x); axis 1: vertical neighbour.
-            for axis in 0..2 {
-                let b = if axis == 0 {
-                    if col + 1 >= w {
-                        continue;
-                    }
-                    a + 1
-                } else {
-                    if row + 1 >= h {
-                        continue;
-                    }
-                    a + w
-                };
-                let (ia, ib) = (ids[a], ids[b]);
-                if ia == ib {
-                    continue;
-                }
-                let a_front = ib == NO_TRIANGLE || (ia != NO_TRIANGLE && depth[a] <= depth[b]);
-                let (front, other) = if a_front { (a, b) } else { (b, a) };
-                let tri = ids[front];
-                let centre = |p: usize| [(p % w) as f64 + 0.5, (p / w) as f64 + 0.5];
-                let (cf, co) = (centre(front), centre(other));
-                let face = faces[tri as usize];
-                for k in 0..3 {
-                    if !silhouette(tri, k) {
-                        continue;
-                    }
-                    let (va, vb) = (face[k], face[(k + 1) % 3]);
-                    let (sa, sb) = (proj[va as usize].screen, proj[vb as usize].screen);
-                    // The segment runs along `axis`; the crossing line is coordinate `o` = const.
-                    let o = 1 - axis;
-                    let line = cf[o];
-                    let (da, db) = (sa[o] - line, sb[o] - line);
-                    if da * db >= 0.0 {
-                        continue;
-                    }
-                    let den = sb[o] - sa[o];
-                    let s = (line - sa[o]) / den;
-                    let cross = sa[axis] + s * (sb[axis] - sa[axis]);
-                    let step = co[axis] - cf[axis]; // ±1
-                    let t = (cross - cf[axis]) / step;
-                    if !(0.0..=1.0).contains(&t) {
-                        continue;
-                    }
-                    // d cross / d(screen of a, b) along `axis` and `o`.
-                    let slope = (sb[axis] - sa[axis]) / den;
-                    let mut ds_a = [0.0; 2];
-                    let mut ds_b = [0.0; 2];
-                    ds_a[axis] = 1.0 - s;
-                    ds_b[axis] = s;
-                    ds_a[o] = slope * (s - 1.0);
-                    ds_b[o] = -slope * s;
-                    let (target, source, alpha, dalpha_dt) = if t > 0.5 {
-                        (other, front, t - 0.5, 1.0)
-                    } else {
-                        (front, other, 0.5 - t, -1.0)
-                    };
-                    let scale = dalpha_dt / step;
-                    let ja = camera.screen_jacobian(proj[va as usize].cam);
-                    let jb = camera.screen_jacobian(proj[vb as usize].cam);
-                    let d_alpha = [
-                        (ja[0] * ds_a[0] + ja[1] * ds_a[1]) * scale,
-                        (jb[0] * ds_b[0] + jb[1] * ds_b[1]) * scale,
-                    ];
-                    blends.push(Blend {
-                        target: target as u32,
-                        source: source as u32,
-                        edge: [va, vb],
-                        alpha,
-                        d_alpha,
-                    });
-                    break;
+        let r = &ids[row * w..(row + 1) * w];
+        for col in 0..w.saturating_sub(1) {
+            if r[col] != r[col + 1] {
+                pairs.push((row * w + col, 0usize));
+            }
+        }
+        if row + 1 < h {
+            let below = &ids[(row + 1) * w..(row + 2) * w];
+            for col in 0..w {
+                if r[col] != below[col] {
+                    pairs.push((row * w + col, 1usize));
                 }
             }
+        }
+    }
+    for (a, axis) in pairs {
+        let b = if axis == 0 { a + 1 } else { a + w };
+        let (ia, ib) = (ids[a], ids[b]);
+        let a_front = ib == NO_TRIANGLE || (ia != NO_TRIANGLE && depth[a] <= depth[b]);
+        let (front, other) = if a_front { (a, b) } else { (b, a) };
+        let tri = ids[front];
+        let centre = |p: usize| [(p % w) as f64 + 0.5, (p / w) as f64 + 0.5];
+        let (cf, co) = (centre(front), centre(other));
+        let face = faces[tri as usize];
+        for k in 0..3 {
+            if !silhouette(tri, k) {
+                continue;
+            }
+            let (va, vb) = (face[k], face[(k + 1) % 3]);
+            let (sa, sb) = (proj[va as usize].screen, proj[vb as usize].screen);
+            // The segment runs along `axis`; the crossing line is coordinate `o` = const.
+            let o = 1 - axis;
+            let line = cf[o];
+            let (da, db) = (sa[o] - line, sb[o] - line);
+            if da * db >= 0.0 {
+                continue;
+            }
+            let den = sb[o] - sa[o];
+            let s = (line - sa[o]) / den;
+            let cross = sa[axis] + s * (sb[axis] - sa[axis]);
+            let step = co[axis] - cf[axis]; // ±1
+            let t = (cross - cf[axis]) / step;
+            if !(0.0..=1.0).contains(&t) {
+                continue;
+            }
+            // d cross / d(screen of a, b) along `axis` and `o`.
+            let slope = (sb[axis] - sa[axis]) / den;
+            let mut ds_a = [0.0; 2];
+            let mut ds_b = [0.0; 2];
+            ds_a[axis] = 1.0 - s;
+            ds_b[axis] = s;
+            ds_a[o] = slope * (s - 1.0);
+            ds_b[o] = -slope * s;
+            let (target, source, alpha, dalpha_dt) = if t > 0.5 {
+                (other, front, t - 0.5, 1.0)
+            } else {
+                (front, other, 0.5 - t, -1.0)
+            };
+            let scale = dalpha_dt / step;
+            let ja = camera.screen_jacobian(proj[va as usize].cam);
+            let jb = camera.screen_jacobian(proj[vb as usize].cam);
+            let d_alpha = [
+                (ja[0] * ds_a[0] + ja[1] * ds_a[1]) * scale,
+                (jb[0] * ds_b[0] + jb[1] * ds_b[1]) * scale,
+            ];
+            blends.push(Blend {
+                target: target as u32,
+                source: source as u32,
+                edge: [va, vb],
+                alpha,
+                d_alpha,
+            });
+            break;
         }
     }
     blends

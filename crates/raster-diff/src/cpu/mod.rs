@@ -325,7 +325,10 @@ impl Renderer for CpuRenderer {
         height: usize,
     ) -> Result<Images, RenderError> {
         let grey = self.render_grey(vertices, faces, views, width, height)?;
-        let rgb = grey.iter().flat_map(|&g| [g as f32; 3]).collect();
+        let mut rgb = Vec::with_capacity(grey.len() * 3);
+        for &g in &grey {
+            rgb.extend_from_slice(&[g as f32; 3]);
+        }
         Ok(Images {
             count: views.len(),
             height,
