@@ -1,5 +1,6 @@
 //! A bad ONNX Runtime library is a clear error, not a panic or an abort. This file is its own test
-//! process: ONNX Runtime can be loaded only once per process, so nothing else may load it first.
+//! process: ONNX Runtime can be loaded only once per process, so nothing else may load it first, and
+//! nothing here loads a real one.
 
 use diffusion_onnx::runtime::environment_from;
 
@@ -19,4 +20,39 @@ fn a_file_that_is_not_a_library_is_refused_with_instructions() {
         "{msg}"
     );
     assert!(msg.contains(&fake.display().to_string()), "{msg}");
+}
+
+/// A stand-in library with ONNX Runtime's entry point that reports version 1.10.0 (and would hand out
+/// no API table): the "too old" case, which ort checks before touching the API.
+const OLD_ORT_C: &str = r#"
+typedef struct { const void *(*GetApi)(unsigned); const char *(*GetVersionString)(void); } OrtApiBase;
+static const void *get_api(unsigned v) { (void)v; return 0; }
+static const char *version(void) { return "1.10.0"; }
+static const OrtApiBase base = { get_api, version };
+const OrtApiBase *OrtGetApiBase(void) { return &base; }
+"#;
+
+#[test]
+fn a_too_old_runtime_is_refused_with_the_version_and_instructions() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let src = dir.path().join("old_ort.c");
+    let lib = dir.path().join("libonnxruntime.so.1.10.0");
+    std::fs::write(&src, OLD_ORT_C).expect("write C source");
+    // gcc/cc is on every machine that builds this workspace (the `onig` dependency compiles C).
+    let cc = std::env::var("CC").unwrap_or_else(|_| "cc".to_string());
+    let status = std::process::Command::new(&cc)
+        .args(["-shared", "-fPIC", "-o"])
+        .arg(&lib)
+        .arg(&src)
+        .status()
+        .unwrap_or_else(|e| panic!("running the C compiler `{cc}` failed: {e}"));
+    assert!(status.success(), "compiling the stand-in library failed");
+    let msg = match environment_from(&lib) {
+        Ok(_) => panic!("ONNX Runtime 1.10 was accepted"),
+        Err(e) => e.to_string(),
+    };
+    assert!(
+        msg.contains("1.10.0") && msg.contains(">= 1.30") && msg.contains("setup-onnxruntime.sh"),
+        "{msg}"
+    );
 }
