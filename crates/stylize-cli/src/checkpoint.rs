@@ -67,7 +67,16 @@ mod tests {
         let c = Checkpoint {
             version: CHECKPOINT_VERSION,
             iteration: 3,
-            x: vec![[0.1, 1.0 / 3.0, -2e-17]],
+            // Values whose shortest decimal form needs all 17 digits (exact parsing is required).
+            x: (0..200)
+                .map(|_| {
+                    [
+                        rng.random::<f64>(),
+                        -rng.random::<f64>() * 1e-7,
+                        rng.random::<f64>() * 3e5,
+                    ]
+                })
+                .collect(),
             adam: optim::AdamState {
                 step: 6,
                 m: vec![1e-9, 0.5, 0.25],

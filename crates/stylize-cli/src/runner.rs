@@ -424,7 +424,14 @@ pub fn execute(request: &RunRequest, task: Task) -> anyhow::Result<RunOutcome> {
     }
 
     // Outputs.
-    let result = darap.forward(&state.x).context("final dARAP forward")?;
+    // The outputs are the deformation of x as saved (f32), so re-applying deformation.npz
+    // reproduces mesh.* exactly.
+    let x_saved: Vec<[f64; 3]> = state
+        .x
+        .iter()
+        .map(|p| p.map(|c| f64::from(c as f32)))
+        .collect();
+    let result = darap.forward(&x_saved).context("final dARAP forward")?;
     let deformed = TriMesh::new(result.positions.clone(), mesh.faces.clone());
     let normals =
         mesh_core::normals::vertex_normals_area_weighted(&deformed.positions, &deformed.faces);
