@@ -11,7 +11,8 @@
 //! |---|---|
 //! | NaN / infinite coordinates | **refuse** (option: drop those vertices and their faces) |
 //! | face index ≥ number of vertices | **refuse** (option: drop those faces) |
-//! | exact duplicate vertices (bitwise equal, −0 = +0) | weld onto the first occurrence |
+//! | exact duplicate vertices (bitwise equal, −0 = +0) on a crack (one unused, or both on an open border) | weld onto the first occurrence |
+//! | coincident vertices inside closed regions (the surface touches itself) | report, keep apart |
 //! | face with a repeated vertex (after welding) | drop |
 //! | zero-area face (area ≤ `zero_area_tolerance` · bbox diagonal²) | drop |
 //! | duplicate faces (same vertex set, any order) | keep the first, drop the rest |
@@ -42,8 +43,12 @@ pub struct RepairOptions {
     pub drop_nonfinite_vertices: bool,
     /// Drop faces with an index ≥ the number of vertices, instead of refusing.
     pub drop_out_of_range_faces: bool,
-    /// Weld vertices whose coordinates are bitwise equal (after −0 → +0).
+    /// Weld vertices whose coordinates are bitwise equal (after −0 → +0) when that closes a
+    /// crack: one of the two is unused, or both lie on an open border.
     pub weld_exact_duplicates: bool,
+    /// Also weld coincident vertices that both lie inside closed surface regions (surfaces that
+    /// touch at a point). Off by default: it pinches the surface into a non-manifold vertex.
+    pub weld_touching_vertices: bool,
     /// Drop faces with a repeated vertex or (near) zero area.
     pub drop_degenerate_faces: bool,
     /// Drop all but the first of faces that use the same three vertices.
@@ -68,6 +73,7 @@ impl Default for RepairOptions {
             drop_nonfinite_vertices: false,
             drop_out_of_range_faces: false,
             weld_exact_duplicates: true,
+            weld_touching_vertices: false,
             drop_degenerate_faces: true,
             drop_duplicate_faces: true,
             drop_unreferenced_vertices: true,
@@ -87,8 +93,10 @@ pub enum IssueKind {
     NonFiniteCoordinates,
     /// Faces that refer to a vertex that does not exist.
     IndexOutOfRange,
-    /// Vertices at exactly the same position as an earlier vertex.
+    /// Vertices at exactly the same position as an earlier vertex, on a crack (welded).
     DuplicateVertices,
+    /// Coincident vertices inside closed surface regions: the surface touches itself (kept).
+    TouchingVertices,
     /// Faces that use the same vertex twice.
     RepeatedVertexInFace,
     /// Faces whose three corners are (nearly) on a line or a point.
@@ -120,6 +128,7 @@ impl IssueKind {
             IssueKind::NonFiniteCoordinates => "non_finite_coordinates",
             IssueKind::IndexOutOfRange => "index_out_of_range",
             IssueKind::DuplicateVertices => "duplicate_vertices",
+            IssueKind::TouchingVertices => "touching_vertices",
             IssueKind::RepeatedVertexInFace => "repeated_vertex_in_face",
             IssueKind::ZeroAreaFaces => "zero_area_faces",
             IssueKind::DuplicateFaces => "duplicate_faces",
@@ -430,22 +439,52 @@ fn analyse(mesh: &TriMesh, o: &RepairOptions) -> Repaired {
             }
         }
     }
-    if !dup_pairs.is_empty() {
-        let n = dup_pairs.len();
-        if o.weld_exact_duplicates {
-            for &[d, kept] in &dup_pairs {
-                rep[d as usize] = kept;
+    // Weld a pair when it closes a crack: one of them is used by no face, or both lie on an open
+    // border. Two vertices inside closed surface regions are distinct points that touch (welding
+    // them would pinch the surface into a non-manifold vertex), unless `weld_touching_vertices`.
+    let mut referenced = vec![false; nv];
+    let mut on_border = vec![false; nv];
+    {
+        let live: Vec<[u32; 3]> = (0..nf)
+            .filter(|&f| face_alive[f])
+            .map(|f| mesh.faces[f])
+            .collect();
+        for f in &live {
+            for &v in f {
+                referenced[v as usize] = true;
             }
         }
-        let shown: Vec<String> = dup_pairs
+        for [a, b] in EdgeFaces::new(&live).boundary_edges() {
+            on_border[a as usize] = true;
+            on_border[b as usize] = true;
+        }
+    }
+    let (weld_pairs, touching): (Vec<[u32; 2]>, Vec<[u32; 2]>) =
+        dup_pairs.iter().partition(|&&[d, kept]| {
+            let (d, kept) = (d as usize, kept as usize);
+            o.weld_touching_vertices
+                || !referenced[d]
+                || !referenced[kept]
+                || (on_border[d] && on_border[kept])
+        });
+    let show_pairs = |pairs: &[[u32; 2]]| -> Vec<String> {
+        pairs
             .iter()
             .take(MAX_EXAMPLES)
             .map(|p| format!("{} = {}", p[0], p[1]))
-            .collect();
+            .collect()
+    };
+    if !weld_pairs.is_empty() {
+        let n = weld_pairs.len();
+        if o.weld_exact_duplicates {
+            for &[d, kept] in &weld_pairs {
+                rep[d as usize] = kept;
+            }
+        }
         issues.push(Issue {
             kind: IssueKind::DuplicateVertices,
             count: n,
-            examples: Locations::VertexPairs(examples(&dup_pairs)),
+            examples: Locations::VertexPairs(examples(&weld_pairs)),
             action: if o.weld_exact_duplicates {
                 Action::Repaired
             } else {
@@ -454,12 +493,26 @@ fn analyse(mesh: &TriMesh, o: &RepairOptions) -> Repaired {
             message: format!(
                 "{} at exactly the same position as an earlier vertex ({}); {}",
                 plural(n, "vertex sits", "vertices sit"),
-                list(&shown, n),
+                list(&show_pairs(&weld_pairs), n),
                 if o.weld_exact_duplicates {
-                    "they were welded, joining the faces around them"
+                    "they were welded, closing the cracks between the faces around them"
                 } else {
                     "left unwelded: the surface has cracks there"
                 }
+            ),
+        });
+    }
+    if !touching.is_empty() {
+        let n = touching.len();
+        issues.push(Issue {
+            kind: IssueKind::TouchingVertices,
+            count: n,
+            examples: Locations::VertexPairs(examples(&touching)),
+            action: Action::Kept,
+            message: format!(
+                "{} the same position as an earlier vertex but on a closed part of the surface                  ({}): the surface touches itself there; kept apart (welding would pinch it)",
+                plural(n, "vertex has", "vertices have"),
+                list(&show_pairs(&touching), n)
             ),
         });
     }
@@ -493,7 +546,7 @@ fn analyse(mesh: &TriMesh, o: &RepairOptions) -> Repaired {
             message: format!(
                 "{} the same vertex twice{} (face {}); {}",
                 plural(n, "face uses", "faces use"),
-                if o.weld_exact_duplicates && !dup_pairs.is_empty() {
+                if o.weld_exact_duplicates && !weld_pairs.is_empty() {
                     " after welding"
                 } else {
                     ""

@@ -6,19 +6,25 @@
 //! indices are stored as read, so a file with an out-of-range index loads and validation reports it.
 //! Truncated or malformed files give a [`MeshError`] naming the file and what was expected.
 
+mod gltf;
 mod obj;
+mod off;
+mod ply;
 
 use std::path::Path;
 
 use crate::{MeshError, TriMesh};
 
+pub use gltf::{read_gltf, write_glb};
 pub use obj::{read_obj, write_obj};
+pub use off::{read_off, write_off};
+pub use ply::{PlyEncoding, read_ply, write_ply};
 
 /// A mesh and, when the file stores one per vertex, its vertex normals.
 pub type MeshWithNormals = (TriMesh, Option<Vec<[f64; 3]>>);
 
-const READ_FORMATS: &str = "obj";
-const WRITE_FORMATS: &str = "obj";
+const READ_FORMATS: &str = "obj, off, ply, gltf, glb";
+const WRITE_FORMATS: &str = "obj, off, ply, glb";
 
 /// Lower-cased extension of `path` ("" when there is none).
 fn extension(path: &Path) -> String {
@@ -34,12 +40,16 @@ pub fn read_mesh(path: impl AsRef<Path>) -> Result<TriMesh, MeshError> {
 }
 
 /// Like [`read_mesh`], also returning per-vertex normals when the file stores exactly one normal
-/// per vertex (OBJ `vn` used consistently per vertex).
+/// per vertex (OBJ `vn` used consistently per vertex, PLY `nx ny nz`, glTF `NORMAL` on every
+/// primitive).
 pub fn read_mesh_with_normals(path: impl AsRef<Path>) -> Result<MeshWithNormals, MeshError> {
     let path = path.as_ref();
     let ext = extension(path);
     let out = match ext.as_str() {
         "obj" => read_obj(path)?,
+        "off" => read_off(path)?,
+        "ply" => read_ply(path)?,
+        "gltf" | "glb" => read_gltf(path)?,
         _ => {
             return Err(MeshError::UnsupportedFormat {
                 path: path.to_path_buf(),
@@ -57,7 +67,8 @@ pub fn read_mesh_with_normals(path: impl AsRef<Path>) -> Result<MeshWithNormals,
 }
 
 /// Writes a mesh, choosing the format by extension, with optional per-vertex normals (one per
-/// vertex). Missing parent folders are created.
+/// vertex). Missing parent folders are created. PLY is written as `binary_little_endian` (use
+/// [`write_ply`] for ASCII); OFF cannot store normals (they are ignored).
 pub fn write_mesh(
     path: impl AsRef<Path>,
     mesh: &TriMesh,
@@ -74,11 +85,19 @@ pub fn write_mesh(
         });
     }
     let ext = extension(path);
+    if !matches!(ext.as_str(), "obj" | "off" | "ply" | "glb") {
+        return Err(MeshError::UnsupportedFormat {
+            path: path.to_path_buf(),
+            extension: ext,
+            supported: WRITE_FORMATS,
+        });
+    }
+    create_parent_dirs(path)?;
     match ext.as_str() {
-        "obj" => {
-            create_parent_dirs(path)?;
-            write_obj(path, mesh, normals)
-        }
+        "obj" => write_obj(path, mesh, normals),
+        "off" => write_off(path, mesh),
+        "ply" => write_ply(path, mesh, normals, PlyEncoding::BinaryLittleEndian),
+        "glb" => write_glb(path, mesh, normals),
         _ => Err(MeshError::UnsupportedFormat {
             path: path.to_path_buf(),
             extension: ext,
@@ -113,6 +132,29 @@ pub(crate) fn parse_err(path: &Path, message: impl Into<String>) -> MeshError {
     MeshError::Parse {
         path: path.to_path_buf(),
         message: message.into(),
+    }
+}
+
+/// Text formats: a parse error on the last line of a file that does not end with a newline most
+/// likely means the file was cut off; say so.
+pub(crate) fn truncation_hint(e: MeshError, bytes: &[u8]) -> MeshError {
+    match e {
+        MeshError::Parse { path, message }
+            if !bytes.is_empty()
+                && !bytes.ends_with(b"\n")
+                && message.starts_with(&format!(
+                    "line {}:",
+                    bytes.iter().filter(|&&b| b == b'\n').count() + 1
+                )) =>
+        {
+            MeshError::Parse {
+                path,
+                message: format!(
+                    "{message} (the last line is incomplete: the file looks truncated)"
+                ),
+            }
+        }
+        e => e,
     }
 }
 

@@ -8,7 +8,7 @@ use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::Path;
 
-use super::{io_err, parse_err, read_bytes};
+use super::{io_err, parse_err, read_bytes, truncation_hint};
 use crate::{MeshError, TriMesh};
 
 /// Reads an OBJ file: vertices in file order (all of them), faces fan-triangulated
@@ -17,7 +17,11 @@ use crate::{MeshError, TriMesh};
 /// referenced by a face uses a single `vn` and all vertices have one.
 pub fn read_obj(path: &Path) -> Result<super::MeshWithNormals, MeshError> {
     let bytes = read_bytes(path)?;
-    let text = String::from_utf8_lossy(&bytes);
+    read_obj_bytes(path, &bytes).map_err(|e| truncation_hint(e, &bytes))
+}
+
+fn read_obj_bytes(path: &Path, bytes: &[u8]) -> Result<super::MeshWithNormals, MeshError> {
+    let text = String::from_utf8_lossy(bytes);
     let mut positions: Vec<[f64; 3]> = Vec::new();
     let mut vn: Vec<[f64; 3]> = Vec::new();
     // Per polygon: (line number, corners as 0-based (position, normal) indices).

@@ -1,0 +1,405 @@
+//! Stanford PLY: `ascii 1.0`, `binary_little_endian 1.0` and `binary_big_endian 1.0`.
+//!
+//! Read: element `vertex` with scalar properties `x y z` (any numeric type; `nx ny nz` read as
+//! normals when present), element `face` with a list property `vertex_indices` or `vertex_index`
+//! (any integer count and index types), polygons fan-triangulated. Every other element and
+//! property is skipped, with its size, in all three encodings.
+//! Write: `x y z` (and `nx ny nz`) as `double`, faces as `list uchar int vertex_indices`.
+
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::Path;
+
+use super::{MeshWithNormals, io_err, parse_err, read_bytes};
+use crate::{MeshError, TriMesh};
+
+/// The body encoding of a PLY file.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PlyEncoding {
+    /// Whitespace-separated text.
+    Ascii,
+    /// Binary, little-endian.
+    BinaryLittleEndian,
+    /// Binary, big-endian (read only).
+    BinaryBigEndian,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Scalar {
+    I8,
+    U8,
+    I16,
+    U16,
+    I32,
+    U32,
+    F32,
+    F64,
+}
+
+impl Scalar {
+    fn parse(s: &str) -> Option<Self> {
+        Some(match s {
+            "char" | "int8" => Scalar::I8,
+            "uchar" | "uint8" => Scalar::U8,
+            "short" | "int16" => Scalar::I16,
+            "ushort" | "uint16" => Scalar::U16,
+            "int" | "int32" => Scalar::I32,
+            "uint" | "uint32" => Scalar::U32,
+            "float" | "float32" => Scalar::F32,
+            "double" | "float64" => Scalar::F64,
+            _ => return None,
+        })
+    }
+
+    fn size(self) -> usize {
+        match self {
+            Scalar::I8 | Scalar::U8 => 1,
+            Scalar::I16 | Scalar::U16 => 2,
+            Scalar::I32 | Scalar::U32 | Scalar::F32 => 4,
+            Scalar::F64 => 8,
+        }
+    }
+}
+
+#[derive(Clone, Debug)]
+enum Property {
+    Scalar {
+        name: String,
+        ty: Scalar,
+    },
+    List {
+        name: String,
+        count: Scalar,
+        item: Scalar,
+    },
+}
+
+#[derive(Clone, Debug)]
+struct Element {
+    name: String,
+    count: usize,
+    properties: Vec<Property>,
+}
+
+/// A cursor over the body that yields numbers as `f64` in any encoding.
+struct Body<'a> {
+    bytes: &'a [u8],
+    pos: usize,
+    encoding: PlyEncoding,
+    path: &'a Path,
+}
+
+impl Body<'_> {
+    fn read(&mut self, ty: Scalar, what: &dyn Fn() -> String) -> Result<f64, MeshError> {
+        match self.encoding {
+            PlyEncoding::Ascii => {
+                while self.pos < self.bytes.len() && self.bytes[self.pos].is_ascii_whitespace() {
+                    self.pos += 1;
+                }
+                let start = self.pos;
+                while self.pos < self.bytes.len() && !self.bytes[self.pos].is_ascii_whitespace() {
+                    self.pos += 1;
+                }
+                if start == self.pos {
+                    return Err(parse_err(
+                        self.path,
+                        format!("file is truncated: it ends before {}", what()),
+                    ));
+                }
+                let tok = String::from_utf8_lossy(&self.bytes[start..self.pos]);
+                tok.parse::<f64>().map_err(|_| {
+                    parse_err(self.path, format!("`{tok}` is not a number ({})", what()))
+                })
+            }
+            enc => {
+                let n = ty.size();
+                let end = self.pos + n;
+                if end > self.bytes.len() {
+                    return Err(parse_err(
+                        self.path,
+                        format!("file is truncated: it ends before {}", what()),
+                    ));
+                }
+                let mut b = [0u8; 8];
+                b[..n].copy_from_slice(&self.bytes[self.pos..end]);
+                if enc == PlyEncoding::BinaryBigEndian {
+                    b[..n].reverse();
+                }
+                self.pos = end;
+                Ok(match ty {
+                    Scalar::I8 => f64::from(b[0] as i8),
+                    Scalar::U8 => f64::from(b[0]),
+                    Scalar::I16 => f64::from(i16::from_le_bytes([b[0], b[1]])),
+                    Scalar::U16 => f64::from(u16::from_le_bytes([b[0], b[1]])),
+                    Scalar::I32 => f64::from(i32::from_le_bytes([b[0], b[1], b[2], b[3]])),
+                    Scalar::U32 => f64::from(u32::from_le_bytes([b[0], b[1], b[2], b[3]])),
+                    Scalar::F32 => f64::from(f32::from_le_bytes([b[0], b[1], b[2], b[3]])),
+                    Scalar::F64 => f64::from_le_bytes(b),
+                })
+            }
+        }
+    }
+}
+
+/// Reads a PLY file (vertices in file order). See the module docs.
+pub fn read_ply(path: &Path) -> Result<MeshWithNormals, MeshError> {
+    let bytes = read_bytes(path)?;
+    if !bytes.starts_with(b"ply") {
+        return Err(parse_err(path, "not a PLY file (it must start with `ply`)"));
+    }
+    let marker = b"end_header";
+    let hend = bytes
+        .windows(marker.len())
+        .position(|w| w == marker)
+        .ok_or_else(|| parse_err(path, "the header never ends (no `end_header` line)"))?;
+    let header = String::from_utf8_lossy(&bytes[..hend]);
+    // The body starts after the newline that ends `end_header` (\n or \r\n).
+    let mut body_start = hend + marker.len();
+    while body_start < bytes.len() && bytes[body_start] != b'\n' {
+        body_start += 1;
+    }
+    body_start = (body_start + 1).min(bytes.len());
+
+    let mut encoding = None;
+    let mut elements: Vec<Element> = Vec::new();
+    for (i, line) in header.lines().enumerate().skip(1) {
+        let lineno = i + 1;
+        let t: Vec<&str> = line.split_whitespace().collect();
+        match t.first().copied() {
+            Some("format") => {
+                encoding = Some(match t.get(1).copied() {
+                    Some("ascii") => PlyEncoding::Ascii,
+                    Some("binary_little_endian") => PlyEncoding::BinaryLittleEndian,
+                    Some("binary_big_endian") => PlyEncoding::BinaryBigEndian,
+                    other => {
+                        return Err(parse_err(
+                            path,
+                            format!(
+                                "line {lineno}: unknown PLY format {:?}",
+                                other.unwrap_or("")
+                            ),
+                        ));
+                    }
+                })
+            }
+            Some("element") => {
+                let (Some(name), Some(count)) = (t.get(1), t.get(2).and_then(|c| c.parse().ok()))
+                else {
+                    return Err(parse_err(
+                        path,
+                        format!("line {lineno}: expected `element NAME COUNT`"),
+                    ));
+                };
+                elements.push(Element {
+                    name: name.to_string(),
+                    count,
+                    properties: Vec::new(),
+                });
+            }
+            Some("property") => {
+                let el = elements.last_mut().ok_or_else(|| {
+                    parse_err(
+                        path,
+                        format!("line {lineno}: `property` before any `element`"),
+                    )
+                })?;
+                let bad = || {
+                    parse_err(
+                        path,
+                        format!("line {lineno}: malformed property `{}`", line.trim()),
+                    )
+                };
+                let prop = if t.get(1) == Some(&"list") {
+                    Property::List {
+                        count: t.get(2).and_then(|s| Scalar::parse(s)).ok_or_else(bad)?,
+                        item: t.get(3).and_then(|s| Scalar::parse(s)).ok_or_else(bad)?,
+                        name: t.get(4).ok_or_else(bad)?.to_string(),
+                    }
+                } else {
+                    Property::Scalar {
+                        ty: t.get(1).and_then(|s| Scalar::parse(s)).ok_or_else(bad)?,
+                        name: t.get(2).ok_or_else(bad)?.to_string(),
+                    }
+                };
+                el.properties.push(prop);
+            }
+            _ => {} // comment, obj_info, blank
+        }
+    }
+    let encoding = encoding.ok_or_else(|| parse_err(path, "the header has no `format` line"))?;
+    let mut body = Body {
+        bytes: &bytes[body_start..],
+        pos: 0,
+        encoding,
+        path,
+    };
+
+    let mut positions: Vec<[f64; 3]> = Vec::new();
+    let mut normals: Vec<[f64; 3]> = Vec::new();
+    let mut faces: Vec<[u32; 3]> = Vec::new();
+    let mut saw_vertex = false;
+    for el in &elements {
+        let is_vertex = el.name == "vertex";
+        let is_face = el.name == "face";
+        let slot = |name: &str| {
+            el.properties
+                .iter()
+                .position(|p| matches!(p, Property::Scalar { name: n, .. } if n == name))
+        };
+        let xyz = [slot("x"), slot("y"), slot("z")];
+        let nxyz = [slot("nx"), slot("ny"), slot("nz")];
+        let has_normals = nxyz.iter().all(Option::is_some);
+        if is_vertex {
+            saw_vertex = true;
+            if xyz.iter().any(Option::is_none) {
+                return Err(parse_err(
+                    path,
+                    "element `vertex` lacks an x, y or z property",
+                ));
+            }
+            positions.reserve(el.count.min(1 << 24));
+        }
+        let list_slot = el.properties.iter().position(
+            |p| matches!(p, Property::List { name, .. } if name == "vertex_indices" || name == "vertex_index"),
+        );
+        if is_face && list_slot.is_none() {
+            return Err(parse_err(
+                path,
+                "element `face` has no `vertex_indices` list",
+            ));
+        }
+        let mut values = vec![0.0f64; el.properties.len()];
+        let mut poly: Vec<u32> = Vec::new();
+        for i in 0..el.count {
+            for (k, p) in el.properties.iter().enumerate() {
+                let what = || format!("{} {i} of {} (property {k})", el.name, el.count);
+                match p {
+                    Property::Scalar { ty, .. } => values[k] = body.read(*ty, &what)?,
+                    Property::List { count, item, .. } => {
+                        let n = body.read(*count, &what)?;
+                        if !(n >= 0.0 && n.fract() == 0.0) {
+                            return Err(parse_err(
+                                path,
+                                format!("bad list length {n} in {}", what()),
+                            ));
+                        }
+                        let keep = Some(k) == list_slot && is_face;
+                        poly.clear();
+                        for _ in 0..n as usize {
+                            let v = body.read(*item, &what)?;
+                            if keep {
+                                if !(v >= 0.0 && v <= f64::from(u32::MAX) && v.fract() == 0.0) {
+                                    return Err(parse_err(
+                                        path,
+                                        format!("face {i}: `{v}` is not a vertex index"),
+                                    ));
+                                }
+                                poly.push(v as u32);
+                            }
+                        }
+                        if keep {
+                            if poly.len() < 3 {
+                                return Err(parse_err(
+                                    path,
+                                    format!(
+                                        "face {i} has {} corners, at least 3 are needed",
+                                        poly.len()
+                                    ),
+                                ));
+                            }
+                            for j in 1..poly.len() - 1 {
+                                faces.push([poly[0], poly[j], poly[j + 1]]);
+                            }
+                        }
+                    }
+                }
+            }
+            if is_vertex {
+                let g = |s: Option<usize>| values[s.unwrap_or(0)];
+                positions.push([g(xyz[0]), g(xyz[1]), g(xyz[2])]);
+                if has_normals {
+                    normals.push([g(nxyz[0]), g(nxyz[1]), g(nxyz[2])]);
+                }
+            }
+        }
+    }
+    if !saw_vertex {
+        return Err(parse_err(path, "the header declares no `vertex` element"));
+    }
+    let normals = (!normals.is_empty() && normals.len() == positions.len()).then_some(normals);
+    Ok((TriMesh { positions, faces }, normals))
+}
+
+/// Writes a PLY file: vertices `double x y z` (plus `double nx ny nz` with normals), faces
+/// `list uchar int vertex_indices`. Indices above `i32::MAX` are refused (PLY `int`).
+pub fn write_ply(
+    path: &Path,
+    mesh: &TriMesh,
+    normals: Option<&[[f64; 3]]>,
+    encoding: PlyEncoding,
+) -> Result<(), MeshError> {
+    if encoding == PlyEncoding::BinaryBigEndian {
+        return Err(MeshError::UnsupportedFormat {
+            path: path.to_path_buf(),
+            extension: "ply (binary_big_endian)".into(),
+            supported: "ply ascii, ply binary_little_endian",
+        });
+    }
+    if mesh.faces.iter().flatten().any(|&v| v > i32::MAX as u32) {
+        return Err(MeshError::Invalid(format!(
+            "{}: a face index exceeds the PLY `int` range",
+            path.display()
+        )));
+    }
+    let file = File::create(path).map_err(|e| io_err(path, e))?;
+    let mut w = BufWriter::new(file);
+    let go = |w: &mut BufWriter<File>| -> std::io::Result<()> {
+        let fmt = match encoding {
+            PlyEncoding::Ascii => "ascii",
+            _ => "binary_little_endian",
+        };
+        write!(
+            w,
+            "ply\nformat {fmt} 1.0\ncomment written by mesh-core\nelement vertex {}\n\
+             property double x\nproperty double y\nproperty double z\n",
+            mesh.positions.len()
+        )?;
+        if normals.is_some() {
+            write!(
+                w,
+                "property double nx\nproperty double ny\nproperty double nz\n"
+            )?;
+        }
+        write!(
+            w,
+            "element face {}\nproperty list uchar int vertex_indices\nend_header\n",
+            mesh.faces.len()
+        )?;
+        for (i, p) in mesh.positions.iter().enumerate() {
+            let n = normals.map(|n| n[i]);
+            if encoding == PlyEncoding::Ascii {
+                write!(w, "{} {} {}", p[0], p[1], p[2])?;
+                if let Some(n) = n {
+                    write!(w, " {} {} {}", n[0], n[1], n[2])?;
+                }
+                writeln!(w)?;
+            } else {
+                for c in p.iter().chain(n.iter().flatten()) {
+                    w.write_all(&c.to_le_bytes())?;
+                }
+            }
+        }
+        for f in &mesh.faces {
+            if encoding == PlyEncoding::Ascii {
+                writeln!(w, "3 {} {} {}", f[0], f[1], f[2])?;
+            } else {
+                w.write_all(&[3u8])?;
+                for &v in f {
+                    w.write_all(&(v as i32).to_le_bytes())?;
+                }
+            }
+        }
+        w.flush()
+    };
+    go(&mut w).map_err(|e| io_err(path, e))
+}
