@@ -95,7 +95,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let u64_256 = Resize2d::bilinear((64, 64), (256, 256))?;
     let plane512 = vec![0.5f32; planes * n * n];
     let plane224 = vec![0.5f32; planes * 224 * 224];
-    let plane224_out = vec![0.5f32; planes * 224 * 224];
+    let plane224_out = vec![0.5f64; planes * 224 * 224];
     let plane64 = vec![0.5f32; planes * 64 * 64];
     let plane256_f64 = vec![0.5f64; planes * 256 * 256];
     let plane64_f64 = vec![0.5f64; planes * 64 * 64];
@@ -104,8 +104,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         time_ms(reps, || drop(r224.apply(&plane512))),
     );
     row(
-        "  cubic AA 512→224 adjoint (f32 in/out, f64 accumulation)",
-        time_ms(reps, || drop(r224.adjoint(&plane224_out))),
+        "  cubic AA 512→224 adjoint (f64 in, f32 out)",
+        time_ms(reps, || drop(r224.adjoint_as::<f64, f32>(&plane224_out))),
     );
     row(
         "  bilinear 224→64 (f32)",

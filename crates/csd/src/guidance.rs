@@ -479,11 +479,10 @@ impl CascadedGuidance {
             None
         };
 
-        // x = 2·R(img) − 1 ⇒ ∂L/∂img = 2·Rᵀ(∂L/∂x). ∂L/∂x is rounded to f32 (±∞ → ±f32::MAX) for the
-        // 224-resize adjoint (which accumulates in f64); the factor 2 is applied while converting
-        // NCHW → (view, row, col, channel), with a final NaN/∞ guard.
-        let grad_x: Vec<f32> = grad_x.iter().map(|&g| nan_to_num(g as f32)).collect();
-        let grad_img = resize.adjoint(&grad_x)?;
+        // x = 2·R(img) − 1 ⇒ ∂L/∂img = 2·Rᵀ(∂L/∂x). The 224-resize adjoint reads ∂L/∂x in f64 and writes
+        // f32 (f64 accumulation); the factor 2 is applied while converting NCHW → (view, row, col,
+        // channel), with a final NaN/∞ guard.
+        let grad_img: Vec<f32> = resize.adjoint_as::<f64, f32>(&grad_x)?;
         let mut grad_images = vec![0.0f32; images.len()];
         grad_images
             .par_chunks_mut(CHANNELS * plane)
@@ -508,7 +507,10 @@ impl CascadedGuidance {
             x: tensor(shape, x),
             stage1,
             stage2,
-            grad_x: tensor(shape, grad_x),
+            grad_x: tensor(
+                shape,
+                grad_x.iter().map(|&g| nan_to_num(g as f32)).collect(),
+            ),
             output,
         })
     }

@@ -214,29 +214,42 @@ impl Resize2d {
 
     /// Applies the resize to every plane of `input` (`planes × in_h × in_w` values).
     pub fn apply<T: Sample>(&self, input: &[T]) -> Result<Vec<T>, GuidanceError> {
+        self.apply_as::<T, T>(input)
+    }
+
+    /// Applies the adjoint (transpose) to every plane of `grad_out` (`planes × out_h × out_w` values).
+    pub fn adjoint<T: Sample>(&self, grad_out: &[T]) -> Result<Vec<T>, GuidanceError> {
+        self.adjoint_as::<T, T>(grad_out)
+    }
+
+    /// [`Self::apply`] reading `I` and writing `O` (e.g. `f64` in, `f32` out); arithmetic in `f64`.
+    pub fn apply_as<I: Sample, O: Sample>(&self, input: &[I]) -> Result<Vec<O>, GuidanceError> {
         let (ih, iw) = self.in_hw();
         let (oh, ow) = self.out_hw();
         let n = self.planes(input.len(), ih * iw, "resize")?;
-        let mut out = vec![T::default(); n * oh * ow];
+        let mut out = vec![O::default(); n * oh * ow];
         out.par_chunks_mut(oh * ow)
             .zip(input.par_chunks(ih * iw))
             .for_each(|(o, i)| self.apply_plane(i, o));
         Ok(out)
     }
 
-    /// Applies the adjoint (transpose) to every plane of `grad_out` (`planes × out_h × out_w` values).
-    pub fn adjoint<T: Sample>(&self, grad_out: &[T]) -> Result<Vec<T>, GuidanceError> {
+    /// [`Self::adjoint`] reading `I` and writing `O` (e.g. `f64` in, `f32` out); arithmetic in `f64`.
+    pub fn adjoint_as<I: Sample, O: Sample>(
+        &self,
+        grad_out: &[I],
+    ) -> Result<Vec<O>, GuidanceError> {
         let (ih, iw) = self.in_hw();
         let (oh, ow) = self.out_hw();
         let n = self.planes(grad_out.len(), oh * ow, "resize adjoint")?;
-        let mut out = vec![T::default(); n * ih * iw];
+        let mut out = vec![O::default(); n * ih * iw];
         out.par_chunks_mut(ih * iw)
             .zip(grad_out.par_chunks(oh * ow))
             .for_each(|(gi, go)| self.adjoint_plane(go, gi));
         Ok(out)
     }
 
-    fn apply_plane<T: Sample>(&self, input: &[T], out: &mut [T]) {
+    fn apply_plane<I: Sample, O: Sample>(&self, input: &[I], out: &mut [O]) {
         let (ih, iw) = self.in_hw();
         let ow = self.cols.out_len();
         // Columns first: tmp (ih × ow).
@@ -263,12 +276,12 @@ impl Resize2d {
                 }
             }
             for (o, a) in out[i * ow..(i + 1) * ow].iter_mut().zip(&acc) {
-                *o = T::from_f64(*a);
+                *o = O::from_f64(*a);
             }
         }
     }
 
-    fn adjoint_plane<T: Sample>(&self, grad_out: &[T], grad_in: &mut [T]) {
+    fn adjoint_plane<I: Sample, O: Sample>(&self, grad_out: &[I], grad_in: &mut [O]) {
         let (ih, iw) = self.in_hw();
         let ow = self.cols.out_len();
         // Rowsᵀ: tmp (ih × ow).
@@ -293,7 +306,7 @@ impl Resize2d {
                 }
             }
             for (o, a) in grad_in[r * iw..(r + 1) * iw].iter_mut().zip(&acc) {
-                *o = T::from_f64(*a);
+                *o = O::from_f64(*a);
             }
         }
     }
