@@ -11,9 +11,9 @@ pub const T5_TOKENIZER_JSON: &[u8] = include_bytes!("../assets/t5_tokenizer.json
 /// DeepFloyd IF's T5-v1.1-XXL encoding of the empty prompt, f16 `(77, 4096)` `.npy`.
 pub const IF_EMPTY_PROMPT_NPY: &[u8] = include_bytes!("../assets/zero_t5-v1_1-xxl_vector.npy");
 
-/// Tokens of [`IF_EMPTY_PROMPT_NPY`].
+/// Tokens of IF's empty-prompt embedding (77).
 pub const IF_UNCOND_TOKENS: usize = 77;
-/// Width of [`IF_EMPTY_PROMPT_NPY`].
+/// Width of IF's empty-prompt embedding (4096, T5-v1.1-XXL).
 pub const IF_UNCOND_DIM: usize = 4096;
 
 /// IF's unconditional embedding `(77, 4096)`, widened to f32.

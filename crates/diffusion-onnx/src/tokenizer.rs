@@ -15,7 +15,7 @@ pub const PAD_ID: i64 = 0;
 /// Token ids and attention mask of one prompt, both of the tokenizer's length.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Tokens {
-    /// Token ids, `</s>` last among the real tokens, then [`PAD_ID`].
+    /// Token ids, `</s>` last among the real tokens, then the pad id 0.
     pub input_ids: Vec<i64>,
     /// 1 for real tokens, 0 for padding.
     pub attention_mask: Vec<i64>,
