@@ -788,3 +788,67 @@ fn bad_inputs_are_typed_errors() {
     };
     assert!(CascadedGuidance::new(fake(), None, cond, uncond, bad_clip).is_err());
 }
+
+#[test]
+fn timesteps_are_drawn_per_view_per_stage_and_within_the_configured_range() {
+    // B = 8 views: t (stage I), t and s (stage II) are 24 independent uniform draws from [20, 980]; the chance
+    // that all 8 values of one vector coincide, or that two vectors are equal, is below 1e-20.
+    let views = 8;
+    let (h, w) = (16, 16);
+    let zero = |s: &Tensor, _: &[i64]| output(s, |_, _, _| 0.0);
+    let (cond, uncond) = embeddings();
+    let (s1, _) = Fake::boxed(zero);
+    let (s2, _) = Fake::boxed(zero);
+    let mut g = CascadedGuidance::new(
+        s1,
+        Some(s2),
+        cond.clone(),
+        uncond.clone(),
+        GuidanceConfig::default(),
+    )
+    .expect("valid");
+    let mut rng = ChaCha8Rng::seed_from_u64(123);
+    let trace = g
+        .evaluate_traced(
+            &renders(views, h, w),
+            views,
+            h,
+            w,
+            0.5,
+            &mut rng,
+            &InjectedDraws::default(),
+        )
+        .expect("runs");
+    let st2 = trace.stage2.as_ref().expect("ran");
+    for t in [&trace.stage1.timesteps, &st2.timesteps, &st2.noise_levels] {
+        assert_eq!(t.len(), views);
+        assert!(t.iter().all(|&x| (20..=980).contains(&x)));
+        assert!(t.iter().any(|&x| x != t[0]), "{t:?}");
+    }
+    assert_ne!(trace.stage1.timesteps, st2.timesteps);
+    assert_ne!(st2.timesteps, st2.noise_levels);
+
+    // A configured range is respected: [100, 100] gives t = s = 100 everywhere.
+    let cfg = GuidanceConfig {
+        timesteps: csd::TimestepRange { min: 100, max: 100 },
+        ..GuidanceConfig::default()
+    };
+    let (s1, _) = Fake::boxed(zero);
+    let (s2, _) = Fake::boxed(zero);
+    let mut g = CascadedGuidance::new(s1, Some(s2), cond, uncond, cfg).expect("valid");
+    let trace = g
+        .evaluate_traced(
+            &renders(views, h, w),
+            views,
+            h,
+            w,
+            0.5,
+            &mut rng,
+            &InjectedDraws::default(),
+        )
+        .expect("runs");
+    let st2 = trace.stage2.as_ref().expect("ran");
+    for t in [&trace.stage1.timesteps, &st2.timesteps, &st2.noise_levels] {
+        assert!(t.iter().all(|&x| x == 100));
+    }
+}
