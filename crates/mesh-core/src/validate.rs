@@ -510,7 +510,7 @@ fn analyse(mesh: &TriMesh, o: &RepairOptions) -> Repaired {
             examples: Locations::VertexPairs(examples(&touching)),
             action: Action::Kept,
             message: format!(
-                "{} the same position as an earlier vertex but on a closed part of the surface                  ({}): the surface touches itself there; kept apart (welding would pinch it)",
+                "{} the same position as an earlier vertex but on a closed part of the surface ({}): the surface touches itself there; kept apart (welding would pinch it)",
                 plural(n, "vertex has", "vertices have"),
                 list(&show_pairs(&touching), n)
             ),

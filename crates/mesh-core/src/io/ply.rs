@@ -272,7 +272,10 @@ pub fn read_ply(path: &Path) -> Result<MeshWithNormals, MeshError> {
         let mut poly: Vec<u32> = Vec::new();
         for i in 0..el.count {
             for (k, p) in el.properties.iter().enumerate() {
-                let what = || format!("{} {i} of {} (property {k})", el.name, el.count);
+                let pname = match p {
+                    Property::Scalar { name, .. } | Property::List { name, .. } => name.as_str(),
+                };
+                let what = || format!("{} {i} of {} (its `{pname}`)", el.name, el.count);
                 match p {
                     Property::Scalar { ty, .. } => values[k] = body.read(*ty, &what)?,
                     Property::List { count, item, .. } => {

@@ -1,10 +1,211 @@
-//! `stylize mesh`.
+//! `stylize mesh`: mesh utilities. `stylize mesh check FILE [--json]` reads a mesh, runs the
+//! validation of `mesh_core::validate` and prints what repair finds and would do.
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use mesh_core::validate::{Locations, RepairOptions, ValidationReport, validate};
 
 /// Arguments of `stylize mesh`.
 #[derive(clap::Args, Debug)]
-pub struct Args {}
+pub struct Args {
+    #[command(subcommand)]
+    command: MeshCommand,
+}
+
+#[derive(clap::Subcommand, Debug)]
+enum MeshCommand {
+    /// Validate a mesh (OBJ, OFF, PLY, glTF/GLB) and report every problem and what repair does
+    /// about it. Exits with status 1 when the mesh cannot be used.
+    Check(CheckArgs),
+}
+
+#[derive(clap::Args, Debug)]
+struct CheckArgs {
+    /// The mesh file.
+    file: PathBuf,
+    /// Print the report as JSON instead of a table.
+    #[arg(long)]
+    json: bool,
+    /// Drop vertices with NaN/infinite coordinates (and their faces) instead of refusing.
+    #[arg(long)]
+    drop_nonfinite: bool,
+    /// Drop faces that refer to missing vertices instead of refusing.
+    #[arg(long)]
+    drop_out_of_range: bool,
+    /// A face is a needle when its smallest corner angle is below this (degrees).
+    #[arg(long, default_value_t = 1.0)]
+    needle_angle: f64,
+}
 
 /// Runs `stylize mesh`.
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("`stylize mesh` is not implemented yet")
+pub fn run(args: Args) -> anyhow::Result<()> {
+    match args.command {
+        MeshCommand::Check(a) => check(a),
+    }
+}
+
+fn check(a: CheckArgs) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        a.needle_angle.is_finite() && a.needle_angle >= 0.0,
+        "--needle-angle must be a non-negative number of degrees"
+    );
+    let mesh = mesh_core::io::read_mesh(&a.file).context("cannot load the mesh")?;
+    let options = RepairOptions {
+        drop_nonfinite_vertices: a.drop_nonfinite,
+        drop_out_of_range_faces: a.drop_out_of_range,
+        needle_angle_degrees: a.needle_angle,
+        ..RepairOptions::default()
+    };
+    let report = validate(&mesh, &options);
+    if a.json {
+        let json = report_json(&a.file, &report);
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&json).context("cannot format the report as JSON")?
+        );
+    } else {
+        print!("{}", report_table(&a.file, &report));
+    }
+    if report.is_refused() {
+        anyhow::bail!(
+            "{} cannot be used: {}",
+            a.file.display(),
+            report.refusal_message()
+        );
+    }
+    Ok(())
+}
+
+fn locations_json(l: &Locations) -> serde_json::Value {
+    use serde_json::json;
+    match l {
+        Locations::Vertices(v) => json!({ "vertices": v }),
+        Locations::Faces(f) => json!({ "faces": f }),
+        Locations::Edges(e) => json!({ "edges": e }),
+        Locations::VertexPairs(p) => json!({ "vertex_pairs": p }),
+        Locations::ComponentSizes(s) => json!({ "component_sizes": s }),
+        _ => json!({}),
+    }
+}
+
+/// The report as JSON: input/output sizes, verdict, and every issue with its kind, action,
+/// count, example locations (input numbering) and message.
+fn report_json(file: &std::path::Path, r: &ValidationReport) -> serde_json::Value {
+    serde_json::json!({
+        "file": file.display().to_string(),
+        "input": { "vertices": r.input_vertices, "faces": r.input_faces },
+        "after_repair": {
+            "vertices": r.output_vertices,
+            "faces": r.output_faces,
+            "components": r.components,
+            "closed": r.closed,
+        },
+        "usable": !r.is_refused(),
+        "issues": r.issues.iter().map(|i| serde_json::json!({
+            "kind": i.kind.name(),
+            "action": i.action.name(),
+            "count": i.count,
+            "examples": locations_json(&i.examples),
+            "message": i.message,
+        })).collect::<Vec<_>>(),
+    })
+}
+
+/// The report as a table for people.
+fn report_table(file: &std::path::Path, r: &ValidationReport) -> String {
+    use std::fmt::Write;
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "{}: {} vertices, {} faces",
+        file.display(),
+        r.input_vertices,
+        r.input_faces
+    );
+    let _ = writeln!(
+        s,
+        "after repair: {} vertices, {} face{}, {} part{}, {}",
+        r.output_vertices,
+        r.output_faces,
+        if r.output_faces == 1 { "" } else { "s" },
+        r.components,
+        if r.components == 1 { "" } else { "s" },
+        if r.closed { "closed" } else { "open" }
+    );
+    if r.issues.is_empty() {
+        let _ = writeln!(s, "no problems found");
+        return s;
+    }
+    let _ = writeln!(s);
+    let _ = writeln!(s, "{:<9} {:<25} {:>7}  details", "action", "issue", "count");
+    for i in &r.issues {
+        let _ = writeln!(
+            s,
+            "{:<9} {:<25} {:>7}  {}",
+            i.action.name(),
+            i.kind.name().replace('_', " "),
+            i.count,
+            i.message
+        );
+    }
+    let _ = writeln!(
+        s,
+        "\n{}",
+        if r.is_refused() {
+            "verdict: cannot be used as is (see the `refused` rows)"
+        } else {
+            "verdict: usable (after the repairs listed)"
+        }
+    );
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use mesh_core::TriMesh;
+
+    fn two_parts_with_nan() -> TriMesh {
+        TriMesh::new(
+            vec![
+                [0.0, 0.0, 0.0],
+                [1.0, 0.0, 0.0],
+                [0.0, 1.0, 0.0],
+                [f64::NAN, 0.0, 0.0],
+            ],
+            vec![[0, 1, 2], [0, 2, 3]],
+        )
+    }
+
+    #[test]
+    fn json_report_names_kinds_actions_and_input_locations() {
+        let r = validate(&two_parts_with_nan(), &RepairOptions::default());
+        let j = report_json(std::path::Path::new("x.obj"), &r);
+        assert_eq!(j["usable"], serde_json::json!(false));
+        assert_eq!(j["input"]["vertices"], serde_json::json!(4));
+        let first = &j["issues"][0];
+        assert_eq!(first["kind"], "non_finite_coordinates");
+        assert_eq!(first["action"], "refused");
+        assert_eq!(first["examples"]["vertices"], serde_json::json!([3]));
+    }
+
+    #[test]
+    fn table_lists_every_issue_and_the_verdict() {
+        let r = validate(&two_parts_with_nan(), &RepairOptions::default());
+        let t = report_table(std::path::Path::new("x.obj"), &r);
+        assert!(
+            t.contains("refused") && t.contains("non finite coordinates"),
+            "{t}"
+        );
+        assert!(t.contains("verdict: cannot be used"), "{t}");
+        assert_eq!(
+            t.lines()
+                .filter(|l| l.starts_with("refused")
+                    || l.starts_with("kept")
+                    || l.starts_with("repaired"))
+                .count(),
+            r.issues.len()
+        );
+    }
 }
