@@ -9,6 +9,33 @@
 //! - [`sds`]: classifier-free guidance, the SDS gradient with NaN/∞ handling, the logged loss.
 //! - [`guidance`]: [`CascadedGuidance`] (stage-I SDS + stage-II CSD) implementing [`Guidance`], with a traced
 //!   evaluation for debugging. The full chain rule is derived in `docs/guidance.md`.
+//!
+//! ```
+//! use csd::{CascadedGuidance, Denoiser, Embedding, Guidance, GuidanceConfig, GuidanceError, Tensor};
+//! use rand::SeedableRng;
+//!
+//! /// Predicts ε = 0 for every input (a real backend runs the IF UNet here).
+//! struct Zero;
+//! impl Denoiser for Zero {
+//!     fn predict(&mut self, sample: &Tensor, _t: &[i64], _e: &[&Embedding], _s: Option<&[i64]>)
+//!         -> Result<Tensor, GuidanceError> {
+//!         let mut shape = sample.shape.clone();
+//!         shape[1] = 6; // IF: ε (3 channels) + learned variance (3 channels)
+//!         Ok(Tensor::zeros(shape))
+//!     }
+//! }
+//!
+//! let emb = |v: f32| Embedding { shape: [77, 8], data: vec![v; 77 * 8] };
+//! let mut guidance = CascadedGuidance::new(
+//!     Box::new(Zero), Some(Box::new(Zero)), emb(1.0), emb(0.0), GuidanceConfig::default())?;
+//! let (views, h, w) = (2, 64, 64);
+//! let renders = vec![0.5f32; views * h * w * 3]; // (view, row, col, channel) in [0, 1]
+//! let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0);
+//! let out = guidance.evaluate(&renders, views, h, w, 0.2, &mut rng)?;
+//! assert_eq!(out.grad_images.len(), renders.len());
+//! assert!(out.loss_stage1 > 0.0 && out.loss_stage2 > 0.0);
+//! # Ok::<(), GuidanceError>(())
+//! ```
 
 pub mod guidance;
 pub mod resize;
