@@ -11,11 +11,13 @@
 
 pub mod camera;
 pub mod cpu;
+#[cfg(feature = "gpu")]
+pub mod gpu;
 pub mod image;
 pub mod shapes;
 
 pub use camera::{CameraConfig, adapt_multiplier, orbit_views, sample_views};
-pub use cpu::{CpuRenderer, RenderSettings};
+pub use cpu::{CpuRenderer, RenderSettings, Visibility};
 
 /// One camera view and its light.
 #[derive(Clone, Debug, PartialEq)]
@@ -81,15 +83,45 @@ pub trait Renderer: Send {
 
 /// Chooses a backend: returns the renderer and a sentence saying what was chosen and why.
 ///
-/// This build has only the CPU backend (the wgpu backend is not implemented yet), so the CPU
-/// renderer is always returned; `prefer_gpu` only changes the explanation.
+/// With `prefer_gpu` and the `gpu` feature, the wgpu renderer is used when the adapter is a real
+/// (non-CPU) GPU; on a software adapter (lavapipe) or without any adapter the CPU renderer is
+/// returned, since it is faster than a software GPU.
 pub fn select_renderer(prefer_gpu: bool) -> (Box<dyn Renderer>, String) {
-    let why = if prefer_gpu {
-        "cpu: a GPU was preferred, but this build has no wgpu backend yet"
+    if prefer_gpu {
+        select_gpu()
     } else {
-        "cpu: requested"
-    };
-    let renderer = CpuRenderer::default();
-    let reason = format!("{} — {why}", renderer.name());
-    (Box::new(renderer), reason)
+        let r = CpuRenderer::default();
+        let why = format!("{}: requested", r.name());
+        (Box::new(r), why)
+    }
+}
+
+#[cfg(feature = "gpu")]
+fn select_gpu() -> (Box<dyn Renderer>, String) {
+    let cpu = CpuRenderer::default();
+    match gpu::WgpuRenderer::new(RenderSettings::default()) {
+        Ok(g) if !g.is_software() => {
+            let why = format!("{}: a hardware adapter was found", g.name());
+            (Box::new(g), why)
+        }
+        Ok(g) => {
+            let why = format!(
+                "{}: the only adapter is a software one ({})",
+                cpu.name(),
+                g.adapter_info().name
+            );
+            (Box::new(cpu), why)
+        }
+        Err(e) => {
+            let why = format!("{}: no usable GPU adapter ({e})", cpu.name());
+            (Box::new(cpu), why)
+        }
+    }
+}
+
+#[cfg(not(feature = "gpu"))]
+fn select_gpu() -> (Box<dyn Renderer>, String) {
+    let cpu = CpuRenderer::default();
+    let why = format!("{}: built without the `gpu` feature", cpu.name());
+    (Box::new(cpu), why)
 }
