@@ -1,10 +1,217 @@
-//! `stylize apply`.
+//! `stylize apply`: re-apply a saved deformation (spec §8) at one or several strengths λ.
+//!
+//! Reads the saved `.npz`, normalizes `verts` to the side-2 cube in f64, builds the dARAP layer
+//! with the requested λ (default: the saved `local_step_procrustes.lamb`), runs local step →
+//! global step → `recenter_rescale`, and writes the deformed mesh (in the normalized frame, as the
+//! reference) with area-weighted vertex normals.
+//!
+//! **Mask file** (`--mask FILE`): plain text, one vertex index per line (0-based, the saved file's
+//! vertex order) of the vertices that **may rotate**; every other vertex keeps `R = I`. Blank
+//! lines and lines starting with `#` are ignored.
+//!
+//! **Several λ** (`--lambda 5,8,11`) write one file per λ next to `-o OUT.ext`:
+//! `OUT_lambda5.ext`, `OUT_lambda8.ext`, … . Parent folders are created; existing outputs are
+//! refused unless `--force` (all outputs are checked before any is written).
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, bail, ensure};
+use darap::{Darap, DarapOptions, PostProcess, RotationRule};
+use mesh_core::TriMesh;
+use mesh_core::npz::{NpyData, SavedDeformation};
+
+/// Rotation rule on the command line.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RuleArg {
+    /// The reference rule (spec §3.3); what saved files and the paper's λ values assume.
+    Gis,
+    /// The textbook Kabsch rule with positive weights (spec §3.4); needs a larger λ.
+    Procrustes,
+}
+
+impl From<RuleArg> for RotationRule {
+    fn from(r: RuleArg) -> Self {
+        match r {
+            RuleArg::Gis => RotationRule::Gis,
+            RuleArg::Procrustes => RotationRule::Procrustes,
+        }
+    }
+}
 
 /// Arguments of `stylize apply`.
-#[derive(clap::Args, Debug)]
-pub struct Args {}
+#[derive(clap::Args, Debug, Clone)]
+pub struct Args {
+    /// Saved deformation (`.npz` in the reference's format).
+    pub saved: PathBuf,
+    /// Output mesh (`.obj`, `.ply` or `.glb`). With several λ: one file per λ, `OUT_lambda<λ>.ext`.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Strength(s) λ, comma separated (default: the λ saved in the file).
+    #[arg(long, value_delimiter = ',')]
+    pub lambda: Vec<f64>,
+    /// Rotation rule (default: the file's `rotation_rule` key if present, else `gis`).
+    #[arg(long, value_enum)]
+    pub rotation_rule: Option<RuleArg>,
+    /// Text file of vertex indices that may rotate, one per line (all others keep R = I).
+    #[arg(long)]
+    pub mask: Option<PathBuf>,
+    /// Overwrite existing output files.
+    #[arg(long)]
+    pub force: bool,
+}
+
+const OUTPUT_FORMATS: [&str; 3] = ["obj", "ply", "glb"];
+
+/// The output path for each λ (the path itself when there is one λ).
+pub fn output_paths(output: &Path, lambdas: &[f64]) -> anyhow::Result<Vec<PathBuf>> {
+    let ext = output
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase)
+        .unwrap_or_default();
+    ensure!(
+        OUTPUT_FORMATS.contains(&ext.as_str()),
+        "output {} must end in .obj, .ply or .glb",
+        output.display()
+    );
+    if lambdas.len() == 1 {
+        return Ok(vec![output.to_path_buf()]);
+    }
+    let stem = output
+        .file_stem()
+        .and_then(|s| s.to_str())
+        .with_context(|| format!("output {} has no usable file name", output.display()))?;
+    Ok(lambdas
+        .iter()
+        .map(|l| output.with_file_name(format!("{stem}_lambda{l}.{ext}")))
+        .collect())
+}
+
+/// Parses a mask file: one 0-based vertex index per line (`#` comments and blank lines ignored);
+/// returns `free[v]` (true for listed vertices).
+pub fn read_mask(path: &Path, num_vertices: usize) -> anyhow::Result<Vec<bool>> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("cannot read mask file {}", path.display()))?;
+    let mut free = vec![false; num_vertices];
+    for (lineno, line) in text.lines().enumerate() {
+        let line = line.trim();
+        if line.is_empty() || line.starts_with('#') {
+            continue;
+        }
+        let v: usize = line.parse().with_context(|| {
+            format!(
+                "mask file {} line {}: `{line}` is not a vertex index",
+                path.display(),
+                lineno + 1
+            )
+        })?;
+        ensure!(
+            v < num_vertices,
+            "mask file {} line {}: vertex {v} is out of range (the mesh has {num_vertices} vertices)",
+            path.display(),
+            lineno + 1
+        );
+        free[v] = true;
+    }
+    Ok(free)
+}
+
+fn saved_rotation_rule(saved: &SavedDeformation) -> anyhow::Result<Option<RuleArg>> {
+    let Some(array) = saved.extra("rotation_rule") else {
+        return Ok(None);
+    };
+    let NpyData::Unicode(v) = &array.data else {
+        bail!("key `rotation_rule` is not a string")
+    };
+    match v.first().map(|s| s.trim().to_ascii_lowercase()).as_deref() {
+        Some("gis") => Ok(Some(RuleArg::Gis)),
+        Some("procrustes") => Ok(Some(RuleArg::Procrustes)),
+        other => bail!("unknown rotation rule {other:?} in the saved file"),
+    }
+}
 
 /// Runs `stylize apply`.
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("`stylize apply` is not implemented yet")
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let saved = SavedDeformation::read(&args.saved)
+        .with_context(|| format!("cannot read saved deformation {}", args.saved.display()))?;
+    ensure!(
+        saved.normalize_target_normals(),
+        "{}: `normalize_target_normals` is false; only normalized target normals are supported",
+        args.saved.display()
+    );
+    if let Some(kind) = saved.arap_energy_type()
+        && kind != "spokes_and_rims_mine"
+    {
+        eprintln!(
+            "warning: saved arap_energy_type is {kind:?}; applying with \"spokes_and_rims_mine\""
+        );
+    }
+    if !saved.pin_first_vertex() {
+        eprintln!(
+            "warning: saved pin_first_vertex is false; applying with the first vertex (of each component) pinned"
+        );
+    }
+
+    let lambdas = if args.lambda.is_empty() {
+        vec![saved.lambda().with_context(|| {
+            format!(
+                "{} records no λ (local_step_procrustes.lamb); pass --lambda",
+                args.saved.display()
+            )
+        })?]
+    } else {
+        args.lambda.clone()
+    };
+    for &l in &lambdas {
+        ensure!(
+            l.is_finite() && l >= 0.0,
+            "λ must be a finite non-negative number, got {l}"
+        );
+    }
+    let rule = match args.rotation_rule {
+        Some(r) => r,
+        None => saved_rotation_rule(&saved)?.unwrap_or(RuleArg::Gis),
+    };
+
+    let outputs = output_paths(&args.output, &lambdas)?;
+    if !args.force {
+        let existing: Vec<String> = outputs
+            .iter()
+            .filter(|p| p.exists())
+            .map(|p| p.display().to_string())
+            .collect();
+        ensure!(
+            existing.is_empty(),
+            "refusing to overwrite {} (pass --force)",
+            existing.join(", ")
+        );
+    }
+
+    let mut rest = saved.verts_f64();
+    mesh_core::normalize::side2_cube(&mut rest);
+    let targets = saved.verts_normals_f64();
+    let options = DarapOptions {
+        lambda: lambdas[0],
+        rotation_rule: rule.into(),
+        post_process: PostProcess::RecenterRescale,
+    };
+    let mut layer = Darap::new(&rest, &saved.faces, options)
+        .with_context(|| format!("cannot build the dARAP layer for {}", args.saved.display()))?;
+    if let Some(mask_path) = &args.mask {
+        layer.set_mask(Some(read_mask(mask_path, rest.len())?))?;
+    }
+
+    for (&lambda, out) in lambdas.iter().zip(&outputs) {
+        layer.set_lambda(lambda);
+        let deformed = layer
+            .forward(&targets)
+            .with_context(|| format!("dARAP forward failed at λ = {lambda}"))?;
+        let mesh = TriMesh::new(deformed.positions, saved.faces.clone());
+        let normals =
+            mesh_core::normals::vertex_normals_area_weighted(&mesh.positions, &mesh.faces);
+        mesh_core::io::write_mesh(out, &mesh, Some(&normals))
+            .with_context(|| format!("cannot write {}", out.display()))?;
+        println!("λ = {lambda}: wrote {}", out.display());
+    }
+    Ok(())
 }
