@@ -185,3 +185,30 @@ fn out_of_range_face_in_saved_file_is_refused() {
     assert_eq!(s.lambda(), None);
     assert!(s.pin_first_vertex());
 }
+
+#[test]
+fn numpy_savez_compressed_file_with_other_dtypes_reads() {
+    // Written by NumPy 2.4.6 with np.savez_compressed (deflated, zip64 entries); generator in
+    // fixtures/meshes/README.md. Faces are int32 and normals float64 here; both convert.
+    let s = SavedDeformation::read(common::fixture("numpy_tet.npz")).expect("reads");
+    assert_eq!(s.verts[3], [0.0, 0.0, 1.0]);
+    assert_eq!(s.faces, vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]);
+    assert_eq!(s.verts_normals[1], [1.0, 0.5, 0.25]);
+    assert_eq!(s.lambda(), Some(5.5));
+    assert!(!s.pin_first_vertex());
+    assert!(!s.normalize_target_normals());
+    assert_eq!(s.dataset_cfg, "{\"name\": \"tétraèdre ✓\"}");
+    let extra = |k: &str| s.extra(k).expect("extra key kept").clone();
+    assert_eq!(
+        extra("mask").data,
+        NpyData::Bool(vec![true, false, true, true])
+    );
+    let grid = extra("grid");
+    assert_eq!(grid.shape, vec![2, 3, 4]);
+    assert_eq!(grid.data, NpyData::U8((0..24).collect()));
+    assert_eq!(extra("big").data, NpyData::I64(vec![-(1 << 40), 1 << 40]));
+    assert_eq!(
+        (extra("seed").shape.len(), extra("seed").data),
+        (0, NpyData::U32(vec![42]))
+    );
+}
