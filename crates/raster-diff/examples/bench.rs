@@ -1,5 +1,6 @@
 //! Renderer benchmark: forward and forward+backward of 8 views at 512×512 for icospheres of
-//! 5,120, 20,480 and 81,920 faces, per backend.
+//! 5,120, 20,480 and 81,920 faces, per backend (cpu; wgpu when an adapter exists — on a machine
+//! without a GPU that is lavapipe, a software Vulkan, so its numbers say nothing about real GPUs).
 //!
 //! `cargo run --release -p raster-diff --example bench [-- --reps N]`
 
@@ -30,6 +31,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         &mut ChaCha8Rng::seed_from_u64(0),
     );
     let mut backends: Vec<Box<dyn Renderer>> = vec![Box::new(CpuRenderer::default())];
+    #[cfg(feature = "gpu")]
+    match raster_diff::gpu::WgpuRenderer::new(raster_diff::RenderSettings::default()) {
+        Ok(g) => backends.push(Box::new(g)),
+        Err(e) => println!("wgpu backend skipped: {e}"),
+    }
     println!("{n_views} views at {w}×{h}, median of {reps} runs (after one warm-up)");
     println!("| backend | faces | vertices | forward (ms) | forward+backward (ms) |");
     println!("|---|---:|---:|---:|---:|");
