@@ -4,6 +4,7 @@
 pub mod checkpoint;
 pub mod cmd;
 pub mod config;
+pub mod eval;
 pub mod models;
 pub mod pipeline;
 pub mod rundir;
