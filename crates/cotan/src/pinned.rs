@@ -50,7 +50,7 @@ fn union(parent: &mut [usize], a: usize, b: usize) {
 ///
 /// Parallelism is explicit ([`PinnedCholesky::with_parallelism`], default [`Par::Seq`]): faer's
 /// supernodal solves with two threads were measured 3–8× slower than sequential on this project's
-/// machine. Results do not depend on the thread count.
+/// machine. With [`Par::Seq`] the solves are deterministic.
 #[derive(Debug)]
 pub struct PinnedCholesky {
     n: usize,
@@ -218,6 +218,11 @@ impl PinnedCholesky {
     pub fn with_parallelism(mut self, par: Par) -> Self {
         self.par = par;
         self
+    }
+
+    /// Sets the parallelism of the solves in place (default [`Par::Seq`]).
+    pub fn set_parallelism(&mut self, par: Par) {
+        self.par = par;
     }
 
     /// Size of the full matrix.

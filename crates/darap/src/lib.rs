@@ -191,6 +191,14 @@ impl Darap {
         self.options.lambda = lambda;
     }
 
+    /// Parallelism of the sparse solves (default `faer::Par::Seq`, which was measured faster than
+    /// two threads on this project's machine). The local step and right-hand side use the ambient
+    /// rayon pool, whose size does not change their results (bit for bit); with `Par::Seq` the
+    /// whole layer is deterministic.
+    pub fn set_solver_parallelism(&mut self, par: faer::Par) {
+        self.solver.set_parallelism(par);
+    }
+
     /// Changes the rotation rule (nothing is recomputed).
     pub fn set_rotation_rule(&mut self, rule: RotationRule) {
         self.options.rotation_rule = rule;
