@@ -322,3 +322,20 @@ fn every_truncation_of_every_written_format_is_an_error_not_a_panic() {
         }
     }
 }
+
+#[test]
+fn headers_announcing_billions_of_elements_fail_fast_as_truncated() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let e = read_mesh(put(
+        dir.path(),
+        "big.off",
+        b"OFF\n4000000000 4000000000 0\n0 0 0\n",
+    ))
+    .expect_err("lying header");
+    assert!(e.to_string().contains("truncated"), "{e}");
+    let ply =
+        b"ply\nformat binary_little_endian 1.0\nelement vertex 4000000000\nproperty float x\n\
+                property float y\nproperty float z\nend_header\n\0\0\0\0";
+    let e = read_mesh(put(dir.path(), "big.ply", ply)).expect_err("lying header");
+    assert!(e.to_string().contains("truncated"), "{e}");
+}

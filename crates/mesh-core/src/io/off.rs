@@ -81,7 +81,8 @@ fn read_off_bytes(path: &Path, bytes: &[u8]) -> Result<MeshWithNormals, MeshErro
     };
     let nv = count(0, "vertices")?;
     let nf = count(1, "faces")?;
-    let mut positions = Vec::with_capacity(nv.min(1 << 24));
+    // Capacity bounded by the file size, so a lying header cannot reserve gigabytes.
+    let mut positions = Vec::with_capacity(nv.min(text.len() / 6));
     for i in 0..nv {
         let (lineno, l) = lines.next().ok_or_else(|| {
             parse_err(
@@ -104,7 +105,7 @@ fn read_off_bytes(path: &Path, bytes: &[u8]) -> Result<MeshWithNormals, MeshErro
         }
         positions.push(p);
     }
-    let mut faces = Vec::with_capacity(nf.min(1 << 24));
+    let mut faces = Vec::with_capacity(nf.min(text.len() / 8));
     for i in 0..nf {
         let (lineno, l) = lines.next().ok_or_else(|| {
             parse_err(

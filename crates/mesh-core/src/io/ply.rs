@@ -257,7 +257,8 @@ pub fn read_ply(path: &Path) -> Result<MeshWithNormals, MeshError> {
                     "element `vertex` lacks an x, y or z property",
                 ));
             }
-            positions.reserve(el.count.min(1 << 24));
+            // Bounded by the file size, so a lying header cannot reserve gigabytes.
+            positions.reserve(el.count.min(bytes.len() / 3));
         }
         let list_slot = el.properties.iter().position(
             |p| matches!(p, Property::List { name, .. } if name == "vertex_indices" || name == "vertex_index"),

@@ -49,7 +49,7 @@ impl NpzReader {
                 continue;
             };
             let key = key.to_string();
-            let mut bytes = Vec::with_capacity(entry.size().min(1 << 30) as usize);
+            let mut bytes = Vec::with_capacity(entry.size().min(1 << 26) as usize);
             entry.read_to_end(&mut bytes).map_err(|e| MeshError::Npy {
                 path: path.clone(),
                 key: key.clone(),
