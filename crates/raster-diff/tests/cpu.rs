@@ -368,3 +368,49 @@ fn render_and_backward_are_deterministic_and_repeatable() {
     assert_eq!(g1, g2);
     assert_eq!(g1, g3);
 }
+
+/// Moving a silhouette edge across a pixel centre flips that pixel's coverage; with antialiasing
+/// the image barely changes there (half-covered on both sides), without it the pixel jumps from
+/// background to surface colour.
+#[test]
+fn antialiasing_makes_the_image_continuous_as_an_edge_crosses_a_pixel_centre() {
+    let (w, h) = (32, 32);
+    let view = front_view(2.0, [0.0, 0.0, 2.0]);
+    // Screen x of the right edge = 16 + 8·x (k = 16, depth 2); column 20's centre 20.5 ↔ x = 0.5625.
+    let render = |x_edge: f64, antialias: bool| {
+        let v = vec![
+            [-0.5, -0.5, 0.0],
+            [x_edge, -0.5, 0.0],
+            [x_edge, 0.5, 0.0],
+            [-0.5, 0.5, 0.0],
+        ];
+        let f = vec![[0, 1, 2], [0, 2, 3]];
+        let mut r = CpuRenderer::new(RenderSettings {
+            antialias,
+            ..RenderSettings::default()
+        });
+        let g = r
+            .render_grey(&v, &f, std::slice::from_ref(&view), w, h)
+            .expect("render");
+        (
+            g[16 * w + 20],
+            r.triangle_ids().expect("state")[16 * w + 20],
+        )
+    };
+    let eps = 1e-9;
+    let (before, id_before) = render(0.5625 - eps, true);
+    let (after, id_after) = render(0.5625 + eps, true);
+    assert_eq!(id_before, NO_TRIANGLE);
+    assert_ne!(id_after, NO_TRIANGLE);
+    // Both sides are a 50/50 mix of white and a surface colour that varies smoothly along the quad.
+    assert!(
+        (before - after).abs() < 0.01,
+        "jump with AA: {before} → {after}"
+    );
+    let (plain_before, _) = render(0.5625 - eps, false);
+    let (plain_after, _) = render(0.5625 + eps, false);
+    assert!(
+        (plain_before - plain_after).abs() > 0.1,
+        "without AA the pixel jumps: {plain_before} → {plain_after}"
+    );
+}

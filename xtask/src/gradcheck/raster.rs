@@ -186,6 +186,59 @@ pub fn suite(report: &mut Report) -> anyhow::Result<()> {
         |_| true,
     )?;
 
+    // (d) wgpu backend. Its backward is the CPU adjoint run on the GPU's visibility buffers, so a
+    // finite difference would only repeat (a)–(c); what can go wrong is the GPU coverage. Check
+    // that coverage and the image gradient agree with the CPU reference.
+    match raster_diff::gpu::WgpuRenderer::new(RenderSettings::default()) {
+        Err(e) => println!("skip raster/wgpu: no adapter ({e})"),
+        Ok(mut gpu) => {
+            use raster_diff::{Images, Renderer};
+            let name = "raster/wgpu vs cpu image gradient";
+            let (v, f) = bumpy_sphere(61);
+            let views = views(62);
+            let mut cpu = CpuRenderer::default();
+            let ic = cpu.render(&v, &f, &views, W, H)?;
+            let ids = cpu
+                .triangle_ids()
+                .ok_or_else(|| anyhow::anyhow!("no render state"))?;
+            gpu.render(&v, &f, &views, W, H)?;
+            let mut gpu_ids = Vec::new();
+            for view in &views {
+                gpu_ids.extend(gpu.visibility(&v, &f, view, W, H)?.ids);
+            }
+            let differing = ids.iter().zip(&gpu_ids).filter(|(a, b)| a != b).count();
+            let mut rng = ChaCha8Rng::seed_from_u64(63);
+            let d = Images {
+                rgb: ic.rgb.iter().map(|_| rng.random::<f32>() - 0.5).collect(),
+                ..ic
+            };
+            let (gc, gg) = (cpu.backward(&d)?, gpu.backward(&d)?);
+            let norm = |x: &mut dyn Iterator<Item = f64>| x.map(|a| a * a).sum::<f64>().sqrt();
+            let diff = norm(
+                &mut gc
+                    .iter()
+                    .flatten()
+                    .zip(gg.iter().flatten())
+                    .map(|(a, b)| a - b),
+            );
+            let rel = diff / norm(&mut gc.iter().flatten().copied()).max(1e-300);
+            let mut failures = Vec::new();
+            if differing > 0 {
+                failures.push(format!(
+                    "{differing} pixels see another triangle on the GPU"
+                ));
+            }
+            if rel > 1e-12 {
+                failures.push(format!("relative gradient difference {rel:.3e}"));
+            }
+            report.results.push(CheckResult {
+                name: format!("{name} ({})", gpu.adapter_info().name),
+                worst_rel: rel,
+                failures,
+            });
+        }
+    }
+
     // Degenerate input: collapsed and sliver triangles must keep the gradient finite.
     {
         let mut v = bumpy_sphere(51).0;
