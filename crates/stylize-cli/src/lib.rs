@@ -1,6 +1,7 @@
 //! Library side of the `stylize` command line: configuration, the loop, run directories, and
 //! one module per subcommand under [`cmd`].
 
+pub mod batch;
 pub mod checkpoint;
 pub mod cmd;
 pub mod config;

@@ -1,10 +1,91 @@
-//! `stylize batch`.
+//! `stylize batch`: every row of a manifest (TOML or JSONL), sharded across a job array.
+
+use std::path::PathBuf;
+
+use anyhow::bail;
+
+use crate::batch::{BatchOptions, RowStatus, Shard, read_manifest, run_batch};
+use crate::cmd::run::resolve_config;
+use crate::runner::LogMode;
 
 /// Arguments of `stylize batch`.
 #[derive(clap::Args, Debug)]
-pub struct Args {}
+pub struct Args {
+    /// Manifest: `.toml` with `[[run]]` tables, or JSON Lines (see docs/cli.md).
+    pub manifest: PathBuf,
+    /// Run only shard `i/n` (0-based). Default: from SLURM_ARRAY_TASK_ID / SLURM_ARRAY_TASK_COUNT
+    /// when set, else every row.
+    #[arg(long)]
+    pub shard: Option<String>,
+    /// ONNX model directory for prompt rows (loaded once).
+    #[arg(long)]
+    pub model: Option<PathBuf>,
+    /// Base configuration file for every row.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Override a config key for every row (repeatable).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub set: Vec<String>,
+    /// Redo rows whose run directories are complete.
+    #[arg(long)]
+    pub force: bool,
+    /// One JSON line per iteration instead of a progress bar.
+    #[arg(long)]
+    pub jsonl: bool,
+    /// No progress output (the per-row summary is still printed).
+    #[arg(long, short)]
+    pub quiet: bool,
+}
 
 /// Runs `stylize batch`.
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("`stylize batch` is not implemented yet")
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let config = resolve_config(args.config.as_deref(), &args.set, None, None)?;
+    let shard = match &args.shard {
+        Some(s) => Shard::parse(s)?,
+        None => Shard::from_env(|k| std::env::var(k).ok())?.unwrap_or(Shard::ALL),
+    };
+    let rows = read_manifest(&args.manifest)?;
+    let log = if args.quiet {
+        LogMode::Quiet
+    } else if args.jsonl {
+        LogMode::Jsonl
+    } else {
+        LogMode::Bar
+    };
+    let options = BatchOptions {
+        config,
+        shard,
+        model: args.model.clone(),
+        log,
+        force: args.force,
+    };
+    let results = run_batch(&rows, &options);
+    let mut failed = 0;
+    for (i, row, status) in &results {
+        let what = match status {
+            RowStatus::Skipped => "skipped (complete)".to_string(),
+            RowStatus::Done { resumed: true } => "done (resumed)".to_string(),
+            RowStatus::Done { resumed: false } => "done".to_string(),
+            RowStatus::Failed(e) => {
+                failed += 1;
+                format!("FAILED: {e}")
+            }
+        };
+        eprintln!(
+            "row {i} {} → {}: {what}",
+            row.mesh.display(),
+            row.out.display()
+        );
+    }
+    eprintln!(
+        "shard {}/{}: {} rows, {} failed",
+        shard.index,
+        shard.count,
+        results.len(),
+        failed
+    );
+    if failed > 0 {
+        bail!("{failed} of {} rows failed", results.len());
+    }
+    Ok(())
 }

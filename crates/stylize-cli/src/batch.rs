@@ -1,0 +1,342 @@
+//! Batch manifests: many runs in one process (models loaded once), sharded across a job array.
+//!
+//! A manifest is TOML (`[[run]]` tables) or JSON Lines (one object per line; blank lines and lines
+//! starting with `#` are ignored). Row fields:
+//!
+//! | field | type | meaning |
+//! |---|---|---|
+//! | `mesh` | path | input mesh (relative paths: from the manifest's folder) |
+//! | `out` | path | run directory (relative: from the manifest's folder) |
+//! | `prompt` *or* `style` | string | text path (needs `--model`) or model-free style |
+//! | `negative_prompt` | string, optional | overrides `guidance.negative_prompt` |
+//! | `seed` | integer, optional | overrides `run.seed` |
+//! | `overrides` | list of `"section.key=value"`, optional | applied after the base config |
+//!
+//! Rows are numbered from 0 in file order; shard `i` of `n` takes the rows with `index % n == i`.
+//! Each row: skipped when its run directory is complete, resumed when it holds a checkpoint,
+//! started otherwise. A failing row is reported and the batch goes on.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, bail};
+use serde::Deserialize;
+
+use crate::config::Config;
+use crate::models::ModelSet;
+use crate::rundir::RunDir;
+use crate::runner::{LogMode, RunRequest, Task, execute};
+use crate::style::Style;
+
+/// One manifest row.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Row {
+    /// Input mesh.
+    pub mesh: PathBuf,
+    /// Run directory.
+    pub out: PathBuf,
+    /// Text prompt.
+    #[serde(default)]
+    pub prompt: Option<String>,
+    /// Model-free style.
+    #[serde(default)]
+    pub style: Option<String>,
+    /// Negative prompt.
+    #[serde(default)]
+    pub negative_prompt: Option<String>,
+    /// Seed.
+    #[serde(default)]
+    pub seed: Option<u64>,
+    /// `section.key=value` overrides.
+    #[serde(default)]
+    pub overrides: Vec<String>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct TomlManifest {
+    run: Vec<Row>,
+}
+
+/// Reads a manifest; relative paths are resolved against its folder.
+pub fn read_manifest(path: &Path) -> anyhow::Result<Vec<Row>> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("cannot read manifest {}", path.display()))?;
+    let is_toml = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("toml"));
+    let mut rows = if is_toml {
+        toml::from_str::<TomlManifest>(&text)
+            .with_context(|| format!("manifest {} (TOML: [[run]] tables)", path.display()))?
+            .run
+    } else {
+        let mut rows = Vec::new();
+        for (i, line) in text.lines().enumerate() {
+            let line = line.trim();
+            if line.is_empty() || line.starts_with('#') {
+                continue;
+            }
+            rows.push(
+                serde_json::from_str::<Row>(line)
+                    .with_context(|| format!("manifest {} line {}", path.display(), i + 1))?,
+            );
+        }
+        rows
+    };
+    let base = path.parent().unwrap_or(Path::new("."));
+    for (i, r) in rows.iter_mut().enumerate() {
+        if r.prompt.is_some() == r.style.is_some() {
+            bail!(
+                "manifest {} row {i}: give exactly one of `prompt` or `style`",
+                path.display()
+            );
+        }
+        if r.mesh.is_relative() {
+            r.mesh = base.join(&r.mesh);
+        }
+        if r.out.is_relative() {
+            r.out = base.join(&r.out);
+        }
+    }
+    Ok(rows)
+}
+
+/// A shard: `index` of `count` (0-based).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Shard {
+    /// This shard (0-based).
+    pub index: usize,
+    /// Number of shards.
+    pub count: usize,
+}
+
+impl Shard {
+    /// Every row.
+    pub const ALL: Shard = Shard { index: 0, count: 1 };
+
+    /// Parses `i/n` (0-based `i < n`).
+    pub fn parse(s: &str) -> anyhow::Result<Self> {
+        let parsed = s
+            .split_once('/')
+            .and_then(|(i, n)| Some((i.trim().parse().ok()?, n.trim().parse().ok()?)));
+        match parsed {
+            Some((index, count)) if count > 0 && index < count => Ok(Self { index, count }),
+            _ => bail!("invalid shard {s:?}: expected i/n with 0 <= i < n, e.g. 0/4"),
+        }
+    }
+
+    /// From Slurm job-array variables: index = `SLURM_ARRAY_TASK_ID − SLURM_ARRAY_TASK_MIN`
+    /// (MIN defaults to 0), count = `SLURM_ARRAY_TASK_COUNT`. `None` when not in a job array.
+    pub fn from_env(get: impl Fn(&str) -> Option<String>) -> anyhow::Result<Option<Self>> {
+        let (Some(id), Some(count)) = (get("SLURM_ARRAY_TASK_ID"), get("SLURM_ARRAY_TASK_COUNT"))
+        else {
+            return Ok(None);
+        };
+        let num = |name: &str, v: &str| -> anyhow::Result<usize> {
+            v.trim()
+                .parse()
+                .with_context(|| format!("{name}={v:?} is not a non-negative integer"))
+        };
+        let id = num("SLURM_ARRAY_TASK_ID", &id)?;
+        let count = num("SLURM_ARRAY_TASK_COUNT", &count)?;
+        let min = match get("SLURM_ARRAY_TASK_MIN") {
+            Some(m) => num("SLURM_ARRAY_TASK_MIN", &m)?,
+            None => 0,
+        };
+        let index = id
+            .checked_sub(min)
+            .context("SLURM_ARRAY_TASK_ID is below SLURM_ARRAY_TASK_MIN")?;
+        if count == 0 || index >= count {
+            bail!(
+                "job array task {index} (id {id} − min {min}) is not below the task count {count}: use a contiguous --array"
+            );
+        }
+        Ok(Some(Self { index, count }))
+    }
+
+    /// Whether row `i` belongs to this shard.
+    pub fn takes(&self, i: usize) -> bool {
+        i % self.count == self.index
+    }
+}
+
+/// What happened to one row.
+#[derive(Clone, Debug, PartialEq)]
+pub enum RowStatus {
+    /// Already complete; nothing done.
+    Skipped,
+    /// Ran to completion (`resumed` when it continued from a checkpoint).
+    Done {
+        /// Continued from a checkpoint.
+        resumed: bool,
+    },
+    /// Failed with this message.
+    Failed(String),
+}
+
+/// Options of a batch.
+#[derive(Clone, Debug)]
+pub struct BatchOptions {
+    /// Base configuration (before each row's overrides).
+    pub config: Config,
+    /// The shard to run.
+    pub shard: Shard,
+    /// Model directory for prompt rows.
+    pub model: Option<PathBuf>,
+    /// Progress reporting of each run.
+    pub log: LogMode,
+    /// Redo complete rows.
+    pub force: bool,
+}
+
+/// Runs the rows of `manifest` that belong to the shard; returns `(row index, row, status)`.
+pub fn run_batch(rows: &[Row], options: &BatchOptions) -> Vec<(usize, Row, RowStatus)> {
+    let mut models: Option<anyhow::Result<ModelSet>> = None;
+    let mut out = Vec::new();
+    for (i, row) in rows
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| options.shard.takes(*i))
+    {
+        let status = match run_row(row, options, &mut models) {
+            Ok(s) => s,
+            Err(e) => RowStatus::Failed(format!("{e:#}")),
+        };
+        out.push((i, row.clone(), status));
+    }
+    out
+}
+
+fn run_row(
+    row: &Row,
+    options: &BatchOptions,
+    models: &mut Option<anyhow::Result<ModelSet>>,
+) -> anyhow::Result<RowStatus> {
+    let dir = RunDir::new(&row.out);
+    if dir.is_complete() && !options.force {
+        return Ok(RowStatus::Skipped);
+    }
+    let resumed = !options.force && dir.has_checkpoint();
+    let mut config = options.config.clone().with_overrides(&row.overrides)?;
+    if let Some(s) = row.seed {
+        config.run.seed = s;
+    }
+    if let Some(n) = &row.negative_prompt {
+        config.guidance.negative_prompt = n.clone();
+    }
+    config.validate()?;
+    let task = match (&row.style, &row.prompt) {
+        (Some(style), _) => Task::Style(Style::parse(style)?),
+        (None, Some(prompt)) => {
+            let Some(model) = &options.model else {
+                bail!("prompt rows need --model DIR (docs/models.md)");
+            };
+            let set = models.get_or_insert_with(|| ModelSet::open(model));
+            let set = set.as_ref().map_err(|e| anyhow::anyhow!("{e:#}"))?;
+            Task::Text {
+                prompt: prompt.clone(),
+                guidance: set.guidance_for(prompt, &config)?,
+            }
+        }
+        (None, None) => bail!("row has neither prompt nor style"),
+    };
+    let request = RunRequest {
+        mesh: row.mesh.clone(),
+        out: row.out.clone(),
+        config,
+        force: options.force,
+        resume: true,
+        log: options.log,
+        halt_after: None,
+    };
+    execute(&request, task)?;
+    Ok(RowStatus::Done { resumed })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shard_parsing_and_membership() {
+        let s = Shard::parse("1/3").unwrap_or(Shard::ALL);
+        assert_eq!(s, Shard { index: 1, count: 3 });
+        let taken: Vec<usize> = (0..8).filter(|&i| s.takes(i)).collect();
+        assert_eq!(taken, vec![1, 4, 7]);
+        for bad in ["3/3", "1", "a/2", "0/0", "-1/2"] {
+            assert!(Shard::parse(bad).is_err(), "{bad}");
+        }
+    }
+
+    #[test]
+    fn slurm_variables_give_the_shard() {
+        let env = |vars: &'static [(&'static str, &'static str)]| {
+            move |k: &str| {
+                vars.iter()
+                    .find(|(n, _)| *n == k)
+                    .map(|(_, v)| v.to_string())
+            }
+        };
+        assert_eq!(Shard::from_env(env(&[])).ok().flatten(), None);
+        let s = Shard::from_env(env(&[
+            ("SLURM_ARRAY_TASK_ID", "2"),
+            ("SLURM_ARRAY_TASK_COUNT", "4"),
+        ]));
+        assert_eq!(s.ok().flatten(), Some(Shard { index: 2, count: 4 }));
+        let s = Shard::from_env(env(&[
+            ("SLURM_ARRAY_TASK_ID", "4"),
+            ("SLURM_ARRAY_TASK_COUNT", "4"),
+            ("SLURM_ARRAY_TASK_MIN", "1"),
+        ]));
+        assert_eq!(s.ok().flatten(), Some(Shard { index: 3, count: 4 }));
+        assert!(
+            Shard::from_env(env(&[
+                ("SLURM_ARRAY_TASK_ID", "4"),
+                ("SLURM_ARRAY_TASK_COUNT", "4")
+            ]))
+            .is_err()
+        );
+    }
+
+    #[test]
+    fn manifests_in_toml_and_jsonl_resolve_relative_paths() {
+        let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+        let toml_path = dir.path().join("m.toml");
+        std::fs::write(
+            &toml_path,
+            "[[run]]\nmesh = \"a.obj\"\nstyle = \"cube\"\nout = \"runs/a\"\nseed = 3\noverrides = [\"darap.lambda=5\"]\n",
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        let rows = read_manifest(&toml_path).unwrap_or_else(|e| panic!("{e:#}"));
+        assert_eq!(rows.len(), 1);
+        assert_eq!(rows[0].mesh, dir.path().join("a.obj"));
+        assert_eq!(rows[0].seed, Some(3));
+        let jsonl = dir.path().join("m.jsonl");
+        std::fs::write(
+            &jsonl,
+            "# comment\n{\"mesh\": \"/abs/b.obj\", \"prompt\": \"a cat\", \"out\": \"b\"}\n\n{\"mesh\": \"c.obj\", \"style\": \"octahedron\", \"out\": \"c\"}\n",
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        let rows = read_manifest(&jsonl).unwrap_or_else(|e| panic!("{e:#}"));
+        assert_eq!(rows.len(), 2);
+        assert_eq!(rows[0].mesh, PathBuf::from("/abs/b.obj"));
+        assert_eq!(rows[1].out, dir.path().join("c"));
+        std::fs::write(&jsonl, "{\"mesh\": \"c.obj\", \"out\": \"c\"}\n")
+            .unwrap_or_else(|e| panic!("{e}"));
+        let e = read_manifest(&jsonl)
+            .err()
+            .map(|e| format!("{e:#}"))
+            .unwrap_or_default();
+        assert!(e.contains("exactly one of"), "{e}");
+        std::fs::write(
+            &jsonl,
+            "{\"mesh\": \"c.obj\", \"out\": \"c\", \"styel\": \"cube\"}\n",
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        let e = read_manifest(&jsonl)
+            .err()
+            .map(|e| format!("{e:#}"))
+            .unwrap_or_default();
+        assert!(e.contains("line 1") && e.contains("styel"), "{e}");
+    }
+}

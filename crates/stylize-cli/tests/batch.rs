@@ -1,0 +1,109 @@
+//! Batch manifests end to end (model-free rows): failing rows do not stop the batch, complete rows
+//! are skipped, partial rows are resumed, shards split the rows.
+
+use std::path::Path;
+
+use mesh_core::TriMesh;
+use stylize_cli::batch::{BatchOptions, RowStatus, Shard, read_manifest, run_batch};
+use stylize_cli::config::Config;
+use stylize_cli::runner::{LogMode, RunRequest, Task, execute};
+use stylize_cli::style::Style;
+
+fn ok<T, E: std::fmt::Debug>(r: Result<T, E>) -> T {
+    r.unwrap_or_else(|e| panic!("{e:?}"))
+}
+
+fn setup(dir: &Path) -> Config {
+    let (p, f) = raster_diff::shapes::icosphere(1);
+    let p: Vec<[f64; 3]> = p.iter().map(|v| [1.3 * v[0], v[1], v[2]]).collect();
+    ok(mesh_core::io::write_mesh(
+        dir.join("m.obj"),
+        &TriMesh::new(p, f),
+        None,
+    ));
+    let manifest = "[[run]]\nmesh = \"m.obj\"\nstyle = \"cube\"\nout = \"runs/cube\"\n\n\
+                    [[run]]\nmesh = \"missing.obj\"\nstyle = \"cube\"\nout = \"runs/missing\"\n\n\
+                    [[run]]\nmesh = \"m.obj\"\nstyle = \"octahedron\"\nout = \"runs/octa\"\nseed = 4\noverrides = [\"darap.lambda=5\"]\n";
+    ok(std::fs::write(dir.join("batch.toml"), manifest));
+    let mut c = Config::default();
+    c.style.iterations = 6;
+    c.run.checkpoint_every = 2;
+    c.run.preview_every = 0;
+    c.run.turntable_views = 1;
+    c.run.turntable_size = 16;
+    c
+}
+
+fn options(config: &Config, shard: Shard) -> BatchOptions {
+    BatchOptions {
+        config: config.clone(),
+        shard,
+        model: None,
+        log: LogMode::Quiet,
+        force: false,
+    }
+}
+
+#[test]
+fn failing_row_is_reported_others_complete_then_skip() {
+    let tmp = ok(tempfile::tempdir());
+    let config = setup(tmp.path());
+    let rows = ok(read_manifest(&tmp.path().join("batch.toml")));
+    let results = run_batch(&rows, &options(&config, Shard::ALL));
+    let statuses: Vec<&RowStatus> = results.iter().map(|r| &r.2).collect();
+    assert_eq!(statuses[0], &RowStatus::Done { resumed: false });
+    assert!(
+        matches!(statuses[1], RowStatus::Failed(m) if m.contains("missing.obj")),
+        "{:?}",
+        statuses[1]
+    );
+    assert_eq!(statuses[2], &RowStatus::Done { resumed: false });
+    let octa = ok(Config::load(&tmp.path().join("runs/octa/config.toml")));
+    assert_eq!(
+        (octa.run.seed, octa.darap.lambda),
+        (4, 5.0),
+        "row seed and overrides are applied"
+    );
+    let again = run_batch(&rows, &options(&config, Shard::ALL));
+    assert_eq!(again[0].2, RowStatus::Skipped);
+    assert!(matches!(again[1].2, RowStatus::Failed(_)));
+    assert_eq!(again[2].2, RowStatus::Skipped);
+}
+
+#[test]
+fn partial_row_is_resumed() {
+    let tmp = ok(tempfile::tempdir());
+    let config = setup(tmp.path());
+    let rows = ok(read_manifest(&tmp.path().join("batch.toml")));
+    // Interrupt row 0 after iteration 3 (checkpoint at 2).
+    let request = RunRequest {
+        mesh: rows[0].mesh.clone(),
+        out: rows[0].out.clone(),
+        config: config.clone(),
+        force: false,
+        resume: false,
+        log: LogMode::Quiet,
+        halt_after: Some(3),
+    };
+    ok(execute(&request, Task::Style(Style::Cube)));
+    let results = run_batch(&rows[..1], &options(&config, Shard::ALL));
+    assert_eq!(results[0].2, RowStatus::Done { resumed: true });
+    assert!(tmp.path().join("runs/cube/run.json").is_file());
+}
+
+#[test]
+fn shards_split_rows_without_overlap() {
+    let tmp = ok(tempfile::tempdir());
+    let config = setup(tmp.path());
+    let rows = ok(read_manifest(&tmp.path().join("batch.toml")));
+    let a: Vec<usize> = run_batch(&rows, &options(&config, Shard { index: 0, count: 2 }))
+        .iter()
+        .map(|r| r.0)
+        .collect();
+    let b: Vec<usize> = run_batch(&rows, &options(&config, Shard { index: 1, count: 2 }))
+        .iter()
+        .map(|r| r.0)
+        .collect();
+    assert_eq!(a, vec![0, 2]);
+    assert_eq!(b, vec![1]);
+}
