@@ -208,4 +208,40 @@ mod tests {
             r.issues.len()
         );
     }
+
+    fn fixture(name: &str) -> PathBuf {
+        PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+            .join("../../fixtures/meshes")
+            .join(name)
+    }
+
+    fn args(name: &str, json: bool) -> CheckArgs {
+        CheckArgs {
+            file: fixture(name),
+            json,
+            drop_nonfinite: false,
+            drop_out_of_range: false,
+            needle_angle: 1.0,
+        }
+    }
+
+    #[test]
+    fn check_succeeds_on_repairable_meshes_and_fails_on_refused_or_unreadable_ones() {
+        assert!(check(args("bone.ply", false)).is_ok());
+        assert!(check(args("triceratops.off", true)).is_ok());
+        let e = check(args("bad/nan_coordinates.obj", false)).expect_err("refused");
+        assert!(format!("{e:#}").contains("vertex 3"), "{e:#}");
+        let e = check(args("bad/truncated.ply", true)).expect_err("unreadable");
+        assert!(format!("{e:#}").contains("truncated"), "{e:#}");
+        let dropped = CheckArgs {
+            drop_nonfinite: true,
+            ..args("bad/nan_coordinates.obj", false)
+        };
+        assert!(check(dropped).is_ok(), "the drop option makes it usable");
+        let bad = CheckArgs {
+            needle_angle: f64::NAN,
+            ..args("bone.ply", false)
+        };
+        assert!(check(bad).is_err());
+    }
 }
