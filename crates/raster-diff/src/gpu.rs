@@ -258,8 +258,13 @@ impl Renderer for WgpuRenderer {
         height: usize,
     ) -> Result<Images, RenderError> {
         // Validate on the CPU side first so the GPU never sees an out-of-range index.
+        // Invalid input never reaches the GPU: the CPU renderer reports it as a typed error.
         let n = vertices.len();
-        if faces.iter().any(|f| f.iter().any(|&v| v as usize >= n)) || width == 0 || height == 0 {
+        if faces.iter().any(|f| f.iter().any(|&v| v as usize >= n))
+            || vertices.iter().flatten().any(|c| !c.is_finite())
+            || width == 0
+            || height == 0
+        {
             return self.cpu.render(vertices, faces, views, width, height);
         }
         let vis = views

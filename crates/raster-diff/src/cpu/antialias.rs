@@ -138,6 +138,9 @@ pub fn find_blends(
                 continue;
             }
             let (va, vb) = (face[k], face[(k + 1) % 3]);
+            if proj[va as usize].cam.z <= 0.0 || proj[vb as usize].cam.z <= 0.0 {
+                continue; // only reachable with externally supplied visibility
+            }
             let (sa, sb) = (proj[va as usize].screen, proj[vb as usize].screen);
             // The segment runs along `axis`; the crossing line is coordinate `o` = const.
             let o = 1 - axis;
