@@ -758,7 +758,7 @@ fn analyse(mesh: &TriMesh, o: &RepairOptions) -> Repaired {
         let n = bad_edges.len();
         let oriented = orient_consistently(&faces);
         let fixed = o.fix_orientation && oriented.orientable;
-        if o.fix_orientation {
+        if fixed {
             faces = oriented.faces;
         }
         let flipped_in: Vec<u32> = oriented
@@ -785,8 +785,8 @@ fn analyse(mesh: &TriMesh, o: &RepairOptions) -> Repaired {
                         plural(flipped_in.len(), "face was", "faces were"),
                         list(&flipped_in, flipped_in.len())
                     ),
-                    (true, false) => "the surface is one-sided (like a Möbius strip), so some \
-                                      edges stay inconsistent; normals there will be wrong"
+                    (true, false) => "the surface is one-sided (like a Möbius strip), so no \
+                                      flip can fix it; kept as is, normals there will be wrong"
                         .to_string(),
                     (false, _) => "kept: normals there will be wrong".to_string(),
                 }

@@ -188,3 +188,27 @@ fn cow_touching_vertex_is_kept_apart_unless_asked() {
         "welding pinches: one vertex fewer, same edges and faces"
     );
 }
+
+#[test]
+fn repair_is_idempotent_on_every_fixture() {
+    // Repairing a repaired mesh changes nothing and only informational issues remain.
+    for name in [
+        "bunny.obj",
+        "bone.ply",
+        "cow.off",
+        "eight.off",
+        "fandisk.off",
+        "triceratops.off",
+        "bad/two_components.obj",
+    ] {
+        let m = read_mesh(common::fixture(name)).expect("reads");
+        let once = repair(&m, &opts()).expect("repairs");
+        let twice = repair(&once.mesh, &opts()).expect("repairs again");
+        assert_eq!(twice.mesh, once.mesh, "{name}");
+        let identity: Vec<Option<u32>> = (0..once.mesh.positions.len() as u32).map(Some).collect();
+        assert_eq!(twice.vertex_map, identity, "{name}");
+        for i in &twice.report.issues {
+            assert_eq!(i.action, Action::Kept, "{name}: {}", i.message);
+        }
+    }
+}

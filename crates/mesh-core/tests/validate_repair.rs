@@ -307,3 +307,43 @@ fn empty_and_fully_degenerate_meshes_are_refused() {
     let e = repair(&m, &opts()).expect_err("refused");
     assert!(e.to_string().contains("none of the 1 faces"), "{e}");
 }
+
+#[test]
+fn one_sided_surface_is_reported_and_left_unchanged() {
+    // A triangulated Möbius band: 5 quads, half twist between the last and the first.
+    let n = 5u32;
+    let mut positions = Vec::new();
+    for i in 0..n {
+        let t = std::f64::consts::TAU * f64::from(i) / f64::from(n);
+        let h = 0.5 * (t / 2.0).cos();
+        let r = 2.0 + 0.5 * (t / 2.0).sin();
+        positions.push([r * t.cos(), r * t.sin(), h]);
+    }
+    for i in 0..n {
+        let t = std::f64::consts::TAU * f64::from(i) / f64::from(n);
+        let h = -0.5 * (t / 2.0).cos();
+        let r = 2.0 - 0.5 * (t / 2.0).sin();
+        positions.push([r * t.cos(), r * t.sin(), h]);
+    }
+    let mut faces = Vec::new();
+    for i in 0..n {
+        let (a, b) = (i, i + n);
+        let (c, d) = if i + 1 < n {
+            (i + 1, i + 1 + n)
+        } else {
+            (n, 0)
+        };
+        faces.push([a, c, b]);
+        faces.push([b, c, d]);
+    }
+    let mut m = TriMesh::new(positions, faces);
+    m.faces[3].swap(1, 2); // make at least one edge inconsistent wherever the seam falls
+    let r = repair(&m, &opts()).expect("kept");
+    let i = r
+        .report
+        .issue(IssueKind::InconsistentOrientation)
+        .expect("reported");
+    assert_eq!(i.action, Action::Kept);
+    assert!(i.message.contains("one-sided"), "{}", i.message);
+    assert_eq!(r.mesh.faces, m.faces);
+}
