@@ -38,24 +38,10 @@ pub struct Fragment {
     pub ray: DVec3,
 }
 
-/// Perspective-correct barycentrics of the ray hit (see module docs).
-#[inline]
-pub fn barycentrics(x: &[DVec3; 3], eye: DVec3, ray: DVec3) -> [f64; 3] {
-    let p = [x[0] - eye, x[1] - eye, x[2] - eye];
-    let a = [
-        ray.dot(p[1].cross(p[2])),
-        ray.dot(p[2].cross(p[0])),
-        ray.dot(p[0].cross(p[1])),
-    ];
-    let s = a[0] + a[1] + a[2];
-    [a[0] / s, a[1] / s, a[2] / s]
-}
-
 struct Forward {
     p: [DVec3; 3],
     s: f64,
     w: [f64; 3],
-    q: DVec3,
     ns_raw: DVec3,
     ns: DVec3,
     ns_inv: f64,
@@ -105,7 +91,6 @@ fn forward(f: &Fragment) -> Forward {
         p,
         s,
         w,
-        q,
         ns_raw,
         ns,
         ns_inv,
@@ -200,9 +185,4 @@ pub fn shade_adjoint(f: &Fragment, dc: f64) -> ([DVec3; 3], [DVec3; 3]) {
         dp[k] += d.cross(fw.p[j]) * da[i];
     }
     (dp, dn_corner)
-}
-
-/// The interpolated point p = eye + Σ w_i (x_i − eye) (for tests and depth).
-pub fn hit_point(f: &Fragment) -> DVec3 {
-    f.eye + forward(f).q
 }
