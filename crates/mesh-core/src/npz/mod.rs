@@ -1,7 +1,7 @@
 //! `.npz` files (a zip of `.npy` arrays, as NumPy's `np.savez` / `np.savez_compressed` write them)
 //! and the reference's saved-deformation layout (spec §8), [`SavedDeformation`].
 //!
-//! The `.npy` parser and writer are in [`npy`]: little-endian, C order, dtypes
+//! The `.npy` parser and writer ([`parse_npy`], [`write_npy`]) handle little-endian, C order, dtypes
 //! `<f4 <f8 <i8 <i4 <u4 |u1 |b1 <U…` of any shape, including 0-d unicode strings. Zip entries may
 //! be stored or deflated; we write stored entries (like `np.savez`).
 
