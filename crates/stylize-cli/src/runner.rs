@@ -132,9 +132,11 @@ pub fn darap_options(config: &Config) -> darap::DarapOptions {
     }
 }
 
-/// A renderer for the configured backend.
+/// A renderer for the configured backend: `cpu` forces the CPU renderer; `auto` and `gpu` ask for
+/// the GPU backend, which falls back to the CPU when there is no hardware adapter. The string says
+/// what was chosen and why.
 pub fn renderer(config: &Config) -> (Box<dyn Renderer>, String) {
-    raster_diff::select_renderer(config.render.backend == Backend::Gpu)
+    raster_diff::select_renderer(config.render.backend != Backend::Cpu)
 }
 
 struct RunObserver<'a> {
@@ -264,19 +266,21 @@ impl Observer for RunObserver<'_> {
 pub fn execute(request: &RunRequest, task: Task) -> anyhow::Result<RunOutcome> {
     let config = &request.config;
     config.validate()?;
-    let dir = RunDir::new(&request.out);
-    let start = dir.prepare(request.force, request.resume)?;
     let config_toml = config.to_toml_string()?;
     let (mesh, mut warnings) = prepare_mesh(&request.mesh)?;
     let setup = Instant::now();
     let darap = Darap::new(&mesh.positions, &mesh.faces, darap_options(config))
         .context("dARAP precomputation")?;
     let setup_seconds = setup.elapsed().as_secs_f64();
+    // Everything that can fail on bad input happens before the run directory is touched.
+    let dir = RunDir::new(&request.out);
+    let start = dir.prepare(request.force, request.resume)?;
     let task_label = match &task {
         Task::Style(s) => ("style", s.name()),
         Task::Text { prompt, .. } => ("prompt", prompt.clone()),
     };
 
+    let mut renderer_choice: Option<String> = None;
     let (mut objective, spec, lr, style_objective): (
         Box<dyn Objective>,
         LoopSpec,
@@ -295,7 +299,8 @@ pub fn execute(request: &RunRequest, task: Task) -> anyhow::Result<RunOutcome> {
             (Box::new(obj.clone()), spec, config.style.lr, Some(obj))
         }
         Task::Text { guidance, .. } => {
-            let (renderer, _why) = renderer(config);
+            let (renderer, why) = renderer(config);
+            renderer_choice = Some(why);
             let camera = CameraConfig {
                 elevation_deg: config.camera.elevation_deg,
                 azimuth_deg: config.camera.azimuth_deg,
@@ -407,6 +412,9 @@ pub fn execute(request: &RunRequest, task: Task) -> anyhow::Result<RunOutcome> {
             request.mesh.display(),
             mesh.positions.len()
         ));
+        if let Some(why) = &renderer_choice {
+            b.println(format!("renderer: {why}"));
+        }
     }
     let loop_start = Instant::now();
     run_loop(&darap, &spec, &mut state, objective.as_mut(), &mut observer)?;
@@ -483,6 +491,7 @@ pub fn execute(request: &RunRequest, task: Task) -> anyhow::Result<RunOutcome> {
         "faces": mesh.faces.len(),
         "alignment_before": alignment.map(|a| a.0),
         "alignment_after": alignment.map(|a| a.1),
+        "renderer": renderer_choice,
         "seconds": { "setup": setup_seconds, "loop": loop_seconds },
         "warnings": warnings,
     });
