@@ -291,10 +291,22 @@ impl Config {
         Ok(config)
     }
 
-    /// Reads a TOML file.
+    /// Reads a TOML file, or (extension `.json`) the reference implementation's JSON layout (see
+    /// [`crate::reference_config`]; its notes about ignored keys are printed to stderr).
     pub fn load(path: &Path) -> anyhow::Result<Self> {
         let text = std::fs::read_to_string(path)
             .with_context(|| format!("cannot read config {}", path.display()))?;
+        if path
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("json"))
+        {
+            let (config, notes) = crate::reference_config::from_reference_json(&text)
+                .with_context(|| format!("in reference config {}", path.display()))?;
+            for n in notes {
+                eprintln!("note: {}: {n}", path.display());
+            }
+            return Ok(config);
+        }
         Self::from_toml_str(&text).with_context(|| format!("in config {}", path.display()))
     }
 

@@ -8,6 +8,7 @@ pub mod config;
 pub mod eval;
 pub mod models;
 pub mod pipeline;
+pub mod reference_config;
 pub mod rundir;
 pub mod runner;
 pub mod style;
