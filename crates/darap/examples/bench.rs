@@ -1,6 +1,6 @@
 //! dARAP timings: precompute, forward, backward and forward+backward on meshes of ~2k to ~160k
-//! vertices, with 1 and 2 rayon threads (the sparse solves always run sequentially, see
-//! `cotan::PinnedCholesky`).
+//! vertices, with 1 and 2 rayon threads and sequential sparse solves (the default, see
+//! `cotan::PinnedCholesky`), plus 2 rayon threads with 2-thread solves (`faer::Par::rayon(2)`).
 //!
 //! `cargo run --release -p darap --example bench -- [--max-vertices N] [--reps N]`
 //!
@@ -56,10 +56,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     meshes.retain(|(_, m)| m.positions.len() <= max_vertices);
     meshes.sort_by_key(|(_, m)| m.positions.len());
 
-    println!("| mesh | V | threads | precompute ms | forward ms | backward ms | fwd+bwd ms |");
-    println!("|---|---:|---:|---:|---:|---:|---:|");
+    println!(
+        "| mesh | V | rayon threads | solver threads | precompute ms | forward ms | backward ms | fwd+bwd ms |"
+    );
+    println!("|---|---:|---:|---:|---:|---:|---:|---:|");
     for (name, mesh) in &meshes {
-        for threads in [1usize, 2] {
+        for (threads, solver_threads) in [(1usize, 1usize), (2, 1), (2, 2)] {
             let pool = rayon::ThreadPoolBuilder::new()
                 .num_threads(threads)
                 .build()?;
@@ -77,7 +79,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     },
                     pre_reps,
                 );
-                let layer = layer.ok_or(darap::DarapError::NoFaces)?;
+                let mut layer = layer.ok_or(darap::DarapError::NoFaces)?;
+                layer.set_solver_parallelism(if solver_threads > 1 {
+                    faer::Par::rayon(solver_threads)
+                } else {
+                    faer::Par::Seq
+                });
                 let x: Vec<[f64; 3]> = layer
                     .rest_normals()
                     .iter()
@@ -110,7 +117,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     reps,
                 );
                 println!(
-                    "| {name} | {} | {threads} | {pre:.1} | {fwd:.2} | {bwd:.2} | {both:.2} |",
+                    "| {name} | {} | {threads} | {solver_threads} | {pre:.1} | {fwd:.2} | {bwd:.2} | {both:.2} |",
                     mesh.positions.len()
                 );
                 Ok(())

@@ -92,3 +92,57 @@ fn vjp_directional_derivatives_match_golden() {
         }
     }
 }
+
+#[test]
+fn rotation_at_vertex0_and_max_angle_match_golden_summary() {
+    let (verts, faces, x) = inputs();
+    let text = std::fs::read_to_string(golden("summary.json")).unwrap();
+    let summary: serde_json::Value = serde_json::from_str(&text).unwrap();
+    for case in summary["cases"].as_array().unwrap() {
+        let lambda = case["lambda"].as_f64().unwrap();
+        let rule = match case["rotation_rule"].as_str().unwrap() {
+            "gis" => RotationRule::Gis,
+            _ => RotationRule::Procrustes,
+        };
+        let layer = Darap::new(
+            &verts,
+            &faces,
+            DarapOptions {
+                lambda,
+                rotation_rule: rule,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        let out = layer.forward(&x).unwrap();
+        let r0 = &out.rotations[0];
+        for i in 0..3 {
+            for j in 0..3 {
+                let e = case["R_vertex0"][i][j].as_f64().unwrap();
+                assert!(
+                    (r0[i][j] - e).abs() < 1e-9,
+                    "{}: R0[{i}][{j}] {} vs {e}",
+                    case["file"],
+                    r0[i][j]
+                );
+            }
+        }
+        // Rotation angle from the trace: θ = acos((tr R − 1)/2).
+        let max_angle = out
+            .rotations
+            .iter()
+            .map(|r| {
+                ((r[0][0] + r[1][1] + r[2][2] - 1.0) / 2.0)
+                    .clamp(-1.0, 1.0)
+                    .acos()
+                    .to_degrees()
+            })
+            .fold(0.0, f64::max);
+        let expected = case["rotation_angle_deg_max"].as_f64().unwrap();
+        assert!(
+            (max_angle - expected).abs() < 1e-6,
+            "{}: max angle {max_angle} vs {expected}",
+            case["file"]
+        );
+    }
+}
