@@ -14,9 +14,8 @@ fn main() -> Result<(), darap::DarapError> {
         .map(|n| [n[0] + 0.5, n[1], n[2]])
         .collect();
     let state = layer.forward(&x)?;
-    // Gradient of ℓ = Σ_v y_v (the deformed heights) with respect to the targets.
-    let grad_positions = vec![[0.0, 1.0, 0.0]; layer.num_vertices()];
-    let grad_x = layer.backward(&state, &grad_positions);
+    // Gradient of ℓ = ½ Σ_v |p_v|² (spread of the deformed mesh) with respect to the targets.
+    let grad_x = layer.backward(&state, &state.positions);
     let moved = state
         .positions
         .iter()

@@ -1,5 +1,5 @@
 //! Differentiable ARAP (dARAP): per-vertex target normals to a deformed mesh, with hand-written
-//! adjoints (spec §1–§4 of `docs/darap.md` and the project's method contract).
+//! adjoints (method spec §1–§4; conventions in `docs/darap.md`).
 //!
 //! # Pipeline and conventions
 //! `x` (raw targets, V×3) → `t̂ = x / max(|x|, 1e-12)` → local step (one rotation `R_v` per vertex
