@@ -96,6 +96,18 @@ impl ModelSet {
     /// A guidance for `prompt` (negative prompt and settings from `config`). Without a stage-II
     /// model the stage-II weight schedule must stay at 0 (the guidance errors otherwise).
     pub fn guidance_for(&self, prompt: &str, config: &Config) -> anyhow::Result<Box<dyn Guidance>> {
+        let stage2_used = config.stage2_schedule()?.phases().iter().any(|p| match *p {
+            optim::Phase::Constant { value, .. } => value != 0.0,
+            optim::Phase::Ramp { from, to, .. } => from != 0.0 || to != 0.0,
+        });
+        if self.stage2.is_none() && stage2_used {
+            anyhow::bail!(
+                "the model directory {} has no stage-II UNet but guidance.stage2_weight = {:?} uses it; \
+                 export stage II (docs/models.md) or run stage I only with --set guidance.stage2_weight=0",
+                self.dir.root().display(),
+                config.guidance.stage2_weight
+            );
+        }
         let (cond, uncond) = diffusion_onnx::prompt_embeddings(
             &self.dir,
             prompt,
