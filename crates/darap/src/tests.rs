@@ -357,3 +357,31 @@ fn layer_is_send_and_sync() {
     check::<Darap>();
     check::<Deformation>();
 }
+
+#[test]
+fn unreferenced_vertices_and_degenerate_faces_stay_finite() {
+    // An extra vertex used by no face is its own component (pinned, left at rest); a zero-area
+    // face hits the reference's area clamp. Nothing may become NaN.
+    let mut mesh = icosphere(1);
+    let extra = mesh.positions.len();
+    mesh.positions.push([5.0, 5.0, 5.0]);
+    let a = mesh.faces[0];
+    let mid = mesh.positions.len() as u32;
+    let (p0, p1) = (mesh.positions[a[0] as usize], mesh.positions[a[1] as usize]);
+    mesh.positions
+        .push(std::array::from_fn(|c| 0.5 * (p0[c] + p1[c])));
+    mesh.faces.push([a[0], mid, a[1]]); // collinear: zero area
+    let opts = DarapOptions {
+        post_process: PostProcess::None,
+        ..Default::default()
+    };
+    let layer = Darap::new(&mesh.positions, &mesh.faces, opts).unwrap();
+    assert!(layer.pins().contains(&extra));
+    let out = layer
+        .forward(&random_targets(layer.rest_normals(), 0.5, 13))
+        .unwrap();
+    assert_eq!(out.positions[extra], [5.0, 5.0, 5.0]);
+    assert!(out.positions.iter().flatten().all(|v| v.is_finite()));
+    let g = layer.backward(&out, &out.positions);
+    assert!(g.iter().flatten().all(|v| v.is_finite()));
+}
