@@ -271,7 +271,10 @@ mod tests {
     fn unsupported_settings_are_errors_not_silently_dropped() {
         for (from, to) in [
             ("\"aug_light\": true", "\"aug_light\": false"),
-            ("\"optimizer_type\": \"Adam\"", "\"optimizer_type\": \"SGD\""),
+            (
+                "\"optimizer_type\": \"Adam\"",
+                "\"optimizer_type\": \"SGD\"",
+            ),
             (
                 "\"jacobian_id_loss_weight_schedule\": \"0.0\"",
                 "\"jacobian_id_loss_weight_schedule\": \"1.0\"",

@@ -210,5 +210,8 @@ fn unknown_style_and_missing_mesh_are_clear_errors() {
     .map(|e| format!("{e:#}"))
     .unwrap_or_default();
     assert!(e.contains("nope.obj"), "{e}");
-    assert!(!tmp.path().join("r").exists(), "no run directory for an unreadable mesh");
+    assert!(
+        !tmp.path().join("r").exists(),
+        "no run directory for an unreadable mesh"
+    );
 }

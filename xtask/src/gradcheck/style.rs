@@ -30,7 +30,13 @@ fn fixture(seed: u64) -> (Vec<[f64; 3]>, Vec<[u32; 3]>, Vec<[f64; 3]>) {
         }
     }
     let t = (0..f.len())
-        .map(|_| unit([rng.random::<f64>() - 0.5, rng.random::<f64>() - 0.5, rng.random::<f64>() - 0.5]))
+        .map(|_| {
+            unit([
+                rng.random::<f64>() - 0.5,
+                rng.random::<f64>() - 0.5,
+                rng.random::<f64>() - 0.5,
+            ])
+        })
         .collect();
     (p, f, t)
 }
@@ -60,7 +66,10 @@ pub fn suite(report: &mut Report) -> anyhow::Result<()> {
     let layer = darap::Darap::new(
         &rest,
         &faces,
-        darap::DarapOptions { lambda: 4.0, ..darap::DarapOptions::default() },
+        darap::DarapOptions {
+            lambda: 4.0,
+            ..darap::DarapOptions::default()
+        },
     )?;
     let mut rng = ChaCha8Rng::seed_from_u64(12);
     let x: Vec<[f64; 3]> = layer
@@ -73,7 +82,9 @@ pub fn suite(report: &mut Report) -> anyhow::Result<()> {
         .map(|&fc| {
             let n = unit(alignment::face_cross(&rest, fc));
             // Cube style: nearest signed axis.
-            let k = (0..3).max_by(|&a, &b| n[a].abs().total_cmp(&n[b].abs())).unwrap_or(0);
+            let k = (0..3)
+                .max_by(|&a, &b| n[a].abs().total_cmp(&n[b].abs()))
+                .unwrap_or(0);
             let mut e = [0.0; 3];
             e[k] = n[k].signum();
             e
@@ -98,13 +109,23 @@ pub fn suite(report: &mut Report) -> anyhow::Result<()> {
     );
 
     // 3. Degenerate faces (all corners equal, or collinear) keep loss and gradient finite.
-    let p = vec![[0.0; 3], [0.0; 3], [0.0; 3], [1.0, 1.0, 1.0], [2.0, 2.0, 2.0]];
+    let p = vec![
+        [0.0; 3],
+        [0.0; 3],
+        [0.0; 3],
+        [1.0, 1.0, 1.0],
+        [2.0, 2.0, 2.0],
+    ];
     let f = vec![[0, 1, 2], [0, 3, 4], [1, 3, 2]];
     let t = vec![[0.0, 0.0, 1.0]; 3];
     let (l, g) = alignment::alignment_loss_and_grad(&p, &f, &t);
     let name = "style/degenerate faces stay finite";
     if l.is_finite() && g.iter().flatten().all(|v| v.is_finite()) {
-        report.results.push(CheckResult { name: name.into(), worst_rel: 0.0, failures: Vec::new() });
+        report.results.push(CheckResult {
+            name: name.into(),
+            worst_rel: 0.0,
+            failures: Vec::new(),
+        });
     } else {
         report.fail(name, format!("loss {l}, gradient {g:?}"));
     }
