@@ -306,3 +306,59 @@ fn second_step_uses_accumulated_gradient_at_the_pre_step_x() {
         "loop's two-step update differs from g1 then g1 + g2"
     );
 }
+
+/// The text path through the run directory with the fake guidance: views, lights and the
+/// guidance's draws all come from the run's generator, so a resumed run must restore its state.
+#[test]
+fn text_run_resumed_from_checkpoint_equals_uninterrupted_run() {
+    use stylize_cli::config::Config;
+    use stylize_cli::runner::{LogMode, RunRequest, Task, execute};
+
+    let tmp = ok(tempfile::tempdir());
+    let (p, f) = raster_diff::shapes::icosphere(2);
+    let mesh = tmp.path().join("m.obj");
+    ok(mesh_core::io::write_mesh(
+        &mesh,
+        &mesh_core::TriMesh::new(p, f),
+        None,
+    ));
+    let mut config = Config::default();
+    config.optim.iterations = 5;
+    config.camera.views = 2;
+    config.render.width = 32;
+    config.render.height = 32;
+    config.render.backend = stylize_cli::config::Backend::Cpu;
+    config.run.checkpoint_every = 2;
+    config.run.preview_every = 0;
+    config.run.turntable_views = 1;
+    config.run.turntable_size = 16;
+    let task = || Task::Text {
+        prompt: "darker".into(),
+        guidance: Box::new(DarkerGuidance {
+            calls: Arc::new(AtomicUsize::new(0)),
+            random_scale: true,
+        }),
+    };
+    let request = |out: &str, resume: bool, halt_after: Option<u64>| RunRequest {
+        mesh: mesh.clone(),
+        out: tmp.path().join(out),
+        config: config.clone(),
+        force: false,
+        resume,
+        log: LogMode::Quiet,
+        halt_after,
+    };
+    ok(execute(&request("a", false, None), task()));
+    let halted = ok(execute(&request("b", false, Some(3)), task()));
+    assert!(!halted.complete);
+    ok(execute(&request("b", true, None), task()));
+    let load = |d: &str| {
+        ok(stylize_cli::checkpoint::Checkpoint::load(
+            &tmp.path().join(d).join("checkpoint.json"),
+        ))
+    };
+    let (a, b) = (load("a"), load("b"));
+    assert_eq!((a.iteration, b.iteration), (5, 5));
+    assert!(a.x == b.x, "x differs after resume");
+    assert!(a.adam == b.adam, "Adam state differs after resume");
+}
