@@ -180,3 +180,73 @@ fn text_path_runs_with_the_tiny_fixture_models() {
     ))));
     assert_eq!(summary["adam_steps"], 4, "two Adam steps per iteration");
 }
+
+#[test]
+fn resume_alone_continues_with_the_runs_own_config() {
+    let tmp = ok(tempfile::tempdir());
+    let mesh = small_mesh(tmp.path());
+    let run = tmp.path().join("run");
+    let first = [
+        "run",
+        s(&mesh),
+        "--style",
+        "cube",
+        "-o",
+        s(&run),
+        "--quiet",
+        "--set",
+        "style.iterations=9",
+        "--set",
+        "run.checkpoint_every=4",
+        "--set",
+        "run.turntable_size=16",
+        "--stop-after",
+        "6",
+    ];
+    must(&stylize(&first, tmp.path()));
+    assert!(!run.join("run.json").exists());
+    let out = stylize(
+        &["run", s(&mesh), "--style", "cube", "-o", s(&run), "--quiet"],
+        tmp.path(),
+    );
+    assert!(
+        !out.status.success(),
+        "an interrupted run needs --resume or --force"
+    );
+    must(&stylize(
+        &[
+            "run",
+            s(&mesh),
+            "--style",
+            "cube",
+            "-o",
+            s(&run),
+            "--quiet",
+            "--resume",
+        ],
+        tmp.path(),
+    ));
+    let summary: serde_json::Value = ok(serde_json::from_str(&ok(std::fs::read_to_string(
+        run.join("run.json"),
+    ))));
+    assert_eq!(summary["iterations"], 9);
+    let out = stylize(
+        &[
+            "run",
+            s(&mesh),
+            "--style",
+            "cube",
+            "-o",
+            s(&run),
+            "--quiet",
+            "--resume",
+            "--seed",
+            "3",
+        ],
+        tmp.path(),
+    );
+    assert!(
+        !out.status.success(),
+        "a complete run is not redone by --resume"
+    );
+}

@@ -46,7 +46,8 @@ pub struct Args {
     /// Seed (same as `--set run.seed=N`).
     #[arg(long)]
     pub seed: Option<u64>,
-    /// Continue an interrupted run from its checkpoint.
+    /// Continue an interrupted run from its checkpoint. Without --config/--set/--seed/
+    /// --negative-prompt, the run's own `config.toml` is used.
     #[arg(long)]
     pub resume: bool,
     /// Overwrite an existing run.
@@ -87,8 +88,19 @@ pub fn resolve_config(
 
 /// Runs `stylize run`.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    let saved = args.out.join("config.toml");
+    let no_config_flags = args.config.is_none()
+        && args.set.is_empty()
+        && args.seed.is_none()
+        && args.negative_prompt.is_none();
+    // `--resume` alone continues with the run's own resolved configuration.
+    let config_file = if args.resume && no_config_flags && saved.is_file() {
+        Some(saved)
+    } else {
+        args.config.clone()
+    };
     let config = resolve_config(
-        args.config.as_deref(),
+        config_file.as_deref(),
         &args.set,
         args.seed,
         args.negative_prompt.as_deref(),
