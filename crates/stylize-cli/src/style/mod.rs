@@ -179,6 +179,46 @@ mod tests {
     }
 
     #[test]
+    fn exemplar_octahedron_file_reproduces_the_cube_style() {
+        // The regular octahedron's area-weighted vertex normals are exactly ±e_i, so as an
+        // exemplar it must give the cube style's targets.
+        let p = vec![
+            [1.0, 0.0, 0.0],
+            [-1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [0.0, -1.0, 0.0],
+            [0.0, 0.0, 1.0],
+            [0.0, 0.0, -1.0],
+        ];
+        let f = vec![
+            [0, 2, 4],
+            [2, 1, 4],
+            [1, 3, 4],
+            [3, 0, 4],
+            [2, 0, 5],
+            [1, 2, 5],
+            [3, 1, 5],
+            [0, 3, 5],
+        ];
+        let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+        let path = dir.path().join("octahedron.obj");
+        mesh_core::io::write_mesh(&path, &mesh_core::TriMesh::new(p, f), None)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let spec = format!("exemplar:{}", path.display());
+        let style = Style::parse(&spec).unwrap_or_else(|e| panic!("{e:#}"));
+        for n in [
+            [0.2, -0.9, 0.1],
+            [0.7, 0.1, 0.69],
+            [0.1, 0.1, -0.5],
+            [-0.6, 0.3, 0.2],
+        ] {
+            let n = unit(n);
+            assert_eq!(style.target(n), Style::Cube.target(n), "{n:?}");
+        }
+        assert!(Style::parse("exemplar:/no/such/file.obj").is_err());
+    }
+
+    #[test]
     fn unknown_style_is_a_clear_error() {
         let e = Style::parse("sphere")
             .err()
