@@ -24,10 +24,10 @@ lint:
 
 # Release benchmarks (results go into docs/benchmarks.md by hand, with the machine).
 bench-darap:
-    cargo run --release -p darap --example bench
+    cargo run --release -p darap --example bench_darap
 
 bench-render:
-    cargo run --release -p raster-diff --example bench
+    cargo run --release -p raster-diff --example bench_render
 
 bench-csd:
-    cargo run --release -p csd --example bench
+    cargo run --release -p csd --example bench_csd

@@ -44,7 +44,7 @@ pub struct Args {
     /// Saved deformation (`.npz` in the reference's format).
     pub saved: PathBuf,
     /// Output mesh (`.obj`, `.ply` or `.glb`). With several λ: one file per λ, `OUT_lambda<λ>.ext`.
-    #[arg(short, long)]
+    #[arg(short, long, visible_alias = "out")]
     pub output: PathBuf,
     /// Strength(s) λ, comma separated (default: the λ saved in the file).
     #[arg(long, value_delimiter = ',')]

@@ -24,7 +24,7 @@ pub struct Args {
     #[arg(long, default_value_t = 8)]
     pub turntable: usize,
     /// Output folder (created if missing).
-    #[arg(short, long)]
+    #[arg(short, long, visible_alias = "out")]
     pub output: PathBuf,
     /// Image width and height in pixels.
     #[arg(long, default_value_t = 512)]

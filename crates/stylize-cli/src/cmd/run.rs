@@ -20,10 +20,10 @@ pub enum LogFormat {
 /// Arguments of `stylize run`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// Input mesh (OBJ; see `stylize mesh check` for what is repaired).
+    /// Input mesh (OBJ, OFF, PLY, glTF/GLB; see `stylize mesh check` for what is repaired).
     pub mesh: PathBuf,
     /// Run directory (created with its parents).
-    #[arg(short, long)]
+    #[arg(short, long, visible_alias = "output")]
     pub out: PathBuf,
     /// Model-free style: `cube`, `octahedron` or `exemplar:MESH`.
     #[arg(long, conflicts_with = "prompt", required_unless_present = "prompt")]

@@ -2,7 +2,7 @@
 //! vertices, with 1 and 2 rayon threads and sequential sparse solves (the default, see
 //! `cotan::PinnedCholesky`), plus 2 rayon threads with 2-thread solves (`faer::Par::rayon(2)`).
 //!
-//! `cargo run --release -p darap --example bench -- [--max-vertices N] [--reps N]`
+//! `cargo run --release -p darap --example bench_darap -- [--max-vertices N] [--reps N]`
 //!
 //! Meshes: the golden bunny (1,839 V) and its midpoint subdivisions (`fixtures/golden/bunny.obj`,
 //! normalized to the side-2 cube), and icospheres of 10,242 / 40,962 / 163,842 V.

@@ -2,7 +2,7 @@
 //! 5,120, 20,480 and 81,920 faces, per backend (cpu; wgpu when an adapter exists — on a machine
 //! without a GPU that is lavapipe, a software Vulkan, so its numbers say nothing about real GPUs).
 //!
-//! `cargo run --release -p raster-diff --example bench [-- --reps N]`
+//! `cargo run --release -p raster-diff --example bench_render [-- --reps N]`
 
 use std::time::Instant;
 

@@ -2,7 +2,7 @@
 //! CFG, the SDS gradient and layout conversions, for 8 renders of 512×512 → 224 → 64 / 256, with an
 //! instant fake denoiser (it only allocates a zero output of the right shape).
 //!
-//! `cargo run --release -p csd --example bench` (optional args: views, repetitions).
+//! `cargo run --release -p csd --example bench_csd` (optional args: views, repetitions).
 
 use csd::resize::Resize2d;
 use csd::schedule::standard_normal;
