@@ -25,7 +25,7 @@ enum Command {
     Run(cmd::run::Args),
     /// Stylize every row of a manifest (sharded across a job array).
     Batch(cmd::batch::Args),
-    /// Identity-preservation metrics (and CLIP similarity with a CLIP model).
+    /// Identity-preservation metrics: per-face area ratio and volume ratio (spec §9).
     Eval(cmd::eval::Args),
     /// Run one guidance evaluation with given noise/timesteps and dump every intermediate to .npz.
     #[command(hide = true, name = "debug-guidance")]
