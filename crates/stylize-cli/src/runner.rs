@@ -186,8 +186,11 @@ pub fn write_grid(path: &Path, images: &Images) -> anyhow::Result<()> {
     .with_context(|| format!("cannot write {}", path.display()))
 }
 
-/// Renders `n` turntable views of a mesh (CPU renderer, elevation 20°, distance 1.8 × the mesh's
-/// extent multiplier).
+/// Renders `n` turntable views of a mesh (CPU renderer, elevation 20°, looking at the origin).
+///
+/// The camera distance makes the whole mesh visible: with r the largest distance of a vertex from
+/// the origin, a sphere of radius r subtends the field of view at distance r / sin(fov/2); 10 %
+/// margin is added.
 pub fn turntable(
     renderer: &mut raster_diff::CpuRenderer,
     positions: &[[f64; 3]],
@@ -196,7 +199,14 @@ pub fn turntable(
     size: usize,
     fov: f64,
 ) -> anyhow::Result<Images> {
-    let distance = 1.8 * raster_diff::adapt_multiplier(positions);
+    let radius = positions
+        .iter()
+        .map(|p| (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt())
+        .filter(|r| r.is_finite())
+        .fold(0.0_f64, f64::max)
+        .max(1e-3);
+    let half_fov = (fov.clamp(1.0, 179.0) * 0.5).to_radians();
+    let distance = 1.1 * radius / half_fov.sin();
     let views = raster_diff::orbit_views(n.max(1), 20.0, distance, fov);
     renderer
         .render(positions, faces, &views, size, size)
