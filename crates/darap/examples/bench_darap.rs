@@ -47,6 +47,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         meshes.push((format!("bunny/{level}"), m.clone()));
         m = mesh_core::subdivide::midpoint(&m);
     }
+    // CGAL's cow (2,904 V) and fandisk (6,475 V) bracket the 5k-vertex target size.
+    for name in ["cow", "fandisk"] {
+        let path = format!(
+            "{}/../../fixtures/meshes/{name}.off",
+            env!("CARGO_MANIFEST_DIR")
+        );
+        let mut mesh = mesh_core::io::read_mesh(&path)?;
+        mesh_core::normalize::side2_cube(&mut mesh.positions);
+        meshes.push((name.to_string(), mesh));
+    }
     for level in [5, 6, 7] {
         meshes.push((
             format!("icosphere/{level}"),
