@@ -47,6 +47,23 @@ pub struct Images {
     pub rgb: Vec<f32>,
 }
 
+impl Images {
+    /// RGB images from grey values laid out `(view, row, column)`: each grey value fills all three
+    /// channels (the reference shading is grey: kd is the same in every channel).
+    pub fn from_grey(count: usize, height: usize, width: usize, grey: &[f64]) -> Self {
+        let mut rgb = Vec::with_capacity(grey.len() * 3);
+        for &g in grey {
+            rgb.extend_from_slice(&[g as f32; 3]);
+        }
+        Self {
+            count,
+            height,
+            width,
+            rgb,
+        }
+    }
+}
+
 /// Errors from rendering.
 #[derive(Debug, thiserror::Error)]
 pub enum RenderError {

@@ -375,16 +375,7 @@ impl Renderer for CpuRenderer {
         height: usize,
     ) -> Result<Images, RenderError> {
         let grey = self.render_grey(vertices, faces, views, width, height)?;
-        let mut rgb = Vec::with_capacity(grey.len() * 3);
-        for &g in &grey {
-            rgb.extend_from_slice(&[g as f32; 3]);
-        }
-        Ok(Images {
-            count: views.len(),
-            height,
-            width,
-            rgb,
-        })
+        Ok(Images::from_grey(views.len(), height, width, &grey))
     }
 
     fn backward(&mut self, d_images: &Images) -> Result<Vec<[f64; 3]>, RenderError> {
