@@ -6,11 +6,13 @@
 //!   outside; fp16 models are converted at the session boundary.
 //! - [`T5Encoder`]: T5 tokenizer + encoder, implements [`csd::TextEmbedding`].
 //! - [`EmbeddingCache`] and [`prompt_embeddings`]: encode each prompt once, reuse from disk.
+//! - [`clip`]: CLIP image and text encoders ([`ClipModel`]) for the CLIP similarity of spec §9.
 //! - [`runtime`]: finding the ONNX Runtime library (`$ORT_DYLIB_PATH`, else
 //!   `.deps/onnxruntime/` from `scripts/setup-onnxruntime.sh`), execution providers.
 
 mod builtin;
 mod cache;
+pub mod clip;
 mod denoiser;
 mod error;
 mod manifest;
@@ -22,6 +24,7 @@ mod tokenizer;
 
 pub use builtin::{IF_UNCOND_DIM, IF_UNCOND_TOKENS, if_empty_prompt_embedding};
 pub use cache::{CACHE_ENV, EmbeddingCache, prompt_embeddings};
+pub use clip::{ClipManifest, ClipModel, ClipTokenizer, cosine_similarity};
 pub use denoiser::OnnxDenoiser;
 pub use error::OnnxError;
 pub use manifest::{
