@@ -76,6 +76,16 @@ pub enum RenderError {
     /// A GPU backend failed.
     #[error("GPU backend error: {0}")]
     Gpu(String),
+    /// The request exceeds a limit of the GPU device (buffer size, dispatch size, bindings).
+    #[error("GPU device limit exceeded: {what} needs {needed}, the device allows {limit}")]
+    DeviceLimit {
+        /// What hit the limit (e.g. "storage buffer `vis` (2 × views × pixels × 4 bytes)").
+        what: String,
+        /// The amount needed.
+        needed: u64,
+        /// The device's limit.
+        limit: u64,
+    },
 }
 
 /// The seam between the optimization loop and a rendering backend.

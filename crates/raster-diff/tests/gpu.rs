@@ -1,23 +1,46 @@
 //! The wgpu backend: shader validation (always) and cross-checks against the CPU reference (when an
-//! adapter exists; lavapipe counts).
+//! adapter exists; lavapipe counts). Tests that need an adapter print `SKIPPED` and return without
+//! one. The assertions shared by both backends are in tests/backends.rs.
 #![cfg(feature = "gpu")]
 
-use raster_diff::gpu::{RASTERIZE_WGSL, WgpuRenderer};
-use raster_diff::{CpuRenderer, Images, RenderSettings, Renderer, orbit_views, shapes};
+use raster_diff::cpu::raster::NO_TRIANGLE;
+use raster_diff::gpu::{SHADERS, WgpuRenderer};
+use raster_diff::{
+    CpuRenderer, Images, RenderError, RenderSettings, Renderer, View, orbit_views, shapes,
+};
 
 #[test]
 fn wgsl_shaders_validate_with_naga() {
-    let module = naga::front::wgsl::parse_str(RASTERIZE_WGSL).expect("rasterize.wgsl parses");
-    naga::valid::Validator::new(
-        naga::valid::ValidationFlags::all(),
-        naga::valid::Capabilities::empty(),
-    )
-    .validate(&module)
-    .expect("rasterize.wgsl validates");
+    for (name, src) in SHADERS {
+        let module = naga::front::wgsl::parse_str(src)
+            .unwrap_or_else(|e| panic!("{name}: {}", e.emit_to_string(src)));
+        naga::valid::Validator::new(
+            naga::valid::ValidationFlags::all(),
+            naga::valid::Capabilities::empty(),
+        )
+        .validate(&module)
+        .unwrap_or_else(|e| panic!("{name} does not validate: {e:?}"));
+    }
+    // Every .wgsl file in src/shaders is part of some validated module.
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("src/shaders");
+    let mut files = 0;
+    for entry in std::fs::read_dir(&dir).expect("src/shaders") {
+        let path = entry.expect("entry").path();
+        if path.extension().is_some_and(|e| e == "wgsl") {
+            let text = std::fs::read_to_string(&path).expect("read shader");
+            assert!(
+                SHADERS.iter().any(|(_, s)| s.contains(&text)),
+                "{} is in no validated shader module",
+                path.display()
+            );
+            files += 1;
+        }
+    }
+    assert!(files >= 6, "found only {files} shader files");
 }
 
-fn gpu() -> Option<WgpuRenderer> {
-    match WgpuRenderer::new(RenderSettings::default()) {
+fn gpu(settings: RenderSettings) -> Option<WgpuRenderer> {
+    match WgpuRenderer::new(settings) {
         Ok(g) => Some(g),
         Err(e) => {
             println!("SKIPPED: no wgpu adapter ({e})");
@@ -26,69 +49,212 @@ fn gpu() -> Option<WgpuRenderer> {
     }
 }
 
-/// GPU coverage uses f32 screen positions, the CPU's f64: a pixel may differ only where its centre
-/// lies within f32 rounding of an edge, so on a 96×96 render of an icosphere at most a handful of
-/// pixels may see another triangle. Where every pixel agrees, images and gradients are the CPU
-/// reference's bit for bit except through the f32 depth used to pick the front pixel at
-/// antialiased pairs.
-#[test]
-fn wgpu_visibility_images_and_gradients_match_cpu() {
-    let Some(mut g) = gpu() else { return };
-    println!("adapter: {:?}", g.adapter_info());
-    let (v, f) = shapes::icosphere(3);
-    let views = orbit_views(4, 25.0, 2.6, 90.0);
-    let (w, h) = (96, 96);
-    let mut c = CpuRenderer::default();
-    let ic = c.render(&v, &f, &views, w, h).expect("cpu render");
-    let ids_cpu = c.triangle_ids().expect("state");
-    let ig = g.render(&v, &f, &views, w, h).expect("gpu render");
-    let vis: Vec<u32> = views
+fn norm(x: &[[f64; 3]]) -> f64 {
+    x.iter().flatten().map(|a| a * a).sum::<f64>().sqrt()
+}
+
+fn rel_l2(a: &[[f64; 3]], b: &[[f64; 3]]) -> f64 {
+    let diff: Vec<[f64; 3]> = a
         .iter()
-        .flat_map(|view| g.visibility(&v, &f, view, w, h).expect("visibility").ids)
-        .collect();
-    let differing = ids_cpu.iter().zip(&vis).filter(|(a, b)| a != b).count();
-    println!("pixels with another triangle: {differing} of {}", vis.len());
-    assert!(differing <= 8, "{differing} pixels differ in coverage");
-    let max_img = ic
-        .rgb
-        .iter()
-        .zip(&ig.rgb)
-        .map(|(a, b)| (a - b).abs())
-        .fold(0.0f32, f32::max);
-    let d = Images {
-        rgb: ic
-            .rgb
-            .iter()
-            .enumerate()
-            .map(|(i, _)| ((i * 37) % 11) as f32 - 5.0)
-            .collect(),
-        ..ic.clone()
-    };
-    let gc = c.backward(&d).expect("cpu backward");
-    let gg = g.backward(&d).expect("gpu backward");
-    let norm = |x: &[[f64; 3]]| x.iter().flatten().map(|a| a * a).sum::<f64>().sqrt();
-    let diff: Vec<[f64; 3]> = gc
-        .iter()
-        .zip(&gg)
+        .zip(b)
         .map(|(a, b)| [a[0] - b[0], a[1] - b[1], a[2] - b[2]])
         .collect();
-    let rel = norm(&diff) / norm(&gc);
-    println!("max image difference {max_img:e}, relative gradient difference {rel:e}");
-    if differing == 0 {
-        assert!(max_img < 1e-6, "images differ by {max_img}");
-        assert!(rel < 1e-9, "gradients differ by {rel}");
-    } else {
-        // A differing pixel changes its own value and its antialiasing pairs only.
-        let changed = ic
-            .rgb
-            .iter()
-            .zip(&ig.rgb)
-            .filter(|(a, b)| (*a - *b).abs() > 1e-6)
-            .count()
-            / 3;
-        assert!(
-            changed <= 5 * differing,
-            "{changed} pixels changed for {differing} coverage differences"
-        );
+    norm(&diff) / norm(a).max(1e-300)
+}
+
+/// Pixels whose triangle id differs between the backends, and the largest image difference over
+/// pixels where the id of the pixel and of its four neighbours agree (antialiasing mixes a pixel
+/// with its neighbours, so a coverage difference legitimately changes them too).
+fn compare_images(
+    w: usize,
+    h: usize,
+    ids_cpu: &[u32],
+    ids_gpu: &[u32],
+    ic: &Images,
+    ig: &Images,
+) -> (usize, f32) {
+    let differing = ids_cpu.iter().zip(ids_gpu).filter(|(a, b)| a != b).count();
+    let same = |i: usize| ids_cpu[i] == ids_gpu[i];
+    let mut max_diff = 0.0f32;
+    for i in 0..ids_cpu.len() {
+        let (col, row) = (i % w, (i / w) % h);
+        let ok = same(i)
+            && (col == 0 || same(i - 1))
+            && (col + 1 == w || same(i + 1))
+            && (row == 0 || same(i - w))
+            && (row + 1 == h || same(i + w));
+        if ok {
+            max_diff = max_diff.max((ic.rgb[3 * i] - ig.rgb[3 * i]).abs());
+        }
     }
+    (differing, max_diff)
+}
+
+/// Forward and VJP against the CPU reference on an icosphere, 4 views at 96×96, with and without
+/// antialiasing. Tolerances: at most 0.1 % of the pixels may see another triangle (f32 vs f64
+/// projection and edge tests at centres within rounding of an edge; on lavapipe it is a handful);
+/// elsewhere |Δ| ≤ 1e-4 (f32 shading is ~1e-6; antialiasing weights come from f32 screen positions);
+/// the VJP of a dense random cotangent agrees to a relative L2 of 2e-3.
+#[test]
+fn wgpu_images_and_gradients_match_cpu() {
+    for antialias in [true, false] {
+        let settings = RenderSettings {
+            antialias,
+            ..RenderSettings::default()
+        };
+        let Some(mut g) = gpu(settings.clone()) else {
+            return;
+        };
+        println!("{}", g.name());
+        let (v, f) = shapes::icosphere(3);
+        let views = orbit_views(4, 25.0, 2.6, 90.0);
+        let (w, h) = (96, 96);
+        let mut c = CpuRenderer::new(settings);
+        let ic = c.render(&v, &f, &views, w, h).expect("cpu render");
+        let ids_cpu = c.triangle_ids().expect("state");
+        let ig = g.render(&v, &f, &views, w, h).expect("gpu render");
+        let ids_gpu = g.triangle_ids().expect("gpu ids");
+        let covered = ids_cpu.iter().filter(|&&t| t != NO_TRIANGLE).count();
+        let (differing, max_img) = compare_images(w, h, &ids_cpu, &ids_gpu, &ic, &ig);
+        println!(
+            "AA {antialias}: {differing} of {} pixels ({covered} covered) see another triangle; \
+             max |Δ| elsewhere {max_img:e}",
+            ids_gpu.len()
+        );
+        assert!(covered > 4000, "the sphere is visible");
+        assert!(
+            differing * 1000 <= ids_cpu.len(),
+            "{differing} pixels differ in coverage"
+        );
+        assert!(max_img <= 1e-4, "images differ by {max_img}");
+        let d = Images {
+            rgb: (0..ic.rgb.len())
+                .map(|i| ((i * 37) % 11) as f32 - 5.0)
+                .collect(),
+            ..ic.clone()
+        };
+        let gc = c.backward(&d).expect("cpu backward");
+        let gg = g.backward(&d).expect("gpu backward");
+        let rel = rel_l2(&gc, &gg);
+        println!("AA {antialias}: VJP relative L2 difference {rel:e}");
+        assert!(norm(&gc) > 1e-3, "non-trivial gradient");
+        assert!(rel <= 2e-3, "gradients differ by {rel}");
+    }
+}
+
+/// The forward is deterministic; `backward` may be called repeatedly for one render and agrees
+/// with itself at the f32 rounding level (the atomic-add order varies); buffers are reused and
+/// resized correctly across shape changes.
+#[test]
+fn wgpu_repeated_calls_and_shape_changes() {
+    let Some(mut g) = gpu(RenderSettings::default()) else {
+        return;
+    };
+    let (v, f) = shapes::icosphere(2);
+    let views = orbit_views(3, 25.0, 2.6, 90.0);
+    let a = g.render(&v, &f, &views, 48, 40).expect("render");
+    let d = Images {
+        rgb: (0..a.rgb.len()).map(|i| (i % 13) as f32 - 6.0).collect(),
+        ..a.clone()
+    };
+    let g1 = g.backward(&d).expect("backward");
+    let g2 = g.backward(&d).expect("backward again");
+    assert!(rel_l2(&g1, &g2) < 1e-5, "repeat: {}", rel_l2(&g1, &g2));
+    // Another shape in between (more views, other size, other mesh), then the first again.
+    let (v2, f2) = shapes::icosphere(1);
+    let views2 = orbit_views(5, 10.0, 3.0, 60.0);
+    let other = g.render(&v2, &f2, &views2, 33, 17).expect("render other");
+    assert_eq!((other.count, other.height, other.width), (5, 17, 33));
+    assert!(
+        g.backward(&d).is_err(),
+        "gradient shaped for the old render"
+    );
+    let b = g.render(&v, &f, &views, 48, 40).expect("render again");
+    assert_eq!(a, b, "forward is deterministic");
+    let g3 = g.backward(&d).expect("backward");
+    assert!(
+        rel_l2(&g1, &g3) < 1e-5,
+        "after resize: {}",
+        rel_l2(&g1, &g3)
+    );
+}
+
+#[test]
+fn wgpu_bad_inputs_give_typed_errors() {
+    let Some(mut g) = gpu(RenderSettings::default()) else {
+        return;
+    };
+    let v = vec![[-0.5, -0.5, 0.0], [0.5, -0.5, 0.0], [0.5, 0.5, 0.0]];
+    let view = View {
+        eye: [0.0, 0.0, 2.0],
+        target: [0.0; 3],
+        up: [0.0, 1.0, 0.0],
+        fov_y_deg: 90.0,
+        light_pos: [0.0, 0.0, 2.0],
+    };
+    let one = std::slice::from_ref(&view);
+    let d = Images {
+        count: 1,
+        height: 8,
+        width: 8,
+        rgb: vec![0.0; 192],
+    };
+    assert!(matches!(g.backward(&d), Err(RenderError::NoForwardState)));
+    assert!(matches!(g.triangle_ids(), Err(RenderError::NoForwardState)));
+    assert!(matches!(
+        g.render(&v, &[[0, 1, 3]], one, 8, 8),
+        Err(RenderError::InvalidInput(_))
+    ));
+    let nan = vec![[f64::NAN, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
+    assert!(matches!(
+        g.render(&nan, &[[0, 1, 2]], one, 8, 8),
+        Err(RenderError::InvalidInput(_))
+    ));
+    assert!(matches!(
+        g.render(&v, &[[0, 1, 2]], one, 0, 8),
+        Err(RenderError::InvalidInput(_))
+    ));
+    let bad_view = View {
+        eye: [0.0; 3],
+        ..view.clone()
+    };
+    assert!(matches!(
+        g.render(&v, &[[0, 1, 2]], &[bad_view], 8, 8),
+        Err(RenderError::InvalidInput(_))
+    ));
+    // A failed render leaves no state behind.
+    assert!(matches!(g.backward(&d), Err(RenderError::NoForwardState)));
+    // More pixels than one storage buffer may hold (2 × views × pixels × 4 bytes): a typed
+    // device-limit error, nothing dispatched.
+    let limit = g.max_storage_buffer_binding_size();
+    let n_views = (limit / (8 * 1024 * 1024)) as usize + 1;
+    let many = vec![view.clone(); n_views];
+    assert!(
+        matches!(
+            g.render(&v, &[[0, 1, 2]], &many, 1024, 1024),
+            Err(RenderError::DeviceLimit { .. })
+        ),
+        "{n_views} views at 1024² exceed a {limit}-byte binding"
+    );
+    let img = g.render(&v, &[[0, 1, 2]], one, 8, 8).expect("render");
+    let wrong = Images {
+        height: 4,
+        rgb: vec![0.0; 96],
+        ..img.clone()
+    };
+    assert!(matches!(
+        g.backward(&wrong),
+        Err(RenderError::InvalidInput(_))
+    ));
+    assert!(g.backward(&img).is_ok());
+    // Empty meshes and batches render background.
+    let empty = g.render(&[], &[], one, 8, 8).expect("empty mesh");
+    assert!(empty.rgb.iter().all(|&x| x == 1.0));
+    assert!(g.backward(&empty).expect("empty backward").is_empty());
+    let none = g.render(&v, &[[0, 1, 2]], &[], 8, 8).expect("no views");
+    assert_eq!(none.count, 0);
+    assert_eq!(
+        g.backward(&none).expect("no views backward"),
+        vec![[0.0; 3]; 3]
+    );
 }

@@ -186,9 +186,8 @@ pub fn suite(report: &mut Report) -> anyhow::Result<()> {
         |_| true,
     )?;
 
-    // (d) wgpu backend. Its backward is the CPU adjoint run on the GPU's visibility buffers, so a
-    // finite difference would only repeat (a)–(c); what can go wrong is the GPU coverage. Check
-    // that coverage and the image gradient agree with the CPU reference.
+    // (d) wgpu backend (f32 WGSL forward and backward): coverage and the image gradient agree with
+    // the CPU reference (relative L2 ≤ 2e-3: f32 shading adjoint and atomic accumulation).
     match raster_diff::gpu::WgpuRenderer::new(RenderSettings::default()) {
         Err(e) => println!("skip raster/wgpu: no adapter ({e})"),
         Ok(mut gpu) => {
@@ -202,10 +201,7 @@ pub fn suite(report: &mut Report) -> anyhow::Result<()> {
                 .triangle_ids()
                 .ok_or_else(|| anyhow::anyhow!("no render state"))?;
             gpu.render(&v, &f, &views, W, H)?;
-            let mut gpu_ids = Vec::new();
-            for view in &views {
-                gpu_ids.extend(gpu.visibility(&v, &f, view, W, H)?.ids);
-            }
+            let gpu_ids = gpu.triangle_ids()?;
             let differing = ids.iter().zip(&gpu_ids).filter(|(a, b)| a != b).count();
             let mut rng = ChaCha8Rng::seed_from_u64(63);
             let d = Images {
@@ -233,7 +229,7 @@ pub fn suite(report: &mut Report) -> anyhow::Result<()> {
                 println!(
                     "note {name}: {differing} pixels differ in coverage (f32 edge tests); gradient rel. diff {rel:.3e}"
                 );
-            } else if rel > 1e-12 {
+            } else if rel > 2e-3 {
                 failures.push(format!(
                     "same coverage but relative gradient difference {rel:.3e}"
                 ));

@@ -92,7 +92,7 @@ impl std::fmt::Debug for CpuRenderer {
     }
 }
 
-fn validate(
+pub(crate) fn validate(
     vertices: &[[f64; 3]],
     faces: &[[u32; 3]],
     width: usize,
