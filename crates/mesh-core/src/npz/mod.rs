@@ -1,14 +1,12 @@
 //! `.npz` files (a zip of `.npy` arrays, as NumPy's `np.savez` / `np.savez_compressed` write them)
 //! and the reference's saved-deformation layout (spec §8), [`SavedDeformation`].
 //!
-//! The `.npy` parser and writer ([`parse_npy`], [`write_npy`]) handle little-endian, C order, dtypes
-//! `<f4 <f8 <i8 <i4 <u4 |u1 |b1 <U…` of any shape, including 0-d unicode strings. Zip entries may
-//! be stored or deflated; we write stored entries (like `np.savez`).
+//! The entries are parsed and written by [`crate::npy`] (re-exported here). Zip entries may be
+//! stored or deflated; we write stored entries (like `np.savez`).
 
-mod npy;
 mod saved;
 
-pub use npy::{NpyArray, NpyData, parse_npy, write_npy};
+pub use crate::npy::{NpyArray, NpyData, parse_npy, write_npy};
 pub use saved::{FORMAT_VERSION, SavedDeformation};
 
 use std::fs::File;
@@ -91,18 +89,14 @@ impl NpzReader {
         self.arrays
     }
 
-    /// An `(n, 3)` float array (`<f4` or `<f8`, converted) as `f32` rows.
+    /// An `(n, 3)` float array (`<f2`, `<f4` or `<f8`, converted) as `f32` rows.
     pub fn rows3_f32(&self, key: &str) -> Result<Vec<[f32; 3]>, MeshError> {
         let a = self.require(key)?;
-        let flat: Vec<f32> = match &a.data {
-            NpyData::F32(v) => v.clone(),
-            NpyData::F64(v) => v.iter().map(|&x| x as f32).collect(),
-            _ => {
-                return Err(self.err(
-                    key,
-                    format!("expected float32 data, found {}", a.data.descr()),
-                ));
-            }
+        let Some(flat) = a.to_f32() else {
+            return Err(self.err(
+                key,
+                format!("expected float data, found {}", a.data.descr()),
+            ));
         };
         self.check_rows3(key, a)?;
         Ok(flat.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect())
@@ -112,7 +106,9 @@ impl NpzReader {
     pub fn rows3_f64(&self, key: &str) -> Result<Vec<[f64; 3]>, MeshError> {
         let a = self.require(key)?;
         let flat = match &a.data {
-            NpyData::F32(_) | NpyData::F64(_) => a.to_f64_vec().unwrap_or_default(),
+            NpyData::F16(_) | NpyData::F32(_) | NpyData::F64(_) => {
+                a.to_f64_vec().unwrap_or_default()
+            }
             _ => {
                 return Err(self.err(
                     key,

@@ -4,12 +4,18 @@
 //! and 3.0), then an ASCII (UTF-8 in 3.0) Python dict literal
 //! `{'descr': '<f4', 'fortran_order': False, 'shape': (V, 3), }` padded with spaces and ending in
 //! `\n` so that the data starts at a multiple of 64 bytes, then the raw elements in C (row-major)
-//! order. Supported `descr`: `<f4 <f8 <i8 <i4 <u4 |u1 |b1 <U{n}`; `<U{n}` stores each element as `n`
-//! UTF-32LE code units, padded with NUL at the end.
+//! order. Supported `descr`: `<f2 <f4 <f8 <i8 <i4 <u4 |u1 |b1 <U{n}`; `<U{n}` stores each element as
+//! `n` UTF-32LE code units, padded with NUL at the end; `<f2` is IEEE half precision (DeepFloyd IF
+//! ships its empty-prompt embedding in it).
+//!
+//! This module needs no zip support and is available without the `io` feature; [`crate::npz`]
+//! builds `.npz` archives on it.
 
 /// The elements of an array, by dtype.
 #[derive(Clone, Debug, PartialEq)]
 pub enum NpyData {
+    /// `<f2` (IEEE half).
+    F16(Vec<half::f16>),
     /// `<f4`.
     F32(Vec<f32>),
     /// `<f8`.
@@ -32,6 +38,7 @@ impl NpyData {
     /// Number of elements.
     pub fn len(&self) -> usize {
         match self {
+            NpyData::F16(v) => v.len(),
             NpyData::F32(v) => v.len(),
             NpyData::F64(v) => v.len(),
             NpyData::I64(v) => v.len(),
@@ -51,6 +58,7 @@ impl NpyData {
     /// The NumPy `descr` this data is written with (`<U{n}` uses the longest string, at least 1).
     pub fn descr(&self) -> String {
         match self {
+            NpyData::F16(_) => "<f2".into(),
             NpyData::F32(_) => "<f4".into(),
             NpyData::F64(_) => "<f8".into(),
             NpyData::I64(_) => "<i8".into(),
@@ -137,6 +145,7 @@ impl NpyArray {
     /// All elements converted to `f64` (integers and booleans too); `None` for strings.
     pub fn to_f64_vec(&self) -> Option<Vec<f64>> {
         Some(match &self.data {
+            NpyData::F16(v) => v.iter().map(|&x| f64::from(x)).collect(),
             NpyData::F32(v) => v.iter().map(|&x| f64::from(x)).collect(),
             NpyData::F64(v) => v.clone(),
             NpyData::I64(v) => v.iter().map(|&x| x as f64).collect(),
@@ -146,6 +155,25 @@ impl NpyArray {
             NpyData::Bool(v) => v.iter().map(|&x| f64::from(u8::from(x))).collect(),
             NpyData::Unicode(_) => return None,
         })
+    }
+
+    /// Floating-point elements as `f32` (`<f2` widened exactly, `<f8` rounded to nearest); `None`
+    /// for integers, booleans and strings.
+    pub fn to_f32(&self) -> Option<Vec<f32>> {
+        match &self.data {
+            NpyData::F16(v) => Some(v.iter().map(|x| x.to_f32()).collect()),
+            NpyData::F32(v) => Some(v.clone()),
+            NpyData::F64(v) => Some(v.iter().map(|&x| x as f32).collect()),
+            _ => None,
+        }
+    }
+
+    /// The elements of an `<i8` array, borrowed (`None` for any other dtype).
+    pub fn as_i64(&self) -> Option<&[i64]> {
+        match &self.data {
+            NpyData::I64(v) => Some(v),
+            _ => None,
+        }
     }
 
     /// Integer elements as `i64` (`None` for floats and strings).
@@ -191,6 +219,9 @@ pub fn write_npy(a: &NpyArray) -> Vec<u8> {
     out.extend_from_slice(&(header.len() as u16).to_le_bytes());
     out.extend_from_slice(header.as_bytes());
     match &a.data {
+        NpyData::F16(v) => v
+            .iter()
+            .for_each(|x| out.extend_from_slice(&x.to_le_bytes())),
         NpyData::F32(v) => v
             .iter()
             .for_each(|x| out.extend_from_slice(&x.to_le_bytes())),
@@ -419,6 +450,7 @@ pub fn parse_npy(bytes: &[u8]) -> Result<NpyArray, String> {
         };
     }
     let data = match kind {
+        "f2" => NpyData::F16(le!(half::f16, 2)),
         "f4" => NpyData::F32(le!(f32, 4)),
         "f8" => NpyData::F64(le!(f64, 8)),
         "i8" => NpyData::I64(le!(i64, 8)),
@@ -452,7 +484,7 @@ pub fn parse_npy(bytes: &[u8]) -> Result<NpyArray, String> {
         }
         _ => {
             return Err(format!(
-                "unsupported dtype '{descr}' (supported: <f4 <f8 <i8 <i4 <u4 |u1 |b1 <U…)"
+                "unsupported dtype '{descr}' (supported: <f2 <f4 <f8 <i8 <i4 <u4 |u1 |b1 <U…)"
             ));
         }
     };
@@ -476,6 +508,14 @@ mod tests {
             ),
             NpyArray::new(vec![1, 2], NpyData::I64(vec![i64::MIN, i64::MAX])),
             NpyArray::new(vec![2], NpyData::I32(vec![-1, 7])),
+            NpyArray::new(
+                vec![3],
+                NpyData::F16(vec![
+                    half::f16::from_f32(0.5),
+                    half::f16::MAX,
+                    half::f16::from_f32(-1e-3),
+                ]),
+            ),
             NpyArray::new(vec![2], NpyData::U32(vec![u32::MAX, 0])),
             NpyArray::new(vec![2, 2, 1], NpyData::U8(vec![0, 1, 254, 255])),
             NpyArray::new(vec![3], NpyData::Bool(vec![true, false, true])),
