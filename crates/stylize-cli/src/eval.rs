@@ -12,10 +12,22 @@
 //!
 //! The area ratios of **all faces of all pairs are pooled**: the reported mean and standard
 //! deviation (population, ddof = 0) are over that pool, as in the paper's table.
+//!
+//! **CLIP similarity** (spec §9, optional, [`add_clip_scores`]): for a mesh M and prompt text,
+//! `clip(M) = (1/N) Σ_v cos(E_img(render_v(M)), E_txt(text))`, the mean over N orbit views (16 in the
+//! paper) of the cosine between each view's image embedding and the prompt's text embedding. Each
+//! mesh (source and result) is normalized to the side-2 cube and rendered with
+//! [`crate::runner::turntable`] (the framing of a run's `turntable.png`: azimuth 360°·k/N, elevation
+//! 20°, head light, distance fitting the bounding sphere in the field of view) on the CPU renderer at
+//! [`ClipSettings::render_size`] pixels; the CLIP model resizes the renders to its own size
+//! (bicubic, antialiased; `diffusion_onnx::clip`). The prompt of a run directory is the `prompt` of
+//! its `deformation.npz` `dataset_cfg` (what the run was given); a model-free run has none, and its
+//! CLIP columns are empty with the reason.
 
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
+use diffusion_onnx::{ClipModel, cosine_similarity};
 use mesh_core::TriMesh;
 use mesh_core::geometry::{bbox_diagonal, face_areas, signed_volume, vertex_centroid};
 use serde::Serialize;
@@ -35,6 +47,55 @@ pub struct PairMetrics {
     pub area_ratio_std: f64,
     /// `V_result / V_source` (NaN when the source volume is 0, e.g. an open sheet).
     pub volume_ratio: f64,
+    /// CLIP similarity of source and result (only when a CLIP model was given).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub clip: Option<ClipScore>,
+}
+
+/// CLIP similarity of one pair: mean over views of cos(image_v, text) for the source and the result.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ClipScore {
+    /// The prompt scored against (None: no prompt, see `skipped`).
+    pub prompt: Option<String>,
+    /// Views per mesh.
+    pub views: usize,
+    /// Mean cosine of the source's views (None when skipped).
+    pub source: Option<f64>,
+    /// Mean cosine of the result's views (None when skipped).
+    pub result: Option<f64>,
+    /// Why there are no scores.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub skipped: Option<String>,
+}
+
+/// The prompt a pair is scored against, or why it has none.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Prompt {
+    /// The prompt text.
+    Text(String),
+    /// No prompt; the reason (shown in the table and the JSON).
+    Missing(String),
+}
+
+/// How the CLIP similarity renders the meshes.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ClipSettings {
+    /// Orbit views per mesh (N; the paper: 16).
+    pub views: usize,
+    /// Side of the square renders in pixels (512: the run's render size; the CLIP model resizes).
+    pub render_size: usize,
+    /// Vertical field of view in degrees (the configuration's default, 90°).
+    pub fov_deg: f64,
+}
+
+impl Default for ClipSettings {
+    fn default() -> Self {
+        Self {
+            views: 16,
+            render_size: 512,
+            fov_deg: crate::config::Config::default().camera.fov_deg,
+        }
+    }
 }
 
 /// Metrics of a set of pairs.
@@ -48,6 +109,12 @@ pub struct EvalReport {
     pub area_ratio_std: f64,
     /// Mean of the finite per-pair volume ratios.
     pub volume_ratio_mean: f64,
+    /// Mean over the scored pairs of the source's CLIP similarity (only with a CLIP model).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub clip_source_mean: Option<f64>,
+    /// Mean over the scored pairs of the result's CLIP similarity (only with a CLIP model).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub clip_result_mean: Option<f64>,
 }
 
 fn mean_std(values: &[f64]) -> (f64, f64) {
@@ -132,6 +199,7 @@ pub fn evaluate(pairs: &[(String, TriMesh, TriMesh)]) -> anyhow::Result<EvalRepo
             area_ratio_mean: m,
             area_ratio_std: s,
             volume_ratio: volume,
+            clip: None,
         });
         pooled.extend(ratios);
     }
@@ -147,18 +215,183 @@ pub fn evaluate(pairs: &[(String, TriMesh, TriMesh)]) -> anyhow::Result<EvalRepo
         area_ratio_mean: mean,
         area_ratio_std: std,
         volume_ratio_mean,
+        clip_source_mean: None,
+        clip_result_mean: None,
     })
+}
+
+/// `(1/N) Σ_v cos(image_v, text)`: the paper's CLIP similarity of one mesh from its view embeddings.
+pub fn mean_view_similarity(views: &[Vec<f32>], text: &[f32]) -> f64 {
+    if views.is_empty() {
+        return f64::NAN;
+    }
+    views
+        .iter()
+        .map(|v| cosine_similarity(v, text))
+        .sum::<f64>()
+        / views.len() as f64
+}
+
+/// Image embeddings of `settings.views` orbit renders of `mesh` (normalized to the side-2 cube);
+/// adds the time spent to `timings`.
+pub fn view_embeddings(
+    clip: &mut ClipModel,
+    renderer: &mut raster_diff::CpuRenderer,
+    mesh: &TriMesh,
+    settings: &ClipSettings,
+    timings: &mut ClipTimings,
+) -> anyhow::Result<Vec<Vec<f32>>> {
+    let start = std::time::Instant::now();
+    let mut positions = mesh.positions.clone();
+    mesh_core::normalize::side2_cube(&mut positions);
+    let images = crate::runner::turntable(
+        renderer,
+        &positions,
+        &mesh.faces,
+        settings.views,
+        settings.render_size,
+        settings.fov_deg,
+    )?;
+    if images.width != images.height {
+        bail!(
+            "the turntable render is {}×{}, CLIP needs square images",
+            images.width,
+            images.height
+        );
+    }
+    let rendered = std::time::Instant::now();
+    timings.render_s += (rendered - start).as_secs_f64();
+    let embeddings = clip
+        .embed_images(&images.rgb, images.count, images.width)
+        .context("CLIP image embedding")?;
+    timings.embed_images_s += rendered.elapsed().as_secs_f64();
+    timings.meshes += 1;
+    Ok(embeddings)
+}
+
+/// Wall-clock seconds spent by [`add_clip_scores`], by stage.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ClipTimings {
+    /// Rendering the orbit views (CPU renderer).
+    pub render_s: f64,
+    /// Preprocessing and embedding the views.
+    pub embed_images_s: f64,
+    /// Tokenizing and embedding the prompts.
+    pub embed_texts_s: f64,
+    /// Meshes rendered.
+    pub meshes: usize,
+}
+
+/// Adds the CLIP similarity of every pair to `report` (`pairs` and `prompts` in the order the report
+/// was made from). Each distinct prompt is embedded once; pairs without a prompt get an empty score
+/// with the reason. Also fills the report's means over the scored pairs.
+pub fn add_clip_scores(
+    report: &mut EvalReport,
+    pairs: &[(String, TriMesh, TriMesh)],
+    prompts: &[Prompt],
+    clip: &mut ClipModel,
+    settings: &ClipSettings,
+) -> anyhow::Result<ClipTimings> {
+    if pairs.len() != report.pairs.len() || prompts.len() != pairs.len() {
+        bail!(
+            "{} pairs, {} prompts, {} report rows: they must match",
+            pairs.len(),
+            prompts.len(),
+            report.pairs.len()
+        );
+    }
+    if settings.views == 0 || settings.render_size == 0 {
+        bail!("CLIP needs at least one view and a positive render size");
+    }
+    let mut renderer = raster_diff::CpuRenderer::default();
+    let mut timings = ClipTimings::default();
+    let mut texts: Vec<(String, Vec<f32>)> = Vec::new();
+    let (mut sources, mut results) = (Vec::new(), Vec::new());
+    for ((row, (name, source, result)), prompt) in report.pairs.iter_mut().zip(pairs).zip(prompts) {
+        let text = match prompt {
+            Prompt::Text(t) => t,
+            Prompt::Missing(why) => {
+                row.clip = Some(ClipScore {
+                    prompt: None,
+                    views: settings.views,
+                    source: None,
+                    result: None,
+                    skipped: Some(why.clone()),
+                });
+                continue;
+            }
+        };
+        let embedding = match texts.iter().find(|(t, _)| t == text) {
+            Some((_, e)) => e.clone(),
+            None => {
+                let start = std::time::Instant::now();
+                let e = clip
+                    .embed_texts(&[text])
+                    .with_context(|| format!("CLIP text embedding of {text:?}"))?
+                    .pop()
+                    .context("the CLIP text encoder returned nothing")?;
+                texts.push((text.clone(), e.clone()));
+                timings.embed_texts_s += start.elapsed().as_secs_f64();
+                e
+            }
+        };
+        let mut score = |mesh: &TriMesh, which: &str| {
+            view_embeddings(clip, &mut renderer, mesh, settings, &mut timings)
+                .map(|v| mean_view_similarity(&v, &embedding))
+                .with_context(|| format!("{name}: CLIP similarity of the {which}"))
+        };
+        let s = score(source, "source")?;
+        let r = score(result, "result")?;
+        sources.push(s);
+        results.push(r);
+        row.clip = Some(ClipScore {
+            prompt: Some(text.clone()),
+            views: settings.views,
+            source: Some(s),
+            result: Some(r),
+            skipped: None,
+        });
+    }
+    let mean = |v: &[f64]| (!v.is_empty()).then(|| mean_std(v).0);
+    report.clip_source_mean = mean(&sources);
+    report.clip_result_mean = mean(&results);
+    Ok(timings)
+}
+
+/// The prompt recorded in a saved deformation's `dataset_cfg` JSON (`{"mesh": …, "prompt": …}` for
+/// the text path, `{"mesh": …, "style": …}` for the model-free path).
+pub fn prompt_of_dataset_cfg(dataset_cfg: &str) -> Prompt {
+    let value: serde_json::Value = match serde_json::from_str(dataset_cfg) {
+        Ok(v) => v,
+        Err(e) => {
+            return Prompt::Missing(format!(
+                "deformation.npz dataset_cfg is not JSON ({e}); no prompt"
+            ));
+        }
+    };
+    match (value.get("prompt"), value.get("style")) {
+        (Some(serde_json::Value::String(p)), _) => Prompt::Text(p.clone()),
+        (_, Some(style)) => Prompt::Missing(format!(
+            "model-free run (style {style}): no prompt to score against"
+        )),
+        _ => Prompt::Missing("deformation.npz dataset_cfg has no \"prompt\"".into()),
+    }
 }
 
 /// The pair stored in a run directory: source = `deformation.npz`'s `verts` (the normalized rest
 /// mesh), result = `mesh.obj`.
 pub fn load_run_pair(dir: &Path) -> anyhow::Result<(TriMesh, TriMesh)> {
+    load_run(dir).map(|(s, r, _)| (s, r))
+}
+
+/// [`load_run_pair`] plus the run's prompt ([`prompt_of_dataset_cfg`]).
+pub fn load_run(dir: &Path) -> anyhow::Result<(TriMesh, TriMesh, Prompt)> {
     let saved = mesh_core::npz::SavedDeformation::read(dir.join("deformation.npz"))
         .with_context(|| format!("{} is not a complete run directory", dir.display()))?;
     let source = TriMesh::new(saved.verts_f64(), saved.faces.clone());
     let result = mesh_core::io::read_mesh(dir.join("mesh.obj"))
         .with_context(|| format!("cannot read {}", dir.join("mesh.obj").display()))?;
-    Ok((source, result))
+    Ok((source, result, prompt_of_dataset_cfg(&saved.dataset_cfg)))
 }
 
 /// Loads a pair of mesh files.
@@ -170,26 +403,62 @@ pub fn load_file_pair(source: &Path, result: &Path) -> anyhow::Result<(TriMesh, 
     Ok((s, r))
 }
 
-/// A human-readable table of a report.
+/// A human-readable table of a report. With CLIP scores, two more columns (source and result mean
+/// cosine) and, below the table, the prompt of each pair or why it has none.
 pub fn table(report: &EvalReport) -> String {
+    let with_clip = report.pairs.iter().any(|p| p.clip.is_some());
+    let clip_cell = |v: Option<f64>| match v {
+        Some(x) => format!(" {x:>9.4}"),
+        None => format!(" {:>9}", "—"),
+    };
     let mut s = format!(
-        "{:<40} {:>8} {:>18} {:>10}\n",
+        "{:<40} {:>8} {:>18} {:>10}",
         "pair", "faces", "area ratio", "volume"
     );
+    if with_clip {
+        s += &format!(" {:>9} {:>9}", "CLIP src", "CLIP res");
+    }
+    s += "\n";
     for p in &report.pairs {
         s += &format!(
-            "{:<40} {:>8} {:>8.3} ± {:<7.3} {:>10.3}\n",
+            "{:<40} {:>8} {:>8.3} ± {:<7.3} {:>10.3}",
             p.name, p.faces, p.area_ratio_mean, p.area_ratio_std, p.volume_ratio
         );
+        if with_clip {
+            let c = p.clip.as_ref();
+            s += &clip_cell(c.and_then(|c| c.source));
+            s += &clip_cell(c.and_then(|c| c.result));
+        }
+        s += "\n";
     }
     s += &format!(
-        "{:<40} {:>8} {:>8.3} ± {:<7.3} {:>10.3}\n",
+        "{:<40} {:>8} {:>8.3} ± {:<7.3} {:>10.3}",
         "pooled",
         report.pairs.iter().map(|p| p.faces).sum::<usize>(),
         report.area_ratio_mean,
         report.area_ratio_std,
         report.volume_ratio_mean
     );
+    if with_clip {
+        s += &clip_cell(report.clip_source_mean);
+        s += &clip_cell(report.clip_result_mean);
+    }
+    s += "\n";
+    if with_clip {
+        for p in &report.pairs {
+            match &p.clip {
+                Some(ClipScore {
+                    prompt: Some(t),
+                    views,
+                    ..
+                }) => s += &format!("CLIP {}: {t:?}, {views} views\n", p.name),
+                Some(ClipScore {
+                    skipped: Some(why), ..
+                }) => s += &format!("CLIP {}: empty: {why}\n", p.name),
+                _ => {}
+            }
+        }
+    }
     s
 }
 
@@ -306,5 +575,69 @@ mod tests {
         let mut other = c.clone();
         other.faces.pop();
         assert!(evaluate(&[("x".into(), c, other)]).is_err());
+    }
+
+    #[test]
+    fn prompt_comes_from_dataset_cfg_or_says_why_not() {
+        assert_eq!(
+            prompt_of_dataset_cfg(r#"{"mesh": "a.obj", "prompt": "a cactus"}"#),
+            Prompt::Text("a cactus".into())
+        );
+        let Prompt::Missing(why) = prompt_of_dataset_cfg(r#"{"mesh": "a.obj", "style": "cube"}"#)
+        else {
+            panic!("a style run has no prompt")
+        };
+        assert!(why.contains("model-free") && why.contains("cube"), "{why}");
+        assert!(matches!(
+            prompt_of_dataset_cfg(r#"{"mesh": "a.obj"}"#),
+            Prompt::Missing(w) if w.contains("\"prompt\"")
+        ));
+        assert!(matches!(
+            prompt_of_dataset_cfg("not json"),
+            Prompt::Missing(w) if w.contains("not JSON")
+        ));
+    }
+
+    #[test]
+    fn mean_view_similarity_is_the_mean_of_per_view_cosines() {
+        let text = [1.0f32, 0.0];
+        // cos = 1, 0, −1 → mean 0; scaling a view does not change its cosine.
+        let views = vec![vec![3.0f32, 0.0], vec![0.0, 2.0], vec![-0.5, 0.0]];
+        assert!(mean_view_similarity(&views, &text).abs() < 1e-12);
+        let views = vec![vec![1.0f32, 1.0], vec![5.0, 0.0]];
+        let want = (0.5f64.sqrt() + 1.0) / 2.0;
+        assert!((mean_view_similarity(&views, &text) - want).abs() < 1e-7);
+        assert!(mean_view_similarity(&[], &text).is_nan());
+    }
+
+    #[test]
+    fn table_shows_clip_columns_and_reasons() {
+        let c = cube();
+        let mut r = evaluate(&[
+            ("a".into(), c.clone(), c.clone()),
+            ("b".into(), c.clone(), c),
+        ])
+        .unwrap_or_else(|e| panic!("{e:#}"));
+        assert!(!table(&r).contains("CLIP"));
+        r.pairs[0].clip = Some(ClipScore {
+            prompt: Some("a cat".into()),
+            views: 16,
+            source: Some(0.25),
+            result: Some(0.3125),
+            skipped: None,
+        });
+        r.pairs[1].clip = Some(ClipScore {
+            prompt: None,
+            views: 16,
+            source: None,
+            result: None,
+            skipped: Some("model-free run".into()),
+        });
+        let t = table(&r);
+        assert!(
+            t.contains("CLIP src") && t.contains("0.2500") && t.contains("0.3125"),
+            "{t}"
+        );
+        assert!(t.contains("b: empty: model-free run"), "{t}");
     }
 }

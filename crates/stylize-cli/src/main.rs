@@ -25,7 +25,7 @@ enum Command {
     Run(cmd::run::Args),
     /// Stylize every row of a manifest (sharded across a job array).
     Batch(cmd::batch::Args),
-    /// Identity-preservation metrics: per-face area ratio and volume ratio (spec §9).
+    /// Metrics of spec §9: per-face area ratio, volume ratio, and CLIP similarity with --clip DIR.
     Eval(cmd::eval::Args),
     /// Run one guidance evaluation with given noise/timesteps and dump every intermediate to .npz.
     #[command(hide = true, name = "debug-guidance")]

@@ -1,15 +1,20 @@
-//! `stylize eval`: identity-preservation metrics (spec §9) for run directories or mesh pairs.
+//! `stylize eval`: identity-preservation metrics (spec §9) for run directories or mesh pairs, and the
+//! CLIP similarity when a CLIP model directory is given.
 
 use std::path::PathBuf;
+use std::time::Instant;
 
-use anyhow::bail;
+use anyhow::{Context, bail};
 
-use crate::eval::{evaluate, label, load_file_pair, load_run_pair, table};
+use crate::eval::{
+    ClipSettings, Prompt, add_clip_scores, evaluate, label, load_file_pair, load_run, table,
+};
 
 /// Arguments of `stylize eval`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// Run directories (source: `deformation.npz` verts; result: `mesh.obj`).
+    /// Run directories (source: `deformation.npz` verts; result: `mesh.obj`; prompt: the one the run
+    /// was given, recorded in `deformation.npz`).
     pub runs: Vec<PathBuf>,
     /// A source mesh and its result (same faces), repeatable: `--pair SOURCE RESULT`.
     #[arg(long, num_args = 2, value_names = ["SOURCE", "RESULT"])]
@@ -17,14 +22,30 @@ pub struct Args {
     /// Print JSON instead of a table.
     #[arg(long)]
     pub json: bool,
+    /// CLIP model directory (from scripts/export_clip_onnx.py; the paper uses ViT-B/16): adds the
+    /// CLIP similarity of source and result, the mean over views of cos(image embedding, prompt
+    /// embedding).
+    #[arg(long, value_name = "DIR")]
+    pub clip: Option<PathBuf>,
+    /// Orbit views rendered per mesh for CLIP.
+    #[arg(long, default_value_t = 16, requires = "clip")]
+    pub clip_views: usize,
+    /// Side in pixels of the CLIP renders (the CLIP model then resizes them to its own size).
+    #[arg(long, default_value_t = 512, requires = "clip")]
+    pub clip_render_size: usize,
+    /// Prompt for the `--pair` pairs' CLIP similarity (run directories use their own prompt).
+    #[arg(long, requires = "clip")]
+    pub prompt: Option<String>,
 }
 
 /// Runs `stylize eval`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     let mut pairs = Vec::new();
+    let mut prompts = Vec::new();
     for dir in &args.runs {
-        let (s, r) = load_run_pair(dir)?;
+        let (s, r, p) = load_run(dir)?;
         pairs.push((label(dir), s, r));
+        prompts.push(p);
     }
     for two in args.pair.chunks(2) {
         let [source, result] = two else {
@@ -32,11 +53,45 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         };
         let (s, r) = load_file_pair(source, result)?;
         pairs.push((format!("{} → {}", label(source), label(result)), s, r));
+        prompts.push(match &args.prompt {
+            Some(t) => Prompt::Text(t.clone()),
+            None => Prompt::Missing("no --prompt given for --pair".into()),
+        });
     }
     if pairs.is_empty() {
         bail!("nothing to evaluate: give run directories or --pair SOURCE RESULT");
     }
-    let report = evaluate(&pairs)?;
+    let mut report = evaluate(&pairs)?;
+    if let Some(dir) = &args.clip {
+        if args.clip_views == 0 {
+            bail!("--clip-views must be at least 1");
+        }
+        if !(1..=4096).contains(&args.clip_render_size) {
+            bail!("--clip-render-size must be in 1..=4096");
+        }
+        let start = Instant::now();
+        let mut clip =
+            diffusion_onnx::ClipModel::open(dir, &diffusion_onnx::SessionOptions::default())
+                .with_context(|| format!("--clip {}", dir.display()))?;
+        let settings = ClipSettings {
+            views: args.clip_views,
+            render_size: args.clip_render_size,
+            ..ClipSettings::default()
+        };
+        let opened = start.elapsed().as_secs_f64();
+        let t = add_clip_scores(&mut report, &pairs, &prompts, &mut clip, &settings)?;
+        eprintln!(
+            "CLIP ({}): {} mesh(es) × {} views at {} px; open {opened:.3} s, render {:.3} s, \
+             image embedding {:.3} s, text embedding {:.3} s",
+            clip.manifest().name,
+            t.meshes,
+            settings.views,
+            settings.render_size,
+            t.render_s,
+            t.embed_images_s,
+            t.embed_texts_s
+        );
+    }
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
