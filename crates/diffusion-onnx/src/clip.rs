@@ -24,8 +24,9 @@
 //! `(x − mean) / std`. Differences from `CLIPImageProcessor` (resize the shortest side to S, centre
 //! crop S × S, rescale bytes by 1/255, normalize): for a square image shortest-side resize + centre
 //! crop is exactly this resize; here the input is float and nothing is quantized to 8 bits (PIL
-//! resizes `uint8` RGB images and rounds after each pass), so values differ by up to about 1/255
-//! before normalization. An image already `S × S` is not resampled.
+//! resizes `uint8` RGB images, rounds after each pass and clamps), so values differ by about one
+//! 8-bit step before normalization (measured: at most 0.005; docs/models.md §6). An image already
+//! `S × S` is not resampled.
 
 use std::borrow::Cow;
 use std::io::Read;
@@ -229,7 +230,8 @@ fn resample_coefficients(input: usize, output: usize) -> Vec<(usize, Vec<f64>)> 
 /// `height × width` to `out_height × out_width` with PIL's `Image.BICUBIC` on float planes: the
 /// horizontal pass first (into an f32 intermediate), then the vertical one, each a normalized
 /// bicubic kernel widened by the scale factor when reducing. Values are not clamped (bicubic can
-/// overshoot slightly, as PIL's float mode does).
+/// overshoot slightly, as PIL's float mode does). Errors when a size is zero or `image` does not
+/// hold `height · width · channels` values.
 pub fn resize_bicubic(
     image: &[f32],
     height: usize,
@@ -237,8 +239,19 @@ pub fn resize_bicubic(
     channels: usize,
     out_height: usize,
     out_width: usize,
-) -> Vec<f32> {
-    debug_assert_eq!(image.len(), height * width * channels);
+) -> Result<Vec<f32>, OnnxError> {
+    if [height, width, channels, out_height, out_width].contains(&0)
+        || image.len() != height * width * channels
+    {
+        return Err(OnnxError::Shape {
+            model: "bicubic resize".into(),
+            message: format!(
+                "{} values for a {height}×{width}×{channels} image resized to {out_height}×{out_width} \
+                 (sizes must be positive and the value count height·width·channels)",
+                image.len()
+            ),
+        });
+    }
     let horizontal = resample_coefficients(width, out_width);
     let mut tmp = vec![0.0f32; height * out_width * channels];
     for r in 0..height {
@@ -267,12 +280,13 @@ pub fn resize_bicubic(
             }
         }
     }
-    out
+    Ok(out)
 }
 
 /// CLIP preprocessing of `count` square RGB images `(image, row, column, channel)` of side `side`,
 /// values in `[0, 1]`: bicubic resize to `size` (skipped when `side == size`), then
-/// `(x − mean) / std`, returned as `pixel_values` `(image, channel, row, column)`.
+/// `(x − mean) / std`, returned as `pixel_values` `(image, channel, row, column)`. Errors when
+/// `rgb` does not hold `count · side² · 3` values or a size is zero.
 pub fn preprocess(
     rgb: &[f32],
     count: usize,
@@ -280,21 +294,31 @@ pub fn preprocess(
     size: usize,
     mean: [f32; 3],
     std: [f32; 3],
-) -> Vec<f32> {
+) -> Result<Vec<f32>, OnnxError> {
     let per = side * side * 3;
+    if side == 0 || size == 0 || rgb.len() != count * per {
+        return Err(OnnxError::Shape {
+            model: "CLIP preprocessing".into(),
+            message: format!(
+                "{} values for {count} RGB images of side {side} (need count·side²·3 = {}), target size {size}",
+                rgb.len(),
+                count * per
+            ),
+        });
+    }
     let mut out = Vec::with_capacity(count * 3 * size * size);
     for n in 0..count {
         let img = &rgb[n * per..(n + 1) * per];
         let resized: Cow<'_, [f32]> = if side == size {
             Cow::Borrowed(img)
         } else {
-            Cow::Owned(resize_bicubic(img, side, side, 3, size, size))
+            Cow::Owned(resize_bicubic(img, side, side, 3, size, size)?)
         };
         for c in 0..3 {
             out.extend(resized.chunks_exact(3).map(|px| (px[c] - mean[c]) / std[c]));
         }
     }
-    out
+    Ok(out)
 }
 
 /// `a·b / (|a| |b|)` in f64; 0 when either vector is zero. Slices of different lengths are compared
@@ -644,7 +668,7 @@ impl ClipModel {
                 size,
                 mean,
                 std,
-            );
+            )?;
             let value = float_input(Dtype::Fp32, vec![n, 3, size, size], pixels)?;
             out.extend(Self::run_single(
                 &mut self.image,
@@ -695,11 +719,13 @@ mod tests {
     #[test]
     fn resize_preserves_constants_and_identity() {
         let img: Vec<f32> = (0..5 * 5 * 3).map(|i| (i % 7) as f32 / 7.0).collect();
-        assert_eq!(resize_bicubic(&img, 5, 5, 3, 5, 5), img);
+        assert_eq!(resize_bicubic(&img, 5, 5, 3, 5, 5).ok(), Some(img));
         let flat = vec![0.25f32; 48 * 48 * 3];
-        let small = resize_bicubic(&flat, 48, 48, 3, 7, 7);
+        let small = resize_bicubic(&flat, 48, 48, 3, 7, 7).expect("resize");
         assert!(small.iter().all(|v| (v - 0.25).abs() < 1e-6));
-        let big = resize_bicubic(&flat, 48, 48, 3, 100, 100);
+        let big = resize_bicubic(&flat, 48, 48, 3, 100, 100).expect("resize");
+        assert!(resize_bicubic(&flat, 48, 48, 3, 0, 7).is_err());
+        assert!(resize_bicubic(&flat, 47, 48, 3, 7, 7).is_err());
         assert!(big.iter().all(|v| (v - 0.25).abs() < 1e-6));
     }
 
@@ -713,7 +739,7 @@ mod tests {
                 [v; 3]
             })
             .collect();
-        let small = resize_bicubic(&img, side, side, 3, 8, 8);
+        let small = resize_bicubic(&img, side, side, 3, 8, 8).expect("resize");
         assert!(
             small.iter().all(|v| (v - 0.5).abs() < 0.02),
             "{:?}",

@@ -107,20 +107,18 @@ fn preprocessing_matches_pil_bicubic_and_normalization() {
     let (s_big, big) = ref_f32("images_resized");
     let (s_exact, exact) = ref_f32("images_exact");
     let (_, pixel_values) = ref_f32("pixel_values");
-    let mut got = preprocess(&big, s_big[0], s_big[1], m.image_size, m.mean, m.std);
+    let mut got =
+        preprocess(&big, s_big[0], s_big[1], m.image_size, m.mean, m.std).expect("preprocess");
     assert!(
         s_big[1] != m.image_size,
         "the reference must exercise the resize"
     );
-    got.extend(preprocess(
-        &exact,
-        s_exact[0],
-        s_exact[1],
-        m.image_size,
-        m.mean,
-        m.std,
-    ));
+    got.extend(
+        preprocess(&exact, s_exact[0], s_exact[1], m.image_size, m.mean, m.std)
+            .expect("preprocess"),
+    );
     assert_close(&got, &pixel_values, (1e-4, 0.0), "pixel_values");
+    assert!(preprocess(&big[1..], s_big[0], s_big[1], m.image_size, m.mean, m.std).is_err());
 }
 
 #[test]
