@@ -2,7 +2,10 @@
 //! 5,120, 20,480 and 81,920 faces, per backend (cpu; wgpu when an adapter exists — on a machine
 //! without a GPU that is lavapipe, a software Vulkan, so its numbers say nothing about real GPUs).
 //!
-//! `cargo run --release -p raster-diff --example bench_render [-- --reps N]`
+//! `cargo run --release -p raster-diff --example bench_render [-- --reps N] [--backend cpu|wgpu]`
+//!
+//! The wgpu backend runs projection, rasterization, shading, antialiasing and their backward as
+//! WGSL compute shaders; smooth normals and their adjoint stay on the CPU (see `raster_diff::gpu`).
 
 use std::time::Instant;
 
@@ -23,6 +26,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .and_then(|i| args.get(i + 1))
         .and_then(|s| s.parse().ok())
         .unwrap_or(5usize);
+    let only = args
+        .iter()
+        .position(|a| a == "--backend")
+        .and_then(|i| args.get(i + 1))
+        .cloned();
+    let wanted = |name: &str| only.as_deref().is_none_or(|o| o == name);
     let (w, h, n_views) = (512, 512, 8);
     let views = sample_views(
         &CameraConfig::default(),
@@ -30,11 +39,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         1.0,
         &mut ChaCha8Rng::seed_from_u64(0),
     );
-    let mut backends: Vec<Box<dyn Renderer>> = vec![Box::new(CpuRenderer::default())];
+    let mut backends: Vec<Box<dyn Renderer>> = Vec::new();
+    if wanted("cpu") {
+        backends.push(Box::new(CpuRenderer::default()));
+    }
     #[cfg(feature = "gpu")]
-    match raster_diff::gpu::WgpuRenderer::new(raster_diff::RenderSettings::default()) {
-        Ok(g) => backends.push(Box::new(g)),
-        Err(e) => println!("wgpu backend skipped: {e}"),
+    if wanted("wgpu") {
+        match raster_diff::gpu::WgpuRenderer::new(raster_diff::RenderSettings::default()) {
+            Ok(g) => backends.push(Box::new(g)),
+            Err(e) => println!("wgpu backend skipped: {e}"),
+        }
     }
     println!("{n_views} views at {w}×{h}, median of {reps} runs (after one warm-up)");
     println!("| backend | faces | vertices | forward (ms) | forward+backward (ms) |");

@@ -280,3 +280,52 @@ fn antialiasing_makes_the_image_continuous_as_an_edge_crosses_a_pixel_centre() {
         }
     }
 }
+
+/// A collapsed triangle, a sliver, a triangle crossing the near plane and one behind the eye:
+/// images stay in [0, 1] and gradients finite.
+#[test]
+fn degenerate_geometry_stays_finite() {
+    let v = vec![
+        [0.1, 0.1, 0.0],
+        [0.1, 0.1, 0.0],
+        [0.1, 0.1, 0.0],
+        [-0.5, -0.5, 0.0],
+        [0.5, 0.5, 0.0],
+        [0.5, 0.5 + 1e-13, 0.0],
+        [-0.3, 0.0, 1.9],
+        [0.3, 0.0, 1.0],
+        [0.0, 0.3, 1.0],
+        [0.0, 0.0, 5.0],
+        [1.0, 0.0, 5.0],
+        [0.0, 1.0, 5.0],
+        [-0.6, -0.2, 0.0],
+        [0.6, -0.2, 0.0],
+        [0.0, 0.6, 0.0],
+    ];
+    let f = vec![[0, 1, 2], [3, 4, 5], [6, 7, 8], [9, 10, 11], [12, 13, 14]];
+    let views = [
+        front_view(2.0, [0.0, 0.0, 2.0]),
+        front_view(2.0, [0.0, 0.0, 0.0]),
+    ];
+    for antialias in [true, false] {
+        for (name, mut b) in backends(aa(antialias)) {
+            let img = b.renderer().render(&v, &f, &views, 24, 24).expect("render");
+            assert!(
+                img.rgb
+                    .iter()
+                    .all(|x| x.is_finite() && (0.0..=1.0).contains(x)),
+                "{name}: image out of range"
+            );
+            let d = Images {
+                rgb: vec![1.0; img.rgb.len()],
+                ..img
+            };
+            let g = b.renderer().backward(&d).expect("backward");
+            assert!(
+                g.iter().flatten().all(|x| x.is_finite()),
+                "{name}: non-finite gradient"
+            );
+            assert!(g.iter().flatten().any(|x| *x != 0.0), "{name}: no gradient");
+        }
+    }
+}
