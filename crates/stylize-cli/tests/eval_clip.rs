@@ -304,3 +304,41 @@ fn bad_clip_arguments_are_clear_errors() {
     let err = fails(&stylize(&["eval", run, "--prompt", "a chair"]));
     assert!(err.contains("--clip"), "{err}");
 }
+
+#[test]
+fn a_real_text_path_run_is_scored_against_its_own_prompt() {
+    let st = setup();
+    let run = st.root.join("text_path_run");
+    let model = fixtures().join("tiny-if");
+    let out = ok(Command::new(env!("CARGO_BIN_EXE_stylize"))
+        .args([
+            "run",
+            s(&st.source),
+            "--prompt",
+            "a marble bust",
+            "--model",
+            s(&model),
+            "-o",
+            s(&run),
+            "--quiet",
+            "--set",
+            "optim.iterations=1",
+            "--set",
+            "camera.views=1",
+            "--set",
+            "render.width=32",
+            "--set",
+            "render.height=32",
+            "--set",
+            "run.turntable_size=16",
+        ])
+        .env(diffusion_onnx::CACHE_ENV, st.root.join("cache"))
+        .output());
+    must(&out);
+    let clip = tiny_clip();
+    let report = must(&stylize(&clip_args(&[s(&run), "--json"], s(&clip))));
+    let c = &report["pairs"][0]["clip"];
+    assert_eq!(c["prompt"], "a marble bust", "{report}");
+    assert!((-1.0..=1.0).contains(&num(&c["result"])), "{report}");
+    assert!((-1.0..=1.0).contains(&num(&c["source"])), "{report}");
+}
