@@ -187,43 +187,17 @@ impl ClipTokenizer {
     }
 }
 
-/// PIL's bicubic kernel (a = −0.5).
-fn bicubic(x: f64) -> f64 {
-    const A: f64 = -0.5;
-    let x = x.abs();
-    if x < 1.0 {
-        ((A + 2.0) * x - (A + 3.0)) * x * x + 1.0
-    } else if x < 2.0 {
-        (((x - 5.0) * x + 8.0) * x - 4.0) * A
-    } else {
-        0.0
-    }
-}
-
-/// Per output index: the first input index and the normalized weights, as PIL's `precompute_coeffs`
-/// (pixel centres at +0.5, kernel widened by the scale factor when reducing, edges renormalized).
-fn resample_coefficients(input: usize, output: usize) -> Vec<(usize, Vec<f64>)> {
-    let scale = input as f64 / output as f64;
-    let filter_scale = scale.max(1.0);
-    let support = 2.0 * filter_scale;
-    (0..output)
-        .map(|o| {
-            let centre = (o as f64 + 0.5) * scale;
-            // `as i64` truncates towards zero, as C's (int) cast in PIL.
-            let lo = ((centre - support + 0.5) as i64).max(0) as usize;
-            let hi = ((centre + support + 0.5) as i64).clamp(0, input as i64) as usize;
-            let mut w: Vec<f64> = (lo..hi)
-                .map(|i| bicubic((i as f64 - centre + 0.5) / filter_scale))
-                .collect();
-            let total: f64 = w.iter().sum();
-            if total != 0.0 {
-                for v in &mut w {
-                    *v /= total;
-                }
-            }
-            (lo, w)
+/// Per output index: the first input index and the normalized weights of PIL's `Image.BICUBIC`
+/// (`precompute_coeffs`: pixel centres at +0.5, kernel widened by the scale factor when reducing,
+/// weights renormalized at the borders). This is exactly csd's antialiased Keys cubic (a = −0.5), the
+/// kernel the guidance resizes with, so the two share one implementation.
+fn resample_coefficients(input: usize, output: usize) -> Result<Vec<csd::resize::Taps>, OnnxError> {
+    csd::Resize1d::cubic_antialias(input, output)
+        .map(|r| r.rows().to_vec())
+        .map_err(|e| OnnxError::Shape {
+            model: "bicubic resize".into(),
+            message: e.to_string(),
         })
-        .collect()
 }
 
 /// Resizes one image `(row, column, channel)` with `channels` interleaved channels from
@@ -252,10 +226,17 @@ pub fn resize_bicubic(
             ),
         });
     }
-    let horizontal = resample_coefficients(width, out_width);
+    let horizontal = resample_coefficients(width, out_width)?;
     let mut tmp = vec![0.0f32; height * out_width * channels];
     for r in 0..height {
-        for (o, (lo, w)) in horizontal.iter().enumerate() {
+        for (
+            o,
+            csd::resize::Taps {
+                start: lo,
+                weights: w,
+            },
+        ) in horizontal.iter().enumerate()
+        {
             for c in 0..channels {
                 let s: f64 = w
                     .iter()
@@ -266,9 +247,16 @@ pub fn resize_bicubic(
             }
         }
     }
-    let vertical = resample_coefficients(height, out_height);
+    let vertical = resample_coefficients(height, out_height)?;
     let mut out = vec![0.0f32; out_height * out_width * channels];
-    for (o, (lo, w)) in vertical.iter().enumerate() {
+    for (
+        o,
+        csd::resize::Taps {
+            start: lo,
+            weights: w,
+        },
+    ) in vertical.iter().enumerate()
+    {
         for col in 0..out_width {
             for c in 0..channels {
                 let s: f64 = w
