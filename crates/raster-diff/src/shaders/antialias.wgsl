@@ -154,24 +154,45 @@ fn find_blend(view: u32, a: u32, axis: u32) -> Blend {
     return r;
 }
 
-// The blend of each of pixel px's neighbour pairs (invalid ones have found = false).
-fn pair_blends(view: u32, px: u32) -> array<Blend, 4> {
+// Whether any of pixel px's neighbour pairs has two different triangle ids (only such pairs can
+// blend; almost all pixels have none, and skip the blend search).
+fn on_id_boundary(view: u32, px: u32) -> bool {
     let col = px % params.width;
     let row = px / params.width;
-    var none: Blend;
-    none.found = false;
-    var out = array<Blend, 4>(none, none, none, none);
+    let t = triangle_at(view, px);
+    return (col > 0u && triangle_at(view, px - 1u) != t)
+        || (col + 1u < params.width && triangle_at(view, px + 1u) != t)
+        || (row > 0u && triangle_at(view, px - params.width) != t)
+        || (row + 1u < params.height && triangle_at(view, px + params.width) != t);
+}
+
+// Antialiasing change of pixel px (colour c before antialiasing) from pair blend `bl`:
+// α·(c_source − c) if px is the blend's target, else 0.
+fn colour_term(view: u32, px: u32, c: f32, bl: Blend) -> f32 {
+    if (bl.found && bl.target_px == px) {
+        return bl.alpha * (img[view * pixels_per_view() + bl.source_px] - c);
+    }
+    return 0.0;
+}
+
+// Antialiased colour of pixel px (colour c before antialiasing) from the blends of its (up to)
+// four neighbour pairs. The pairs are visited one by one, without an array of blends: local
+// arrays indexed at run time cost scratch memory on every invocation on some adapters.
+fn gather_colour(view: u32, px: u32, c: f32) -> f32 {
+    let col = px % params.width;
+    let row = px / params.width;
+    var out = c;
     if (col > 0u) {
-        out[0] = find_blend(view, px - 1u, 0u);
+        out += colour_term(view, px, c, find_blend(view, px - 1u, 0u));
     }
     if (col + 1u < params.width) {
-        out[1] = find_blend(view, px, 0u);
+        out += colour_term(view, px, c, find_blend(view, px, 0u));
     }
     if (row > 0u) {
-        out[2] = find_blend(view, px - params.width, 1u);
+        out += colour_term(view, px, c, find_blend(view, px - params.width, 1u));
     }
     if (row + 1u < params.height) {
-        out[3] = find_blend(view, px, 1u);
+        out += colour_term(view, px, c, find_blend(view, px, 1u));
     }
     return out;
 }
@@ -187,18 +208,51 @@ fn antialias(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let px = row * params.width + col;
     let base = view * pixels_per_view();
-    let c = img[base + px];
-    var out = c;
-    if (params.antialias != 0u) {
-        var blends = pair_blends(view, px);
-        for (var k = 0u; k < 4u; k = k + 1u) {
-            let bl = blends[k];
-            if (bl.found && bl.target_px == px) {
-                out += bl.alpha * (img[base + bl.source_px] - c);
-            }
-        }
+    var out = img[base + px];
+    if (params.antialias != 0u && on_id_boundary(view, px)) {
+        out = gather_colour(view, px, out);
     }
     img[total_pixels() + base + px] = out;
+}
+
+// Adjoint contribution of pair blend `bl` to dL/d(colour of px), where g_px = dL/d(output of
+// px); when px is the blend's target, also adds the blend's visibility gradient
+// dL/dα · dα/dx (dL/dα = g_px · (c_source − c_px)) to `grad`.
+fn adjoint_term(view: u32, px: u32, g_px: f32, bl: Blend) -> f32 {
+    let base = view * pixels_per_view();
+    if (!bl.found) {
+        return 0.0;
+    }
+    if (bl.target_px == px) {
+        let d_alpha = g_px * (img[base + bl.source_px] - img[base + px]);
+        add_grad3(bl.va, bl.d_alpha_a * d_alpha);
+        add_grad3(bl.vb, bl.d_alpha_b * d_alpha);
+        return -g_px * bl.alpha;
+    }
+    if (bl.source_px == px) {
+        return dimg[base + bl.target_px] * bl.alpha;
+    }
+    return 0.0;
+}
+
+// dL/d(colour before antialiasing) of pixel px from the blends of its neighbour pairs.
+fn gather_adjoint(view: u32, px: u32, g_px: f32) -> f32 {
+    let col = px % params.width;
+    let row = px / params.width;
+    var d_colour = g_px;
+    if (col > 0u) {
+        d_colour += adjoint_term(view, px, g_px, find_blend(view, px - 1u, 0u));
+    }
+    if (col + 1u < params.width) {
+        d_colour += adjoint_term(view, px, g_px, find_blend(view, px, 0u));
+    }
+    if (row > 0u) {
+        d_colour += adjoint_term(view, px, g_px, find_blend(view, px - params.width, 1u));
+    }
+    if (row + 1u < params.height) {
+        d_colour += adjoint_term(view, px, g_px, find_blend(view, px, 1u));
+    }
+    return d_colour;
 }
 
 // Adjoint: dimg[P + i] = dL/d(colour before antialiasing) from dimg[i] = dL/d(output), and the
@@ -214,24 +268,9 @@ fn antialias_backward(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let px = row * params.width + col;
     let base = view * pixels_per_view();
-    let g_px = dimg[base + px];
-    var d_colour = g_px;
-    if (params.antialias != 0u) {
-        var blends = pair_blends(view, px);
-        for (var k = 0u; k < 4u; k = k + 1u) {
-            let bl = blends[k];
-            if (!bl.found) {
-                continue;
-            }
-            if (bl.target_px == px) {
-                d_colour -= g_px * bl.alpha;
-                let d_alpha = g_px * (img[base + bl.source_px] - img[base + px]);
-                add_grad3(bl.va, bl.d_alpha_a * d_alpha);
-                add_grad3(bl.vb, bl.d_alpha_b * d_alpha);
-            } else if (bl.source_px == px) {
-                d_colour += dimg[base + bl.target_px] * bl.alpha;
-            }
-        }
+    var d_colour = dimg[base + px];
+    if (params.antialias != 0u && on_id_boundary(view, px)) {
+        d_colour = gather_adjoint(view, px, d_colour);
     }
     dimg[total_pixels() + base + px] = d_colour;
 }

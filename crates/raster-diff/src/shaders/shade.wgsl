@@ -133,20 +133,10 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
     img[i] = RADIANCE_SCALE * max(fw.dot_nl, 0.0);
 }
 
-@compute @workgroup_size(64)
-fn shade_backward(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let col = gid.x;
-    let row = gid.y;
-    let view = gid.z;
-    if (col >= params.width || row >= params.height || view >= params.num_views) {
-        return;
-    }
-    let i = view * pixels_per_view() + row * params.width + col;
-    let t = ~vis[total_pixels() + i];
-    let dc = dimg[total_pixels() + i];
-    if (t == NO_TRIANGLE || dc == 0.0) {
-        return;
-    }
+// Adds the adjoint of pixel (view, row, col), which sees triangle t, for dL/d(colour) = dc to
+// `grad`. A separate function so that its large local variables exist only for pixels that
+// contribute (local variables are zero-initialized at function entry).
+fn add_pixel_adjoint(view: u32, row: u32, col: u32, t: u32, dc: f32) {
     // `var`s: their arrays are indexed dynamically below.
     var f = fragment_at(view, row, col, t);
     var fw = forward_of(f);
@@ -210,5 +200,21 @@ fn shade_backward(@builtin(global_invocation_id) gid: vec3<u32>) {
         let v = faces[3u * t + k];
         add_grad3(v, dp[k]);
         add_grad3(nv + v, dn_corner[k]);
+    }
+}
+
+@compute @workgroup_size(64)
+fn shade_backward(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let col = gid.x;
+    let row = gid.y;
+    let view = gid.z;
+    if (col >= params.width || row >= params.height || view >= params.num_views) {
+        return;
+    }
+    let i = view * pixels_per_view() + row * params.width + col;
+    let t = ~vis[total_pixels() + i];
+    let dc = dimg[total_pixels() + i];
+    if (t != NO_TRIANGLE && dc != 0.0) {
+        add_pixel_adjoint(view, row, col, t, dc);
     }
 }
