@@ -25,8 +25,9 @@
 //! whereas the CPU backend's are bit-identical. Agreement with the CPU reference (tests/gpu.rs):
 //! f32 projection and edge tests can hand a pixel whose centre lies within rounding of an edge to
 //! another triangle (a handful of 2.1 M pixels for 8 views at 512²); images agree to ~1e-5 where
-//! coverage agrees; the VJP's relative L2 difference is ~1e-5–1e-4 on coarse meshes and grows with
-//! the face count to ~5e-3 at 82k faces (f32 arithmetic; see docs/renderer.md, "Precision and determinism").
+//! coverage agrees; the VJP's relative L2 difference is ~1e-5–3e-4 for 1k–82k faces (the shading
+//! math is arranged for f32, see `shade.wgsl`; numbers in docs/renderer.md, "Precision and
+//! determinism").
 //!
 //! Buffers, bind groups and pipelines are kept across calls and rebuilt only when the vertex,
 //! face, view or pixel counts change; faces and adjacency are uploaded only when the face list

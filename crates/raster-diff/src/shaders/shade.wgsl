@@ -1,9 +1,20 @@
-// Shading pass and its adjoint (prefixed with common.wgsl and grad.wgsl), one invocation per pixel — gid.x column, gid.y row, gid.z view —
-// a port of cpu::shading::shade / shade_adjoint in f32 (see that module for the math):
-// ray barycentrics a_i = d·(P_j × P_k) with P_i = x_i − eye, w_i = a_i / Σa; q = Σ w_i P_i;
-// n_s = normalize(Σ w_i n_i); n_g = normalize((P_1 − P_0) × (P_2 − P_0)); v = normalize(−q);
-// two-sided flip when v·n_g < 0; τ = clamp(v·n_s / 0.1, 0, 1); n = (1 − τ) n_g + τ n_s;
-// l = normalize(light − eye − q); colour = 0.5 · max(n·l, 0)/π · 5; background 1.0.
+// Shading pass and its adjoint (prefixed with common.wgsl and grad.wgsl), one invocation per
+// pixel — gid.x column, gid.y row, gid.z view — the math of cpu::shading::shade / shade_adjoint
+// in f32: ray barycentrics a_i = d·(P_j × P_k) with P_i = x_i − eye, w_i = a_i / Σa;
+// q = Σ w_i P_i; n_s = normalize(Σ w_i n_i); n_g = normalize((x_1 − x_0) × (x_2 − x_0));
+// v = normalize(−q); two-sided flip when v·n_g < 0; τ = clamp(v·n_s / 0.1, 0, 1);
+// n = (1 − τ) n_g + τ n_s; l = normalize(light − eye − q); colour = 0.5 · max(n·l, 0)/π · 5;
+// background 1.0.
+//
+// Arranged for f32 (algebraically the same as the CPU's f64 formulas): with the edges
+// e_1 = x_1 − x_0, e_2 = x_2 − x_0 taken from the world positions, P_0 = x_0 − eye, and
+// P_1 = P_0 + e_1, P_2 = P_0 + e_2, the barycentrics are
+//   a_1 = d·(e_2 × P_0), a_2 = d·(P_0 × e_1), S = Σa = d·(e_1 × e_2), w_0 = 1 − w_1 − w_2,
+//   q = P_0 + w_1 e_1 + w_2 e_2, Σ w_i n_i = n_0 + w_1 (n_1 − n_0) + w_2 (n_2 − n_0).
+// The CPU form differentiates w_i = a_i/S through P_i·dq and d·(P_j × P_k), whose terms are
+// |P|/|e| times larger than their sum and cancel; in f32 that cost up to ~1e-2 of the VJP on fine
+// meshes. Here every large vector appears only as P_0 − q = −(w_1 e_1 + w_2 e_2) (small and exact
+// up to rounding of the small terms), using P_0 × d = (P_0 − q) × d since q ∥ d.
 //
 // `shade` writes img[0, P) (colour before antialiasing). `shade_backward` reads dL/d(colour) from
 // dimg[P, 2P) and adds dL/dx_i and dL/dn_i of the visible triangle's corners to `grad` (f32 atomic
@@ -22,22 +33,30 @@ const BENT_WIDTH: f32 = 0.1;
 const BACKGROUND: f32 = 1.0;
 
 struct Fragment {
-    x: array<vec3<f32>, 3>,
-    n: array<vec3<f32>, 3>,
+    x0: vec3<f32>,
+    x1: vec3<f32>,
+    x2: vec3<f32>,
+    n0: vec3<f32>,
+    n1: vec3<f32>,
+    n2: vec3<f32>,
     eye: vec3<f32>,
     light: vec3<f32>,
     ray: vec3<f32>,
 }
 
 struct Forward {
-    p: array<vec3<f32>, 3>,
+    p0: vec3<f32>,
+    e1: vec3<f32>,
+    e2: vec3<f32>,
     s: f32,
-    w: array<f32, 3>,
+    w0: f32,
+    w1: f32,
+    w2: f32,
+    // P_0 − q = −(w_1 e_1 + w_2 e_2).
+    r0: vec3<f32>,
     ns_raw: vec3<f32>,
     ns: vec3<f32>,
     ns_inv: f32,
-    e1: vec3<f32>,
-    e2: vec3<f32>,
     g: vec3<f32>,
     ng: vec3<f32>,
     ng_inv: f32,
@@ -69,21 +88,20 @@ fn normalize_adjoint(x: vec3<f32>, y: vec3<f32>, inv: f32, dy: vec3<f32>) -> vec
 
 fn forward_of(f: Fragment) -> Forward {
     var r: Forward;
-    r.p = array<vec3<f32>, 3>(f.x[0] - f.eye, f.x[1] - f.eye, f.x[2] - f.eye);
-    let a = array<f32, 3>(
-        dot(f.ray, cross(r.p[1], r.p[2])),
-        dot(f.ray, cross(r.p[2], r.p[0])),
-        dot(f.ray, cross(r.p[0], r.p[1])),
-    );
-    r.s = a[0] + a[1] + a[2];
-    r.w = array<f32, 3>(a[0] / r.s, a[1] / r.s, a[2] / r.s);
-    let q = r.p[0] * r.w[0] + r.p[1] * r.w[1] + r.p[2] * r.w[2];
-    r.ns_raw = f.n[0] * r.w[0] + f.n[1] * r.w[1] + f.n[2] * r.w[2];
+    let d = f.ray;
+    r.p0 = f.x0 - f.eye;
+    r.e1 = f.x1 - f.x0;
+    r.e2 = f.x2 - f.x0;
+    r.g = cross(r.e1, r.e2);
+    r.s = dot(d, r.g);
+    r.w1 = dot(d, cross(r.e2, r.p0)) / r.s;
+    r.w2 = dot(d, cross(r.p0, r.e1)) / r.s;
+    r.w0 = 1.0 - r.w1 - r.w2;
+    r.r0 = -(r.e1 * r.w1 + r.e2 * r.w2);
+    let q = r.p0 - r.r0;
+    r.ns_raw = f.n0 + (f.n1 - f.n0) * r.w1 + (f.n2 - f.n0) * r.w2;
     r.ns_inv = inv_len(r.ns_raw);
     r.ns = r.ns_raw * r.ns_inv;
-    r.e1 = r.p[1] - r.p[0];
-    r.e2 = r.p[2] - r.p[0];
-    r.g = cross(r.e1, r.e2);
     r.ng_inv = inv_len(r.g);
     r.ng = r.g * r.ng_inv;
     r.vv = -q;
@@ -100,19 +118,23 @@ fn forward_of(f: Fragment) -> Forward {
     return r;
 }
 
-// The fragment of pixel (view, row, column) if a triangle covers it.
+// The fragment of pixel (view, row, column), which triangle t covers.
 fn fragment_at(view: u32, row: u32, col: u32, t: u32) -> Fragment {
     let cam = cams[view];
-    var f: Fragment;
-    for (var i = 0u; i < 3u; i = i + 1u) {
-        let v = faces[3u * t + i];
-        f.x[i] = verts[v].xyz;
-        f.n[i] = normals[v].xyz;
-    }
-    f.eye = cam.eye.xyz;
-    f.light = cam.light.xyz;
-    f.ray = pixel_ray(cam, vec2<f32>(f32(col) + 0.5, f32(row) + 0.5));
-    return f;
+    let i0 = faces[3u * t];
+    let i1 = faces[3u * t + 1u];
+    let i2 = faces[3u * t + 2u];
+    return Fragment(
+        verts[i0].xyz,
+        verts[i1].xyz,
+        verts[i2].xyz,
+        normals[i0].xyz,
+        normals[i1].xyz,
+        normals[i2].xyz,
+        cam.eye.xyz,
+        cam.light.xyz,
+        pixel_ray(cam, vec2<f32>(f32(col) + 0.5, f32(row) + 0.5)),
+    );
 }
 
 @compute @workgroup_size(64)
@@ -134,22 +156,18 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
 }
 
 // Adds the adjoint of pixel (view, row, col), which sees triangle t, for dL/d(colour) = dc to
-// `grad`. A separate function so that its large local variables exist only for pixels that
-// contribute (local variables are zero-initialized at function entry).
+// `grad`. Piecewise choices (two-sided sign, clamp of τ, max in the diffuse term) are constants.
 fn add_pixel_adjoint(view: u32, row: u32, col: u32, t: u32, dc: f32) {
-    // `var`s: their arrays are indexed dynamically below.
-    var f = fragment_at(view, row, col, t);
-    var fw = forward_of(f);
+    let f = fragment_at(view, row, col, t);
+    let fw = forward_of(f);
     if (fw.dot_nl <= 0.0) {
         return;
     }
-    var dp = array<vec3<f32>, 3>(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0));
     let ddot = dc * RADIANCE_SCALE;
     let dn = fw.l * ddot;
     let dl = fw.n * ddot;
-    let dll = normalize_adjoint(fw.ll, fw.l, fw.l_inv, dl);
     // ll = light − eye − q
-    var dq = -dll;
+    var dq = -normalize_adjoint(fw.ll, fw.l, fw.l_inv, dl);
     // n = sign·((1 − τ) n_g + τ n_s)
     let ns_s = fw.ns * fw.sign;
     let ng_s = fw.ng * fw.sign;
@@ -166,41 +184,39 @@ fn add_pixel_adjoint(view: u32, row: u32, col: u32, t: u32, dc: f32) {
     let dng = dng_s * fw.sign;
     // v = normalize(−q)
     dq -= normalize_adjoint(fw.vv, fw.v, fw.v_inv, dv);
-    // n_g = normalize(e1 × e2); adjoint of g = e1 × e2 is (e2 × dg, dg × e1).
+    // n_g = normalize(g), g = e1 × e2: dL/de1 = e2 × dg, dL/de2 = dg × e1.
     let dg = normalize_adjoint(fw.g, fw.ng, fw.ng_inv, dng);
-    let de1 = cross(fw.e2, dg);
-    let de2 = cross(dg, fw.e1);
-    dp[1] += de1;
-    dp[2] += de2;
-    dp[0] -= de1 + de2;
-    // n_s = normalize(Σ w_i n_i)
+    var de1 = cross(fw.e2, dg);
+    var de2 = cross(dg, fw.e1);
+    // Σ w_i n_i = n_0 + w_1 (n_1 − n_0) + w_2 (n_2 − n_0), normalized to n_s.
     let dns_raw = normalize_adjoint(fw.ns_raw, fw.ns, fw.ns_inv, dns);
-    var dw = array<f32, 3>(0.0, 0.0, 0.0);
-    var dn_corner = array<vec3<f32>, 3>(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0));
-    for (var k = 0u; k < 3u; k = k + 1u) {
-        dn_corner[k] = dns_raw * fw.w[k];
-        dw[k] += dot(f.n[k], dns_raw);
-        // q = Σ w_i P_i
-        dp[k] += dq * fw.w[k];
-        dw[k] += dot(fw.p[k], dq);
-    }
-    // w_i = a_i / S
-    let wdw = fw.w[0] * dw[0] + fw.w[1] * dw[1] + fw.w[2] * dw[2];
-    var da = array<f32, 3>((dw[0] - wdw) / fw.s, (dw[1] - wdw) / fw.s, (dw[2] - wdw) / fw.s);
+    // q = P_0 + w_1 e_1 + w_2 e_2.
+    let dw1 = dot(f.n1 - f.n0, dns_raw) + dot(fw.e1, dq);
+    let dw2 = dot(f.n2 - f.n0, dns_raw) + dot(fw.e2, dq);
+    var dp0 = dq;
+    de1 += dq * fw.w1;
+    de2 += dq * fw.w2;
+    // w_k = a_k / S.
+    let da1 = dw1 / fw.s;
+    let da2 = dw2 / fw.s;
+    let ds = -(fw.w1 * dw1 + fw.w2 * dw2) / fw.s;
     let d = f.ray;
-    // a_i = d·(P_j × P_k) = P_j·(P_k × d) = P_k·(d × P_j)
-    for (var k = 0u; k < 3u; k = k + 1u) {
-        let j = (k + 1u) % 3u;
-        let m = (k + 2u) % 3u;
-        dp[j] += cross(fw.p[m], d) * da[k];
-        dp[m] += cross(d, fw.p[j]) * da[k];
-    }
+    // a_1 = d·(e_2 × P_0) = P_0·(d × e_2) = e_2·(P_0 × d), with P_0 × d = (P_0 − q) × d;
+    // a_2 = d·(P_0 × e_1) = P_0·(e_1 × d) = e_1·(d × P_0); S = d·(e_1 × e_2).
+    let r0xd = cross(fw.r0, d);
+    dp0 += cross(d, fw.e2) * da1 + cross(fw.e1, d) * da2;
+    de2 += r0xd * da1 + cross(d, fw.e1) * ds;
+    de1 += -r0xd * da2 + cross(fw.e2, d) * ds;
+    let i0 = faces[3u * t];
+    let i1 = faces[3u * t + 1u];
+    let i2 = faces[3u * t + 2u];
+    add_grad3(i0, dp0 - de1 - de2);
+    add_grad3(i1, de1);
+    add_grad3(i2, de2);
     let nv = params.num_verts;
-    for (var k = 0u; k < 3u; k = k + 1u) {
-        let v = faces[3u * t + k];
-        add_grad3(v, dp[k]);
-        add_grad3(nv + v, dn_corner[k]);
-    }
+    add_grad3(nv + i0, dns_raw * fw.w0);
+    add_grad3(nv + i1, dns_raw * fw.w1);
+    add_grad3(nv + i2, dns_raw * fw.w2);
 }
 
 @compute @workgroup_size(64)
