@@ -258,3 +258,65 @@ fn wgpu_bad_inputs_give_typed_errors() {
         vec![[0.0; 3]; 3]
     );
 }
+
+/// The same agreement on a non-square image whose width is not a multiple of the workgroup size
+/// (70×45), 3 views at 60° fov, and two overlapping spheres (occlusion boundaries between them),
+/// antialiasing on. Same tolerances as above.
+#[test]
+fn wgpu_matches_cpu_on_a_non_square_scene_with_occlusion() {
+    let Some(mut g) = gpu(RenderSettings::default()) else {
+        return;
+    };
+    let (mut v, mut f) = shapes::icosphere(3);
+    let (v2, f2) = shapes::icosphere(2);
+    let n = v.len() as u32;
+    v.extend(
+        v2.iter()
+            .map(|p| [0.5 * p[0] + 0.4, 0.5 * p[1] + 0.2, 0.5 * p[2] + 1.0]),
+    );
+    f.extend(f2.iter().map(|t| [t[0] + n, t[1] + n, t[2] + n]));
+    let views: Vec<View> = orbit_views(3, 20.0, 3.2, 60.0)
+        .into_iter()
+        .map(|mut view| {
+            // Look from the +z side so the small sphere occludes the large one.
+            view.eye[2] = view.eye[2].abs() + 1.0;
+            view
+        })
+        .collect();
+    let (w, h) = (70, 45);
+    let mut c = CpuRenderer::default();
+    let ic = c.render(&v, &f, &views, w, h).expect("cpu render");
+    let ids_cpu = c.triangle_ids().expect("state");
+    let ig = g.render(&v, &f, &views, w, h).expect("gpu render");
+    let ids_gpu = g.triangle_ids().expect("gpu ids");
+    let second = f.len() - f2.len();
+    let occlusion_pairs = (0..ids_cpu.len())
+        .filter(|&i| {
+            i % w + 1 < w
+                && ids_cpu[i] != NO_TRIANGLE
+                && ids_cpu[i + 1] != NO_TRIANGLE
+                && ((ids_cpu[i] as usize) < second) != ((ids_cpu[i + 1] as usize) < second)
+        })
+        .count();
+    let (differing, max_img) = compare_images(w, h, &ids_cpu, &ids_gpu, &ic, &ig);
+    println!(
+        "{differing} of {} pixels see another triangle; max |Δ| elsewhere {max_img:e}; \
+         {occlusion_pairs} horizontal pairs across the two spheres",
+        ids_cpu.len()
+    );
+    assert!(occlusion_pairs > 10, "the scene has occlusion boundaries");
+    assert!(differing * 1000 <= ids_cpu.len(), "{differing} differ");
+    assert!(max_img <= 1e-4, "images differ by {max_img}");
+    let d = Images {
+        rgb: (0..ic.rgb.len())
+            .map(|i| ((i * 53) % 17) as f32 / 8.0 - 1.0)
+            .collect(),
+        ..ic.clone()
+    };
+    let gc = c.backward(&d).expect("cpu backward");
+    let gg = g.backward(&d).expect("gpu backward");
+    let rel = rel_l2(&gc, &gg);
+    println!("VJP relative L2 difference {rel:e}");
+    assert!(norm(&gc) > 1e-3, "non-trivial gradient");
+    assert!(rel <= 2e-3, "gradients differ by {rel}");
+}
