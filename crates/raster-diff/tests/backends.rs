@@ -35,16 +35,24 @@ impl Backend {
 
 /// Every available backend with these settings.
 fn backends(settings: RenderSettings) -> Vec<(String, Backend)> {
-    let mut out = vec![(
+    let cpu = (
         "cpu".to_string(),
         Backend::Cpu(CpuRenderer::new(settings.clone())),
-    )];
+    );
     #[cfg(feature = "gpu")]
     match raster_diff::gpu::WgpuRenderer::new(settings) {
-        Ok(g) => out.push(("wgpu".to_string(), Backend::Gpu(Box::new(g)))),
-        Err(e) => println!("SKIPPED wgpu: no adapter ({e})"),
+        Ok(g) => vec![cpu, ("wgpu".to_string(), Backend::Gpu(Box::new(g)))],
+        Err(e) => {
+            println!("SKIPPED wgpu: no adapter ({e})");
+            vec![cpu]
+        }
     }
-    out
+    #[cfg(not(feature = "gpu"))]
+    {
+        let _ = settings;
+        println!("SKIPPED wgpu: built without the `gpu` feature");
+        vec![cpu]
+    }
 }
 
 fn aa(on: bool) -> RenderSettings {
