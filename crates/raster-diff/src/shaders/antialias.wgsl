@@ -1,6 +1,6 @@
 // Silhouette antialiasing and its adjoint (prefixed with common.wgsl and grad.wgsl), a per-pixel
 // *gather* port of cpu::antialias (see that module and docs/renderer.md for the rules): one
-// invocation per pixel — gid.x column, gid.y row, gid.z view — evaluates the blend of each of its
+// invocation per pixel of the boundary list (classify.wgsl) evaluates the blend of each of its
 // (up to) four neighbour pairs exactly as the CPU does for that pair and keeps the ones that
 // concern it. Both pixels of a pair evaluate the same pair with the same arithmetic, so every
 // blend is seen identically by its target and its source; no atomics in the forward pass.
@@ -19,6 +19,7 @@
 @group(0) @binding(7) var<storage, read> vis: array<u32>;
 @group(0) @binding(8) var<storage, read_write> img: array<f32>;
 @group(0) @binding(9) var<storage, read_write> dimg: array<f32>;
+@group(0) @binding(11) var<storage, read> lists: array<u32>;
 
 // c[target] += alpha · (c[source] − c[target]); pixel indices within the view.
 struct Blend {
@@ -154,18 +155,6 @@ fn find_blend(view: u32, a: u32, axis: u32) -> Blend {
     return r;
 }
 
-// Whether any of pixel px's neighbour pairs has two different triangle ids (only such pairs can
-// blend; almost all pixels have none, and skip the blend search).
-fn on_id_boundary(view: u32, px: u32) -> bool {
-    let col = px % params.width;
-    let row = px / params.width;
-    let t = triangle_at(view, px);
-    return (col > 0u && triangle_at(view, px - 1u) != t)
-        || (col + 1u < params.width && triangle_at(view, px + 1u) != t)
-        || (row > 0u && triangle_at(view, px - params.width) != t)
-        || (row + 1u < params.height && triangle_at(view, px + params.width) != t);
-}
-
 // Antialiasing change of pixel px (colour c before antialiasing) from pair blend `bl`:
 // α·(c_source − c) if px is the blend's target, else 0.
 fn colour_term(view: u32, px: u32, c: f32, bl: Blend) -> f32 {
@@ -197,22 +186,29 @@ fn gather_colour(view: u32, px: u32, c: f32) -> f32 {
     return out;
 }
 
-// img[P + i] = antialiased colour (a copy of img[i] when antialiasing is off).
+// Position k of the boundary list as (global index, view, pixel within the view); the global
+// index is P or more past the list's end.
+fn boundary_pixel(k: u32) -> vec3<u32> {
+    if (k >= lists[LIST_BOUNDARY_LEN]) {
+        return vec3<u32>(total_pixels(), 0u, 0u);
+    }
+    let i = lists[LIST_HEADER + total_pixels() + k];
+    return vec3<u32>(i, i / pixels_per_view(), i % pixels_per_view());
+}
+
+// Over the boundary list (pixels with a neighbour of another triangle id; the others' output was
+// written by shade / classify): img[P + i] = antialiased colour.
 @compute @workgroup_size(64)
-fn antialias(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let col = gid.x;
-    let row = gid.y;
-    let view = gid.z;
-    if (col >= params.width || row >= params.height || view >= params.num_views) {
+fn antialias(
+    @builtin(workgroup_id) wg: vec3<u32>,
+    @builtin(num_workgroups) num_wg: vec3<u32>,
+    @builtin(local_invocation_index) li: u32,
+) {
+    let b = boundary_pixel(list_position(wg, num_wg, li));
+    if (b.x >= total_pixels()) {
         return;
     }
-    let px = row * params.width + col;
-    let base = view * pixels_per_view();
-    var out = img[base + px];
-    if (params.antialias != 0u && on_id_boundary(view, px)) {
-        out = gather_colour(view, px, out);
-    }
-    img[total_pixels() + base + px] = out;
+    img[total_pixels() + b.x] = gather_colour(b.y, b.z, img[b.x]);
 }
 
 // Adjoint contribution of pair blend `bl` to dL/d(colour of px), where g_px = dL/d(output of
@@ -255,22 +251,19 @@ fn gather_adjoint(view: u32, px: u32, g_px: f32) -> f32 {
     return d_colour;
 }
 
-// Adjoint: dimg[P + i] = dL/d(colour before antialiasing) from dimg[i] = dL/d(output), and the
-// visibility gradient dL/dα · dα/dx of every blend added by its target pixel (each blend has one
-// target, so each is added once) to grad's dL/dx part.
+// Adjoint over the boundary list: dimg[P + i] = dL/d(colour before antialiasing) from
+// dimg[i] = dL/d(output) (the backward uploads dL/d(output) to both halves, so pixels off the
+// list keep d_colour = d_out), and the visibility gradient dL/dα · dα/dx of every blend added by
+// its target pixel (each blend has one target, so each is added once) to grad's dL/dx part.
 @compute @workgroup_size(64)
-fn antialias_backward(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let col = gid.x;
-    let row = gid.y;
-    let view = gid.z;
-    if (col >= params.width || row >= params.height || view >= params.num_views) {
+fn antialias_backward(
+    @builtin(workgroup_id) wg: vec3<u32>,
+    @builtin(num_workgroups) num_wg: vec3<u32>,
+    @builtin(local_invocation_index) li: u32,
+) {
+    let b = boundary_pixel(list_position(wg, num_wg, li));
+    if (b.x >= total_pixels()) {
         return;
     }
-    let px = row * params.width + col;
-    let base = view * pixels_per_view();
-    var d_colour = dimg[base + px];
-    if (params.antialias != 0u && on_id_boundary(view, px)) {
-        d_colour = gather_adjoint(view, px, d_colour);
-    }
-    dimg[total_pixels() + base + px] = d_colour;
+    dimg[total_pixels() + b.x] = gather_adjoint(b.y, b.z, dimg[b.x]);
 }

@@ -10,6 +10,7 @@
 //   8 img: [0, P) colour before antialiasing, [P, 2P) antialiased output
 //   9 dimg: [0, P) dL/d(output), [P, 2P) dL/d(colour before antialiasing)
 //  10 grad: f32 bits, [0, 3V) dL/dx, [3V, 6V) dL/dn (smooth normals), added with CAS loops
+//  11 lists: compacted pixel lists and their indirect dispatch arguments (see classify.wgsl)
 // where P = num_views · width · height and pixel (view, row, column) is at view·W·H + row·W + column.
 
 struct Params {
@@ -38,6 +39,12 @@ const NO_TRIANGLE: u32 = 0xffffffffu;
 const BOUNDARY_EDGE: u32 = 0xffffffffu;
 const NON_MANIFOLD_EDGE: u32 = 0xfffffffeu;
 const NORMALIZE_EPS2: f32 = 1e-20;
+const BACKGROUND: f32 = 1.0;
+// Layout of `lists` (binding 11): dispatch arguments at 0 and 3, lengths at 6 and 7, then the
+// covered list at LIST_HEADER and the boundary list at LIST_HEADER + P.
+const LIST_COVERED_LEN: u32 = 6u;
+const LIST_BOUNDARY_LEN: u32 = 7u;
+const LIST_HEADER: u32 = 8u;
 
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(1) var<storage, read> cams: array<Cam>;
@@ -56,6 +63,11 @@ fn pixel_ray(cam: Cam, s: vec2<f32>) -> vec3<f32> {
     let k = cam.kc.x;
     return cam.right.xyz * ((s.x - cam.kc.y) / k) - cam.up.xyz * ((s.y - cam.kc.z) / k)
         + cam.forward.xyz;
+}
+
+// Position k in a list processed by a 2D indirect dispatch of 64-wide workgroups.
+fn list_position(wg: vec3<u32>, num_wg: vec3<u32>, local: u32) -> u32 {
+    return (wg.y * num_wg.x + wg.x) * 64u + local;
 }
 
 // Component i (0 or 1) of a 2-vector.

@@ -16,8 +16,9 @@
 // meshes. Here every large vector appears only as P_0 − q = −(w_1 e_1 + w_2 e_2) (small and exact
 // up to rounding of the small terms), using P_0 × d = (P_0 − q) × d since q ∥ d.
 //
-// `shade` writes img[0, P) (colour before antialiasing). `shade_backward` reads dL/d(colour) from
-// dimg[P, 2P) and adds dL/dx_i and dL/dn_i of the visible triangle's corners to `grad` (f32 atomic
+// Both run over the list of covered pixels built by classify.wgsl. `shade` writes the colour
+// before antialiasing to img[0, P) and, as the output of pixels that no blend changes, to
+// img[P, 2P). `shade_backward` reads dL/d(colour) from dimg[P, 2P) and adds dL/dx_i and dL/dn_i of the visible triangle's corners to `grad` (f32 atomic
 // adds as CAS loops on the bit patterns: the summation order, hence the f32 rounding, depends on
 // scheduling).
 
@@ -27,10 +28,10 @@
 @group(0) @binding(7) var<storage, read> vis: array<u32>;
 @group(0) @binding(8) var<storage, read_write> img: array<f32>;
 @group(0) @binding(9) var<storage, read> dimg: array<f32>;
+@group(0) @binding(11) var<storage, read> lists: array<u32>;
 
 const RADIANCE_SCALE: f32 = 0.7957747154594767; // 0.5 · 5 / π
 const BENT_WIDTH: f32 = 0.1;
-const BACKGROUND: f32 = 1.0;
 
 struct Fragment {
     x0: vec3<f32>,
@@ -137,22 +138,48 @@ fn fragment_at(view: u32, row: u32, col: u32, t: u32) -> Fragment {
     );
 }
 
+// The pixel at position k of the covered list, as (global index, view, row, column); false
+// past the list's end.
+struct Covered {
+    ok: bool,
+    i: u32,
+    view: u32,
+    row: u32,
+    col: u32,
+    t: u32,
+}
+
+fn covered_pixel(k: u32) -> Covered {
+    var c: Covered;
+    c.ok = k < lists[LIST_COVERED_LEN];
+    if (!c.ok) {
+        return c;
+    }
+    c.i = lists[LIST_HEADER + k];
+    c.view = c.i / pixels_per_view();
+    let px = c.i % pixels_per_view();
+    c.row = px / params.width;
+    c.col = px % params.width;
+    c.t = ~vis[total_pixels() + c.i];
+    return c;
+}
+
+// Over the covered list (background pixels were written by `classify`): the colour goes to both
+// halves of `img`; the antialiasing pass then overwrites the output of pixels next to another id.
 @compute @workgroup_size(64)
-fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let col = gid.x;
-    let row = gid.y;
-    let view = gid.z;
-    if (col >= params.width || row >= params.height || view >= params.num_views) {
+fn shade(
+    @builtin(workgroup_id) wg: vec3<u32>,
+    @builtin(num_workgroups) num_wg: vec3<u32>,
+    @builtin(local_invocation_index) li: u32,
+) {
+    let c = covered_pixel(list_position(wg, num_wg, li));
+    if (!c.ok) {
         return;
     }
-    let i = view * pixels_per_view() + row * params.width + col;
-    let t = ~vis[total_pixels() + i];
-    if (t == NO_TRIANGLE) {
-        img[i] = BACKGROUND;
-        return;
-    }
-    let fw = forward_of(fragment_at(view, row, col, t));
-    img[i] = RADIANCE_SCALE * max(fw.dot_nl, 0.0);
+    let fw = forward_of(fragment_at(c.view, c.row, c.col, c.t));
+    let colour = RADIANCE_SCALE * max(fw.dot_nl, 0.0);
+    img[c.i] = colour;
+    img[total_pixels() + c.i] = colour;
 }
 
 // Adds the adjoint of pixel (view, row, col), which sees triangle t, for dL/d(colour) = dc to
@@ -219,18 +246,19 @@ fn add_pixel_adjoint(view: u32, row: u32, col: u32, t: u32, dc: f32) {
     add_grad3(nv + i2, dns_raw * fw.w2);
 }
 
+// Over the covered list: dL/d(colour) from dimg[P, 2P).
 @compute @workgroup_size(64)
-fn shade_backward(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let col = gid.x;
-    let row = gid.y;
-    let view = gid.z;
-    if (col >= params.width || row >= params.height || view >= params.num_views) {
+fn shade_backward(
+    @builtin(workgroup_id) wg: vec3<u32>,
+    @builtin(num_workgroups) num_wg: vec3<u32>,
+    @builtin(local_invocation_index) li: u32,
+) {
+    let c = covered_pixel(list_position(wg, num_wg, li));
+    if (!c.ok) {
         return;
     }
-    let i = view * pixels_per_view() + row * params.width + col;
-    let t = ~vis[total_pixels() + i];
-    let dc = dimg[total_pixels() + i];
-    if (t != NO_TRIANGLE && dc != 0.0) {
-        add_pixel_adjoint(view, row, col, t, dc);
+    let dc = dimg[total_pixels() + c.i];
+    if (dc != 0.0) {
+        add_pixel_adjoint(c.view, c.row, c.col, c.t, dc);
     }
 }
