@@ -7,7 +7,9 @@ export XDG_RUNTIME_DIR="${XDG_RUNTIME_DIR:-/tmp}"   # silences Mesa's warnings u
 
 step() { echo; echo "==> $*"; }
 step "cargo fmt --check";          cargo fmt --all -- --check
+step "cargo fmt --check (xtask)";  cargo fmt --manifest-path xtask/Cargo.toml -- --check
 step "cargo clippy -D warnings";   cargo clippy --workspace --all-targets --locked -- -D warnings
+step "cargo clippy (xtask)";       cargo clippy --manifest-path xtask/Cargo.toml --target-dir target --locked -- -D warnings
 step "cargo test";                 cargo test --workspace --locked
 step "cargo xtask check-deps";     cargo xtask check-deps
 step "cargo xtask gradcheck";      cargo xtask gradcheck

@@ -4,7 +4,10 @@ use std::process::Command;
 
 /// (crate, forbidden dependencies in its normal dependency tree)
 const RULES: &[(&str, &[&str])] = &[
-    ("darap", &["wgpu", "ort", "tokenizers", "tobj", "gltf", "naga", "tokio"]),
+    (
+        "darap",
+        &["wgpu", "ort", "tokenizers", "tobj", "gltf", "naga", "tokio"],
+    ),
     ("cotan", &["wgpu", "ort", "tokenizers", "tobj", "gltf"]),
     ("csd", &["ort", "wgpu", "tokenizers"]),
     ("optim", &["wgpu", "ort", "faer", "tokenizers"]),
@@ -16,23 +19,44 @@ pub fn run() -> anyhow::Result<()> {
     let mut violations = Vec::new();
     for (krate, forbidden) in RULES {
         let out = Command::new(env!("CARGO"))
-            .args(["tree", "--quiet", "--edges", "normal", "--prefix", "none", "--format", "{p}", "-p", krate])
+            .args([
+                "tree", "--quiet", "--edges", "normal", "--prefix", "none", "--format", "{p}",
+                "-p", krate,
+            ])
             .output()?;
-        anyhow::ensure!(out.status.success(), "cargo tree -p {krate} failed: {}", String::from_utf8_lossy(&out.stderr));
+        anyhow::ensure!(
+            out.status.success(),
+            "cargo tree -p {krate} failed: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
         let tree = String::from_utf8_lossy(&out.stdout);
-        let mut names: Vec<&str> = tree.lines().filter_map(|l| l.split_whitespace().next()).collect();
+        let mut names: Vec<&str> = tree
+            .lines()
+            .filter_map(|l| l.split_whitespace().next())
+            .collect();
         names.sort_unstable();
         names.dedup();
         // Guard against a vacuous pass (an empty or unexpected `cargo tree` output).
-        anyhow::ensure!(names.contains(krate), "cargo tree -p {krate} did not list {krate} itself; output format changed?");
+        anyhow::ensure!(
+            names.contains(krate),
+            "cargo tree -p {krate} did not list {krate} itself; output format changed?"
+        );
         for f in *forbidden {
             if names.contains(f) {
                 violations.push(format!("{krate} depends on {f}"));
             }
         }
-        println!("{krate}: {} distinct crates in its normal dependency tree, none forbidden: {}", names.len(), !names.iter().any(|n| forbidden.contains(n)));
+        println!(
+            "{krate}: {} distinct crates in its normal dependency tree, none forbidden: {}",
+            names.len(),
+            !names.iter().any(|n| forbidden.contains(n))
+        );
     }
-    anyhow::ensure!(violations.is_empty(), "dependency rules violated:\n  {}", violations.join("\n  "));
+    anyhow::ensure!(
+        violations.is_empty(),
+        "dependency rules violated:\n  {}",
+        violations.join("\n  ")
+    );
     println!("check-deps: all rules hold");
     Ok(())
 }

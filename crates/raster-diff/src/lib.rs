@@ -17,7 +17,7 @@ pub mod image;
 pub mod shapes;
 
 pub use camera::{CameraConfig, adapt_multiplier, orbit_views, sample_views};
-pub use cpu::{CpuRenderer, RenderSettings, Visibility};
+pub use cpu::{CpuRenderer, RenderSettings};
 
 /// One camera view and its light.
 #[derive(Clone, Debug, PartialEq)]

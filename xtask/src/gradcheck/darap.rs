@@ -14,7 +14,9 @@ fn rows(v: &[f64]) -> Vec<[f64; 3]> {
 }
 
 fn mats(v: &[f64]) -> Vec<Mat3> {
-    v.chunks_exact(9).map(|c| [[c[0], c[1], c[2]], [c[3], c[4], c[5]], [c[6], c[7], c[8]]]).collect()
+    v.chunks_exact(9)
+        .map(|c| [[c[0], c[1], c[2]], [c[3], c[4], c[5]], [c[6], c[7], c[8]]])
+        .collect()
 }
 
 fn flat(v: &[[f64; 3]]) -> Vec<f64> {
@@ -26,7 +28,10 @@ fn flat_m(v: &[Mat3]) -> Vec<f64> {
 }
 
 fn dot(a: &[[f64; 3]], b: &[[f64; 3]]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| x[0] * y[0] + x[1] * y[1] + x[2] * y[2]).sum()
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| x[0] * y[0] + x[1] * y[1] + x[2] * y[2])
+        .sum()
 }
 
 fn dot_m(a: &[Mat3], b: &[Mat3]) -> f64 {
@@ -34,11 +39,15 @@ fn dot_m(a: &[Mat3], b: &[Mat3]) -> f64 {
 }
 
 fn random_rows(rng: &mut ChaCha8Rng, n: usize) -> Vec<[f64; 3]> {
-    (0..n).map(|_| std::array::from_fn(|_| rng.random::<f64>() * 2.0 - 1.0)).collect()
+    (0..n)
+        .map(|_| std::array::from_fn(|_| rng.random::<f64>() * 2.0 - 1.0))
+        .collect()
 }
 
 fn random_mats(rng: &mut ChaCha8Rng, n: usize) -> Vec<Mat3> {
-    (0..n).map(|_| std::array::from_fn(|_| std::array::from_fn(|_| rng.random::<f64>() * 2.0 - 1.0))).collect()
+    (0..n)
+        .map(|_| std::array::from_fn(|_| std::array::from_fn(|_| rng.random::<f64>() * 2.0 - 1.0)))
+        .collect()
 }
 
 /// Targets near the rest normals, of varying length.
@@ -70,15 +79,28 @@ pub fn suite(report: &mut Report) -> anyhow::Result<()> {
     let s = random_mats(&mut rng, 64);
     let g = random_mats(&mut rng, 64);
     for (rule_name, rule) in [
-        ("gis", darap::rotation_rule::gis as fn(&Mat3) -> (Mat3, darap::rotation_rule::RotationSvd)),
+        (
+            "gis",
+            darap::rotation_rule::gis as fn(&Mat3) -> (Mat3, darap::rotation_rule::RotationSvd),
+        ),
         ("procrustes", darap::rotation_rule::procrustes),
     ] {
-        let grad: Vec<Mat3> =
-            s.iter().zip(&g).map(|(s, g)| darap::rotation_rule::rotation_vjp(&rule(s).1, g)).collect();
-        report.check(&format!("darap/rotation_rule/{rule_name}/random"), &flat_m(&s), &flat_m(&grad), tol, 2, |theta| {
-            let r: Vec<Mat3> = mats(theta).iter().map(|s| rule(s).0).collect();
-            dot_m(&g, &r)
-        });
+        let grad: Vec<Mat3> = s
+            .iter()
+            .zip(&g)
+            .map(|(s, g)| darap::rotation_rule::rotation_vjp(&rule(s).1, g))
+            .collect();
+        report.check(
+            &format!("darap/rotation_rule/{rule_name}/random"),
+            &flat_m(&s),
+            &flat_m(&grad),
+            tol,
+            2,
+            |theta| {
+                let r: Vec<Mat3> = mats(theta).iter().map(|s| rule(s).0).collect();
+                dot_m(&g, &r)
+            },
+        );
     }
 
     for (name, mesh) in meshes()? {
@@ -95,38 +117,73 @@ pub fn suite(report: &mut Report) -> anyhow::Result<()> {
         // Normalization.
         let g3 = random_rows(&mut rng, n);
         let grad = darap::normalize_targets_vjp(&x, &g3);
-        report.check(&format!("darap/normalize_targets/{name}"), &flat(&x), &flat(&grad), tol, 3, |theta| {
-            dot(&g3, &darap::normalize_targets(&rows(theta)))
-        });
+        report.check(
+            &format!("darap/normalize_targets/{name}"),
+            &flat(&x),
+            &flat(&grad),
+            tol,
+            3,
+            |theta| dot(&g3, &darap::normalize_targets(&rows(theta))),
+        );
 
         // Rotation rules on this mesh's covariances.
-        for (rule_name, rule, lambda) in [("gis", RotationRule::Gis, 8.0), ("procrustes", RotationRule::Procrustes, 40.0)] {
-            let sv: Vec<Mat3> =
-                (0..n).map(|v| darap::covariance(rule, &k[v], lambda * mass[v], n0[v], unit[v])).collect();
+        for (rule_name, rule, lambda) in [
+            ("gis", RotationRule::Gis, 8.0),
+            ("procrustes", RotationRule::Procrustes, 40.0),
+        ] {
+            let sv: Vec<Mat3> = (0..n)
+                .map(|v| darap::covariance(rule, &k[v], lambda * mass[v], n0[v], unit[v]))
+                .collect();
             let gm = random_mats(&mut rng, n);
             let apply = |s: &Mat3| match rule {
                 RotationRule::Gis => darap::rotation_rule::gis(s),
                 RotationRule::Procrustes => darap::rotation_rule::procrustes(s),
             };
-            let grad: Vec<Mat3> =
-                sv.iter().zip(&gm).map(|(s, g)| darap::rotation_rule::rotation_vjp(&apply(s).1, g)).collect();
-            report.check(&format!("darap/rotation_rule/{rule_name}/{name}"), &flat_m(&sv), &flat_m(&grad), tol, 4, |theta| {
-                let r: Vec<Mat3> = mats(theta).iter().map(|s| apply(s).0).collect();
-                dot_m(&gm, &r)
-            });
+            let grad: Vec<Mat3> = sv
+                .iter()
+                .zip(&gm)
+                .map(|(s, g)| darap::rotation_rule::rotation_vjp(&apply(s).1, g))
+                .collect();
+            report.check(
+                &format!("darap/rotation_rule/{rule_name}/{name}"),
+                &flat_m(&sv),
+                &flat_m(&grad),
+                tol,
+                4,
+                |theta| {
+                    let r: Vec<Mat3> = mats(theta).iter().map(|s| apply(s).0).collect();
+                    dot_m(&gm, &r)
+                },
+            );
 
             // Local step with respect to the unit targets (with and without a mask). The loss sums
             // ~10⁴ SVD-based entries, whose rounding noise (~1e-13 in total) dominates a central
             // difference at h = 1e-6; h = 1e-5 balances rounding and truncation.
             for masked in [false, true] {
                 let mask: Option<Vec<bool>> = masked.then(|| (0..n).map(|v| v % 3 != 0).collect());
-                let (_, tape) = darap::local_step(&k, &mass, lambda, &n0, &unit, rule, mask.as_deref());
+                let (_, tape) =
+                    darap::local_step(&k, &mass, lambda, &n0, &unit, rule, mask.as_deref());
                 let grad = darap::local_step_vjp(&tape, &mass, lambda, &n0, &gm);
                 let label = if masked { "masked/" } else { "" };
-                report.check(&format!("darap/local_step/{rule_name}/{label}{name}"), &flat(&unit), &flat(&grad), Tolerance { step: 1e-5, ..tol }, 5, |theta| {
-                    let (r, _) = darap::local_step(&k, &mass, lambda, &n0, &rows(theta), rule, mask.as_deref());
-                    dot_m(&gm, &r)
-                });
+                report.check(
+                    &format!("darap/local_step/{rule_name}/{label}{name}"),
+                    &flat(&unit),
+                    &flat(&grad),
+                    Tolerance { step: 1e-5, ..tol },
+                    5,
+                    |theta| {
+                        let (r, _) = darap::local_step(
+                            &k,
+                            &mass,
+                            lambda,
+                            &n0,
+                            &rows(theta),
+                            rule,
+                            mask.as_deref(),
+                        );
+                        dot_m(&gm, &r)
+                    },
+                );
             }
         }
 
@@ -135,9 +192,14 @@ pub fn suite(report: &mut Report) -> anyhow::Result<()> {
         let rot = random_mats(&mut rng, n);
         let gb = random_rows(&mut rng, n);
         let grad = darap::rhs_vjp(&pre, &gb);
-        report.check(&format!("darap/rhs/{name}"), &flat_m(&rot), &flat_m(&grad), tol, 6, |theta| {
-            dot(&gb, &darap::rhs(&pre, &mats(theta)))
-        });
+        report.check(
+            &format!("darap/rhs/{name}"),
+            &flat_m(&rot),
+            &flat_m(&grad),
+            tol,
+            6,
+            |theta| dot(&gb, &darap::rhs(&pre, &mats(theta))),
+        );
 
         // Pinned solve (the layer's solver) with respect to b.
         let l = cotan::laplacian_from_weights(n, &weights)?;
@@ -145,41 +207,93 @@ pub fn suite(report: &mut Report) -> anyhow::Result<()> {
         let pinned: Vec<[f64; 3]> = solver.pins().iter().map(|&v| p[v]).collect();
         let b = random_rows(&mut rng, n);
         let grad = solver.solve_pinned_adjoint(&gb);
-        report.check(&format!("darap/pinned_solve/{name}"), &flat(&b), &flat(&grad), tol, 7, |theta| {
-            dot(&gb, &solver.solve_pinned(&rows(theta), &pinned))
-        });
+        report.check(
+            &format!("darap/pinned_solve/{name}"),
+            &flat(&b),
+            &flat(&grad),
+            tol,
+            7,
+            |theta| dot(&gb, &solver.solve_pinned(&rows(theta), &pinned)),
+        );
 
         // Post-processing, all three modes, on a deformed-looking point set.
-        let solved: Vec<[f64; 3]> = p.iter().zip(&gb).map(|(q, d)| std::array::from_fn(|c| q[c] + 0.05 * d[c])).collect();
+        let solved: Vec<[f64; 3]> = p
+            .iter()
+            .zip(&gb)
+            .map(|(q, d)| std::array::from_fn(|c| q[c] + 0.05 * d[c]))
+            .collect();
         let rest_diag = mesh_core::geometry::bbox_diagonal(p);
-        for (mode_name, mode) in
-            [("recenter_rescale", PostProcess::RecenterRescale), ("recenter_only", PostProcess::RecenterOnly), ("none", PostProcess::None)]
-        {
+        for (mode_name, mode) in [
+            ("recenter_rescale", PostProcess::RecenterRescale),
+            ("recenter_only", PostProcess::RecenterOnly),
+            ("none", PostProcess::None),
+        ] {
             let (_, tape) = darap::post_process(&solved, rest_diag, mode);
             let grad = darap::post_process_vjp(&tape, &g3);
-            report.check(&format!("darap/post_process/{mode_name}/{name}"), &flat(&solved), &flat(&grad), tol, 8, |theta| {
-                dot(&g3, &darap::post_process(&rows(theta), rest_diag, mode).0)
-            });
+            report.check(
+                &format!("darap/post_process/{mode_name}/{name}"),
+                &flat(&solved),
+                &flat(&grad),
+                tol,
+                8,
+                |theta| dot(&g3, &darap::post_process(&rows(theta), rest_diag, mode).0),
+            );
         }
 
         // The whole chain x → positions.
-        for (rule_name, rule, lambda) in [("gis", RotationRule::Gis, 8.0), ("procrustes", RotationRule::Procrustes, 40.0)] {
-            let layer = Darap::new(p, f, DarapOptions { lambda, rotation_rule: rule, ..Default::default() })?;
+        for (rule_name, rule, lambda) in [
+            ("gis", RotationRule::Gis, 8.0),
+            ("procrustes", RotationRule::Procrustes, 40.0),
+        ] {
+            let layer = Darap::new(
+                p,
+                f,
+                DarapOptions {
+                    lambda,
+                    rotation_rule: rule,
+                    ..Default::default()
+                },
+            )?;
             let state = layer.forward(&x)?;
             let grad = layer.backward(&state, &g3);
-            report.check(&format!("darap/chain/{rule_name}/{name}"), &flat(&x), &flat(&grad), tol, 9, |theta| {
-                layer.forward(&rows(theta)).map_or(f64::NAN, |s| dot(&g3, &s.positions))
-            });
+            report.check(
+                &format!("darap/chain/{rule_name}/{name}"),
+                &flat(&x),
+                &flat(&grad),
+                tol,
+                9,
+                |theta| {
+                    layer
+                        .forward(&rows(theta))
+                        .map_or(f64::NAN, |s| dot(&g3, &s.positions))
+                },
+            );
         }
 
         // Degenerate inputs stay finite: zero targets, identical targets, huge λ.
         for lambda in [0.0, 8.0, 1e8] {
-            let layer = Darap::new(p, f, DarapOptions { lambda, ..Default::default() })?;
+            let layer = Darap::new(
+                p,
+                f,
+                DarapOptions {
+                    lambda,
+                    ..Default::default()
+                },
+            )?;
             for xd in [vec![[0.0; 3]; n], vec![[0.0, 1.0, 0.0]; n]] {
                 let state = layer.forward(&xd)?;
                 let grad = layer.backward(&state, &g3);
-                if !state.positions.iter().chain(&grad).flatten().all(|v| v.is_finite()) {
-                    report.fail(&format!("darap/degenerate_finite/{name}"), format!("non-finite output at λ = {lambda}"));
+                if !state
+                    .positions
+                    .iter()
+                    .chain(&grad)
+                    .flatten()
+                    .all(|v| v.is_finite())
+                {
+                    report.fail(
+                        &format!("darap/degenerate_finite/{name}"),
+                        format!("non-finite output at λ = {lambda}"),
+                    );
                 }
             }
         }

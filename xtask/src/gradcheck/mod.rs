@@ -31,7 +31,12 @@ pub struct Tolerance {
 
 impl Default for Tolerance {
     fn default() -> Self {
-        Self { step: 1e-6, rtol: 1e-5, atol: 1e-9, directions: 4 }
+        Self {
+            step: 1e-6,
+            rtol: 1e-5,
+            atol: 1e-9,
+            directions: 4,
+        }
     }
 }
 
@@ -65,50 +70,77 @@ impl Report {
         let mut failures = Vec::new();
         let mut worst_rel: f64 = 0.0;
         for k in 0..tol.directions {
-            let mut d: Vec<f64> = (0..theta.len()).map(|_| rng.random::<f64>() * 2.0 - 1.0).collect();
+            let mut d: Vec<f64> = (0..theta.len())
+                .map(|_| rng.random::<f64>() * 2.0 - 1.0)
+                .collect();
             let norm = d.iter().map(|v| v * v).sum::<f64>().sqrt().max(1e-300);
             d.iter_mut().for_each(|v| *v /= norm);
-            let shifted = |s: f64| -> Vec<f64> { theta.iter().zip(&d).map(|(t, di)| t + s * di).collect() };
+            let shifted =
+                |s: f64| -> Vec<f64> { theta.iter().zip(&d).map(|(t, di)| t + s * di).collect() };
             let fd = (loss(&shifted(tol.step)) - loss(&shifted(-tol.step))) / (2.0 * tol.step);
             let an: f64 = grad.iter().zip(&d).map(|(g, di)| g * di).sum();
             let err = (fd - an).abs();
             let scale = fd.abs().max(an.abs());
             let rel = if scale > 0.0 { err / scale } else { 0.0 };
             if !fd.is_finite() || !an.is_finite() || err > tol.atol + tol.rtol * scale {
-                failures.push(format!("direction {k}: finite difference {fd:.9e}, adjoint {an:.9e}, |diff| {err:.3e}"));
+                failures.push(format!(
+                    "direction {k}: finite difference {fd:.9e}, adjoint {an:.9e}, |diff| {err:.3e}"
+                ));
             }
             if err > tol.atol {
                 worst_rel = worst_rel.max(rel);
             }
         }
-        self.results.push(CheckResult { name: name.to_string(), worst_rel, failures });
+        self.results.push(CheckResult {
+            name: name.to_string(),
+            worst_rel,
+            failures,
+        });
     }
 
     /// Records a failure that is not a finite-difference mismatch (e.g. a NaN in a degenerate case).
     pub fn fail(&mut self, name: &str, why: String) {
-        self.results.push(CheckResult { name: name.to_string(), worst_rel: f64::NAN, failures: vec![why] });
+        self.results.push(CheckResult {
+            name: name.to_string(),
+            worst_rel: f64::NAN,
+            failures: vec![why],
+        });
     }
 
     fn finish(&self) -> anyhow::Result<()> {
         let mut failed = 0;
         for r in &self.results {
-            let status = if r.failures.is_empty() { "ok  " } else { "FAIL" };
-            println!("{status} {:<60} worst rel. error {:.2e}", r.name, r.worst_rel);
+            let status = if r.failures.is_empty() {
+                "ok  "
+            } else {
+                "FAIL"
+            };
+            println!(
+                "{status} {:<60} worst rel. error {:.2e}",
+                r.name, r.worst_rel
+            );
             for f in &r.failures {
                 println!("       {f}");
             }
             failed += usize::from(!r.failures.is_empty());
         }
-        println!("gradcheck: {} passed, {} failed", self.results.len() - failed, failed);
+        println!(
+            "gradcheck: {} passed, {} failed",
+            self.results.len() - failed,
+            failed
+        );
         anyhow::ensure!(failed == 0, "{failed} gradient check(s) failed");
         Ok(())
     }
 }
 
+/// A suite of checks: registers its results in the report.
+type Suite = fn(&mut Report) -> anyhow::Result<()>;
+
 /// Runs every check whose name contains `filter` (all when `None`).
 pub fn run(filter: Option<&str>) -> anyhow::Result<()> {
     let mut report = Report::default();
-    let suites: &[(&str, fn(&mut Report) -> anyhow::Result<()>)] = &[
+    let suites: &[(&str, Suite)] = &[
         // Each crate's checks live in a sibling module and register here.
         ("raster", raster::suite),
         ("csd", csd::suite),
@@ -121,6 +153,9 @@ pub fn run(filter: Option<&str>) -> anyhow::Result<()> {
             suite(&mut report)?;
         }
     }
-    anyhow::ensure!(!report.results.is_empty(), "no gradient check matched the filter");
+    anyhow::ensure!(
+        !report.results.is_empty(),
+        "no gradient check matched the filter"
+    );
     report.finish()
 }

@@ -19,9 +19,12 @@ fn unit(v: [f64; 3]) -> [f64; 3] {
     v.map(|c| c / l)
 }
 
+/// Positions, faces and one unit target normal per face.
+type Fixture = (Vec<[f64; 3]>, Vec<[u32; 3]>, Vec<[f64; 3]>);
+
 /// A small closed test mesh (icosphere, 1 subdivision) with jittered vertices and random unit
 /// per-face targets.
-fn fixture(seed: u64) -> (Vec<[f64; 3]>, Vec<[u32; 3]>, Vec<[f64; 3]>) {
+fn fixture(seed: u64) -> Fixture {
     let (mut p, f) = raster_diff::shapes::icosphere(1);
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     for v in &mut p {

@@ -29,7 +29,7 @@ pub const BOUNDARY_EDGE: u32 = u32::MAX;
 /// Marker for an edge shared by more than two faces.
 pub const NON_MANIFOLD_EDGE: u32 = u32::MAX - 1;
 
-/// Face adjacency across each edge: `adj[f][k]` is the face across the edge (f[k], f[k+1]).
+/// Face adjacency across each edge: `adj[f][k]` is the face across the edge `(f[k], f[k+1])`.
 pub fn face_adjacency(faces: &[[u32; 3]]) -> Vec<[u32; 3]> {
     let mut keyed: Vec<(u32, u32, u32, u8)> = Vec::with_capacity(faces.len() * 3);
     for (fi, f) in faces.iter().enumerate() {

@@ -42,15 +42,6 @@ impl Default for RenderSettings {
 /// Background value (white) composited behind the mesh.
 pub const BACKGROUND: f64 = 1.0;
 
-/// Which triangle each pixel centre sees, and at what depth, for one view (row-major).
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct Visibility {
-    /// Triangle id per pixel ([`raster::NO_TRIANGLE`] for background).
-    pub ids: Vec<u32>,
-    /// Depth along the view direction per pixel (+∞ for background).
-    pub depth: Vec<f64>,
-}
-
 struct ViewState {
     camera: Camera,
     ids: Vec<u32>,
@@ -162,49 +153,12 @@ impl CpuRenderer {
         width: usize,
         height: usize,
     ) -> Result<Vec<f64>, RenderError> {
-        self.render_grey_with(vertices, faces, views, width, height, None)
-    }
-
-    /// Like [`render_grey`](Self::render_grey), with the visibility (triangle id and depth per
-    /// pixel, one entry per view) computed elsewhere, e.g. by the wgpu rasterizer. Shading,
-    /// antialiasing and the state for `backward` are the CPU reference's.
-    pub fn render_grey_with(
-        &mut self,
-        vertices: &[[f64; 3]],
-        faces: &[[u32; 3]],
-        views: &[View],
-        width: usize,
-        height: usize,
-        visibility: Option<Vec<Visibility>>,
-    ) -> Result<Vec<f64>, RenderError> {
         self.state = None;
         validate(vertices, faces, width, height)?;
         let cameras = views
             .iter()
             .map(|v| Camera::new(v, width, height))
             .collect::<Result<Vec<_>, _>>()?;
-        let mut visibility: Vec<Option<Visibility>> = match visibility {
-            None => (0..views.len()).map(|_| None).collect(),
-            Some(v) => {
-                let n = width * height;
-                if v.len() != views.len()
-                    || v.iter().any(|x| x.ids.len() != n || x.depth.len() != n)
-                {
-                    return Err(RenderError::InvalidInput(
-                        "visibility buffers do not match the views and image size".into(),
-                    ));
-                }
-                if v.iter()
-                    .flat_map(|x| &x.ids)
-                    .any(|&t| t != NO_TRIANGLE && t as usize >= faces.len())
-                {
-                    return Err(RenderError::InvalidInput(
-                        "visibility names a triangle that does not exist".into(),
-                    ));
-                }
-                v.into_iter().map(Some).collect()
-            }
-        };
         let adjacency = if self.settings.antialias {
             self.adjacency(faces)
         } else {
@@ -215,13 +169,9 @@ impl CpuRenderer {
         let settings = &self.settings;
         let results: Vec<(ViewState, Vec<f64>)> = cameras
             .into_par_iter()
-            .zip(visibility.par_iter_mut())
-            .map(|(camera, vis)| {
+            .map(|camera| {
                 let proj = raster::project_vertices(&camera, vertices);
-                let (ids, depth) = match vis.take() {
-                    Some(v) => (v.ids, v.depth),
-                    None => raster::rasterize(faces, &proj, settings.near, width, height),
-                };
+                let (ids, depth) = raster::rasterize(faces, &proj, settings.near, width, height);
                 let mut colour = vec![BACKGROUND; width * height];
                 for (i, (&t, c)) in ids.iter().zip(colour.iter_mut()).enumerate() {
                     if t != NO_TRIANGLE {
