@@ -2,56 +2,7 @@
 
 use mesh_core::TriMesh;
 
-/// An icosphere: the icosahedron subdivided `level` times (midpoint) and projected to the unit
-/// sphere. Well-shaped (all weights positive). `V = 10·4^level + 2`.
-pub fn icosphere(level: u32) -> TriMesh {
-    let t = (1.0 + 5f64.sqrt()) / 2.0;
-    let raw = [
-        [-1.0, t, 0.0],
-        [1.0, t, 0.0],
-        [-1.0, -t, 0.0],
-        [1.0, -t, 0.0],
-        [0.0, -1.0, t],
-        [0.0, 1.0, t],
-        [0.0, -1.0, -t],
-        [0.0, 1.0, -t],
-        [t, 0.0, -1.0],
-        [t, 0.0, 1.0],
-        [-t, 0.0, -1.0],
-        [-t, 0.0, 1.0],
-    ];
-    let faces = vec![
-        [0, 11, 5],
-        [0, 5, 1],
-        [0, 1, 7],
-        [0, 7, 10],
-        [0, 10, 11],
-        [1, 5, 9],
-        [5, 11, 4],
-        [11, 10, 2],
-        [10, 7, 6],
-        [7, 1, 8],
-        [3, 9, 4],
-        [3, 4, 2],
-        [3, 2, 6],
-        [3, 6, 8],
-        [3, 8, 9],
-        [4, 9, 5],
-        [2, 4, 11],
-        [6, 2, 10],
-        [8, 6, 7],
-        [9, 8, 1],
-    ];
-    let mut mesh = TriMesh::new(raw.to_vec(), faces);
-    for _ in 0..level {
-        mesh = mesh_core::subdivide::midpoint(&mesh);
-    }
-    for p in &mut mesh.positions {
-        let n = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
-        *p = p.map(|c| c / n);
-    }
-    mesh
-}
+pub use mesh_core::shapes::icosphere;
 
 /// An open, wavy `k×k` grid over `[−1, 1]²` whose cells are sheared so that half of the triangles
 /// are obtuse (negative cotangent weights): a stress case for the reference conventions.
