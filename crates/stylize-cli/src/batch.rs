@@ -231,7 +231,13 @@ fn run_row(
             let Some(model) = &options.model else {
                 bail!("prompt rows need --model DIR (docs/models.md)");
             };
-            let set = models.get_or_insert_with(|| ModelSet::open(model));
+            if config.guidance.onnx_memory_arena != options.config.guidance.onnx_memory_arena {
+                bail!(
+                    "guidance.onnx_memory_arena cannot be overridden per row: the batch opens its \
+                     models once (set it for the whole batch with --set)"
+                );
+            }
+            let set = models.get_or_insert_with(|| ModelSet::open(model, &options.config));
             let set = set.as_ref().map_err(|e| anyhow::anyhow!("{e:#}"))?;
             Task::Text {
                 prompt: prompt.clone(),

@@ -71,11 +71,15 @@ impl std::fmt::Debug for ModelSet {
 }
 
 impl ModelSet {
-    /// Opens the model directory and its UNets (stage II only when the manifest lists it).
-    pub fn open(model: &Path) -> anyhow::Result<Self> {
+    /// Opens the model directory and its UNets (stage II only when the manifest lists it), with
+    /// the session settings of `config` (`guidance.onnx_memory_arena`).
+    pub fn open(model: &Path, config: &Config) -> anyhow::Result<Self> {
         let dir = ModelDir::open(model)
             .with_context(|| format!("cannot open model directory {}", model.display()))?;
-        let options = SessionOptions::default();
+        let options = SessionOptions {
+            cpu_memory_arena: config.guidance.onnx_memory_arena,
+            ..SessionOptions::default()
+        };
         let cache = EmbeddingCache::at_default().ok();
         let stage1 = OnnxDenoiser::open(&dir, Stage::One, &options).context("IF stage I")?;
         let stage2 = match dir.stage(Stage::Two) {
@@ -138,5 +142,5 @@ pub fn load_guidance(
     prompt: &str,
     config: &Config,
 ) -> anyhow::Result<Box<dyn Guidance>> {
-    ModelSet::open(model)?.guidance_for(prompt, config)
+    ModelSet::open(model, config)?.guidance_for(prompt, config)
 }

@@ -107,3 +107,21 @@ fn shards_split_rows_without_overlap() {
     assert_eq!(a, vec![0, 2]);
     assert_eq!(b, vec![1]);
 }
+
+#[test]
+fn process_wide_session_setting_cannot_be_overridden_per_row() {
+    let tmp = ok(tempfile::tempdir());
+    let config = setup(tmp.path());
+    let manifest = "[[run]]\nmesh = \"m.obj\"\nprompt = \"a cube\"\nout = \"runs/text\"\n\
+                    overrides = [\"guidance.onnx_memory_arena=false\"]\n";
+    ok(std::fs::write(tmp.path().join("arena.toml"), manifest));
+    let rows = ok(read_manifest(&tmp.path().join("arena.toml")));
+    let mut opts = options(&config, Shard::ALL);
+    opts.model = Some(tmp.path().join("no-model-needed-before-the-check"));
+    let results = run_batch(&rows, &opts);
+    assert!(
+        matches!(&results[0].2, RowStatus::Failed(m) if m.contains("onnx_memory_arena")),
+        "{:?}",
+        results[0].2
+    );
+}
