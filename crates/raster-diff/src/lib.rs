@@ -62,6 +62,33 @@ impl Images {
             rgb,
         }
     }
+
+    /// dL/d(grey) from these dL/d(RGB) images, checked against the shape of the render they belong
+    /// to (`count` views of `height`×`width`). All three channels carry the same grey value, so
+    /// dL/d(grey) is the channel sum, summed in f64.
+    pub fn grey_gradient(
+        &self,
+        count: usize,
+        height: usize,
+        width: usize,
+    ) -> Result<Vec<f64>, RenderError> {
+        if (self.count, self.height, self.width) != (count, height, width) {
+            return Err(RenderError::InvalidInput(format!(
+                "gradient images are {}×{}×{}, the last render was {count}×{height}×{width}",
+                self.count, self.height, self.width
+            )));
+        }
+        if self.rgb.len() != count * height * width * 3 {
+            return Err(RenderError::InvalidInput(
+                "gradient images have the wrong number of values".into(),
+            ));
+        }
+        Ok(self
+            .rgb
+            .chunks_exact(3)
+            .map(|c| f64::from(c[0]) + f64::from(c[1]) + f64::from(c[2]))
+            .collect())
+    }
 }
 
 /// Errors from rendering.

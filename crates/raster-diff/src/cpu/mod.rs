@@ -330,31 +330,7 @@ impl Renderer for CpuRenderer {
 
     fn backward(&mut self, d_images: &Images) -> Result<Vec<[f64; 3]>, RenderError> {
         let st = self.state.as_ref().ok_or(RenderError::NoForwardState)?;
-        if d_images.count != st.views.len()
-            || d_images.width != st.width
-            || d_images.height != st.height
-        {
-            return Err(RenderError::InvalidInput(format!(
-                "gradient images are {}×{}×{}, the last render was {}×{}×{}",
-                d_images.count,
-                d_images.height,
-                d_images.width,
-                st.views.len(),
-                st.height,
-                st.width
-            )));
-        }
-        if d_images.rgb.len() != d_images.count * d_images.height * d_images.width * 3 {
-            return Err(RenderError::InvalidInput(
-                "gradient images have the wrong number of values".into(),
-            ));
-        }
-        // All three channels carry the same grey value, so dL/d(grey) is the channel sum.
-        let d_grey: Vec<f64> = d_images
-            .rgb
-            .chunks_exact(3)
-            .map(|c| f64::from(c[0]) + f64::from(c[1]) + f64::from(c[2]))
-            .collect();
+        let d_grey = d_images.grey_gradient(st.views.len(), st.height, st.width)?;
         self.backward_grey(&d_grey)
     }
 }

@@ -790,28 +790,16 @@ impl Renderer for WgpuRenderer {
         let st = self.state.as_ref().ok_or(RenderError::NoForwardState)?;
         let b = self.buffers.as_ref().ok_or(RenderError::NoForwardState)?;
         let s = st.shape;
-        if d_images.count != s.views || d_images.width != s.width || d_images.height != s.height {
-            return Err(RenderError::InvalidInput(format!(
-                "gradient images are {}×{}×{}, the last render was {}×{}×{}",
-                d_images.count, d_images.height, d_images.width, s.views, s.height, s.width
-            )));
-        }
+        let d_grey: Vec<f32> = d_images
+            .grey_gradient(s.views, s.height, s.width)?
+            .into_iter()
+            .map(|g| g as f32)
+            .collect();
         let p = s.pixels();
-        if d_images.rgb.len() != 3 * p {
-            return Err(RenderError::InvalidInput(
-                "gradient images have the wrong number of values".into(),
-            ));
-        }
         let nv = s.verts;
         if nv == 0 {
             return Ok(Vec::new());
         }
-        // All three channels carry the same grey value, so dL/d(grey) is the channel sum.
-        let d_grey: Vec<f32> = d_images
-            .rgb
-            .chunks_exact(3)
-            .map(|c| c[0] + c[1] + c[2])
-            .collect();
         let q = &self.queue;
         if p > 0 {
             // Both halves: pixels off the boundary list keep dL/d(colour) = dL/d(output).
