@@ -44,6 +44,9 @@ from pathlib import Path
 
 import numpy as np
 
+# Shared with the IF exporter (this directory is on sys.path when a script here runs).
+from export_if_onnx import strip_debug_info
+
 SCRIPT_DIR = Path(__file__).resolve().parent
 REPO_ROOT = SCRIPT_DIR.parent
 TOKENIZER_JSON = REPO_ROOT / "crates" / "diffusion-onnx" / "assets" / "clip_tokenizer.json"
@@ -154,23 +157,6 @@ def make_wrappers():
             return self.proj(pooled)
 
     return ImageEncoder, TextEncoder
-
-
-def strip_debug_info(path: Path):
-    """Drop the exporter's per-node stack traces and metadata (weights untouched)."""
-    import onnx
-
-    model = onnx.load(str(path))
-    model.graph.doc_string = ""
-    for node in model.graph.node:
-        node.doc_string = ""
-        del node.metadata_props[:]
-    for vi in model.graph.value_info:
-        del vi.metadata_props[:]
-    for t in model.graph.initializer:
-        del t.metadata_props[:]
-    del model.metadata_props[:]
-    onnx.save(model, str(path))
 
 
 def export_module(module, arg, name_in: str, name_out: str, path: Path):
