@@ -281,7 +281,7 @@ fn read_seen(path: &Path) -> std::io::Result<Seen> {
         .map_or(0.0, |d| d.as_secs_f64());
     let mut raw = Vec::new();
     // A lock record is small; anything much larger is not ours (read a bounded prefix).
-    f.by_ref()
+    Read::by_ref(&mut f)
         .take(4 * RECORD_BYTES as u64)
         .read_to_end(&mut raw)?;
     let record = std::str::from_utf8(&raw)
@@ -319,7 +319,8 @@ enum Verdict {
 pub struct RunLock {
     dir: PathBuf,
     path: PathBuf,
-    file: Arc<File>,
+    /// Kept open while the lock is held (the heartbeat thread writes through it).
+    _file: Arc<File>,
     ino: (u64, u64),
     lost: Arc<AtomicBool>,
     stop: Option<mpsc::Sender<()>>,
@@ -389,7 +390,7 @@ impl RunLock {
         let lost = Arc::new(AtomicBool::new(false));
         let (stop, stopped) = mpsc::channel::<()>();
         let thread = {
-            let (file, lost, path) = (Arc::clone(&file), Arc::clone(&lost), path.clone());
+            let (file, lost, beat_path) = (Arc::clone(&file), Arc::clone(&lost), path.clone());
             std::thread::Builder::new()
                 .name("run-lock-heartbeat".into())
                 .spawn(move || {
@@ -398,7 +399,7 @@ impl RunLock {
                     {
                         me.beat += 1;
                         me.heartbeat = now_unix();
-                        if !owns(&path, ino) {
+                        if !owns(&beat_path, ino) {
                             lost.store(true, Ordering::SeqCst);
                             return;
                         }
@@ -411,7 +412,7 @@ impl RunLock {
         Ok(Self {
             dir: dir.to_path_buf(),
             path,
-            file,
+            _file: file,
             ino,
             lost,
             stop: Some(stop),

@@ -42,7 +42,7 @@ fn must(o: &Output) {
     assert!(o.status.success(), "stylize failed:\n{}", stderr(o));
 }
 
-fn mesh(dir: &Path, name: &str, subdivisions: usize, squash: f64) -> PathBuf {
+fn mesh(dir: &Path, name: &str, subdivisions: u32, squash: f64) -> PathBuf {
     let (p, f) = raster_diff::shapes::icosphere(subdivisions);
     let p: Vec<[f64; 3]> = p
         .iter()
@@ -286,8 +286,12 @@ fn inputs_and_foreign_folders_are_never_overwritten() {
     let base = cube_run(&input, &proj, "style.iterations=3");
     let out = stylize(&base);
     assert!(!out.status.success());
+    assert!(stderr(&out).contains("input mesh"), "{}", stderr(&out));
+    let other = mesh(tmp.path(), "other.obj", 1, 0.7);
+    let out = stylize(&cube_run(&other, &proj, "style.iterations=3"));
+    assert!(!out.status.success());
     assert!(
-        stderr(&out).contains("not a stylize run directory"),
+        stderr(&out).contains("not a stylize run directory") && stderr(&out).contains("config.toml"),
         "{}",
         stderr(&out)
     );
@@ -301,7 +305,6 @@ fn inputs_and_foreign_folders_are_never_overwritten() {
         stderr(&out)
     );
     // The config file inside the output folder, with the mesh elsewhere.
-    let other = mesh(tmp.path(), "other.obj", 1, 0.7);
     let cfg = proj.join("config.toml");
     let out = stylize(&[
         "run",
