@@ -30,9 +30,9 @@ use anyhow::{Context, bail};
 use serde::Deserialize;
 
 use crate::config::Config;
+use crate::identity::{ModelIdentity, ObjectiveIdentity};
 use crate::models::ModelSet;
 use crate::rundir::RunDir;
-use crate::identity::{ModelIdentity, ObjectiveIdentity};
 use crate::runner::{LogMode, RunOptions, RunRequest, Task, execute_with};
 use crate::signals::Interrupted;
 use crate::style::Style;
@@ -178,7 +178,10 @@ fn normalized_dir(path: &Path) -> PathBuf {
             }
             return out;
         }
-        match (existing.file_name().map(|n| n.to_os_string()), existing.parent()) {
+        match (
+            existing.file_name().map(|n| n.to_os_string()),
+            existing.parent(),
+        ) {
             (Some(name), Some(parent)) => {
                 rest.push(name);
                 existing = parent.to_path_buf();
@@ -326,7 +329,6 @@ pub fn run_batch_until_interrupted(
     (out, None)
 }
 
-
 fn run_row(
     row: &Row,
     options: &BatchOptions,
@@ -390,8 +392,7 @@ fn run_row(
                 &request,
                 objective,
                 || {
-                    let set =
-                        models.get_or_insert_with(|| ModelSet::open(model, &options.config));
+                    let set = models.get_or_insert_with(|| ModelSet::open(model, &options.config));
                     let set = set.as_ref().map_err(|e| anyhow::anyhow!("{e:#}"))?;
                     Ok(Task::Text {
                         prompt: prompt.clone(),

@@ -263,8 +263,14 @@ mod tests {
         c.run.turntable_size = 64;
         let d = a.differences(&id(&octa, &c));
         assert_eq!(d.len(), 3, "{d:?}");
-        assert!(d.iter().any(|m| m.starts_with("style: was cube, now octahedron")));
-        assert!(d.iter().any(|m| m.starts_with("config.run.seed: was 0, now 3")));
+        assert!(
+            d.iter()
+                .any(|m| m.starts_with("style: was cube, now octahedron"))
+        );
+        assert!(
+            d.iter()
+                .any(|m| m.starts_with("config.run.seed: was 0, now 3"))
+        );
         assert!(d.iter().any(|m| m.starts_with("config.darap.lambda")));
         // The model-free path does not read the text path's settings.
         let mut t = base.clone();
@@ -276,7 +282,10 @@ mod tests {
         };
         let d = id(&p("a cat"), &base).differences(&id(&p("a dog"), &t));
         assert_eq!(d.len(), 2, "{d:?}");
-        assert!(d.iter().any(|m| m.contains("\"a cat\"") && m.contains("\"a dog\"")));
+        assert!(
+            d.iter()
+                .any(|m| m.contains("\"a cat\"") && m.contains("\"a dog\""))
+        );
     }
 
     #[test]

@@ -79,9 +79,10 @@ impl LockSettings {
         let read = |name: &str| -> anyhow::Result<Option<Duration>> {
             match std::env::var(name) {
                 Ok(v) => {
-                    let secs: f64 = v.trim().parse().map_err(|_| {
-                        anyhow::anyhow!("{name}={v:?} is not a number of seconds")
-                    })?;
+                    let secs: f64 = v
+                        .trim()
+                        .parse()
+                        .map_err(|_| anyhow::anyhow!("{name}={v:?} is not a number of seconds"))?;
                     anyhow::ensure!(
                         secs.is_finite() && secs > 0.0 && secs < 1e6,
                         "{name}={v:?} must be a positive number of seconds"
@@ -138,33 +139,53 @@ pub struct LockRecord {
     pub command: String,
 }
 
+/// The holder of a lock, as its record says.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Holder {
+    /// Holder's host.
+    pub host: String,
+    /// Holder's pid.
+    pub pid: u32,
+    /// When the holder took the lock (UTC).
+    pub since: String,
+    /// Heartbeat age in words.
+    pub age: String,
+    /// The holder's command line ("" when unknown).
+    pub command: String,
+    /// Our staleness limit in seconds.
+    pub stale_secs: f64,
+}
+
+fn held_message(dir: &Path, h: &Holder) -> String {
+    format!(
+        "run directory {} is in use: locked by pid {} on host {} since {} (last heartbeat {}){}; \
+         two processes must not write one run directory. If that process is gone, its lock is \
+         taken over automatically once its heartbeat is older than {} s ({STALE_ENV}), or at once \
+         on the same host",
+        dir.display(),
+        h.pid,
+        h.host,
+        h.since,
+        h.age,
+        if h.command.is_empty() {
+            String::new()
+        } else {
+            format!("; command: {}", h.command)
+        },
+        h.stale_secs
+    )
+}
+
 /// Why a lock could not be taken.
 #[derive(Debug, thiserror::Error)]
 pub enum LockError {
     /// Another live process holds the lock.
-    #[error(
-        "run directory {dir} is in use: locked by pid {pid} on host {host} since {since} \
-         (last heartbeat {age}){command}; two processes must not write one run directory. \
-         If that process is gone, its lock is taken over automatically once its heartbeat is \
-         older than {stale_secs} s ({stale_env}), or at once on the same host"
-    )]
+    #[error("{}", held_message(dir, holder))]
     Held {
         /// The run directory.
         dir: PathBuf,
-        /// Holder's host.
-        host: String,
-        /// Holder's pid.
-        pid: u32,
-        /// When the holder took the lock (UTC).
-        since: String,
-        /// Heartbeat age in words.
-        age: String,
-        /// `; command: …` or empty.
-        command: String,
-        /// Staleness limit in seconds.
-        stale_secs: f64,
-        /// [`STALE_ENV`].
-        stale_env: &'static str,
+        /// Who holds it.
+        holder: Box<Holder>,
     },
     /// The lock file exists but is being written or is unreadable garbage that still changes.
     #[error(
@@ -177,7 +198,7 @@ pub enum LockError {
         /// The lock file.
         path: PathBuf,
         /// What was found.
-        detail: String,
+        detail: Box<str>,
     },
     /// Input/output error on the lock file.
     #[error("run directory lock {path}: {source}")]
@@ -347,7 +368,11 @@ impl RunLock {
             heartbeat: now_unix(),
             interval: settings.heartbeat.as_secs_f64(),
             beat: 0,
-            token: format!("{:016x}{:016x}", rand::random::<u64>(), rand::random::<u64>()),
+            token: format!(
+                "{:016x}{:016x}",
+                rand::random::<u64>(),
+                rand::random::<u64>()
+            ),
             command: std::env::args().collect::<Vec<_>>().join(" "),
         };
         // A few rounds: each round either creates the lock, finds a live holder, or removes one
@@ -490,7 +515,7 @@ fn assess(path: &Path, me: &LockRecord, settings: LockSettings) -> Result<Verdic
     }
     let last = seen.record.as_ref().map_or(seen.mtime, |r| r.heartbeat);
     let age = now_unix() - last;
-    if !(age > settings.stale_after.as_secs_f64()) {
+    if !age.is_finite() || age <= settings.stale_after.as_secs_f64() {
         return Ok(Verdict::Live(seen));
     }
     // Looks stale by the clocks: confirm by watching the file for two of the holder's heartbeats.
@@ -520,21 +545,18 @@ fn held_error(dir: &Path, path: &Path, seen: &Seen, settings: LockSettings) -> L
             let age = now_unix() - r.heartbeat;
             LockError::Held {
                 dir: dir.to_path_buf(),
-                host: r.host.clone(),
-                pid: r.pid,
-                since: format_utc(r.since),
-                age: if age.is_finite() && age >= 0.0 {
-                    format!("{age:.0} s ago")
-                } else {
-                    "in the future by this host's clock".into()
-                },
-                command: if r.command.is_empty() {
-                    String::new()
-                } else {
-                    format!("; command: {}", r.command)
-                },
-                stale_secs: settings.stale_after.as_secs_f64(),
-                stale_env: STALE_ENV,
+                holder: Box::new(Holder {
+                    host: r.host.clone(),
+                    pid: r.pid,
+                    since: format_utc(r.since),
+                    age: if age.is_finite() && age >= 0.0 {
+                        format!("{age:.0} s ago")
+                    } else {
+                        "in the future by this host's clock".into()
+                    },
+                    command: r.command.clone(),
+                    stale_secs: settings.stale_after.as_secs_f64(),
+                }),
             }
         }
         None => LockError::Busy {

@@ -122,8 +122,11 @@ pub fn is_own_entry(name: &str) -> bool {
         || crate::durable::is_temp_name(name)
 }
 
+/// (device, inode).
+type FileId = (u64, u64);
+
 /// Identity of a file: (device, inode) of the entry itself and of what it points to.
-fn file_ids(path: &Path) -> Option<((u64, u64), Option<(u64, u64)>)> {
+fn file_ids(path: &Path) -> Option<(FileId, Option<FileId>)> {
     let l = std::fs::symlink_metadata(path).ok()?;
     let followed = std::fs::metadata(path).ok().map(|m| (m.dev(), m.ino()));
     Some(((l.dev(), l.ino()), followed))
@@ -295,7 +298,10 @@ impl RunDir {
             let e = e.with_context(|| format!("cannot list {}", self.root.display()))?;
             names.push(e.file_name().to_string_lossy().into_owned());
         }
-        if names.iter().all(|n| is_lock_name(n) || crate::durable::is_temp_name(n)) {
+        if names
+            .iter()
+            .all(|n| is_lock_name(n) || crate::durable::is_temp_name(n))
+        {
             return Ok(Existing::Empty);
         }
         if self.has_marker() {
@@ -327,7 +333,9 @@ impl RunDir {
         // A resume never rewrites task.json or config.toml (`--resume` alone reads the latter).
         let outputs: Vec<PathBuf> = RUN_FILES
             .iter()
-            .filter(|n| claim.resume != ResumeMode::Required || !matches!(**n, "task.json" | "config.toml"))
+            .filter(|n| {
+                claim.resume != ResumeMode::Required || !matches!(**n, "task.json" | "config.toml")
+            })
             .map(|n| self.file(n))
             .collect();
         refuse_overwriting_inputs(&outputs, &[self.previews()], claim.inputs)?;
@@ -340,7 +348,11 @@ impl RunDir {
                      replaces only files named like the run's own: {}, previews/)",
                     self.root.display(),
                     shown.join(", "),
-                    if names.len() > shown.len() { ", …" } else { "" },
+                    if names.len() > shown.len() {
+                        ", …"
+                    } else {
+                        ""
+                    },
                     RUN_FILES.join(", ")
                 );
             }
@@ -535,7 +547,10 @@ mod tests {
         assert!(run.file(crate::lock::LOCK_FILE).is_file());
         ok(run.write_task(&id));
         drop(lock);
-        assert!(!run.file(crate::lock::LOCK_FILE).exists(), "released on drop");
+        assert!(
+            !run.file(crate::lock::LOCK_FILE).exists(),
+            "released on drop"
+        );
         ok(std::fs::write(
             run.summary(),
             r#"{"status":"complete","objective":"x"}"#,
@@ -563,7 +578,10 @@ mod tests {
         let run = RunDir::new(&proj);
         let id = identity("cube");
         let e = err(run.claim(&claim(&id, &[], false, ResumeMode::Never)));
-        assert!(e.contains("not a stylize run directory") && e.contains("config.toml"), "{e}");
+        assert!(
+            e.contains("not a stylize run directory") && e.contains("config.toml"),
+            "{e}"
+        );
         // The input mesh is one of the outputs' names: refused even with --force.
         let inputs = vec![("input mesh".to_string(), proj.join("../proj/./mesh.obj"))];
         let e = err(run.claim(&claim(&id, &inputs, true, ResumeMode::Never)));
@@ -571,7 +589,10 @@ mod tests {
         // A hard link of the input under an output's name is the same file.
         let other = dir.path().join("other");
         ok(std::fs::create_dir_all(&other));
-        ok(std::fs::hard_link(proj.join("mesh.obj"), other.join("mesh.ply")));
+        ok(std::fs::hard_link(
+            proj.join("mesh.obj"),
+            other.join("mesh.ply"),
+        ));
         let e = err(RunDir::new(&other).claim(&claim(&id, &inputs, true, ResumeMode::Never)));
         assert!(e.contains("mesh.ply"), "{e}");
         // An input inside previews/ would be removed by --force.
@@ -630,6 +651,9 @@ mod tests {
         .unwrap_or_else(|e| panic!("{e}"));
         run.truncate_metrics(9).unwrap_or_else(|e| panic!("{e}"));
         let text = std::fs::read_to_string(run.metrics()).unwrap_or_else(|e| panic!("{e}"));
-        assert_eq!(text, "{\"iteration\":1}\n{\"iteration\":2}\n{\"iteration\":3}\n");
+        assert_eq!(
+            text,
+            "{\"iteration\":1}\n{\"iteration\":2}\n{\"iteration\":3}\n"
+        );
     }
 }

@@ -16,15 +16,15 @@ use rand_chacha::ChaCha8Rng;
 use raster_diff::{CameraConfig, Images, Renderer};
 
 use crate::checkpoint::{CHECKPOINT_VERSION, Checkpoint};
+use crate::config::{Backend, Config, PostProcess, RotationRule};
 use crate::identity::{ObjectiveIdentity, TaskIdentity};
 use crate::lock::RunLock;
-use crate::signals::Interrupted;
-use crate::config::{Backend, Config, PostProcess, RotationRule};
 use crate::pipeline::{
     IterationRecord, LoopSpec, LoopState, Objective, Observer, StyleObjective, TextObjective,
     ViewSettings, run_loop,
 };
 use crate::rundir::{Claim, ResumeMode, RunDir, Start};
+use crate::signals::Interrupted;
 use crate::style::Style;
 
 /// Format version of our extra keys in `deformation.npz`.

@@ -132,7 +132,8 @@ fn duplicate_or_empty_outputs_are_manifest_errors_naming_the_rows() {
     let tmp = ok(tempfile::tempdir());
     setup(tmp.path());
     let path = tmp.path().join("dup.jsonl");
-    let row = |out: &str| format!("{{\"mesh\": \"m.obj\", \"style\": \"cube\", \"out\": \"{out}\"}}\n");
+    let row =
+        |out: &str| format!("{{\"mesh\": \"m.obj\", \"style\": \"cube\", \"out\": \"{out}\"}}\n");
     let err = |text: String| {
         ok(std::fs::write(&path, text));
         read_manifest(&path)

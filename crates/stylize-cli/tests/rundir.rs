@@ -183,7 +183,12 @@ fn one_process_per_directory_and_signals_checkpoint_for_an_exact_resume() {
     let out = finish(resumed);
     assert_eq!(out.status.code(), Some(130), "{}", stderr(&out));
     let c2 = ok(Checkpoint::load(&run.join("checkpoint.json")));
-    assert!(c2.iteration > c.iteration, "{} {}", c2.iteration, c.iteration);
+    assert!(
+        c2.iteration > c.iteration,
+        "{} {}",
+        c2.iteration,
+        c.iteration
+    );
     // The exact printed command (through a shell) finishes the run.
     must(&ok(Command::new("sh").args(["-c", &resume_line]).output()));
     let a = ok(SavedDeformation::read(reference.join("deformation.npz")));
@@ -193,7 +198,10 @@ fn one_process_per_directory_and_signals_checkpoint_for_an_exact_resume() {
         ok(Checkpoint::load(&reference.join("checkpoint.json"))),
         ok(Checkpoint::load(&run.join("checkpoint.json"))),
     );
-    assert!(ca.x == cb.x && ca.adam == cb.adam, "state differs after resume");
+    assert!(
+        ca.x == cb.x && ca.adam == cb.adam,
+        "state differs after resume"
+    );
     assert_eq!(metrics_iterations(&run), (1..=1500).collect::<Vec<_>>());
 }
 
@@ -257,7 +265,11 @@ fn live_locks_are_respected_and_stale_ones_taken_over() {
     // A dead process on this host: taken over at once, with the default limits.
     let dead = ok(Command::new("true").spawn());
     let pid = dead.id();
-    ok(finish(dead).status.success().then_some(()).ok_or("true failed"));
+    ok(finish(dead)
+        .status
+        .success()
+        .then_some(())
+        .ok_or("true failed"));
     let host = std::fs::read_to_string("/proc/sys/kernel/hostname")
         .map(|h| h.trim().to_string())
         .unwrap_or_default();
@@ -278,7 +290,10 @@ fn inputs_and_foreign_folders_are_never_overwritten() {
     let proj = tmp.path().join("proj");
     ok(std::fs::create_dir_all(&proj));
     let input = mesh(&proj, "mesh.obj", 1, 0.8);
-    ok(std::fs::write(proj.join("config.toml"), "[style]\niterations = 3\n"));
+    ok(std::fs::write(
+        proj.join("config.toml"),
+        "[style]\niterations = 3\n",
+    ));
     let before = (
         ok(std::fs::read(&input)),
         ok(std::fs::read(proj.join("config.toml"))),
@@ -291,7 +306,8 @@ fn inputs_and_foreign_folders_are_never_overwritten() {
     let out = stylize(&cube_run(&other, &proj, "style.iterations=3"));
     assert!(!out.status.success());
     assert!(
-        stderr(&out).contains("not a stylize run directory") && stderr(&out).contains("config.toml"),
+        stderr(&out).contains("not a stylize run directory")
+            && stderr(&out).contains("config.toml"),
         "{}",
         stderr(&out)
     );
@@ -353,7 +369,10 @@ fn inputs_and_foreign_folders_are_never_overwritten() {
     let mut args = cube_run(&other, &shared, "style.iterations=3");
     args.push("--force");
     must(&stylize(&args));
-    assert_eq!(ok(std::fs::read_to_string(shared.join("notes.txt"))), "mine");
+    assert_eq!(
+        ok(std::fs::read_to_string(shared.join("notes.txt"))),
+        "mine"
+    );
 
     // apply and render outputs never replace their inputs either.
     let mask = tmp.path().join("mask.obj");
@@ -371,7 +390,10 @@ fn inputs_and_foreign_folders_are_never_overwritten() {
     assert_eq!(ok(std::fs::read_to_string(&mask)), "0\n");
     let frames = tmp.path().join("frames");
     ok(std::fs::create_dir_all(&frames));
-    ok(std::os::unix::fs::symlink(&other, frames.join("contact_sheet.png")));
+    ok(std::os::unix::fs::symlink(
+        &other,
+        frames.join("contact_sheet.png"),
+    ));
     let out = stylize(&[
         "render",
         s(&other),
@@ -403,41 +425,49 @@ fn resume_refuses_another_task_naming_the_fields() {
         a.extend_from_slice(extra);
         stylize(&a)
     };
-    let cases: Vec<(Output, &str)> = vec![
-        (resume(&m, &["--style", "octahedron"]), "style: was cube, now octahedron"),
-        (resume(&other, &["--style", "cube"]), "mesh.sha256"),
-        (
-            resume(
-                &m,
-                &[
-                    "--style",
-                    "cube",
-                    "--config",
-                    s(&run.join("config.toml")),
-                    "--seed",
-                    "5",
-                    "--set",
-                    "darap.lambda=3",
-                ],
+    let cases: Vec<(Output, &str)> =
+        vec![
+            (
+                resume(&m, &["--style", "octahedron"]),
+                "style: was cube, now octahedron",
             ),
-            "config.run.seed: was 0, now 5",
-        ),
-        (
-            resume(
-                &m,
-                &[
-                    "--prompt",
-                    "a chair",
-                    "--model",
-                    s(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/models/tiny-if")),
-                ],
+            (resume(&other, &["--style", "cube"]), "mesh.sha256"),
+            (
+                resume(
+                    &m,
+                    &[
+                        "--style",
+                        "cube",
+                        "--config",
+                        s(&run.join("config.toml")),
+                        "--seed",
+                        "5",
+                        "--set",
+                        "darap.lambda=3",
+                    ],
+                ),
+                "config.run.seed: was 0, now 5",
             ),
-            "objective: was style, now prompt",
-        ),
-    ];
+            (
+                resume(
+                    &m,
+                    &[
+                        "--prompt",
+                        "a chair",
+                        "--model",
+                        s(&Path::new(env!("CARGO_MANIFEST_DIR"))
+                            .join("../../fixtures/models/tiny-if")),
+                    ],
+                ),
+                "objective: was style, now prompt",
+            ),
+        ];
     for (out, expected) in &cases {
         let e = stderr(out);
-        assert!(!out.status.success() && e.contains(expected), "{expected}: {e}");
+        assert!(
+            !out.status.success() && e.contains(expected),
+            "{expected}: {e}"
+        );
         assert!(e.contains("--force"), "{e}");
     }
     assert!(
@@ -445,7 +475,10 @@ fn resume_refuses_another_task_naming_the_fields() {
         "every differing field is named: {}",
         stderr(&cases[2].0)
     );
-    assert_eq!(ok(Checkpoint::load(&run.join("checkpoint.json"))).iteration, 2);
+    assert_eq!(
+        ok(Checkpoint::load(&run.join("checkpoint.json"))).iteration,
+        2
+    );
     // Settings that only change cadence or pictures may differ.
     must(&resume(
         &m,
@@ -475,15 +508,7 @@ fn resume_refuses_another_task_naming_the_fields() {
         o.remove("identity");
     }
     ok(std::fs::write(old.join("checkpoint.json"), c.to_string()));
-    let out = stylize(&[
-        "run",
-        s(&m),
-        "--style",
-        "cube",
-        "-o",
-        s(&old),
-        "--resume",
-    ]);
+    let out = stylize(&["run", s(&m), "--style", "cube", "-o", s(&old), "--resume"]);
     assert!(stderr(&out).contains("older stylize"), "{}", stderr(&out));
 }
 
@@ -496,7 +521,11 @@ fn resume_without_a_checkpoint_is_an_error() {
     args.push("--resume");
     let out = stylize(&args);
     assert!(!out.status.success());
-    assert!(stderr(&out).contains("nothing to resume"), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("nothing to resume"),
+        "{}",
+        stderr(&out)
+    );
     assert!(!missing.exists(), "no fresh run with defaults");
     let empty = tmp.path().join("empty");
     ok(std::fs::create_dir_all(&empty));

@@ -5,9 +5,9 @@ use std::path::PathBuf;
 use anyhow::bail;
 
 use crate::batch::{BatchOptions, RowStatus, Shard, read_manifest, run_batch_until_interrupted};
-use crate::signals::shell_quote;
 use crate::cmd::run::resolve_config;
 use crate::runner::LogMode;
+use crate::signals::shell_quote;
 
 /// Arguments of `stylize batch`.
 #[derive(clap::Args, Debug)]
