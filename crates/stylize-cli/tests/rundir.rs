@@ -535,3 +535,39 @@ fn resume_without_a_checkpoint_is_an_error() {
     assert!(stderr(&out).contains("no checkpoint"), "{}", stderr(&out));
     assert_eq!(ok(std::fs::read_dir(&empty)).count(), 0);
 }
+
+/// SIGTERM stops a batch after the current row's checkpoint; the same command then resumes it.
+#[test]
+fn sigterm_stops_a_batch_and_the_same_command_resumes_it() {
+    let tmp = ok(tempfile::tempdir());
+    mesh(tmp.path(), "m.obj", 3, 0.8);
+    let manifest = tmp.path().join("m.toml");
+    let common = "overrides = [\"run.turntable_size=16\", \"run.turntable_views=1\", \"run.preview_every=0\"";
+    ok(std::fs::write(
+        &manifest,
+        format!(
+            "[[run]]\nmesh = \"m.obj\"\nstyle = \"cube\"\nout = \"runs/long\"\n{common}, \"style.iterations=1500\"]\n\n\
+             [[run]]\nmesh = \"m.obj\"\nstyle = \"octahedron\"\nout = \"runs/short\"\n{common}, \"style.iterations=3\"]\n"
+        ),
+    ));
+    let args = ["batch", s(&manifest), "--quiet"];
+    let mut batch = spawn(&args);
+    let long = tmp.path().join("runs/long");
+    wait_for_iterations(&long, 2, &mut batch);
+    signal(&batch, "TERM");
+    let out = finish(batch);
+    let e = stderr(&out);
+    assert_eq!(out.status.code(), Some(143), "{e}");
+    assert!(e.contains("run the same command again"), "{e}");
+    let c = ok(Checkpoint::load(&long.join("checkpoint.json")));
+    assert!(c.iteration >= 2 && c.iteration < 1500);
+    assert!(
+        !tmp.path().join("runs/short").exists(),
+        "the batch stops at the interrupted row"
+    );
+    let out = stylize(&args);
+    must(&out);
+    assert!(stderr(&out).contains("done (resumed)"), "{}", stderr(&out));
+    assert_eq!(metrics_iterations(&long), (1..=1500).collect::<Vec<_>>());
+    assert!(tmp.path().join("runs/short/run.json").is_file());
+}
