@@ -94,7 +94,9 @@ pub fn read_manifest(path: &Path) -> anyhow::Result<Vec<Row>> {
         rows
     };
     let base = path.parent().unwrap_or(Path::new("."));
-    let mut seen: Vec<(PathBuf, usize, PathBuf)> = Vec::new();
+    // Normalized run directory → (row, `out` as written).
+    let mut seen: std::collections::HashMap<PathBuf, (usize, PathBuf)> =
+        std::collections::HashMap::new();
     for (i, r) in rows.iter_mut().enumerate() {
         if r.prompt.is_some() == r.style.is_some() {
             bail!(
@@ -119,7 +121,7 @@ pub fn read_manifest(path: &Path) -> anyhow::Result<Vec<Row>> {
             r.out = base.join(&r.out);
         }
         let key = normalized_dir(&r.out);
-        if let Some((_, j, other)) = seen.iter().find(|(k, _, _)| *k == key) {
+        if let Some((j, other)) = seen.get(&key) {
             bail!(
                 "manifest {}: rows {j} and {i} both write to the run directory {} (out = {:?} \
                  and {:?}); every row needs its own `out`",
@@ -129,7 +131,7 @@ pub fn read_manifest(path: &Path) -> anyhow::Result<Vec<Row>> {
                 written.display().to_string()
             );
         }
-        seen.push((key, i, written));
+        seen.insert(key, (i, written));
     }
     Ok(rows)
 }
