@@ -133,6 +133,31 @@ pub fn read_manifest(path: &Path) -> anyhow::Result<Vec<Row>> {
         }
         seen.insert(key, (i, written));
     }
+    // A row's input must not be another row's output (its mesh.obj, or anything in its previews/).
+    for (i, r) in rows.iter().enumerate() {
+        let Some(name) = r.mesh.file_name().and_then(|n| n.to_str()) else {
+            continue;
+        };
+        let parent = normalized_dir(r.mesh.parent().unwrap_or(Path::new(".")));
+        let writer = if crate::rundir::RUN_FILES.contains(&name) {
+            seen.get(&parent)
+        } else {
+            None
+        }
+        .or_else(|| {
+            (parent.file_name().is_some_and(|n| n == "previews"))
+                .then(|| parent.parent().and_then(|p| seen.get(p)))
+                .flatten()
+        });
+        if let Some((j, _)) = writer {
+            bail!(
+                "manifest {}: row {i}'s mesh {} is an output of row {j}; a run never replaces \
+                 its inputs — copy the mesh elsewhere",
+                path.display(),
+                r.mesh.display()
+            );
+        }
+    }
     Ok(rows)
 }
 

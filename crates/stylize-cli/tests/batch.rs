@@ -150,6 +150,10 @@ fn duplicate_or_empty_outputs_are_manifest_errors_naming_the_rows() {
     assert!(e.contains("row 1") && e.contains("empty"), "{e}");
     let e = err(row("runs/a") + &row("  "));
     assert!(e.contains("row 1") && e.contains("empty"), "{e}");
+    // One row's input is another row's output.
+    let e = err(row("runs/a")
+        + "{\"mesh\": \"runs/a/mesh.obj\", \"style\": \"cube\", \"out\": \"runs/b\"}\n");
+    assert!(e.contains("row 1's mesh") && e.contains("row 0"), "{e}");
 }
 
 #[test]
