@@ -388,6 +388,16 @@ fn inputs_and_foreign_folders_are_never_overwritten() {
     ]);
     assert!(stderr(&out).contains("mask file"), "{}", stderr(&out));
     assert_eq!(ok(std::fs::read_to_string(&mask)), "0\n");
+    let out = stylize(&[
+        "apply",
+        s(&shared.join("deformation.npz")),
+        "-o",
+        s(&tmp.path().join("twice.obj")),
+        "--lambda",
+        "5,5",
+    ]);
+    assert!(stderr(&out).contains("repeated"), "{}", stderr(&out));
+    assert!(!tmp.path().join("twice_lambda5.obj").exists());
     let frames = tmp.path().join("frames");
     ok(std::fs::create_dir_all(&frames));
     ok(std::os::unix::fs::symlink(
