@@ -13,8 +13,9 @@
 //! - the holder ran on this host (same host name, boot id and pid namespace) and its process is
 //!   gone (or the pid now belongs to a process started at another time), or
 //! - its heartbeat is older than `stale_after` by our clock **and** the file does not change during
-//!   an observation window of two of the holder's heartbeat intervals plus one second (so a holder
-//!   whose clock is behind ours is not mistaken for a dead one).
+//!   an observation window of two of the holder's heartbeat intervals plus one second (a quarter of
+//!   `stale_after` when that is shorter), so a holder whose clock is behind ours is not mistaken
+//!   for a dead one.
 //!
 //! Taking over a stale lock is race-free among any number of contenders: a contender first creates
 //! `run.lock.takeover-<token>` with `O_EXCL` (only one can, per stale lock), re-reads `run.lock` to
@@ -377,6 +378,7 @@ impl RunLock {
         };
         // A few rounds: each round either creates the lock, finds a live holder, or removes one
         // stale lock (which can only happen once per stale lock).
+        let mut blocked_by: Option<PathBuf> = None;
         for _ in 0..8 {
             match std::fs::OpenOptions::new()
                 .write(true)
@@ -390,13 +392,21 @@ impl RunLock {
             match assess(&path, &me, settings)? {
                 Verdict::Vanished => continue,
                 Verdict::Live(seen) => return Err(held_error(dir, &path, &seen, settings)),
-                Verdict::Stale(seen) => take_over(dir, &path, &seen)?,
+                Verdict::Stale(seen) => blocked_by = take_over(dir, &path, &seen)?,
             }
         }
         Err(LockError::Busy {
             dir: dir.to_path_buf(),
             path: path.clone(),
-            detail: "it keeps changing hands between other processes".into(),
+            detail: match blocked_by {
+                Some(marker) => format!(
+                    "it is stale, but another process's take-over of it is in progress or was \
+                     interrupted ({}); if no process works in this directory, remove both files",
+                    marker.display()
+                )
+                .into(),
+                None => "it keeps changing hands between other processes".into(),
+            },
         })
     }
 
@@ -524,7 +534,8 @@ fn assess(path: &Path, me: &LockRecord, settings: LockSettings) -> Result<Verdic
         .as_ref()
         .map_or(settings.heartbeat.as_secs_f64(), |r| r.interval)
         .clamp(0.01, settings.stale_after.as_secs_f64());
-    let window = Duration::from_secs_f64(2.0 * interval + 1.0);
+    let margin = (settings.stale_after.as_secs_f64() / 4.0).min(1.0);
+    let window = Duration::from_secs_f64(2.0 * interval + margin);
     let step = Duration::from_secs_f64((interval / 2.0).clamp(0.01, 1.0));
     let start = std::time::Instant::now();
     while start.elapsed() < window {
@@ -568,8 +579,9 @@ fn held_error(dir: &Path, path: &Path, seen: &Seen, settings: LockSettings) -> L
 }
 
 /// Removes one stale lock (see the module documentation). Returns `Ok` when the caller should try
-/// to create the lock again (whether or not this call removed it).
-fn take_over(dir: &Path, path: &Path, seen: &Seen) -> Result<(), LockError> {
+/// to create the lock again (whether or not this call removed it), with the take-over marker of
+/// another process when that blocked this call.
+fn take_over(dir: &Path, path: &Path, seen: &Seen) -> Result<Option<PathBuf>, LockError> {
     let token = match &seen.record {
         Some(r) if !r.token.is_empty() && r.token.chars().all(|c| c.is_ascii_alphanumeric()) => {
             r.token.clone()
@@ -597,7 +609,7 @@ fn take_over(dir: &Path, path: &Path, seen: &Seen) -> Result<(), LockError> {
             // Another process is taking over this very lock right now: let it finish, then look
             // again (its new lock will be live).
             std::thread::sleep(Duration::from_millis(200));
-            return Ok(());
+            return Ok(Some(marker));
         }
         Err(e) => return Err(io_err(&marker)(e)),
     };
@@ -623,7 +635,7 @@ fn take_over(dir: &Path, path: &Path, seen: &Seen) -> Result<(), LockError> {
     drop(m);
     let _ = std::fs::remove_file(&marker);
     let _ = crate::durable::sync_dir(dir);
-    result
+    result.map(|()| None)
 }
 
 #[cfg(test)]
@@ -763,6 +775,29 @@ mod tests {
             .filter(Result::is_ok)
             .count();
         assert_eq!(winners, 1);
+    }
+
+    #[test]
+    fn an_interrupted_takeover_is_reported_with_its_marker() {
+        let dir = ok(tempfile::tempdir());
+        let record = foreign("node-17", 10.0);
+        write_foreign(dir.path(), &record);
+        let marker = dir
+            .path()
+            .join(format!("{TAKEOVER_PREFIX}{}", record.token));
+        ok(std::fs::write(&marker, "node-3 12\n"));
+        let settings = LockSettings {
+            heartbeat: Duration::from_millis(10),
+            stale_after: Duration::from_millis(30),
+        };
+        let e = RunLock::acquire_with(dir.path(), settings)
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(
+            e.contains("take-over") && e.contains(TAKEOVER_PREFIX),
+            "{e}"
+        );
     }
 
     #[test]
