@@ -13,8 +13,16 @@
 //! | `overrides` | list of `"section.key=value"`, optional | applied after the base config |
 //!
 //! Rows are numbered from 0 in file order; shard `i` of `n` takes the rows with `index % n == i`.
-//! Each row: skipped when its run directory is complete, resumed when it holds a checkpoint,
-//! started otherwise. A failing row is reported and the batch goes on.
+//! At load time, an empty `out` and two rows writing the same run directory (after path
+//! normalization: `.`/`..`, trailing slashes, links of existing folders) are errors naming the rows.
+//!
+//! Each row takes its run directory's lock, then: **skipped** when the directory holds a complete
+//! run of the same task (same identity, see [`crate::identity`]); an **error** when it holds a
+//! complete run of a different task (an edited row; `--force` redoes it); **resumed** when it
+//! holds a checkpoint of the same task (a checkpoint of a different task is an error, never mixed
+//! in); started otherwise. A failing row is reported and the batch goes on; a row locked by another
+//! process fails (naming the holder) and the batch goes on. SIGINT/SIGTERM stops the batch after
+//! the current row's checkpoint.
 
 use std::path::{Path, PathBuf};
 
@@ -22,9 +30,11 @@ use anyhow::{Context, bail};
 use serde::Deserialize;
 
 use crate::config::Config;
+use crate::identity::{ModelIdentity, ObjectiveIdentity};
 use crate::models::ModelSet;
 use crate::rundir::RunDir;
-use crate::runner::{LogMode, RunRequest, Task, execute};
+use crate::runner::{LogMode, RunOptions, RunRequest, Task, execute_with};
+use crate::signals::Interrupted;
 use crate::style::Style;
 
 /// One manifest row.
@@ -84,6 +94,9 @@ pub fn read_manifest(path: &Path) -> anyhow::Result<Vec<Row>> {
         rows
     };
     let base = path.parent().unwrap_or(Path::new("."));
+    // Normalized run directory → (row, `out` as written).
+    let mut seen: std::collections::HashMap<PathBuf, (usize, PathBuf)> =
+        std::collections::HashMap::new();
     for (i, r) in rows.iter_mut().enumerate() {
         if r.prompt.is_some() == r.style.is_some() {
             bail!(
@@ -91,14 +104,118 @@ pub fn read_manifest(path: &Path) -> anyhow::Result<Vec<Row>> {
                 path.display()
             );
         }
+        if r.out.to_str().is_some_and(|t| t.trim().is_empty()) {
+            bail!(
+                "manifest {} row {i}: `out` is empty (every row needs its own run directory)",
+                path.display()
+            );
+        }
+        if r.mesh.to_str().is_some_and(|t| t.trim().is_empty()) {
+            bail!("manifest {} row {i}: `mesh` is empty", path.display());
+        }
+        let written = r.out.clone();
         if r.mesh.is_relative() {
             r.mesh = base.join(&r.mesh);
         }
         if r.out.is_relative() {
             r.out = base.join(&r.out);
         }
+        let key = normalized_dir(&r.out);
+        if let Some((j, other)) = seen.get(&key) {
+            bail!(
+                "manifest {}: rows {j} and {i} both write to the run directory {} (out = {:?} \
+                 and {:?}); every row needs its own `out`",
+                path.display(),
+                key.display(),
+                other.display().to_string(),
+                written.display().to_string()
+            );
+        }
+        seen.insert(key, (i, written));
+    }
+    // A row's input must not be another row's output (its mesh.obj, or anything in its previews/).
+    for (i, r) in rows.iter().enumerate() {
+        let Some(name) = r.mesh.file_name().and_then(|n| n.to_str()) else {
+            continue;
+        };
+        let parent = normalized_dir(r.mesh.parent().unwrap_or(Path::new(".")));
+        let writer = if crate::rundir::RUN_FILES.contains(&name) {
+            seen.get(&parent)
+        } else {
+            None
+        }
+        .or_else(|| {
+            (parent.file_name().is_some_and(|n| n == "previews"))
+                .then(|| parent.parent().and_then(|p| seen.get(p)))
+                .flatten()
+        });
+        if let Some((j, _)) = writer {
+            bail!(
+                "manifest {}: row {i}'s mesh {} is an output of row {j}; a run never replaces \
+                 its inputs — copy the mesh elsewhere",
+                path.display(),
+                r.mesh.display()
+            );
+        }
     }
     Ok(rows)
+}
+
+/// `path` with `.` removed, `a/..` folded and trailing separators dropped (no file system access).
+fn normalize_lexically(path: &Path) -> PathBuf {
+    use std::path::Component;
+    let mut out = PathBuf::new();
+    for c in path.components() {
+        match c {
+            Component::CurDir => {}
+            Component::ParentDir => {
+                let last = out.components().next_back();
+                match last {
+                    Some(Component::Normal(_)) => {
+                        out.pop();
+                    }
+                    Some(Component::RootDir | Component::Prefix(_)) => {}
+                    _ => out.push(".."),
+                }
+            }
+            other => out.push(other.as_os_str()),
+        }
+    }
+    out
+}
+
+/// The run directory a row writes, for comparing rows: absolute, normalized, and with its longest
+/// existing ancestor canonicalized (so links of existing folders compare equal).
+fn normalized_dir(path: &Path) -> PathBuf {
+    let absolute = if path.is_absolute() {
+        path.to_path_buf()
+    } else {
+        std::env::current_dir()
+            .map(|d| d.join(path))
+            .unwrap_or_else(|_| path.to_path_buf())
+    };
+    let lexical = normalize_lexically(&absolute);
+    let mut existing = lexical.clone();
+    let mut rest = Vec::new();
+    loop {
+        if let Ok(c) = std::fs::canonicalize(&existing) {
+            let mut out = c;
+            for part in rest.iter().rev() {
+                out.push(part);
+            }
+            return out;
+        }
+        match (
+            existing.file_name().map(|n| n.to_os_string()),
+            existing.parent(),
+        ) {
+            (Some(name), Some(parent)) => {
+                rest.push(name);
+                existing = parent.to_path_buf();
+            }
+            _ => return lexical,
+        }
+    }
 }
 
 /// A shard: `index` of `count` (0-based).
@@ -163,7 +280,7 @@ impl Shard {
 /// What happened to one row.
 #[derive(Clone, Debug, PartialEq)]
 pub enum RowStatus {
-    /// Already complete; nothing done.
+    /// Already complete with the same task; nothing done.
     Skipped,
     /// Ran to completion (`resumed` when it continued from a checkpoint).
     Done {
@@ -185,12 +302,24 @@ pub struct BatchOptions {
     pub model: Option<PathBuf>,
     /// Progress reporting of each run.
     pub log: LogMode,
-    /// Redo complete rows.
+    /// Redo complete rows (and start partial ones over).
     pub force: bool,
+    /// Files every row reads besides its mesh (manifest, base config), with their role.
+    pub inputs: Vec<(String, PathBuf)>,
 }
 
 /// Runs the rows of `manifest` that belong to the shard; returns `(row index, row, status)`.
+/// A row interrupted by SIGINT/SIGTERM is the last one (its status is `Failed` with the
+/// interruption; [`run_batch_until_interrupted`] also returns it).
 pub fn run_batch(rows: &[Row], options: &BatchOptions) -> Vec<(usize, Row, RowStatus)> {
+    run_batch_until_interrupted(rows, options).0
+}
+
+/// [`run_batch`], also returning the interruption that stopped the batch, if any.
+pub fn run_batch_until_interrupted(
+    rows: &[Row],
+    options: &BatchOptions,
+) -> (Vec<(usize, Row, RowStatus)>, Option<Interrupted>) {
     let mut models: Option<anyhow::Result<ModelSet>> = None;
     let mut out = Vec::new();
     for (i, row) in rows
@@ -198,13 +327,33 @@ pub fn run_batch(rows: &[Row], options: &BatchOptions) -> Vec<(usize, Row, RowSt
         .enumerate()
         .filter(|(i, _)| options.shard.takes(*i))
     {
-        let status = match run_row(row, options, &mut models) {
-            Ok(s) => s,
-            Err(e) => RowStatus::Failed(format!("{e:#}")),
+        let (status, stop) = match run_row(row, options, &mut models) {
+            Ok(s) => (s, None),
+            Err(e) => {
+                let stop = e.downcast_ref::<Interrupted>().map(|i| Interrupted {
+                    signal: i.signal,
+                    dir: i.dir.clone(),
+                    checkpoint_iteration: i.checkpoint_iteration,
+                });
+                (RowStatus::Failed(format!("{e:#}")), stop)
+            }
         };
         out.push((i, row.clone(), status));
+        if stop.is_some() {
+            return (out, stop);
+        }
+        if let Some(signal) = crate::signals::pending() {
+            return (
+                out,
+                Some(Interrupted {
+                    signal,
+                    dir: row.out.clone(),
+                    checkpoint_iteration: None,
+                }),
+            );
+        }
     }
-    out
+    (out, None)
 }
 
 fn run_row(
@@ -213,10 +362,7 @@ fn run_row(
     models: &mut Option<anyhow::Result<ModelSet>>,
 ) -> anyhow::Result<RowStatus> {
     let dir = RunDir::new(&row.out);
-    if dir.is_complete() && !options.force {
-        return Ok(RowStatus::Skipped);
-    }
-    let resumed = !options.force && dir.has_checkpoint();
+    let resumed = !options.force && dir.has_checkpoint() && !dir.is_complete();
     let mut config = options.config.clone().with_overrides(&row.overrides)?;
     if let Some(s) = row.seed {
         config.run.seed = s;
@@ -225,8 +371,32 @@ fn run_row(
         config.guidance.negative_prompt = n.clone();
     }
     config.validate()?;
-    let task = match (&row.style, &row.prompt) {
-        (Some(style), _) => Task::Style(Style::parse(style)?),
+    let request = RunRequest {
+        mesh: row.mesh.clone(),
+        out: row.out.clone(),
+        config: config.clone(),
+        force: options.force,
+        resume: false,
+        log: options.log,
+        halt_after: None,
+    };
+    let mut run_options = RunOptions {
+        resume_if_checkpoint: !options.force,
+        skip_complete: !options.force,
+        inputs: options.inputs.clone(),
+        model: None,
+    };
+    let outcome = match (&row.style, &row.prompt) {
+        (Some(style), _) => {
+            let style = Style::parse(style)?;
+            if let Style::Exemplar { path, .. } = &style {
+                run_options
+                    .inputs
+                    .push(("exemplar mesh".into(), path.clone()));
+            }
+            let objective = ObjectiveIdentity::of_style(&style);
+            execute_with(&request, objective, || Ok(Task::Style(style)), &run_options)?
+        }
         (None, Some(prompt)) => {
             let Some(model) = &options.model else {
                 bail!("prompt rows need --model DIR (docs/models.md)");
@@ -237,25 +407,33 @@ fn run_row(
                      models once (set it for the whole batch with --set)"
                 );
             }
-            let set = models.get_or_insert_with(|| ModelSet::open(model, &options.config));
-            let set = set.as_ref().map_err(|e| anyhow::anyhow!("{e:#}"))?;
-            Task::Text {
+            run_options.model = Some(ModelIdentity::of_dir(model)?);
+            run_options
+                .inputs
+                .push(("model manifest".into(), model.join("manifest.toml")));
+            let objective = ObjectiveIdentity::Prompt {
                 prompt: prompt.clone(),
-                guidance: set.guidance_for(prompt, &config)?,
-            }
+                model: None,
+            };
+            execute_with(
+                &request,
+                objective,
+                || {
+                    let set = models.get_or_insert_with(|| ModelSet::open(model, &options.config));
+                    let set = set.as_ref().map_err(|e| anyhow::anyhow!("{e:#}"))?;
+                    Ok(Task::Text {
+                        prompt: prompt.clone(),
+                        guidance: set.guidance_for(prompt, &config)?,
+                    })
+                },
+                &run_options,
+            )?
         }
         (None, None) => bail!("row has neither prompt nor style"),
     };
-    let request = RunRequest {
-        mesh: row.mesh.clone(),
-        out: row.out.clone(),
-        config,
-        force: options.force,
-        resume: true,
-        log: options.log,
-        halt_after: None,
-    };
-    execute(&request, task)?;
+    if outcome.already_complete {
+        return Ok(RowStatus::Skipped);
+    }
     Ok(RowStatus::Done { resumed })
 }
 

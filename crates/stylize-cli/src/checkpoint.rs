@@ -1,6 +1,11 @@
 //! Checkpoints: everything needed to continue a run exactly where it stopped — the raw targets x,
-//! Adam's moments and step count, the RNG state and the last finished iteration — written
-//! atomically (temporary file in the same directory, then rename).
+//! Adam's moments and step count, the RNG state and the last finished iteration — plus the
+//! identity of the task ([`crate::identity`]) so that a resume can refuse a different task. Written
+//! atomically and durably ([`crate::durable`]: unique temporary file, `fsync`, rename, `fsync` of
+//! the folder).
+//!
+//! Versions: 2 adds `identity`. Version-1 checkpoints (written before identities existed) still
+//! load, with `identity: None`; a resume refuses them (their task cannot be verified).
 
 use std::path::Path;
 
@@ -8,8 +13,13 @@ use anyhow::Context;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
+use crate::identity::TaskIdentity;
+
 /// Version of the checkpoint layout.
-pub const CHECKPOINT_VERSION: u32 = 1;
+pub const CHECKPOINT_VERSION: u32 = 2;
+
+/// The oldest layout [`Checkpoint::load`] reads.
+pub const OLDEST_CHECKPOINT_VERSION: u32 = 1;
 
 /// The state after `iteration` finished iterations (1-indexed; 0 = before the first).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -26,16 +36,16 @@ pub struct Checkpoint {
     pub rng: ChaCha8Rng,
     /// The resolved config the run was started with (TOML); a resume must use the same.
     pub config_toml: String,
+    /// The task this checkpoint belongs to (`None`: a version-1 checkpoint).
+    #[serde(default)]
+    pub identity: Option<TaskIdentity>,
 }
 
 impl Checkpoint {
-    /// Writes `path` atomically: `path.tmp` first, then a rename over `path`.
+    /// Writes `path` atomically and durably (see [`crate::durable::replace_with`]).
     pub fn save_atomic(&self, path: &Path) -> anyhow::Result<()> {
-        let tmp = path.with_extension("json.tmp");
         let text = serde_json::to_string(self).context("cannot serialize checkpoint")?;
-        std::fs::write(&tmp, text).with_context(|| format!("cannot write {}", tmp.display()))?;
-        std::fs::rename(&tmp, path)
-            .with_context(|| format!("cannot move {} to {}", tmp.display(), path.display()))
+        crate::durable::replace_bytes(path, text.as_bytes())
     }
 
     /// Reads a checkpoint.
@@ -45,8 +55,15 @@ impl Checkpoint {
         let c: Self = serde_json::from_str(&text)
             .with_context(|| format!("checkpoint {} is corrupt", path.display()))?;
         anyhow::ensure!(
-            c.version == CHECKPOINT_VERSION,
-            "checkpoint {} has version {}, this build reads {CHECKPOINT_VERSION}",
+            (OLDEST_CHECKPOINT_VERSION..=CHECKPOINT_VERSION).contains(&c.version),
+            "checkpoint {} has version {}, this build reads versions \
+             {OLDEST_CHECKPOINT_VERSION} to {CHECKPOINT_VERSION}",
+            path.display(),
+            c.version
+        );
+        anyhow::ensure!(
+            c.version < 2 || c.identity.is_some(),
+            "checkpoint {} (version {}) has no task identity: it is corrupt",
             path.display(),
             c.version
         );
@@ -84,6 +101,9 @@ mod tests {
             },
             rng: rng.clone(),
             config_toml: "[run]\nseed = 9\n".into(),
+            identity: Some(TaskIdentity {
+                fields: [("mesh.sha256".to_string(), "ab".to_string())].into(),
+            }),
         };
         let path = dir.path().join("checkpoint.json");
         c.save_atomic(&path).unwrap_or_else(|e| panic!("{e:#}"));
@@ -92,6 +112,40 @@ mod tests {
         assert_eq!(back.adam, c.adam);
         let (a, b): (u64, u64) = (rng.random(), back.rng.random());
         assert_eq!(a, b);
-        assert!(!path.with_extension("json.tmp").exists());
+        assert_eq!(back.identity, c.identity);
+        let entries = std::fs::read_dir(dir.path())
+            .map(|d| d.count())
+            .unwrap_or_default();
+        assert_eq!(entries, 1, "no temporary file is left");
+    }
+
+    #[test]
+    fn version_one_checkpoints_load_without_identity() {
+        let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+        let c = Checkpoint {
+            version: 1,
+            iteration: 1,
+            x: vec![[0.0; 3]],
+            adam: optim::AdamState {
+                step: 1,
+                m: vec![0.0; 3],
+                v: vec![0.0; 3],
+            },
+            rng: ChaCha8Rng::seed_from_u64(1),
+            config_toml: String::new(),
+            identity: None,
+        };
+        let mut v = serde_json::to_value(&c).unwrap_or_default();
+        if let Some(o) = v.as_object_mut() {
+            o.remove("identity");
+        }
+        let path = dir.path().join("checkpoint.json");
+        std::fs::write(&path, v.to_string()).unwrap_or_else(|e| panic!("{e}"));
+        let back = Checkpoint::load(&path).unwrap_or_else(|e| panic!("{e:#}"));
+        assert_eq!(back.identity, None);
+        // A version-2 checkpoint must carry its identity.
+        v["version"] = 2.into();
+        std::fs::write(&path, v.to_string()).unwrap_or_else(|e| panic!("{e}"));
+        assert!(Checkpoint::load(&path).is_err());
     }
 }

@@ -48,7 +48,8 @@ fn main() -> std::process::ExitCode {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e:#}");
-            std::process::ExitCode::FAILURE
+            // 128 + signal after SIGINT/SIGTERM, 75 when a run directory is locked, else 1.
+            std::process::ExitCode::from(stylize_cli::signals::exit_code(&e))
         }
     }
 }

@@ -3,21 +3,36 @@
 //!
 //! ```text
 //! RUN_DIR/
+//!   run.lock           held for the whole life of a run (crate::lock); absent when none runs
+//!   task.json          the task's identity (crate::identity), written first: marks the folder ours
 //!   config.toml        resolved configuration (every key)
 //!   metrics.jsonl      one JSON object per iteration: losses, weights, timings
-//!   checkpoint.json    x, Adam moments and step, RNG state, iteration (atomic: temp + rename)
+//!   checkpoint.json    x, Adam moments and step, RNG state, iteration, task identity
 //!   previews/iter_NNNNNN.png   grid of the current views every run.preview_every iterations
 //!   mesh.obj, mesh.ply, mesh.glb   deformed mesh (side-2 cube frame) with vertex normals
 //!   deformation.npz    reference format (spec §8) + format_version, seed, rotation_rule
 //!   turntable.png      contact sheet of an orbit around the result
 //!   run.json           summary; written last — its presence marks the run complete
 //! ```
+//!
+//! Every file is replaced atomically and durably ([`crate::durable`]). Rules for an existing
+//! folder ([`RunDir::claim`]):
+//! - an output never replaces an input (mesh, exemplar, config, mask, manifest): refused always,
+//!   `--force` included (paths are compared by file identity, so links and `..` do not fool it);
+//! - a non-empty folder that is not one of our run directories (no valid `task.json`,
+//!   `checkpoint.json` or `run.json`) is refused unless `--force`;
+//! - `--force` removes only our own files ([`RUN_FILES`], `previews/`, our temporary files);
+//! - the directory lock is taken before anything in the folder is read or changed.
 
+use std::os::unix::fs::MetadataExt;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
+use serde::{Deserialize, Serialize};
 
 use crate::checkpoint::Checkpoint;
+use crate::identity::TaskIdentity;
+use crate::lock::{RunLock, is_lock_name};
 
 /// Paths inside a run directory.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -25,12 +40,12 @@ pub struct RunDir {
     root: PathBuf,
 }
 
-/// Every file name a run writes at top level (what `--force` removes).
+/// Every file name a run writes at top level (what `--force` removes, with `previews/`).
 pub const RUN_FILES: &[&str] = &[
+    "task.json",
     "config.toml",
     "metrics.jsonl",
     "checkpoint.json",
-    "checkpoint.json.tmp",
     "mesh.obj",
     "mesh.ply",
     "mesh.glb",
@@ -39,13 +54,142 @@ pub const RUN_FILES: &[&str] = &[
     "run.json",
 ];
 
+/// The `format` value of `task.json`.
+const TASK_FORMAT: &str = "stylize-task";
+
 /// How an existing directory is to be used.
 #[derive(Debug)]
 pub enum Start {
     /// Nothing there (or removed with `--force`): start at iteration 1.
     Fresh,
-    /// A checkpoint to continue from.
+    /// A checkpoint of the same task to continue from.
     Resume(Box<Checkpoint>),
+    /// A complete run of the same task (only when [`Claim::skip_complete`]).
+    Complete,
+}
+
+/// Whether and how to continue from a checkpoint.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ResumeMode {
+    /// A checkpoint is refused (`--resume` or `--force` needed).
+    Never,
+    /// A checkpoint must be there (`--resume`): anything else is an error.
+    Required,
+    /// Continue when there is a checkpoint, start fresh otherwise (batch rows).
+    IfCheckpoint,
+}
+
+/// What a run asks of its directory.
+#[derive(Clone, Debug)]
+pub struct Claim<'a> {
+    /// Start over: remove our own files first.
+    pub force: bool,
+    /// Checkpoint handling.
+    pub resume: ResumeMode,
+    /// A complete run of the same task is [`Start::Complete`] instead of an error.
+    pub skip_complete: bool,
+    /// The task about to run.
+    pub identity: &'a TaskIdentity,
+    /// The files the run reads, with their role (`input mesh`, `config file`, …).
+    pub inputs: &'a [(String, PathBuf)],
+}
+
+/// `task.json`.
+#[derive(Debug, Serialize, Deserialize)]
+struct TaskFile {
+    format: String,
+    identity: TaskIdentity,
+}
+
+/// The state of a folder before a run claims it.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Existing {
+    /// No such folder.
+    Missing,
+    /// An empty folder (or one holding only our lock or temporary files).
+    Empty,
+    /// One of our run directories.
+    Ours,
+    /// A non-empty folder that is not a run directory; a few of its entries.
+    Foreign(Vec<String>),
+}
+
+/// Whether a top-level name in a run directory is one the run itself creates.
+pub fn is_own_entry(name: &str) -> bool {
+    RUN_FILES.contains(&name)
+        || name == "previews"
+        || is_lock_name(name)
+        || crate::durable::is_temp_name(name)
+}
+
+/// (device, inode).
+type FileId = (u64, u64);
+
+/// Identity of a file: (device, inode) of the entry itself and of what it points to.
+fn file_ids(path: &Path) -> Option<(FileId, Option<FileId>)> {
+    let l = std::fs::symlink_metadata(path).ok()?;
+    let followed = std::fs::metadata(path).ok().map(|m| (m.dev(), m.ino()));
+    Some(((l.dev(), l.ino()), followed))
+}
+
+/// Canonical form of a path whose last component may not exist: the parent canonicalized, the
+/// name kept (so a link named like an output is compared as the link, not its target).
+fn canonical_entry(path: &Path) -> Option<PathBuf> {
+    let name = path.file_name()?;
+    let parent = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    Some(std::fs::canonicalize(parent).ok()?.join(name))
+}
+
+/// Refuses when writing any of `outputs` (files replaced by rename) or removing any folder in
+/// `trees` would replace or delete one of `inputs` (`(role, path)`). Files are compared by
+/// identity (device and inode, links followed and not), folders by canonical path. This check
+/// is not lifted by `--force`.
+pub fn refuse_overwriting_inputs(
+    outputs: &[PathBuf],
+    trees: &[PathBuf],
+    inputs: &[(String, PathBuf)],
+) -> anyhow::Result<()> {
+    for (role, input) in inputs {
+        let Some((in_entry, in_target)) = file_ids(input) else {
+            continue;
+        };
+        for out in outputs {
+            let Some((out_entry, out_target)) = file_ids(out) else {
+                continue;
+            };
+            let same = out_entry == in_entry
+                || (out_target.is_some() && out_target == in_target)
+                || out_target == Some(in_entry);
+            if same {
+                bail!(
+                    "refusing to write {}: it is the {role} {} — an output never replaces an \
+                     input (not even with --force); choose another output location",
+                    out.display(),
+                    input.display()
+                );
+            }
+        }
+        let entry = canonical_entry(input);
+        let target = std::fs::canonicalize(input).ok();
+        for tree in trees {
+            let Ok(tree_c) = std::fs::canonicalize(tree) else {
+                continue;
+            };
+            let inside = |p: &Option<PathBuf>| p.as_ref().is_some_and(|p| p.starts_with(&tree_c));
+            if inside(&entry) || inside(&target) {
+                bail!(
+                    "refusing to use {}: the {role} {} lies inside it and would be removed — \
+                     an output never replaces an input (not even with --force); move the input",
+                    tree.display(),
+                    input.display()
+                );
+            }
+        }
+    }
+    Ok(())
 }
 
 impl RunDir {
@@ -62,6 +206,11 @@ impl RunDir {
     /// `root/name`.
     pub fn file(&self, name: &str) -> PathBuf {
         self.root.join(name)
+    }
+
+    /// `task.json`.
+    pub fn task(&self) -> PathBuf {
+        self.file("task.json")
     }
 
     /// `config.toml`.
@@ -104,38 +253,206 @@ impl RunDir {
         self.checkpoint().is_file()
     }
 
-    /// Decides how to start, creating the directory (and its parents) when missing.
-    ///
-    /// - complete run: refused unless `force` (which removes the run's files, see [`RUN_FILES`]);
-    /// - checkpoint present: `resume` continues from it, `force` starts over, otherwise refused;
-    /// - otherwise: fresh (a `resume` without a checkpoint starts fresh too).
-    pub fn prepare(&self, force: bool, resume: bool) -> anyhow::Result<Start> {
+    /// The identity in `task.json`, if it is there and valid.
+    pub fn task_identity(&self) -> Option<TaskIdentity> {
+        let text = std::fs::read_to_string(self.task()).ok()?;
+        let t: TaskFile = serde_json::from_str(&text).ok()?;
+        (t.format == TASK_FORMAT).then_some(t.identity)
+    }
+
+    /// Writes `task.json` (first file of a fresh run: it marks the folder as ours).
+    pub fn write_task(&self, identity: &TaskIdentity) -> anyhow::Result<()> {
+        let t = TaskFile {
+            format: TASK_FORMAT.into(),
+            identity: identity.clone(),
+        };
+        let text = serde_json::to_string_pretty(&t).context("cannot serialize task.json")?;
+        crate::durable::replace_bytes(&self.task(), text.as_bytes())
+    }
+
+    fn has_marker(&self) -> bool {
+        if self.task_identity().is_some() {
+            return true;
+        }
+        let json = |p: PathBuf| -> Option<serde_json::Value> {
+            serde_json::from_str(&std::fs::read_to_string(p).ok()?).ok()
+        };
+        let summary = json(self.summary());
+        if summary.is_some_and(|v| v.get("status").is_some() && v.get("objective").is_some()) {
+            return true;
+        }
+        self.has_checkpoint() && Checkpoint::load(&self.checkpoint()).is_ok()
+    }
+
+    /// What is at `root` now.
+    pub fn inspect(&self) -> anyhow::Result<Existing> {
+        let entries = match std::fs::read_dir(&self.root) {
+            Ok(e) => e,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Existing::Missing),
+            Err(e) => {
+                return Err(e).with_context(|| format!("cannot list {}", self.root.display()));
+            }
+        };
+        let mut names = Vec::new();
+        for e in entries {
+            let e = e.with_context(|| format!("cannot list {}", self.root.display()))?;
+            names.push(e.file_name().to_string_lossy().into_owned());
+        }
+        if names
+            .iter()
+            .all(|n| is_lock_name(n) || crate::durable::is_temp_name(n))
+        {
+            return Ok(Existing::Empty);
+        }
+        if self.has_marker() {
+            return Ok(Existing::Ours);
+        }
+        names.sort();
+        Ok(Existing::Foreign(names))
+    }
+
+    /// Takes the directory for a run: checks inputs are not overwritten, refuses foreign folders
+    /// without `--force`, takes the lock, and decides (under the lock) how to start.
+    pub fn claim(&self, claim: &Claim<'_>) -> anyhow::Result<(RunLock, Start)> {
         if self.root.exists() && !self.root.is_dir() {
             bail!(
                 "output {} exists and is not a directory",
                 self.root.display()
             );
         }
-        if force {
-            self.remove_outputs()?;
-        } else if self.is_complete() {
+        if claim.force && claim.resume == ResumeMode::Required {
+            bail!("--resume and --force contradict each other: --force starts over");
+        }
+        if claim.resume == ResumeMode::Required && !self.root.is_dir() {
             bail!(
-                "{} already holds a complete run (run.json); pass --force to overwrite it",
+                "--resume: {} does not exist, so there is nothing to resume (start the run \
+                 without --resume)",
                 self.root.display()
             );
-        } else if self.has_checkpoint() {
-            if !resume {
+        }
+        // A resume never rewrites task.json or config.toml (`--resume` alone reads the latter).
+        let outputs: Vec<PathBuf> = RUN_FILES
+            .iter()
+            .filter(|n| {
+                claim.resume != ResumeMode::Required || !matches!(**n, "task.json" | "config.toml")
+            })
+            .map(|n| self.file(n))
+            .collect();
+        refuse_overwriting_inputs(&outputs, &[self.previews()], claim.inputs)?;
+        match self.inspect()? {
+            Existing::Foreign(names) if !claim.force => {
+                let shown: Vec<&str> = names.iter().take(6).map(String::as_str).collect();
                 bail!(
-                    "{} holds an interrupted run (checkpoint.json); pass --resume to continue it or --force to start over",
-                    self.root.display()
+                    "{} is not empty and is not a stylize run directory (it holds {}{}); choose \
+                     a new or empty folder, or pass --force to write into it anyway (--force \
+                     replaces only files named like the run's own: {}, previews/)",
+                    self.root.display(),
+                    shown.join(", "),
+                    if names.len() > shown.len() {
+                        ", …"
+                    } else {
+                        ""
+                    },
+                    RUN_FILES.join(", ")
                 );
             }
-            let c = Checkpoint::load(&self.checkpoint())?;
-            return Ok(Start::Resume(Box::new(c)));
+            _ => {}
         }
         std::fs::create_dir_all(&self.root)
             .with_context(|| format!("cannot create {}", self.root.display()))?;
+        let lock = RunLock::acquire(&self.root)?;
+        self.remove_temporaries();
+        let start = self.decide(claim)?;
+        Ok((lock, start))
+    }
+
+    fn decide(&self, claim: &Claim<'_>) -> anyhow::Result<Start> {
+        let dir = self.root.display();
+        if claim.force {
+            self.remove_outputs()?;
+            return Ok(Start::Fresh);
+        }
+        let recorded = || -> anyhow::Result<Option<TaskIdentity>> {
+            if self.has_checkpoint() {
+                return Ok(Checkpoint::load(&self.checkpoint())?.identity);
+            }
+            Ok(self.task_identity())
+        };
+        if self.is_complete() {
+            if claim.skip_complete {
+                return match recorded()? {
+                    Some(id) if id == *claim.identity => Ok(Start::Complete),
+                    Some(id) => bail!(
+                        "{dir} holds a complete run of a different task:\n  {}\nchange the \
+                         row's `out`, restore its settings, or pass --force to redo it",
+                        id.differences(claim.identity).join("\n  ")
+                    ),
+                    None => bail!(
+                        "{dir} holds a complete run written by an older stylize without a task \
+                         identity, so it cannot be told whether it is this task; pass --force \
+                         to redo it"
+                    ),
+                };
+            }
+            bail!(
+                "{dir} already holds a complete run (run.json){}; pass --force to overwrite it",
+                if claim.resume == ResumeMode::Required {
+                    ": there is nothing to resume"
+                } else {
+                    ""
+                }
+            );
+        }
+        if self.has_checkpoint() {
+            if claim.resume == ResumeMode::Never {
+                bail!(
+                    "{dir} holds an interrupted run (checkpoint.json); pass --resume to continue \
+                     it or --force to start over"
+                );
+            }
+            let c = Checkpoint::load(&self.checkpoint())?;
+            let Some(id) = &c.identity else {
+                bail!(
+                    "the checkpoint in {dir} was written by an older stylize (checkpoint version \
+                     {}) without a task identity, so it cannot be verified to belong to this \
+                     task; pass --force to start over",
+                    c.version
+                );
+            };
+            let diffs = id.differences(claim.identity);
+            if !diffs.is_empty() {
+                bail!(
+                    "refusing to resume: the checkpoint in {dir} belongs to a different task \
+                     ({} field{} differ):\n  {}\nresume with the run's own settings (see its \
+                     config.toml and task.json), or pass --force to start over",
+                    diffs.len(),
+                    if diffs.len() == 1 { "" } else { "s" },
+                    diffs.join("\n  ")
+                );
+            }
+            return Ok(Start::Resume(Box::new(c)));
+        }
+        if claim.resume == ResumeMode::Required {
+            bail!(
+                "--resume: {dir} holds no checkpoint, so there is nothing to resume (a run \
+                 writes its first checkpoint after run.checkpoint_every iterations); start it \
+                 again without --resume"
+            );
+        }
+        // Ours without a checkpoint: an attempt that died before its first checkpoint.
+        self.remove_outputs()?;
         Ok(Start::Fresh)
+    }
+
+    fn remove_temporaries(&self) {
+        if let Ok(entries) = std::fs::read_dir(&self.root) {
+            for e in entries.flatten() {
+                let name = e.file_name().to_string_lossy().into_owned();
+                if crate::durable::is_temp_name(&name) {
+                    let _ = std::fs::remove_file(e.path());
+                }
+            }
+        }
     }
 
     fn remove_outputs(&self) -> anyhow::Result<()> {
@@ -151,29 +468,38 @@ impl RunDir {
             std::fs::remove_dir_all(&previews)
                 .with_context(|| format!("cannot remove {}", previews.display()))?;
         }
+        self.remove_temporaries();
         Ok(())
     }
 
-    /// Keeps the `metrics.jsonl` lines of iterations `<= iteration` (after a resume, the lines a
-    /// killed run wrote past its last checkpoint are dropped so the file has each iteration once).
+    /// Keeps the `metrics.jsonl` lines of iterations `<= iteration`, each once and in increasing
+    /// order (after a resume, the lines a killed run wrote past its last checkpoint, and a
+    /// partial last line, are dropped). Replaced atomically.
     pub fn truncate_metrics(&self, iteration: u64) -> anyhow::Result<()> {
         let path = self.metrics();
         if !path.is_file() {
-            return Ok(());
+            return crate::durable::replace_bytes(&path, b"");
         }
         let text = std::fs::read_to_string(&path)
             .with_context(|| format!("cannot read {}", path.display()))?;
         let mut kept = String::new();
-        for line in text.lines() {
+        let mut last = 0;
+        for line in text.split_inclusive('\n') {
+            if !line.ends_with('\n') {
+                continue;
+            }
             let it = serde_json::from_str::<serde_json::Value>(line)
                 .ok()
                 .and_then(|v| v.get("iteration").and_then(serde_json::Value::as_u64));
-            if it.is_some_and(|i| i <= iteration) {
+            if let Some(i) = it
+                && i <= iteration
+                && i > last
+            {
                 kept.push_str(line);
-                kept.push('\n');
+                last = i;
             }
         }
-        std::fs::write(&path, kept).with_context(|| format!("cannot write {}", path.display()))
+        crate::durable::replace_bytes(&path, kept.as_bytes())
     }
 }
 
@@ -181,27 +507,129 @@ impl RunDir {
 mod tests {
     use super::*;
 
+    fn ok<T, E: std::fmt::Debug>(r: Result<T, E>) -> T {
+        r.unwrap_or_else(|e| panic!("{e:?}"))
+    }
+
+    fn identity(v: &str) -> TaskIdentity {
+        TaskIdentity {
+            fields: [("style".to_string(), v.to_string())].into(),
+        }
+    }
+
+    fn claim<'a>(
+        id: &'a TaskIdentity,
+        inputs: &'a [(String, PathBuf)],
+        force: bool,
+        resume: ResumeMode,
+    ) -> Claim<'a> {
+        Claim {
+            force,
+            resume,
+            skip_complete: false,
+            identity: id,
+            inputs,
+        }
+    }
+
+    fn err<T>(r: anyhow::Result<T>) -> String {
+        r.err().map(|e| format!("{e:#}")).unwrap_or_default()
+    }
+
     #[test]
-    fn complete_run_is_refused_without_force() {
-        let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+    fn complete_run_is_refused_without_force_and_force_keeps_foreign_files() {
+        let dir = ok(tempfile::tempdir());
         let run = RunDir::new(dir.path().join("a/b/run"));
-        assert!(matches!(run.prepare(false, false), Ok(Start::Fresh)));
+        let id = identity("cube");
+        let (lock, start) = ok(run.claim(&claim(&id, &[], false, ResumeMode::Never)));
+        assert!(matches!(start, Start::Fresh));
         assert!(run.root().is_dir(), "parent folders are created");
-        std::fs::write(run.summary(), "{}").unwrap_or_else(|e| panic!("{e}"));
-        std::fs::write(run.file("mesh.obj"), "").unwrap_or_else(|e| panic!("{e}"));
-        let e = run
-            .prepare(false, false)
-            .err()
-            .map(|e| e.to_string())
-            .unwrap_or_default();
+        assert!(run.file(crate::lock::LOCK_FILE).is_file());
+        ok(run.write_task(&id));
+        drop(lock);
+        assert!(
+            !run.file(crate::lock::LOCK_FILE).exists(),
+            "released on drop"
+        );
+        ok(std::fs::write(
+            run.summary(),
+            r#"{"status":"complete","objective":"x"}"#,
+        ));
+        ok(std::fs::write(run.file("mesh.obj"), ""));
+        let e = err(run.claim(&claim(&id, &[], false, ResumeMode::Never)));
         assert!(e.contains("--force"), "{e}");
-        std::fs::write(run.file("user-notes.txt"), "keep me").unwrap_or_else(|e| panic!("{e}"));
-        assert!(matches!(run.prepare(true, false), Ok(Start::Fresh)));
+        ok(std::fs::write(run.file("user-notes.txt"), "keep me"));
+        let (_lock, start) = ok(run.claim(&claim(&id, &[], true, ResumeMode::Never)));
+        assert!(matches!(start, Start::Fresh));
         assert!(!run.summary().exists() && !run.file("mesh.obj").exists());
         assert!(
             run.file("user-notes.txt").exists(),
             "--force removes only the run's own files"
         );
+    }
+
+    #[test]
+    fn foreign_folder_is_refused_without_force_and_inputs_always() {
+        let dir = ok(tempfile::tempdir());
+        let proj = dir.path().join("proj");
+        ok(std::fs::create_dir_all(&proj));
+        ok(std::fs::write(proj.join("mesh.obj"), "v 0 0 0"));
+        ok(std::fs::write(proj.join("config.toml"), "# mine"));
+        let run = RunDir::new(&proj);
+        let id = identity("cube");
+        let e = err(run.claim(&claim(&id, &[], false, ResumeMode::Never)));
+        assert!(
+            e.contains("not a stylize run directory") && e.contains("config.toml"),
+            "{e}"
+        );
+        // The input mesh is one of the outputs' names: refused even with --force.
+        let inputs = vec![("input mesh".to_string(), proj.join("../proj/./mesh.obj"))];
+        let e = err(run.claim(&claim(&id, &inputs, true, ResumeMode::Never)));
+        assert!(e.contains("input mesh") && e.contains("--force"), "{e}");
+        // A hard link of the input under an output's name is the same file.
+        let other = dir.path().join("other");
+        ok(std::fs::create_dir_all(&other));
+        ok(std::fs::hard_link(
+            proj.join("mesh.obj"),
+            other.join("mesh.ply"),
+        ));
+        let e = err(RunDir::new(&other).claim(&claim(&id, &inputs, true, ResumeMode::Never)));
+        assert!(e.contains("mesh.ply"), "{e}");
+        // An input inside previews/ would be removed by --force.
+        let prev = dir.path().join("r2/previews");
+        ok(std::fs::create_dir_all(&prev));
+        ok(std::fs::write(prev.join("x.obj"), ""));
+        let inputs = vec![("exemplar mesh".to_string(), prev.join("x.obj"))];
+        let e = err(RunDir::new(dir.path().join("r2")).claim(&claim(
+            &id,
+            &inputs,
+            true,
+            ResumeMode::Never,
+        )));
+        assert!(e.contains("exemplar mesh"), "{e}");
+        assert!(prev.join("x.obj").exists() && proj.join("config.toml").exists());
+    }
+
+    #[test]
+    fn resume_needs_a_checkpoint_of_the_same_task() {
+        let dir = ok(tempfile::tempdir());
+        let run = RunDir::new(dir.path().join("r"));
+        let id = identity("cube");
+        let e = err(run.claim(&claim(&id, &[], false, ResumeMode::Required)));
+        assert!(e.contains("does not exist") && !run.root().exists(), "{e}");
+        ok(std::fs::create_dir_all(run.root()));
+        let e = err(run.claim(&claim(&id, &[], false, ResumeMode::Required)));
+        assert!(e.contains("no checkpoint"), "{e}");
+    }
+
+    #[test]
+    fn a_locked_directory_is_refused() {
+        let dir = ok(tempfile::tempdir());
+        let run = RunDir::new(dir.path());
+        let id = identity("cube");
+        let (_lock, _) = ok(run.claim(&claim(&id, &[], false, ResumeMode::Never)));
+        let e = err(run.claim(&claim(&id, &[], false, ResumeMode::Never)));
+        assert!(e.contains("in use") && e.contains("pid"), "{e}");
     }
 
     #[test]
@@ -215,5 +643,17 @@ mod tests {
         run.truncate_metrics(5).unwrap_or_else(|e| panic!("{e}"));
         let text = std::fs::read_to_string(run.metrics()).unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(text.lines().count(), 5);
+        // A duplicated line and a partial last line (a killed writer) are dropped.
+        std::fs::write(
+            run.metrics(),
+            "{\"iteration\":1}\n{\"iteration\":2}\n{\"iteration\":2}\n{\"iteration\":3}\n{\"itera",
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        run.truncate_metrics(9).unwrap_or_else(|e| panic!("{e}"));
+        let text = std::fs::read_to_string(run.metrics()).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(
+            text,
+            "{\"iteration\":1}\n{\"iteration\":2}\n{\"iteration\":3}\n"
+        );
     }
 }

@@ -17,11 +17,14 @@ use raster_diff::{CameraConfig, Images, Renderer};
 
 use crate::checkpoint::{CHECKPOINT_VERSION, Checkpoint};
 use crate::config::{Backend, Config, PostProcess, RotationRule};
+use crate::identity::{ObjectiveIdentity, TaskIdentity};
+use crate::lock::RunLock;
 use crate::pipeline::{
     IterationRecord, LoopSpec, LoopState, Objective, Observer, StyleObjective, TextObjective,
     ViewSettings, run_loop,
 };
-use crate::rundir::{RunDir, Start};
+use crate::rundir::{Claim, ResumeMode, RunDir, Start};
+use crate::signals::Interrupted;
 use crate::style::Style;
 
 /// Format version of our extra keys in `deformation.npz`.
@@ -90,6 +93,9 @@ pub struct RunOutcome {
     pub alignment: Option<(f64, f64)>,
     /// Warnings (e.g. an output format the mesh writer does not support).
     pub warnings: Vec<String>,
+    /// Nothing was done: the directory already held a complete run of the same task (only with
+    /// [`RunOptions::skip_complete`]).
+    pub already_complete: bool,
 }
 
 /// A mesh prepared as the reference does: repaired, side-2 cube normalized, rounded to the f32
@@ -139,8 +145,15 @@ pub fn renderer(config: &Config) -> (Box<dyn Renderer>, String) {
     raster_diff::select_renderer(config.render.backend != Backend::Cpu)
 }
 
+/// The loop was asked to stop by a signal (returned by the observer after a full iteration).
+#[derive(Debug, thiserror::Error)]
+#[error("stop requested by a signal")]
+struct StopRequested;
+
 struct RunObserver<'a> {
     dir: &'a RunDir,
+    lock: &'a RunLock,
+    identity: TaskIdentity,
     metrics: std::fs::File,
     log: LogMode,
     bar: Option<indicatif::ProgressBar>,
@@ -175,15 +188,17 @@ pub fn write_grid(path: &Path, images: &Images) -> anyhow::Result<()> {
     }
     let columns = images.count.clamp(1, 4);
     let sheet = raster_diff::image::contact_sheet(images, columns.max(1));
-    let file =
-        std::fs::File::create(path).with_context(|| format!("cannot create {}", path.display()))?;
-    raster_diff::image::write_png(
-        std::io::BufWriter::new(file),
-        &sheet,
-        0,
-        raster_diff::image::Encoding::Direct,
-    )
-    .with_context(|| format!("cannot write {}", path.display()))
+    crate::durable::replace_with(path, |tmp| {
+        let file = std::fs::File::create(tmp)
+            .with_context(|| format!("cannot create {}", tmp.display()))?;
+        raster_diff::image::write_png(
+            std::io::BufWriter::new(file),
+            &sheet,
+            0,
+            raster_diff::image::Encoding::Direct,
+        )
+        .with_context(|| format!("cannot write {}", path.display()))
+    })
 }
 
 /// Renders `n` turntable views of a mesh (CPU renderer, elevation 20°, looking at the origin).
@@ -232,11 +247,19 @@ impl Observer for RunObserver<'_> {
             }
             LogMode::Quiet => {}
         }
+        if crate::signals::pending().is_some() {
+            return Err(StopRequested.into());
+        }
         Ok(())
     }
 
     fn checkpoint(&mut self, state: &LoopState) -> anyhow::Result<()> {
+        self.lock.ensure_held()?;
         self.metrics.flush().context("cannot flush metrics.jsonl")?;
+        // The checkpoint must not be durable before the metrics lines it accounts for.
+        self.metrics
+            .sync_data()
+            .context("cannot sync metrics.jsonl")?;
         Checkpoint {
             version: CHECKPOINT_VERSION,
             iteration: state.iteration,
@@ -244,6 +267,7 @@ impl Observer for RunObserver<'_> {
             adam: state.adam.state().clone(),
             rng: state.rng.clone(),
             config_toml: self.config_toml.clone(),
+            identity: Some(self.identity.clone()),
         }
         .save_atomic(&self.dir.checkpoint())
     }
@@ -272,19 +296,121 @@ impl Observer for RunObserver<'_> {
     }
 }
 
+/// Options of [`execute_with`] beyond the request (what the commands know and the library
+/// entry point [`execute`] does not).
+#[derive(Clone, Debug, Default)]
+pub struct RunOptions {
+    /// Continue from a checkpoint when there is one, start fresh otherwise (batch rows; overrides
+    /// `RunRequest::resume`).
+    pub resume_if_checkpoint: bool,
+    /// A complete run of the same task is an [`RunOutcome::already_complete`] success instead of
+    /// an error (batch rows).
+    pub skip_complete: bool,
+    /// Further files the run reads, with their role (config file, manifest, model manifest); the
+    /// input mesh and an exemplar are added by the runner. No output may replace any of them.
+    pub inputs: Vec<(String, PathBuf)>,
+    /// The model of a text run (part of the task identity).
+    pub model: Option<crate::identity::ModelIdentity>,
+}
+
+/// The identity of a ready task's objective (without model).
+pub fn objective_identity(task: &Task) -> ObjectiveIdentity {
+    match task {
+        Task::Style(s) => ObjectiveIdentity::of_style(s),
+        Task::Text { prompt, .. } => ObjectiveIdentity::Prompt {
+            prompt: prompt.clone(),
+            model: None,
+        },
+    }
+}
+
 /// Runs one request to completion (or to `halt_after`).
 pub fn execute(request: &RunRequest, task: Task) -> anyhow::Result<RunOutcome> {
+    let objective = objective_identity(&task);
+    let mut options = RunOptions::default();
+    if let Task::Style(Style::Exemplar { path, .. }) = &task {
+        options.inputs.push(("exemplar mesh".into(), path.clone()));
+    }
+    execute_with(request, objective, || Ok(task), &options)
+}
+
+/// Runs one request: `objective` is the task's identity, `make_task` builds the task (e.g. loads
+/// the models) — called only once the run directory is claimed, so refusals come before any
+/// expensive loading.
+pub fn execute_with(
+    request: &RunRequest,
+    mut objective: ObjectiveIdentity,
+    make_task: impl FnOnce() -> anyhow::Result<Task>,
+    options: &RunOptions,
+) -> anyhow::Result<RunOutcome> {
     let config = &request.config;
     config.validate()?;
     let config_toml = config.to_toml_string()?;
     let (mesh, mut warnings) = prepare_mesh(&request.mesh)?;
+    if let (ObjectiveIdentity::Prompt { model, .. }, Some(m)) = (&mut objective, &options.model) {
+        *model = Some(m.clone());
+    }
+    let identity = TaskIdentity::new(&mesh.positions, &mesh.faces, &objective, config)?;
     let setup = Instant::now();
     let darap = Darap::new(&mesh.positions, &mesh.faces, darap_options(config))
         .context("dARAP precomputation")?;
     let setup_seconds = setup.elapsed().as_secs_f64();
     // Everything that can fail on bad input happens before the run directory is touched.
+    crate::signals::install()?;
     let dir = RunDir::new(&request.out);
-    let start = dir.prepare(request.force, request.resume)?;
+    let mut inputs = vec![("input mesh".to_string(), request.mesh.clone())];
+    inputs.extend(options.inputs.iter().cloned());
+    let resume = if options.resume_if_checkpoint {
+        ResumeMode::IfCheckpoint
+    } else if request.resume {
+        ResumeMode::Required
+    } else {
+        ResumeMode::Never
+    };
+    let (lock, start) = dir.claim(&Claim {
+        force: request.force,
+        resume,
+        skip_complete: options.skip_complete,
+        identity: &identity,
+        inputs: &inputs,
+    })?;
+    if matches!(start, Start::Complete) {
+        return Ok(RunOutcome {
+            iteration: 0,
+            complete: true,
+            alignment: None,
+            warnings,
+            already_complete: true,
+        });
+    }
+    let interrupted_before = |start: &Start| {
+        crate::signals::pending().map(|signal| Interrupted {
+            signal,
+            dir: request.out.clone(),
+            checkpoint_iteration: match start {
+                Start::Resume(c) => Some(c.iteration),
+                _ => None,
+            },
+        })
+    };
+    if let Some(i) = interrupted_before(&start) {
+        return Err(i.into());
+    }
+    let task = make_task()?;
+    if let Some(i) = interrupted_before(&start) {
+        return Err(i.into());
+    }
+    if let Task::Style(Style::Exemplar { path, .. }) = &task {
+        inputs.push(("exemplar mesh".into(), path.clone()));
+        crate::rundir::refuse_overwriting_inputs(
+            &crate::rundir::RUN_FILES
+                .iter()
+                .map(|n| dir.file(n))
+                .collect::<Vec<_>>(),
+            &[dir.previews()],
+            &inputs,
+        )?;
+    }
     let task_label = match &task {
         Task::Style(s) => ("style", s.name()),
         Task::Text { prompt, .. } => ("prompt", prompt.clone()),
@@ -349,10 +475,10 @@ pub fn execute(request: &RunRequest, task: Task) -> anyhow::Result<RunOutcome> {
     };
 
     let mut state = match start {
-        Start::Fresh => {
-            std::fs::write(dir.config(), &config_toml)
-                .with_context(|| format!("cannot write {}", dir.config().display()))?;
-            std::fs::write(dir.metrics(), "").context("cannot create metrics.jsonl")?;
+        Start::Fresh | Start::Complete => {
+            dir.write_task(&identity)?;
+            crate::durable::replace_bytes(&dir.config(), config_toml.as_bytes())?;
+            crate::durable::replace_bytes(&dir.metrics(), b"")?;
             LoopState {
                 iteration: 0,
                 x: darap.rest_normals().to_vec(),
@@ -361,12 +487,6 @@ pub fn execute(request: &RunRequest, task: Task) -> anyhow::Result<RunOutcome> {
             }
         }
         Start::Resume(c) => {
-            if c.config_toml != config_toml {
-                bail!(
-                    "the checkpoint in {} was written with a different configuration; resume with the same config (see its config.toml) or pass --force",
-                    dir.root().display()
-                );
-            }
             if c.x.len() != mesh.positions.len() {
                 bail!(
                     "the checkpoint has {} vertices, the mesh {}: not the same mesh",
@@ -404,6 +524,8 @@ pub fn execute(request: &RunRequest, task: Task) -> anyhow::Result<RunOutcome> {
     });
     let mut observer = RunObserver {
         dir: &dir,
+        lock: &lock,
+        identity: identity.clone(),
         metrics,
         log: request.log,
         bar: bar.clone(),
@@ -427,18 +549,42 @@ pub fn execute(request: &RunRequest, task: Task) -> anyhow::Result<RunOutcome> {
         }
     }
     let loop_start = Instant::now();
-    run_loop(&darap, &spec, &mut state, objective.as_mut(), &mut observer)?;
-    let loop_seconds = loop_start.elapsed().as_secs_f64();
+    let looped = run_loop(&darap, &spec, &mut state, objective.as_mut(), &mut observer);
     if let Some(b) = &bar {
         b.finish_and_clear();
     }
+    match looped {
+        Ok(()) => {}
+        Err(e) if e.is::<StopRequested>() => {
+            // The iteration is complete (state is consistent): keep it.
+            observer.checkpoint(&state)?;
+            return Err(Interrupted {
+                signal: crate::signals::pending().unwrap_or(signal_hook::consts::signal::SIGTERM),
+                dir: request.out.clone(),
+                checkpoint_iteration: Some(state.iteration),
+            }
+            .into());
+        }
+        Err(e) => return Err(e),
+    }
+    let loop_seconds = loop_start.elapsed().as_secs_f64();
     if state.iteration < spec.iterations {
         return Ok(RunOutcome {
             iteration: state.iteration,
             complete: false,
             alignment: None,
             warnings,
+            already_complete: false,
         });
+    }
+    if let Some(signal) = crate::signals::pending() {
+        // The final checkpoint is written; the outputs are left to the resume.
+        return Err(Interrupted {
+            signal,
+            dir: request.out.clone(),
+            checkpoint_iteration: Some(state.iteration),
+        }
+        .into());
     }
 
     // Outputs.
@@ -453,11 +599,20 @@ pub fn execute(request: &RunRequest, task: Task) -> anyhow::Result<RunOutcome> {
     let deformed = TriMesh::new(result.positions.clone(), mesh.faces.clone());
     let normals =
         mesh_core::normals::vertex_normals_area_weighted(&deformed.positions, &deformed.faces);
+    lock.ensure_held()?;
     for ext in ["obj", "ply", "glb"] {
         let path = dir.file(&format!("mesh.{ext}"));
-        match mesh_core::io::write_mesh(&path, &deformed, Some(&normals)) {
+        let written = crate::durable::replace_with(&path, |tmp| {
+            mesh_core::io::write_mesh(tmp, &deformed, Some(&normals)).map_err(anyhow::Error::from)
+        });
+        match written {
             Ok(()) => {}
-            Err(mesh_core::MeshError::UnsupportedFormat { .. }) => {
+            Err(e)
+                if matches!(
+                    e.downcast_ref::<mesh_core::MeshError>(),
+                    Some(mesh_core::MeshError::UnsupportedFormat { .. })
+                ) =>
+            {
                 warnings.push(format!(
                     "mesh.{ext} not written: this build's mesh writer does not support .{ext}"
                 ));
@@ -504,17 +659,23 @@ pub fn execute(request: &RunRequest, task: Task) -> anyhow::Result<RunOutcome> {
         "renderer": renderer_choice,
         "seconds": { "setup": setup_seconds, "loop": loop_seconds },
         "warnings": warnings,
+        "task": identity.fields,
     });
-    std::fs::write(
-        dir.summary(),
-        serde_json::to_string_pretty(&summary).context("summary")?,
+    lock.ensure_held()?;
+    crate::durable::replace_bytes(
+        &dir.summary(),
+        serde_json::to_string_pretty(&summary)
+            .context("summary")?
+            .as_bytes(),
     )
     .context("cannot write run.json")?;
+    drop(lock);
     Ok(RunOutcome {
         iteration: state.iteration,
         complete: true,
         alignment,
         warnings,
+        already_complete: false,
     })
 }
 
@@ -555,7 +716,8 @@ fn write_deformation(
         "rotation_rule",
         NpyArray::scalar_str(config.darap.rotation_rule.name()),
     )?;
-    saved
-        .write(dir.deformation())
-        .with_context(|| format!("cannot write {}", dir.deformation().display()))
+    crate::durable::replace_with(&dir.deformation(), |tmp| {
+        saved.write(tmp).map_err(anyhow::Error::from)
+    })
+    .with_context(|| format!("cannot write {}", dir.deformation().display()))
 }

@@ -41,6 +41,7 @@ fn options(config: &Config, shard: Shard) -> BatchOptions {
         model: None,
         log: LogMode::Quiet,
         force: false,
+        inputs: Vec::new(),
     }
 }
 
@@ -123,5 +124,85 @@ fn process_wide_session_setting_cannot_be_overridden_per_row() {
         matches!(&results[0].2, RowStatus::Failed(m) if m.contains("onnx_memory_arena")),
         "{:?}",
         results[0].2
+    );
+}
+
+#[test]
+fn duplicate_or_empty_outputs_are_manifest_errors_naming_the_rows() {
+    let tmp = ok(tempfile::tempdir());
+    setup(tmp.path());
+    let path = tmp.path().join("dup.jsonl");
+    let row =
+        |out: &str| format!("{{\"mesh\": \"m.obj\", \"style\": \"cube\", \"out\": \"{out}\"}}\n");
+    let err = |text: String| {
+        ok(std::fs::write(&path, text));
+        read_manifest(&path)
+            .err()
+            .map(|e| format!("{e:#}"))
+            .unwrap_or_default()
+    };
+    let e = err(row("runs/a") + &row("runs/b") + &row("./runs/x/../a/"));
+    assert!(e.contains("rows 0 and 2") && e.contains("runs/a"), "{e}");
+    let abs = tmp.path().join("runs/b");
+    let e = err(row("runs/b") + &row(abs.to_str().unwrap_or_default()));
+    assert!(e.contains("rows 0 and 1"), "{e}");
+    let e = err(row("runs/a") + &row(""));
+    assert!(e.contains("row 1") && e.contains("empty"), "{e}");
+    let e = err(row("runs/a") + &row("  "));
+    assert!(e.contains("row 1") && e.contains("empty"), "{e}");
+    // One row's input is another row's output.
+    let e = err(row("runs/a")
+        + "{\"mesh\": \"runs/a/mesh.obj\", \"style\": \"cube\", \"out\": \"runs/b\"}\n");
+    assert!(e.contains("row 1's mesh") && e.contains("row 0"), "{e}");
+}
+
+#[test]
+fn an_edited_row_is_never_skipped_or_mixed() {
+    let tmp = ok(tempfile::tempdir());
+    let config = setup(tmp.path());
+    let rows = ok(read_manifest(&tmp.path().join("batch.toml")));
+    let first = run_batch(&rows[..1], &options(&config, Shard::ALL));
+    assert_eq!(first[0].2, RowStatus::Done { resumed: false });
+    // The same row with another style: the complete run is of a different task.
+    let mut edited = rows[0].clone();
+    edited.style = Some("octahedron".into());
+    let again = run_batch(std::slice::from_ref(&edited), &options(&config, Shard::ALL));
+    assert!(
+        matches!(&again[0].2, RowStatus::Failed(m) if m.contains("different task") && m.contains("octahedron")),
+        "{:?}",
+        again[0].2
+    );
+    // Another seed for the same row: also a different task.
+    let mut seeded = rows[0].clone();
+    seeded.seed = Some(11);
+    let again = run_batch(std::slice::from_ref(&seeded), &options(&config, Shard::ALL));
+    assert!(
+        matches!(&again[0].2, RowStatus::Failed(m) if m.contains("config.run.seed")),
+        "{:?}",
+        again[0].2
+    );
+    // The unchanged row is skipped; --force redoes the edited one.
+    let same = run_batch(&rows[..1], &options(&config, Shard::ALL));
+    assert_eq!(same[0].2, RowStatus::Skipped);
+    let mut forced = options(&config, Shard::ALL);
+    forced.force = true;
+    let redo = run_batch(std::slice::from_ref(&edited), &forced);
+    assert_eq!(redo[0].2, RowStatus::Done { resumed: false });
+    // A partial run of a different task is not resumed into this row.
+    let request = RunRequest {
+        mesh: rows[2].mesh.clone(),
+        out: rows[2].out.clone(),
+        config: config.clone(),
+        force: false,
+        resume: false,
+        log: LogMode::Quiet,
+        halt_after: Some(3),
+    };
+    ok(execute(&request, Task::Style(Style::Cube)));
+    let r = run_batch(&rows[2..], &options(&config, Shard::ALL));
+    assert!(
+        matches!(&r[0].2, RowStatus::Failed(m) if m.contains("refusing to resume")),
+        "{:?}",
+        r[0].2
     );
 }

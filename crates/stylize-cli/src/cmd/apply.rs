@@ -11,7 +11,9 @@
 //!
 //! **Several λ** (`--lambda 5,8,11`) write one file per λ next to `-o OUT.ext`:
 //! `OUT_lambda5.ext`, `OUT_lambda8.ext`, … . Parent folders are created; existing outputs are
-//! refused unless `--force` (all outputs are checked before any is written).
+//! refused unless `--force` (all outputs are checked before any is written). An output that is
+//! one of the inputs (the saved file, the mask — compared by file identity) is refused always,
+//! `--force` included. Each output is written atomically and durably (`crate::durable`).
 
 use std::path::{Path, PathBuf};
 
@@ -174,6 +176,19 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
 
     let outputs = output_paths(&args.output, &lambdas)?;
+    let mut inputs = vec![("saved deformation".to_string(), args.saved.clone())];
+    if let Some(m) = &args.mask {
+        inputs.push(("mask file".into(), m.clone()));
+    }
+    crate::rundir::refuse_overwriting_inputs(&outputs, &[], &inputs)?;
+    for (i, a) in outputs.iter().enumerate() {
+        if outputs[..i].contains(a) {
+            bail!(
+                "two strengths λ write the same file {} (repeated --lambda value)",
+                a.display()
+            );
+        }
+    }
     if !args.force {
         let existing: Vec<String> = outputs
             .iter()
@@ -209,8 +224,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let mesh = TriMesh::new(deformed.positions, saved.faces.clone());
         let normals =
             mesh_core::normals::vertex_normals_area_weighted(&mesh.positions, &mesh.faces);
-        mesh_core::io::write_mesh(out, &mesh, Some(&normals))
-            .with_context(|| format!("cannot write {}", out.display()))?;
+        if let Some(parent) = out.parent()
+            && !parent.as_os_str().is_empty()
+        {
+            std::fs::create_dir_all(parent)
+                .with_context(|| format!("cannot create {}", parent.display()))?;
+        }
+        crate::durable::replace_with(out, |tmp| {
+            mesh_core::io::write_mesh(tmp, &mesh, Some(&normals)).map_err(anyhow::Error::from)
+        })
+        .with_context(|| format!("cannot write {}", out.display()))?;
         println!("λ = {lambda}: wrote {}", out.display());
     }
     Ok(())

@@ -4,9 +4,10 @@ use std::path::PathBuf;
 
 use anyhow::bail;
 
-use crate::batch::{BatchOptions, RowStatus, Shard, read_manifest, run_batch};
+use crate::batch::{BatchOptions, RowStatus, Shard, read_manifest, run_batch_until_interrupted};
 use crate::cmd::run::resolve_config;
 use crate::runner::LogMode;
+use crate::signals::shell_quote;
 
 /// Arguments of `stylize batch`.
 #[derive(clap::Args, Debug)]
@@ -26,7 +27,8 @@ pub struct Args {
     /// Override a config key for every row (repeatable).
     #[arg(long = "set", value_name = "KEY=VALUE")]
     pub set: Vec<String>,
-    /// Redo rows whose run directories are complete.
+    /// Redo every row from scratch: complete rows, rows of a different task, partial rows
+    /// (removes only the run directories' own files).
     #[arg(long)]
     pub force: bool,
     /// One JSON line per iteration instead of a progress bar.
@@ -52,14 +54,19 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     } else {
         LogMode::Bar
     };
+    let mut inputs = vec![("manifest".to_string(), args.manifest.clone())];
+    if let Some(c) = &args.config {
+        inputs.push(("config file".into(), c.clone()));
+    }
     let options = BatchOptions {
         config,
         shard,
         model: args.model.clone(),
         log,
         force: args.force,
+        inputs,
     };
-    let results = run_batch(&rows, &options);
+    let (results, interrupted) = run_batch_until_interrupted(&rows, &options);
     let mut failed = 0;
     for (i, row, status) in &results {
         let what = match status {
@@ -84,6 +91,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         results.len(),
         failed
     );
+    if let Some(i) = interrupted {
+        let command: Vec<String> = std::env::args().map(|a| shell_quote(&a)).collect();
+        eprintln!(
+            "batch stopped by {}; run the same command again to resume (complete rows are \
+             skipped, the interrupted row continues from its checkpoint):\n  {}",
+            crate::signals::name(i.signal),
+            command.join(" ")
+        );
+        return Err(i.into());
+    }
     if failed > 0 {
         bail!("{failed} of {} rows failed", results.len());
     }

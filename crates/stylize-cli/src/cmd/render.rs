@@ -57,10 +57,12 @@ fn frame_path(dir: &Path, k: usize) -> PathBuf {
 }
 
 fn save(path: &Path, images: &Images, index: usize, encoding: Encoding) -> anyhow::Result<()> {
-    let file =
-        std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
-    write_png(std::io::BufWriter::new(file), images, index, encoding)
-        .with_context(|| format!("writing {}", path.display()))
+    crate::durable::replace_with(path, |tmp| {
+        let file =
+            std::fs::File::create(tmp).with_context(|| format!("creating {}", tmp.display()))?;
+        write_png(std::io::BufWriter::new(file), images, index, encoding)
+            .with_context(|| format!("writing {}", path.display()))
+    })
 }
 
 /// Runs `stylize render`.
@@ -80,6 +82,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
     let dir = &args.output;
     let sheet_path = dir.join("contact_sheet.png");
+    let outputs: Vec<PathBuf> = (0..args.turntable)
+        .map(|k| frame_path(dir, k))
+        .chain([sheet_path.clone()])
+        .collect();
+    crate::rundir::refuse_overwriting_inputs(
+        &outputs,
+        &[],
+        &[("input mesh".to_string(), args.mesh.clone())],
+    )?;
     if !args.force {
         let existing = (0..args.turntable)
             .map(|k| frame_path(dir, k))

@@ -5,7 +5,9 @@ use std::path::PathBuf;
 use anyhow::{Context, bail};
 
 use crate::config::Config;
-use crate::runner::{LogMode, RunRequest, Task, execute};
+use crate::identity::{ModelIdentity, ObjectiveIdentity};
+use crate::runner::{LogMode, RunOptions, RunRequest, Task, execute_with};
+use crate::signals::{Interrupted, shell_quote};
 use crate::style::Style;
 
 /// Progress output format.
@@ -46,11 +48,13 @@ pub struct Args {
     /// Seed (same as `--set run.seed=N`).
     #[arg(long)]
     pub seed: Option<u64>,
-    /// Continue an interrupted run from its checkpoint. Without --config/--set/--seed/
-    /// --negative-prompt, the run's own `config.toml` is used.
-    #[arg(long)]
+    /// Continue an interrupted run from its checkpoint (an error when there is none). Without
+    /// --config/--set/--seed/--negative-prompt, the run's own `config.toml` is used. The task
+    /// (mesh, style/prompt, model, result-changing settings) must be the checkpoint's.
+    #[arg(long, conflicts_with = "force")]
     pub resume: bool,
-    /// Overwrite an existing run.
+    /// Start over in an existing run directory, or write into a non-empty folder that is not a
+    /// run directory. Removes only the run's own files; never replaces an input.
     #[arg(long)]
     pub force: bool,
     /// No progress output.
@@ -86,6 +90,31 @@ pub fn resolve_config(
     Ok(config)
 }
 
+/// The command that continues this run: the same mesh, run directory and objective with
+/// `--resume` (the run's own `config.toml` holds the resolved settings).
+pub fn resume_command(args: &Args) -> String {
+    let program = std::env::args().next().unwrap_or_else(|| "stylize".into());
+    let mut parts: Vec<String> = vec![program, "run".into()];
+    parts.push(args.mesh.display().to_string());
+    parts.push("--out".into());
+    parts.push(args.out.display().to_string());
+    if let Some(s) = &args.style {
+        parts.extend(["--style".into(), s.clone()]);
+    }
+    if let Some(p) = &args.prompt {
+        parts.extend(["--prompt".into(), p.clone()]);
+    }
+    if let Some(m) = &args.model {
+        parts.extend(["--model".into(), m.display().to_string()]);
+    }
+    parts.push("--resume".into());
+    parts
+        .iter()
+        .map(|p| shell_quote(p))
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
 /// Runs `stylize run`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     let saved = args.out.join("config.toml");
@@ -105,23 +134,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         args.seed,
         args.negative_prompt.as_deref(),
     )?;
-    let task = match (&args.style, &args.prompt) {
-        (Some(style), None) => Task::Style(Style::parse(style)?),
-        (None, Some(prompt)) => {
-            let Some(model) = &args.model else {
-                bail!(
-                    "--prompt needs --model DIR: an ONNX export of DeepFloyd IF (see docs/models.md for how to export it). \
-                     Without models, try a model-free style: --style cube"
-                );
-            };
-            let guidance = crate::models::load_guidance(model, prompt, &config)?;
-            Task::Text {
-                prompt: prompt.clone(),
-                guidance,
-            }
-        }
-        _ => bail!("give exactly one of --style or --prompt"),
-    };
+    let mut options = RunOptions::default();
+    if let Some(c) = &config_file {
+        options.inputs.push(("config file".into(), c.clone()));
+    }
     let log = if args.quiet {
         LogMode::Quiet
     } else {
@@ -133,14 +149,62 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let request = RunRequest {
         mesh: args.mesh.clone(),
         out: args.out.clone(),
-        config,
+        config: config.clone(),
         force: args.force,
         resume: args.resume,
         log,
         halt_after: args.stop_after,
     };
-    let outcome =
-        execute(&request, task).with_context(|| format!("run on {}", args.mesh.display()))?;
+    let result = match (&args.style, &args.prompt) {
+        (Some(style), None) => {
+            let style = Style::parse(style)?;
+            if let Style::Exemplar { path, .. } = &style {
+                options.inputs.push(("exemplar mesh".into(), path.clone()));
+            }
+            let objective = ObjectiveIdentity::of_style(&style);
+            execute_with(&request, objective, || Ok(Task::Style(style)), &options)
+        }
+        (None, Some(prompt)) => {
+            let Some(model) = &args.model else {
+                bail!(
+                    "--prompt needs --model DIR: an ONNX export of DeepFloyd IF (see docs/models.md for how to export it). \
+                     Without models, try a model-free style: --style cube"
+                );
+            };
+            options.model = Some(ModelIdentity::of_dir(model)?);
+            options
+                .inputs
+                .push(("model manifest".into(), model.join("manifest.toml")));
+            let objective = ObjectiveIdentity::Prompt {
+                prompt: prompt.clone(),
+                model: None,
+            };
+            execute_with(
+                &request,
+                objective,
+                || {
+                    Ok(Task::Text {
+                        prompt: prompt.clone(),
+                        guidance: crate::models::load_guidance(model, prompt, &config)?,
+                    })
+                },
+                &options,
+            )
+        }
+        _ => bail!("give exactly one of --style or --prompt"),
+    };
+    let outcome = match result {
+        Ok(o) => o,
+        Err(e) => {
+            if let Some(i) = e.downcast_ref::<Interrupted>()
+                && i.checkpoint_iteration.is_some()
+            {
+                eprintln!("{i}");
+                eprintln!("resume with:\n  {}", resume_command(&args));
+            }
+            return Err(e).with_context(|| format!("run on {}", args.mesh.display()));
+        }
+    };
     if !args.quiet {
         for w in &outcome.warnings {
             eprintln!("warning: {w}");
