@@ -18,6 +18,7 @@
 
 #![cfg_attr(test, allow(clippy::unwrap_used))]
 
+mod factor;
 mod laplacian;
 mod mass;
 mod pinned;

@@ -1,15 +1,15 @@
 //! Sparse Cholesky of a Laplacian with pinned (Dirichlet) vertices, factored once, solved many times.
 
+use crate::factor::CscFactor;
 use crate::{CotanError, SymmetricCsr};
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt::factor::LltError;
 use faer::linalg::cholesky::llt::factor::LltRegularization;
 use faer::sparse::linalg::cholesky::{
-    CholeskySymbolicParams, LltRef, SymbolicCholesky, SymmetricOrdering,
-    factorize_symbolic_cholesky,
+    CholeskySymbolicParams, SymmetricOrdering, factorize_symbolic_cholesky,
 };
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
-use faer::{Conj, MatMut, Par, Side};
+use faer::{Par, Side};
 
 /// One pin per connected component of the mesh graph: the lowest vertex index of each component
 /// (vertex 0 for a connected mesh, as the reference). Vertices referenced by no face form their
@@ -45,12 +45,14 @@ fn union(parent: &mut [usize], a: usize, b: usize) {
 /// rows and columns of the pinned vertices removed.
 ///
 /// Solving `L x = b` with `x[pins]` prescribed is then `L_pin x_free = b_free − L[free, pins]·x_pins`
-/// ([`PinnedCholesky::solve_pinned`]). The fill-reducing ordering (AMD) and symbolic analysis run
-/// once, the numeric factorization once; solves allocate only their scratch space.
+/// ([`PinnedCholesky::solve_pinned`]). The fill-reducing ordering (AMD), the symbolic analysis and
+/// the numeric factorization (faer) run once; the factor is then copied into a compressed-column
+/// form on which the solves run forward and backward substitution for the three coordinates
+/// together, sequentially and deterministically.
 ///
-/// Parallelism is explicit ([`PinnedCholesky::with_parallelism`], default [`Par::Seq`]): faer's
-/// supernodal solves with two threads were measured 3–8× slower than sequential on this project's
-/// machine. With [`Par::Seq`] the solves are deterministic.
+/// **Solver order.** The factor's rows are the free vertices in the fill-reducing order
+/// ([`PinnedCholesky::solver_order`]). Callers that build their right-hand side directly in that
+/// order ([`PinnedCholesky::solve_ordered_in_place`]) skip every permutation.
 #[derive(Debug)]
 pub struct PinnedCholesky {
     n: usize,
@@ -62,9 +64,13 @@ pub struct PinnedCholesky {
     /// For each free row (reduced), the entries `L[row, pin]` as (position in `pins`, value).
     coupling_ptr: Vec<usize>,
     coupling: Vec<(usize, f64)>,
-    symbolic: Option<SymbolicCholesky<usize>>,
-    factor: Vec<f64>,
-    par: Par,
+    /// Solver position → reduced index.
+    perm_fwd: Vec<usize>,
+    /// Reduced index → solver position.
+    perm_inv: Vec<usize>,
+    /// Solver position → full index.
+    order: Vec<usize>,
+    factor: CscFactor,
 }
 
 impl PinnedCholesky {
@@ -167,9 +173,10 @@ impl PinnedCholesky {
             free,
             coupling_ptr,
             coupling,
-            symbolic: None,
-            factor: Vec::new(),
-            par: Par::Seq,
+            perm_fwd: Vec::new(),
+            perm_inv: Vec::new(),
+            order: Vec::new(),
+            factor: CscFactor::default(),
         };
         if m == 0 {
             return Ok(out);
@@ -209,21 +216,31 @@ impl PinnedCholesky {
         if factor.iter().any(|x| !x.is_finite()) {
             return Err(CotanError::NotPositiveDefinite { pivot: 0, size: m });
         }
-        out.symbolic = Some(symbolic);
-        out.factor = factor;
+        let (perm_fwd, perm_inv) = match symbolic.perm() {
+            Some(p) => {
+                let (fwd, inv) = p.arrays();
+                (fwd.to_vec(), inv.to_vec())
+            }
+            None => ((0..m).collect(), (0..m).collect()),
+        };
+        out.order = perm_fwd.iter().map(|&r| out.free[r]).collect();
+        out.perm_fwd = perm_fwd;
+        out.perm_inv = perm_inv;
+        out.factor = CscFactor::from_faer(&symbolic, &factor)?;
         Ok(out)
     }
 
-    /// Sets the parallelism of the solves (default [`Par::Seq`]).
-    pub fn with_parallelism(mut self, par: Par) -> Self {
-        self.par = par;
+    /// Kept for compatibility: the solves no longer run in faer, they are sequential
+    /// substitutions on the crate's own copy of the factor (measured faster than faer's
+    /// two-thread solves on every mesh of `docs/benchmarks.md`).
+    #[deprecated(note = "the solves are sequential; the parallelism setting has no effect")]
+    pub fn with_parallelism(self, _par: Par) -> Self {
         self
     }
 
-    /// Sets the parallelism of the solves in place (default [`Par::Seq`]).
-    pub fn set_parallelism(&mut self, par: Par) {
-        self.par = par;
-    }
+    /// Kept for compatibility; see [`PinnedCholesky::with_parallelism`].
+    #[deprecated(note = "the solves are sequential; the parallelism setting has no effect")]
+    pub fn set_parallelism(&mut self, _par: Par) {}
 
     /// Size of the full matrix.
     pub fn size(&self) -> usize {
@@ -245,6 +262,54 @@ impl PinnedCholesky {
         self.reduced_of.get(v).copied().filter(|&r| r != usize::MAX)
     }
 
+    /// The free vertices in the factor's fill-reducing order (solver position → full index): the
+    /// row order of [`PinnedCholesky::solve_ordered_in_place`].
+    pub fn solver_order(&self) -> &[usize] {
+        &self.order
+    }
+
+    /// Number of stored entries of the Cholesky factor (diagonal included).
+    pub fn factor_nnz(&self) -> usize {
+        self.factor.nnz()
+    }
+
+    /// Solves `L_pin X = B` in place with the rows of `B` in solver order
+    /// ([`PinnedCholesky::solver_order`]). `L_pin` is symmetric, so this is also the adjoint solve.
+    ///
+    /// # Panics
+    /// If `rhs.len()` is not the number of free vertices (a programming error).
+    pub fn solve_ordered_in_place(&self, rhs: &mut [[f64; 3]]) {
+        assert_eq!(
+            rhs.len(),
+            self.free.len(),
+            "right-hand side has the wrong number of rows"
+        );
+        if !rhs.is_empty() {
+            self.factor.solve_in_place(rhs);
+        }
+    }
+
+    /// `−L[v, pins]·pinned_values` for every free vertex `v`, in solver order: what the pinned
+    /// values add to the right-hand side of the free rows (see [`PinnedCholesky::solve_pinned`]).
+    ///
+    /// # Panics
+    /// If `pinned_values.len() != pins().len()` (a programming error).
+    pub fn pinned_rhs_ordered(&self, pinned_values: &[[f64; 3]]) -> Vec<[f64; 3]> {
+        assert_eq!(pinned_values.len(), self.pins.len(), "one value per pin");
+        self.perm_fwd
+            .iter()
+            .map(|&r| {
+                let mut x = [0.0; 3];
+                for &(k, w) in &self.coupling[self.coupling_ptr[r]..self.coupling_ptr[r + 1]] {
+                    for c in 0..3 {
+                        x[c] -= w * pinned_values[k][c];
+                    }
+                }
+                x
+            })
+            .collect()
+    }
+
     /// Solves `L_pin X = B` in place for a reduced right-hand side with three columns
     /// (`rhs.len()` = number of free vertices, rows in reduced order).
     ///
@@ -256,19 +321,11 @@ impl PinnedCholesky {
             self.free.len(),
             "right-hand side has the wrong number of rows"
         );
-        let Some(symbolic) = &self.symbolic else {
-            return;
-        };
-        let m = rhs.len();
-        let mat = MatMut::from_row_major_slice_mut(rhs.as_flattened_mut(), m, 3);
-        let req = symbolic.solve_in_place_scratch::<f64>(3, self.par);
-        let mut buf = MemBuffer::new(req);
-        LltRef::new(symbolic, &self.factor).solve_in_place_with_conj(
-            Conj::No,
-            mat,
-            self.par,
-            MemStack::new(&mut buf),
-        );
+        let mut x: Vec<[f64; 3]> = self.perm_fwd.iter().map(|&r| rhs[r]).collect();
+        self.solve_ordered_in_place(&mut x);
+        for (xi, &r) in x.iter().zip(&self.perm_fwd) {
+            rhs[r] = *xi;
+        }
     }
 
     /// Solves `L_pinᵀ X = B` in place: the adjoint of [`PinnedCholesky::solve_in_place`]. `L_pin` is
@@ -291,11 +348,10 @@ impl PinnedCholesky {
         );
         assert_eq!(pinned_values.len(), self.pins.len(), "one value per pin");
         let mut red: Vec<[f64; 3]> = self
-            .free
+            .perm_fwd
             .iter()
-            .enumerate()
-            .map(|(r, &v)| {
-                let mut x = b[v];
+            .map(|&r| {
+                let mut x = b[self.free[r]];
                 for &(k, w) in &self.coupling[self.coupling_ptr[r]..self.coupling_ptr[r + 1]] {
                     for c in 0..3 {
                         x[c] -= w * pinned_values[k][c];
@@ -304,13 +360,13 @@ impl PinnedCholesky {
                 x
             })
             .collect();
-        self.solve_in_place(&mut red);
+        self.solve_ordered_in_place(&mut red);
         let mut x = vec![[0.0; 3]; self.n];
         for (k, &p) in self.pins.iter().enumerate() {
             x[p] = pinned_values[k];
         }
-        for (r, &v) in self.free.iter().enumerate() {
-            x[v] = red[r];
+        for (xi, &v) in red.iter().zip(&self.order) {
+            x[v] = *xi;
         }
         x
     }
@@ -324,11 +380,11 @@ impl PinnedCholesky {
             self.n,
             "gradient has the wrong number of rows"
         );
-        let mut red: Vec<[f64; 3]> = self.free.iter().map(|&v| grad_x[v]).collect();
-        self.solve_adjoint_in_place(&mut red);
+        let mut red: Vec<[f64; 3]> = self.order.iter().map(|&v| grad_x[v]).collect();
+        self.solve_ordered_in_place(&mut red);
         let mut g = vec![[0.0; 3]; self.n];
-        for (r, &v) in self.free.iter().enumerate() {
-            g[v] = red[r];
+        for (gi, &v) in red.iter().zip(&self.order) {
+            g[v] = *gi;
         }
         g
     }

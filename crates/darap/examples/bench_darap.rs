@@ -1,11 +1,16 @@
 //! dARAP timings: precompute, forward, backward and forward+backward on meshes of ~2k to ~160k
-//! vertices, with 1 and 2 rayon threads and sequential sparse solves (the default, see
-//! `cotan::PinnedCholesky`), plus 2 rayon threads with 2-thread solves (`faer::Par::rayon(2)`).
+//! vertices, with 1 and 2 rayon threads (the sparse solves are sequential, see
+//! `cotan::PinnedCholesky`).
 //!
-//! `cargo run --release -p darap --example bench_darap -- [--max-vertices N] [--reps N]`
+//! `cargo run --release -p darap --example bench_darap -- [--max-vertices N] [--reps N]
+//! [--threads N] [--mesh PATH]... [--only NAME]`
 //!
 //! Meshes: the golden bunny (1,839 V) and its midpoint subdivisions (`fixtures/golden/bunny.obj`,
-//! normalized to the side-2 cube), and icospheres of 10,242 / 40,962 / 163,842 V.
+//! normalized to the side-2 cube), CGAL's cow and fandisk, icospheres of 10,242 / 40,962 /
+//! 163,842 V, plus any `--mesh PATH` (any format `mesh_core::io` reads). `--threads N` runs only
+//! the N-thread rows (use with `taskset -c K` for one-core numbers); `--only NAME` one mesh (for
+//! profiling). The factor column is the
+//! number of stored entries of the pinned Laplacian's Cholesky factor.
 
 use darap::{Darap, DarapOptions};
 use mesh_core::TriMesh;
@@ -34,6 +39,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     let max_vertices = arg("--max-vertices", 200_000);
     let reps = arg("--reps", 11).max(1);
+    let only_threads = arg("--threads", 0);
+    let extra: Vec<&String> = args
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| *i > 0 && args[i - 1] == "--mesh")
+        .map(|(_, a)| a)
+        .collect();
 
     let path = concat!(
         env!("CARGO_MANIFEST_DIR"),
@@ -63,15 +75,33 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             darap::procedural::icosphere(level),
         ));
     }
+    for path in extra {
+        let mut mesh = mesh_core::io::read_mesh(path)?;
+        mesh_core::normalize::side2_cube(&mut mesh.positions);
+        let name = std::path::Path::new(path)
+            .file_stem()
+            .map_or_else(|| path.clone(), |s| s.to_string_lossy().into_owned());
+        meshes.push((name, mesh));
+    }
     meshes.retain(|(_, m)| m.positions.len() <= max_vertices);
+    if let Some(only) = args
+        .iter()
+        .position(|a| a == "--only")
+        .and_then(|i| args.get(i + 1))
+    {
+        meshes.retain(|(name, _)| name == only);
+    }
     meshes.sort_by_key(|(_, m)| m.positions.len());
 
     println!(
-        "| mesh | V | rayon threads | solver threads | precompute ms | forward ms | backward ms | fwd+bwd ms |"
+        "| mesh | V | factor nnz | rayon threads | precompute ms | forward ms | backward ms | fwd+bwd ms |"
     );
     println!("|---|---:|---:|---:|---:|---:|---:|---:|");
     for (name, mesh) in &meshes {
-        for (threads, solver_threads) in [(1usize, 1usize), (2, 1), (2, 2)] {
+        for threads in [1usize, 2] {
+            if only_threads != 0 && threads != only_threads {
+                continue;
+            }
             let pool = rayon::ThreadPoolBuilder::new()
                 .num_threads(threads)
                 .build()?;
@@ -89,12 +119,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     },
                     pre_reps,
                 );
-                let mut layer = layer.ok_or(darap::DarapError::NoFaces)?;
-                layer.set_solver_parallelism(if solver_threads > 1 {
-                    faer::Par::rayon(solver_threads)
-                } else {
-                    faer::Par::Seq
-                });
+                let layer = layer.ok_or(darap::DarapError::NoFaces)?;
                 let x: Vec<[f64; 3]> = layer
                     .rest_normals()
                     .iter()
@@ -127,8 +152,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     reps,
                 );
                 println!(
-                    "| {name} | {} | {threads} | {solver_threads} | {pre:.1} | {fwd:.2} | {bwd:.2} | {both:.2} |",
-                    mesh.positions.len()
+                    "| {name} | {} | {} | {threads} | {pre:.1} | {fwd:.3} | {bwd:.3} | {both:.3} |",
+                    mesh.positions.len(),
+                    layer.factor_nnz(),
                 );
                 Ok(())
             })?;

@@ -1,7 +1,7 @@
 //! The global step (spec §4.1–4.2): right-hand side from the rotations, pinned sparse solve.
 
 use crate::local::PAR_MIN_LEN;
-use crate::mat3::{Mat3, ZERO, mul_vec};
+use crate::mat3::{Mat3, ZERO};
 use cotan::CotWeights;
 use rayon::prelude::*;
 
@@ -10,140 +10,196 @@ use rayon::prelude::*;
 /// Per face `f = (i, j, k)` and corner `a` with other corners `b`, `e`, the rest vector
 /// `g_{f,a} = (1/6)·[c_ab (p_a − p_b) + c_ae (p_a − p_e)]` (full edge weights `c`, not halved), so
 /// that `b_a = Σ_{(f,a)} R_f g_{f,a}` with `R_f = R_i + R_j + R_k` (spec §4.1).
+///
+/// Stored fused: expanding `R_f` gives `b_a = Σ_v R_v h_{a,v}` with
+/// `h_{a,v} = Σ_{f ∋ a, v} g_{f,a}` over the faces holding both `a` and `v` (`v = a` included) —
+/// one 3-vector per nonzero of the Laplacian's pattern. The entries are kept twice, by row `a` for
+/// [`rhs`] and by column `v` for [`rhs_vjp`], so both are gathers that walk memory in order.
+///
+/// Rows (the entries of `b`) and columns (the rotations) can be renumbered and rows dropped
+/// ([`RhsPrecompute::with_order`]): the layer builds `b` directly in its solver's vertex order.
 #[derive(Clone, Debug)]
 pub struct RhsPrecompute {
-    faces: Vec<[u32; 3]>,
-    corner_vectors: Vec<[[f64; 3]; 3]>,
-    /// Vertex → (face, corner) incidences in CSR form, in increasing face order.
-    incidence_ptr: Vec<usize>,
-    incidence: Vec<(u32, u8)>,
+    num_rows: usize,
+    num_cols: usize,
+    row_ptr: Vec<usize>,
+    row_col: Vec<u32>,
+    row_h: Vec<[f64; 3]>,
+    col_ptr: Vec<usize>,
+    col_row: Vec<u32>,
+    col_h: Vec<[f64; 3]>,
 }
 
 impl RhsPrecompute {
-    /// Builds the precompute; `weights` are the mesh's cotangent weights.
+    /// Builds the precompute in the mesh's own vertex order (row `a` of `b` is vertex `a`, column
+    /// `v` is rotation `v`); `weights` are the mesh's cotangent weights.
     pub fn new(positions: &[[f64; 3]], faces: &[[u32; 3]], weights: &CotWeights) -> Self {
-        let corner_vectors = faces
-            .iter()
-            .map(|f| {
-                std::array::from_fn(|a| {
-                    let (pa, b, e) = (f[a], f[(a + 1) % 3], f[(a + 2) % 3]);
-                    let p = positions[pa as usize];
-                    let mut g = [0.0; 3];
-                    for other in [b, e] {
-                        if other == pa {
-                            continue;
-                        }
-                        let c = weights.get(pa, other).unwrap_or(0.0);
-                        let q = positions[other as usize];
-                        for d in 0..3 {
-                            g[d] += c * (p[d] - q[d]) / 6.0;
-                        }
-                    }
-                    g
-                })
-            })
-            .collect();
         let n = positions.len();
-        let mut incidence_ptr = vec![0usize; n + 1];
+        let identity: Vec<usize> = (0..n).collect();
+        let rows: Vec<Option<usize>> = (0..n).map(Some).collect();
+        Self::with_order(positions, faces, weights, &rows, n, &identity)
+    }
+
+    /// Builds the precompute with vertex `a`'s entry of `b` at row `row_of[a]` (`None`: not
+    /// computed, e.g. a pinned vertex) of `num_rows`, and vertex `v`'s rotation at position
+    /// `col_of[v]` of the rotations slice.
+    ///
+    /// # Panics
+    /// If a row or column number is out of range or `u32` cannot hold it (programming errors).
+    pub fn with_order(
+        positions: &[[f64; 3]],
+        faces: &[[u32; 3]],
+        weights: &CotWeights,
+        row_of: &[Option<usize>],
+        num_rows: usize,
+        col_of: &[usize],
+    ) -> Self {
+        let n = positions.len();
+        assert_eq!(row_of.len(), n, "one row number per vertex");
+        assert_eq!(col_of.len(), n, "one column number per vertex");
+        assert!(u32::try_from(n.max(num_rows)).is_ok(), "too many vertices");
+        // (row, column, g) for every corner a of every face and every corner v of that face, in
+        // face order; equal (row, column) pairs are summed in that order.
+        let mut triplets: Vec<(u32, u32, [f64; 3])> = Vec::with_capacity(9 * faces.len());
         for f in faces {
-            for &v in f {
-                incidence_ptr[v as usize + 1] += 1;
+            for a in 0..3 {
+                let pa = f[a];
+                let Some(row) = row_of[pa as usize] else {
+                    continue;
+                };
+                let p = positions[pa as usize];
+                let mut g = [0.0; 3];
+                for other in [f[(a + 1) % 3], f[(a + 2) % 3]] {
+                    if other == pa {
+                        continue;
+                    }
+                    let c = weights.get(pa, other).unwrap_or(0.0);
+                    let q = positions[other as usize];
+                    for d in 0..3 {
+                        g[d] += c * (p[d] - q[d]) / 6.0;
+                    }
+                }
+                for &v in f {
+                    assert!(row < num_rows, "row out of range");
+                    triplets.push((row as u32, col_of[v as usize] as u32, g));
+                }
             }
         }
-        for i in 0..n {
-            incidence_ptr[i + 1] += incidence_ptr[i];
-        }
-        let mut fill = incidence_ptr.clone();
-        let mut incidence = vec![(0u32, 0u8); 3 * faces.len()];
-        for (fi, f) in faces.iter().enumerate() {
-            for (k, &v) in f.iter().enumerate() {
-                incidence[fill[v as usize]] = (fi as u32, k as u8);
-                fill[v as usize] += 1;
+        triplets.sort_by_key(|&(r, c, _)| (r, c));
+        let mut entries: Vec<(u32, u32, [f64; 3])> = Vec::with_capacity(triplets.len() / 2);
+        for (r, c, g) in triplets {
+            match entries.last_mut() {
+                Some(last) if last.0 == r && last.1 == c => {
+                    for d in 0..3 {
+                        last.2[d] += g[d];
+                    }
+                }
+                _ => entries.push((r, c, g)),
             }
+        }
+        let num_cols = n;
+        let mut row_ptr = vec![0usize; num_rows + 1];
+        let mut col_ptr = vec![0usize; num_cols + 1];
+        for &(r, c, _) in &entries {
+            row_ptr[r as usize + 1] += 1;
+            col_ptr[c as usize + 1] += 1;
+        }
+        for i in 0..num_rows {
+            row_ptr[i + 1] += row_ptr[i];
+        }
+        for i in 0..num_cols {
+            col_ptr[i + 1] += col_ptr[i];
+        }
+        let row_col = entries.iter().map(|e| e.1).collect();
+        let row_h = entries.iter().map(|e| e.2).collect();
+        // By column: a stable counting sort keeps rows increasing within a column.
+        let mut fill = col_ptr.clone();
+        let mut col_row = vec![0u32; entries.len()];
+        let mut col_h = vec![[0.0; 3]; entries.len()];
+        for &(r, c, h) in &entries {
+            let k = fill[c as usize];
+            col_row[k] = r;
+            col_h[k] = h;
+            fill[c as usize] += 1;
         }
         Self {
-            faces: faces.to_vec(),
-            corner_vectors,
-            incidence_ptr,
-            incidence,
+            num_rows,
+            num_cols,
+            row_ptr,
+            row_col,
+            row_h,
+            col_ptr,
+            col_row,
+            col_h,
         }
     }
 
-    /// Number of vertices.
+    /// Number of rows of `b`.
+    pub fn num_rows(&self) -> usize {
+        self.num_rows
+    }
+
+    /// Number of rotations (columns).
     pub fn num_vertices(&self) -> usize {
-        self.incidence_ptr.len() - 1
+        self.num_cols
     }
 }
 
-/// The right-hand side `b` of the global step (spec §4.1). With every `R = I`, `b = L p` exactly.
-/// Deterministic (a gather per vertex in a fixed order).
-pub fn rhs(pre: &RhsPrecompute, rotations: &[Mat3]) -> Vec<[f64; 3]> {
-    let face_rot: Vec<Mat3> = pre
-        .faces
-        .par_iter()
+/// `b_a = Σ_v R_v h_{a,v}` for the rows `out` covers, added to `out` (`out[a]` holds an offset on
+/// entry, zero for plain [`rhs`]).
+pub(crate) fn rhs_add_into(pre: &RhsPrecompute, rotations: &[Mat3], out: &mut [[f64; 3]]) {
+    assert_eq!(rotations.len(), pre.num_cols, "one rotation per vertex");
+    assert_eq!(out.len(), pre.num_rows, "one row per entry of b");
+    out.par_iter_mut()
+        .enumerate()
         .with_min_len(PAR_MIN_LEN)
-        .map(|f| {
-            let (a, b, c) = (
-                &rotations[f[0] as usize],
-                &rotations[f[1] as usize],
-                &rotations[f[2] as usize],
-            );
-            std::array::from_fn(|i| std::array::from_fn(|j| a[i][j] + b[i][j] + c[i][j]))
-        })
-        .collect();
-    (0..pre.num_vertices())
-        .into_par_iter()
-        .with_min_len(PAR_MIN_LEN)
-        .map(|v| {
-            let mut acc = [0.0; 3];
-            for &(f, k) in &pre.incidence[pre.incidence_ptr[v]..pre.incidence_ptr[v + 1]] {
-                let y = mul_vec(
-                    &face_rot[f as usize],
-                    pre.corner_vectors[f as usize][k as usize],
-                );
-                acc[0] += y[0];
-                acc[1] += y[1];
-                acc[2] += y[2];
+        .for_each(|(a, acc)| {
+            let range = pre.row_ptr[a]..pre.row_ptr[a + 1];
+            let mut s = *acc;
+            for (&v, h) in pre.row_col[range.clone()].iter().zip(&pre.row_h[range]) {
+                let r = &rotations[v as usize];
+                s[0] += r[0][0] * h[0] + r[0][1] * h[1] + r[0][2] * h[2];
+                s[1] += r[1][0] * h[0] + r[1][1] * h[1] + r[1][2] * h[2];
+                s[2] += r[2][0] * h[0] + r[2][1] * h[1] + r[2][2] * h[2];
             }
-            acc
-        })
-        .collect()
+            *acc = s;
+        });
 }
 
-/// Adjoint of [`rhs`]: given `∂ℓ/∂b`, returns `∂ℓ/∂R_v = Σ_{f ∋ v} Σ_a (∂ℓ/∂b_a) g_{f,a}ᵀ`.
+/// The right-hand side `b` of the global step (spec §4.1), one row per row of `pre`. With every
+/// `R = I`, `b = L p` up to rounding. Deterministic (a gather per row in a fixed order).
+pub fn rhs(pre: &RhsPrecompute, rotations: &[Mat3]) -> Vec<[f64; 3]> {
+    let mut b = vec![[0.0; 3]; pre.num_rows];
+    rhs_add_into(pre, rotations, &mut b);
+    b
+}
+
+/// Adjoint of [`rhs`]: given `∂ℓ/∂b` (one row per row of `pre`), returns
+/// `∂ℓ/∂R_v = Σ_a (∂ℓ/∂b_a) h_{a,v}ᵀ` for every rotation.
 pub fn rhs_vjp(pre: &RhsPrecompute, grad_b: &[[f64; 3]]) -> Vec<Mat3> {
-    let face_grad: Vec<Mat3> = pre
-        .faces
-        .par_iter()
-        .zip(pre.corner_vectors.par_iter())
+    let mut out = vec![ZERO; pre.num_cols];
+    rhs_vjp_into(pre, grad_b, &mut out);
+    out
+}
+
+/// [`rhs_vjp`] into `out` (overwritten).
+pub(crate) fn rhs_vjp_into(pre: &RhsPrecompute, grad_b: &[[f64; 3]], out: &mut [Mat3]) {
+    assert_eq!(grad_b.len(), pre.num_rows, "one gradient row per entry of b");
+    assert_eq!(out.len(), pre.num_cols, "one rotation per vertex");
+    out.par_iter_mut()
+        .enumerate()
         .with_min_len(PAR_MIN_LEN)
-        .map(|(f, g)| {
+        .for_each(|(v, acc)| {
+            let range = pre.col_ptr[v]..pre.col_ptr[v + 1];
             let mut m = ZERO;
-            for a in 0..3 {
-                let gb = grad_b[f[a] as usize];
+            for (&a, h) in pre.col_row[range.clone()].iter().zip(&pre.col_h[range]) {
+                let gb = grad_b[a as usize];
                 for i in 0..3 {
                     for j in 0..3 {
-                        m[i][j] += gb[i] * g[a][j];
+                        m[i][j] += gb[i] * h[j];
                     }
                 }
             }
-            m
-        })
-        .collect();
-    (0..pre.num_vertices())
-        .into_par_iter()
-        .with_min_len(PAR_MIN_LEN)
-        .map(|v| {
-            let mut acc = ZERO;
-            for &(f, _) in &pre.incidence[pre.incidence_ptr[v]..pre.incidence_ptr[v + 1]] {
-                let m = &face_grad[f as usize];
-                for i in 0..3 {
-                    for j in 0..3 {
-                        acc[i][j] += m[i][j];
-                    }
-                }
-            }
-            acc
-        })
-        .collect()
+            *acc = m;
+        });
 }

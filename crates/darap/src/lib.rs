@@ -24,7 +24,9 @@
 
 #![cfg_attr(test, allow(clippy::unwrap_used))]
 
+mod batch;
 mod global;
+mod lanes;
 mod local;
 pub mod mat3;
 mod post;
@@ -38,6 +40,7 @@ pub use local::{
     LocalTape, covariance, local_step, local_step_vjp, normalize_targets, normalize_targets_vjp,
     rest_covariances,
 };
+use local::normalize_target;
 pub use mat3::Mat3;
 pub use post::{PostTape, post_process, post_process_vjp};
 
@@ -121,13 +124,28 @@ pub enum DarapError {
 /// A dARAP layer for one rest mesh: everything λ-independent is precomputed once (cotangent
 /// weights, rest covariances `K_v`, masses, rest normals, right-hand-side vectors, and the pinned
 /// Cholesky factorization).
+///
+/// **Internal vertex order.** The local step, the right-hand side and the solve run in the
+/// solver's fill-reducing order (free vertices as [`PinnedCholesky::solver_order`] lists them,
+/// then the pins), fixed at construction: per-vertex data are permuted once, the targets are
+/// gathered and the results scattered once per call, and everything in between walks memory in
+/// order. Inputs and outputs of the public API are in the mesh's vertex order.
 #[derive(Debug)]
 pub struct Darap {
     rest_positions: Vec<[f64; 3]>,
     rest_normals: Vec<[f64; 3]>,
     mass: Vec<f64>,
-    covariance_rest: Vec<Mat3>,
+    /// Internal position → vertex (free vertices in solver order, then the pins).
+    order: Vec<usize>,
+    /// `covariance_rest`, `mass`, `rest_normals` and the mask in internal order.
+    covariance_int: Vec<Mat3>,
+    mass_int: Vec<f64>,
+    normals_int: Vec<[f64; 3]>,
+    free_int: Option<Vec<bool>>,
+    /// Rows: free vertices in solver order; columns: internal order.
     rhs: RhsPrecompute,
+    /// `−L[free, pins]·x_pins` in solver order (the pins stay at rest).
+    pinned_rhs: Vec<[f64; 3]>,
     solver: PinnedCholesky,
     pinned_values: Vec<[f64; 3]>,
     rest_diag: f64,
@@ -162,22 +180,52 @@ impl Darap {
         if faces.is_empty() {
             return Err(DarapError::NoFaces);
         }
+        let n = rest_positions.len();
         let weights = cotan::cot_weights(rest_positions, faces)?;
-        let laplacian = cotan::laplacian_from_weights(rest_positions.len(), &weights)?;
+        let laplacian = cotan::laplacian_from_weights(n, &weights)?;
         let mass = cotan::voronoi_mass(rest_positions, faces)?;
         let rest_normals = mesh_core::normals::vertex_normals_area_weighted(rest_positions, faces);
         let covariance_rest = rest_covariances(rest_positions, faces, &weights);
-        let rhs = RhsPrecompute::new(rest_positions, faces, &weights);
-        let pins = cotan::component_pins(rest_positions.len(), faces);
+        let pins = cotan::component_pins(n, faces);
         let solver = PinnedCholesky::new(&laplacian, &pins)?;
-        let pinned_values = solver.pins().iter().map(|&p| rest_positions[p]).collect();
+        let pinned_values: Vec<[f64; 3]> =
+            solver.pins().iter().map(|&p| rest_positions[p]).collect();
+        let order: Vec<usize> = solver
+            .solver_order()
+            .iter()
+            .chain(solver.pins())
+            .copied()
+            .collect();
+        let mut position_of = vec![0usize; n];
+        for (k, &v) in order.iter().enumerate() {
+            position_of[v] = k;
+        }
+        let num_free = solver.solver_order().len();
+        let row_of: Vec<Option<usize>> = position_of
+            .iter()
+            .map(|&k| (k < num_free).then_some(k))
+            .collect();
+        let rhs = RhsPrecompute::with_order(
+            rest_positions,
+            faces,
+            &weights,
+            &row_of,
+            num_free,
+            &position_of,
+        );
+        let pinned_rhs = solver.pinned_rhs_ordered(&pinned_values);
         let rest_diag = mesh_core::geometry::bbox_diagonal(rest_positions);
         Ok(Darap {
+            covariance_int: order.iter().map(|&v| covariance_rest[v]).collect(),
+            mass_int: order.iter().map(|&v| mass[v]).collect(),
+            normals_int: order.iter().map(|&v| rest_normals[v]).collect(),
+            free_int: None,
+            order,
             rest_positions: rest_positions.to_vec(),
             rest_normals,
             mass,
-            covariance_rest,
             rhs,
+            pinned_rhs,
             solver,
             pinned_values,
             rest_diag,
@@ -191,13 +239,12 @@ impl Darap {
         self.options.lambda = lambda;
     }
 
-    /// Parallelism of the sparse solves (default `faer::Par::Seq`, which was measured faster than
-    /// two threads on this project's machine). The local step and right-hand side use the ambient
-    /// rayon pool, whose size does not change their results (bit for bit); with `Par::Seq` the
-    /// whole layer is deterministic.
-    pub fn set_solver_parallelism(&mut self, par: faer::Par) {
-        self.solver.set_parallelism(par);
-    }
+    /// Kept for compatibility: the sparse solves are sequential substitutions (see
+    /// [`PinnedCholesky`]) and this setting has no effect. The local step and right-hand side use
+    /// the ambient rayon pool, whose size does not change their results (bit for bit): the whole
+    /// layer is deterministic.
+    #[deprecated(note = "the solves are sequential; the parallelism setting has no effect")]
+    pub fn set_solver_parallelism(&mut self, _par: faer::Par) {}
 
     /// Changes the rotation rule (nothing is recomputed).
     pub fn set_rotation_rule(&mut self, rule: RotationRule) {
@@ -221,6 +268,9 @@ impl Darap {
                 got: m.len(),
             });
         }
+        self.free_int = free
+            .as_ref()
+            .map(|m| self.order.iter().map(|&v| m[v]).collect());
         self.free = free;
         Ok(())
     }
@@ -243,6 +293,12 @@ impl Darap {
     /// Mixed-Voronoi vertex areas `a_v`.
     pub fn mass(&self) -> &[f64] {
         &self.mass
+    }
+
+    /// Number of stored entries of the pinned Laplacian's Cholesky factor (diagonal included):
+    /// what one sparse solve walks twice.
+    pub fn factor_nnz(&self) -> usize {
+        self.solver.factor_nnz()
     }
 
     /// Pinned vertices (sorted).
@@ -277,18 +333,23 @@ impl Darap {
                 index: 0,
             });
         }
-        let unit = normalize_targets(x);
-        let (rotations, local) = local_step(
-            &self.covariance_rest,
-            &self.mass,
+        // Targets gathered into the internal order and normalized in one pass.
+        let unit: Vec<[f64; 3]> = self.order.iter().map(|&v| normalize_target(x[v])).collect();
+        let (rotations_int, local) = local_step(
+            &self.covariance_int,
+            &self.mass_int,
             self.options.lambda,
-            &self.rest_normals,
+            &self.normals_int,
             &unit,
             self.options.rotation_rule,
-            self.free.as_deref(),
+            self.free_int.as_deref(),
         );
-        let solved = self.global_step(&rotations);
+        let solved = self.solve_internal(&rotations_int);
         let (positions, post) = post_process(&solved, self.rest_diag, self.options.post_process);
+        let mut rotations = vec![mat3::ZERO; n];
+        for (r, &v) in rotations_int.iter().zip(&self.order) {
+            rotations[v] = *r;
+        }
         Ok(Deformation {
             positions,
             rotations,
@@ -299,11 +360,30 @@ impl Darap {
         })
     }
 
+    /// Right-hand side and solve for rotations in internal order; positions in vertex order.
+    fn solve_internal(&self, rotations_int: &[Mat3]) -> Vec<[f64; 3]> {
+        let mut b = self.pinned_rhs.clone();
+        global::rhs_add_into(&self.rhs, rotations_int, &mut b);
+        self.solver.solve_ordered_in_place(&mut b);
+        let mut solved = vec![[0.0; 3]; self.num_vertices()];
+        for (x, &v) in b.iter().zip(&self.order) {
+            solved[v] = *x;
+        }
+        for (x, &p) in self.pinned_values.iter().zip(self.solver.pins()) {
+            solved[p] = *x;
+        }
+        solved
+    }
+
     /// The global step alone: positions (before post-processing) for given rotations.
     /// With all `R = I` this returns the rest positions.
+    ///
+    /// # Panics
+    /// If `rotations.len()` is not the number of vertices (a programming error).
     pub fn global_step(&self, rotations: &[Mat3]) -> Vec<[f64; 3]> {
-        let b = rhs(&self.rhs, rotations);
-        self.solver.solve_pinned(&b, &self.pinned_values)
+        assert_eq!(rotations.len(), self.num_vertices(), "one rotation per vertex");
+        let rotations_int: Vec<Mat3> = self.order.iter().map(|&v| rotations[v]).collect();
+        self.solve_internal(&rotations_int)
     }
 
     /// `∂ℓ/∂x` for `∂ℓ/∂positions` at the state of a previous [`Darap::forward`].
@@ -340,15 +420,25 @@ impl Darap {
             });
         }
         let grad_solved = post_process_vjp(&state.post, grad_positions);
-        let grad_b = self.solver.solve_pinned_adjoint(&grad_solved);
+        // The solve is self-adjoint; the pinned rows of b do not enter it (zero gradient).
+        let num_free = self.solver.solver_order().len();
+        let mut grad_b: Vec<[f64; 3]> = self.order[..num_free]
+            .iter()
+            .map(|&v| grad_solved[v])
+            .collect();
+        self.solver.solve_ordered_in_place(&mut grad_b);
         let grad_r = rhs_vjp(&self.rhs, &grad_b);
-        let grad_unit = local_step_vjp(
+        let grad_unit_int = local_step_vjp(
             &state.local,
-            &self.mass,
+            &self.mass_int,
             state.lambda,
-            &self.rest_normals,
+            &self.normals_int,
             &grad_r,
         );
+        let mut grad_unit = vec![[0.0; 3]; n];
+        for (g, &v) in grad_unit_int.iter().zip(&self.order) {
+            grad_unit[v] = *g;
+        }
         Ok(normalize_targets_vjp(&state.targets, &grad_unit))
     }
 }

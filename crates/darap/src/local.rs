@@ -2,8 +2,11 @@
 //! then a rotation rule.
 
 use crate::RotationRule;
+use crate::batch::{SvdLanes, d01, rotation_vjp_lanes, rule_lanes, svd3_lanes};
+use crate::lanes::{F, M3, Mask, W, dispatch};
 use crate::mat3::{IDENTITY, Mat3, ZERO, mul_tvec, outer, sub};
-use crate::rotation_rule::{RotationSvd, gis, procrustes, rotation_vjp};
+use crate::rotation_rule::RotationSvd;
+use crate::svd3::Svd3;
 use cotan::CotWeights;
 use rayon::prelude::*;
 
@@ -12,12 +15,14 @@ pub(crate) const PAR_MIN_LEN: usize = 1024;
 
 /// Target normalization `t̂ = x / max(|x|, 1e-12)` (spec §3.2, §5).
 pub fn normalize_targets(x: &[[f64; 3]]) -> Vec<[f64; 3]> {
-    x.iter()
-        .map(|v| {
-            let inv = 1.0 / (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt().max(1e-12);
-            [v[0] * inv, v[1] * inv, v[2] * inv]
-        })
-        .collect()
+    x.iter().map(|&v| normalize_target(v)).collect()
+}
+
+/// One target of [`normalize_targets`].
+#[inline]
+pub(crate) fn normalize_target(v: [f64; 3]) -> [f64; 3] {
+    let inv = 1.0 / (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt().max(1e-12);
+    [v[0] * inv, v[1] * inv, v[2] * inv]
 }
 
 /// Adjoint of [`normalize_targets`]: `∂ℓ/∂x = (g − t̂ (t̂·g)) / |x|` where `|x| > 1e-12`, and
@@ -104,14 +109,74 @@ pub fn covariance(
     s
 }
 
-/// Per-vertex record of the local step for the adjoint; `None` where the mask forces `R = I`.
-pub type LocalTape = Vec<Option<RotationSvd>>;
+/// What [`local_step_vjp`] needs: per vertex the SVD of `S_v`, the rule's sign pattern and
+/// whether the vertex was free, stored by batches of [`W`] vertices (structure of arrays).
+#[derive(Clone, Debug)]
+pub struct LocalTape {
+    rule: RotationRule,
+    len: usize,
+    chunks: Vec<TapeChunk>,
+}
+
+#[derive(Clone, Copy, Debug)]
+struct TapeChunk {
+    svd: SvdLanes,
+    d2: F,
+    free: Mask,
+}
+
+impl LocalTape {
+    /// Number of vertices.
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    /// Whether the tape holds no vertex.
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// The rule the local step applied.
+    pub fn rule(&self) -> RotationRule {
+        self.rule
+    }
+
+    /// Vertex `v`'s record (as the scalar [`crate::rotation_rule::gis`] /
+    /// [`crate::rotation_rule::procrustes`] return it); `None` where the mask forced `R = I` or
+    /// `v` is out of range.
+    pub fn get(&self, v: usize) -> Option<RotationSvd> {
+        if v >= self.len {
+            return None;
+        }
+        let (c, l) = (v / W, v % W);
+        let chunk = &self.chunks[c];
+        if !chunk.free[l] {
+            return None;
+        }
+        let lane = |m: &M3| -> Mat3 { std::array::from_fn(|i| std::array::from_fn(|j| m[i][j][l])) };
+        let d01 = d01(self.rule);
+        Some(RotationSvd {
+            svd: Svd3 {
+                u: lane(&chunk.svd.u),
+                sigma: std::array::from_fn(|k| chunk.svd.sigma[k][l]),
+                v: lane(&chunk.svd.v),
+            },
+            d: [d01, d01, chunk.d2[l]],
+            transposed: self.rule == RotationRule::Procrustes,
+        })
+    }
+}
 
 /// The local step: `R_v = rule(S_v)` with `S_v` from [`covariance`] and normal weight
 /// `λ·mass[v]`; vertices with `free[v] == false` get `R_v = I`.
 ///
-/// `targets_unit` are unit target normals (see [`normalize_targets`]). Deterministic for any
+/// `targets_unit` are unit target normals (see [`normalize_targets`]). Runs [`W`] vertices per
+/// SIMD batch; each vertex's result is bit for bit that of the scalar rule
+/// ([`crate::rotation_rule::gis`], [`crate::rotation_rule::procrustes`]). Deterministic for any
 /// number of rayon threads (each vertex is independent).
+///
+/// # Panics
+/// If the slices differ in length (a programming error).
 pub fn local_step(
     covariance_rest: &[Mat3],
     mass: &[f64],
@@ -121,49 +186,161 @@ pub fn local_step(
     rule: RotationRule,
     free: Option<&[bool]>,
 ) -> (Vec<Mat3>, LocalTape) {
-    (0..covariance_rest.len())
-        .into_par_iter()
-        .with_min_len(PAR_MIN_LEN)
-        .map(|v| {
-            if free.is_some_and(|m| !m[v]) {
-                return (IDENTITY, None);
-            }
-            let s = covariance(
-                rule,
-                &covariance_rest[v],
-                lambda * mass[v],
-                rest_normals[v],
-                targets_unit[v],
-            );
-            let (r, tape) = match rule {
-                RotationRule::Gis => gis(&s),
-                RotationRule::Procrustes => procrustes(&s),
-            };
-            (r, Some(tape))
+    let n = covariance_rest.len();
+    assert!(
+        mass.len() == n
+            && rest_normals.len() == n
+            && targets_unit.len() == n
+            && free.is_none_or(|m| m.len() == n),
+        "local_step: inputs differ in length"
+    );
+    let mut rotations = vec![ZERO; n];
+    let chunks: Vec<TapeChunk> = rotations
+        .par_chunks_mut(W)
+        .enumerate()
+        .with_min_len(PAR_MIN_LEN / W)
+        .map(|(c, out)| {
+            dispatch(|| {
+                local_chunk(
+                    c * W,
+                    covariance_rest,
+                    mass,
+                    lambda,
+                    rest_normals,
+                    targets_unit,
+                    rule,
+                    free,
+                    out,
+                )
+            })
         })
-        .unzip()
+        .collect();
+    (
+        rotations,
+        LocalTape {
+            rule,
+            len: n,
+            chunks,
+        },
+    )
+}
+
+#[inline(always)]
+fn local_chunk(
+    base: usize,
+    covariance_rest: &[Mat3],
+    mass: &[f64],
+    lambda: f64,
+    rest_normals: &[[f64; 3]],
+    targets_unit: &[[f64; 3]],
+    rule: RotationRule,
+    free: Option<&[bool]>,
+    out: &mut [Mat3],
+) -> TapeChunk {
+    let mut s: M3 = [[[0.0; W]; 3]; 3];
+    let mut is_free: Mask = [false; W];
+    for l in 0..out.len() {
+        let v = base + l;
+        let sv = covariance(
+            rule,
+            &covariance_rest[v],
+            lambda * mass[v],
+            rest_normals[v],
+            targets_unit[v],
+        );
+        for i in 0..3 {
+            for j in 0..3 {
+                s[i][j][l] = sv[i][j];
+            }
+        }
+        is_free[l] = free.is_none_or(|m| m[v]);
+    }
+    let svd = svd3_lanes(&s);
+    let (r, d2) = rule_lanes(&svd, rule);
+    for (l, o) in out.iter_mut().enumerate() {
+        *o = if is_free[l] {
+            std::array::from_fn(|i| std::array::from_fn(|j| r[i][j][l]))
+        } else {
+            IDENTITY
+        };
+    }
+    TapeChunk {
+        svd,
+        d2,
+        free: is_free,
+    }
 }
 
 /// Adjoint of [`local_step`] with respect to the unit targets:
-/// `∂ℓ/∂t̂_v = λ a_v · (∂ℓ/∂S_v)ᵀ n0_v`, zero at masked vertices.
+/// `∂ℓ/∂t̂_v = λ a_v · (∂ℓ/∂S_v)ᵀ n0_v`, zero at masked vertices. Each vertex's `∂ℓ/∂S_v` is bit
+/// for bit [`crate::rotation_rule::rotation_vjp`].
+///
+/// # Panics
+/// If the slices differ in length from the tape (a programming error).
 pub fn local_step_vjp(
-    tape: &[Option<RotationSvd>],
+    tape: &LocalTape,
     mass: &[f64],
     lambda: f64,
     rest_normals: &[[f64; 3]],
     grad_rotations: &[Mat3],
 ) -> Vec<[f64; 3]> {
-    (0..tape.len())
-        .into_par_iter()
-        .with_min_len(PAR_MIN_LEN)
-        .map(|v| match &tape[v] {
-            None => [0.0; 3],
-            Some(t) => {
-                let ds = rotation_vjp(t, &grad_rotations[v]);
-                let g = mul_tvec(&ds, rest_normals[v]);
-                let w = lambda * mass[v];
-                [w * g[0], w * g[1], w * g[2]]
+    let n = tape.len;
+    assert!(
+        mass.len() == n && rest_normals.len() == n && grad_rotations.len() == n,
+        "local_step_vjp: inputs differ in length from the tape"
+    );
+    let mut out = vec![[0.0; 3]; n];
+    out.par_chunks_mut(W)
+        .zip(tape.chunks.par_iter())
+        .enumerate()
+        .with_min_len(PAR_MIN_LEN / W)
+        .for_each(|(c, (out, chunk))| {
+            dispatch(|| {
+                local_vjp_chunk(
+                    c * W,
+                    chunk,
+                    tape.rule,
+                    mass,
+                    lambda,
+                    rest_normals,
+                    grad_rotations,
+                    out,
+                )
+            })
+        });
+    out
+}
+
+#[inline(always)]
+fn local_vjp_chunk(
+    base: usize,
+    chunk: &TapeChunk,
+    rule: RotationRule,
+    mass: &[f64],
+    lambda: f64,
+    rest_normals: &[[f64; 3]],
+    grad_rotations: &[Mat3],
+    out: &mut [[f64; 3]],
+) {
+    let mut g: M3 = [[[0.0; W]; 3]; 3];
+    for l in 0..out.len() {
+        let gv = &grad_rotations[base + l];
+        for i in 0..3 {
+            for j in 0..3 {
+                g[i][j][l] = gv[i][j];
             }
-        })
-        .collect()
+        }
+    }
+    let ds = rotation_vjp_lanes(&chunk.svd, chunk.d2, rule, &g);
+    for (l, o) in out.iter_mut().enumerate() {
+        let v = base + l;
+        *o = if chunk.free[l] {
+            let dsv: Mat3 = std::array::from_fn(|i| std::array::from_fn(|j| ds[i][j][l]));
+            let g = mul_tvec(&dsv, rest_normals[v]);
+            let w = lambda * mass[v];
+            [w * g[0], w * g[1], w * g[2]]
+        } else {
+            [0.0; 3]
+        };
+    }
 }

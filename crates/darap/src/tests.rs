@@ -56,7 +56,7 @@ fn identity_rotations_reproduce_rest_mesh() {
         let w = cotan::cot_weights(&mesh.positions, &mesh.faces).unwrap();
         let l = cotan::laplacian_from_weights(mesh.positions.len(), &w).unwrap();
         let lp = l.mul_vec3(&mesh.positions);
-        let b = rhs(&layer.rhs, &rot);
+        let b = rhs(&RhsPrecompute::new(&mesh.positions, &mesh.faces, &w), &rot);
         assert!(
             max_diff(&b, &lp) < 1e-12,
             "b ≠ L p: {} on {} vertices",
@@ -78,7 +78,6 @@ fn open_boundary_edges_enter_rhs_with_half_weight_as_in_reference() {
     // The reference right-hand side gives each face half of the full edge weight, so a boundary
     // edge (one face) contributes c/2: with R = I, b = L' p where L' halves boundary weights.
     let mesh = obtuse_wavy_grid(9);
-    let layer = Darap::new(&mesh.positions, &mesh.faces, DarapOptions::default()).unwrap();
     let mut w = cotan::cot_weights(&mesh.positions, &mesh.faces).unwrap();
     let boundary = mesh_core::topology::boundary_edges(&mesh.faces);
     assert!(!boundary.is_empty());
@@ -88,7 +87,9 @@ fn open_boundary_edges_enter_rhs_with_half_weight_as_in_reference() {
         w.weights[k] *= 0.5;
     }
     let l_half = cotan::laplacian_from_weights(mesh.positions.len(), &w).unwrap();
-    let b = rhs(&layer.rhs, &vec![IDENTITY; mesh.positions.len()]);
+    let full = cotan::cot_weights(&mesh.positions, &mesh.faces).unwrap();
+    let pre = RhsPrecompute::new(&mesh.positions, &mesh.faces, &full);
+    let b = rhs(&pre, &vec![IDENTITY; mesh.positions.len()]);
     assert!(max_diff(&b, &l_half.mul_vec3(&mesh.positions)) < 1e-12);
 }
 
@@ -384,4 +385,71 @@ fn unreferenced_vertices_and_degenerate_faces_stay_finite() {
     assert!(out.positions.iter().flatten().all(|v| v.is_finite()));
     let g = layer.backward(&out, &out.positions);
     assert!(g.iter().flatten().all(|v| v.is_finite()));
+}
+
+/// The layer in its internal (solver) vertex order against the public stage functions chained in
+/// the mesh's vertex order: identical rotations (same arithmetic per vertex), positions and
+/// gradients equal up to the summation order of the right-hand side and the solve.
+#[test]
+fn layer_matches_the_stage_functions_chained_in_vertex_order() {
+    let squashed = squashed_sphere();
+    let grid = obtuse_wavy_grid(7);
+    for mesh in [squashed, grid] {
+        let (p, f) = (&mesh.positions, &mesh.faces);
+        let n = p.len();
+        let w = cotan::cot_weights(p, f).unwrap();
+        let l = cotan::laplacian_from_weights(n, &w).unwrap();
+        let mass = cotan::voronoi_mass(p, f).unwrap();
+        let k = rest_covariances(p, f, &w);
+        let pre = RhsPrecompute::new(p, f, &w);
+        let solver = PinnedCholesky::new(&l, &cotan::component_pins(n, f)).unwrap();
+        let pinned: Vec<[f64; 3]> = solver.pins().iter().map(|&v| p[v]).collect();
+        let diag = mesh_core::geometry::bbox_diagonal(p);
+        for (rule, lambda) in [(RotationRule::Gis, 8.0), (RotationRule::Procrustes, 40.0)] {
+            for masked in [false, true] {
+                let mut layer = Darap::new(
+                    p,
+                    f,
+                    DarapOptions {
+                        lambda,
+                        rotation_rule: rule,
+                        ..Default::default()
+                    },
+                )
+                .unwrap();
+                let mask: Option<Vec<bool>> = masked.then(|| (0..n).map(|v| v % 5 != 2).collect());
+                layer.set_mask(mask.clone()).unwrap();
+                let n0 = layer.rest_normals().to_vec();
+                let x = random_targets(&n0, 0.6, 21);
+                let g = random_targets(&n0, 1.0, 22);
+
+                let unit = normalize_targets(&x);
+                let (rot, tape) =
+                    local_step(&k, &mass, lambda, &n0, &unit, rule, mask.as_deref());
+                let solved = solver.solve_pinned(&rhs(&pre, &rot), &pinned);
+                let (pos, post) = post_process(&solved, diag, PostProcess::RecenterRescale);
+                let out = layer.forward(&x).unwrap();
+                assert_eq!(out.rotations, rot, "{rule:?} masked {masked}");
+                let scale = pos.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
+                assert!(max_diff(&out.positions, &pos) < 1e-12 * scale);
+
+                let gs = solver.solve_pinned_adjoint(&post_process_vjp(&post, &g));
+                let gu = local_step_vjp(&tape, &mass, lambda, &n0, &rhs_vjp(&pre, &gs));
+                let expected = normalize_targets_vjp(&x, &gu);
+                let got = layer.backward(&out, &g);
+                let gscale = expected.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
+                assert!(
+                    max_diff(&got, &expected) < 1e-10 * gscale,
+                    "{rule:?} masked {masked}: {} vs scale {gscale}",
+                    max_diff(&got, &expected)
+                );
+                if masked {
+                    for v in (0..n).filter(|v| v % 5 == 2) {
+                        assert_eq!(got[v], [0.0; 3]);
+                        assert_eq!(out.rotations[v], IDENTITY);
+                    }
+                }
+            }
+        }
+    }
 }

@@ -1,0 +1,382 @@
+//! The local step's per-vertex kernels on [`W`](crate::lanes::W) vertices at once: the 3×3 SVD
+//! ([`crate::svd3::svd3`]), the rotation rules ([`crate::rotation_rule`]) and their adjoint
+//! ([`crate::rotation_rule::rotation_vjp`]).
+//!
+//! Each lane evaluates **the same sequence of IEEE operations** as the scalar functions, so its
+//! results are bit for bit the scalar ones (tested against them on random, rank-deficient and
+//! repeated-singular-value matrices). The scalar one-sided Jacobi stops after the first sweep
+//! that rotates nothing; here a batch sweeps until every lane has had such a sweep. That changes
+//! nothing for a lane that is already done: a sweep without rotation leaves its columns as they
+//! are, so the next sweep makes the same (skip) decisions. Lanes are independent; data-dependent
+//! branches of the scalar code become selects.
+
+use crate::RotationRule;
+use crate::lanes::{
+    F, M3, Mask, V3, W, abs, add, all, and, any, col, cross, det, div, dot, eq, ge, gt, identity,
+    is_finite, is_nan, le, lt, matmul, mul, neg, not, or, select, select3, signum, splat, sqrt,
+    sub, transpose,
+};
+
+/// `S = U·diag(σ)·Vᵀ` for every lane (see [`crate::svd3::Svd3`]).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct SvdLanes {
+    pub u: M3,
+    pub sigma: V3,
+    pub v: M3,
+}
+
+/// `x / |x|` and whether `|x|` is positive and finite (`mat3`'s `normalize`).
+#[inline(always)]
+fn normalize(x: V3) -> (V3, Mask) {
+    let n = sqrt(dot(x, x));
+    let ok = and(gt(n, splat(0.0)), is_finite(n));
+    ([div(x[0], n), div(x[1], n), div(x[2], n)], ok)
+}
+
+/// `svd3::any_orthogonal`: a unit vector orthogonal to the unit vector `u`.
+#[inline(always)]
+fn any_orthogonal(u: V3) -> V3 {
+    let a = [abs(u[0]), abs(u[1]), abs(u[2])];
+    let first = and(le(a[0], a[1]), le(a[0], a[2]));
+    let second = and(not(first), le(a[1], a[2]));
+    let third = and(not(first), not(second));
+    let one = splat(1.0);
+    let zero = splat(0.0);
+    let axis = [
+        select(first, one, zero),
+        select(second, one, zero),
+        select(third, one, zero),
+    ];
+    let (y, ok) = normalize(cross(u, axis));
+    select3(ok, y, [zero, zero, one])
+}
+
+/// The one-sided Jacobi SVD of [`crate::svd3::svd3`], lane by lane.
+#[inline(always)]
+pub(crate) fn svd3_lanes(s: &M3) -> SvdLanes {
+    let mut magnitude = splat(0.0);
+    for row in s {
+        for &x in row {
+            let ax = abs(x);
+            magnitude = select(gt(ax, magnitude), ax, magnitude);
+        }
+    }
+    let scaled = and(gt(magnitude, splat(0.0)), is_finite(magnitude));
+    let inv = select(scaled, div(splat(1.0), magnitude), splat(1.0));
+    let mut a: M3 = s.map(|row| row.map(|x| mul(x, inv)));
+    let mut v = identity();
+    const PAIRS: [(usize, usize); 3] = [(0, 1), (0, 2), (1, 2)];
+    for _sweep in 0..32 {
+        let mut rotated: Mask = [false; W];
+        for (p, q) in PAIRS {
+            let ap = col(&a, p);
+            let aq = col(&a, q);
+            let alpha = dot(ap, ap);
+            let beta = dot(aq, aq);
+            let gamma = dot(ap, aq);
+            let skip = or(
+                eq(gamma, splat(0.0)),
+                le(abs(gamma), mul(splat(1e-15), sqrt(mul(alpha, beta)))),
+            );
+            if all(skip) {
+                continue;
+            }
+            rotated = or(rotated, not(skip));
+            let zeta = div(sub(beta, alpha), mul(splat(2.0), gamma));
+            let zeta_abs = abs(zeta);
+            let t = select(
+                gt(zeta_abs, splat(1e150)),
+                div(splat(0.5), zeta),
+                div(
+                    signum(zeta),
+                    add(zeta_abs, sqrt(add(splat(1.0), mul(zeta, zeta)))),
+                ),
+            );
+            let c = div(splat(1.0), sqrt(add(splat(1.0), mul(t, t))));
+            let sn = mul(c, t);
+            for m in [&mut a, &mut v] {
+                for row in m.iter_mut() {
+                    let (x, y) = (row[p], row[q]);
+                    row[p] = select(skip, x, sub(mul(c, x), mul(sn, y)));
+                    row[q] = select(skip, y, add(mul(sn, x), mul(c, y)));
+                }
+            }
+        }
+        if !any(rotated) {
+            break;
+        }
+    }
+    let s0 = sqrt(dot(col(&a, 0), col(&a, 0)));
+    let s1 = sqrt(dot(col(&a, 1), col(&a, 1)));
+    let s2 = sqrt(dot(col(&a, 2), col(&a, 2)));
+    // Stable descending sort of three: column i goes before column j when σ_i > σ_j, or when
+    // σ_i = σ_j and i < j. `first_k[i]`: column i lands in slot k.
+    let b01 = ge(s0, s1);
+    let b02 = ge(s0, s2);
+    let b12 = ge(s1, s2);
+    let to0 = [and(b01, b02), and(not(b01), b12)];
+    let to1 = [
+        not(eq_mask(b01, b02)),
+        eq_mask(b01, b12),
+    ];
+    let to2 = [and(not(b01), not(b02)), and(b01, not(b12))];
+    let pick = |m: [Mask; 2], x: [F; 3]| select(m[0], x[0], select(m[1], x[1], x[2]));
+    let sigma = [
+        pick(to0, [s0, s1, s2]),
+        pick(to1, [s0, s1, s2]),
+        pick(to2, [s0, s1, s2]),
+    ];
+    let permute = |m: &M3| -> M3 {
+        std::array::from_fn(|i| {
+            let r = m[i];
+            [pick(to0, r), pick(to1, r), pick(to2, r)]
+        })
+    };
+    let a = permute(&a);
+    let v = permute(&v);
+
+    let tau = mul(splat(1e-13), sigma[0]);
+    let zero = splat(0.0);
+    let one = splat(1.0);
+    let (u1, ok1) = normalize(col(&a, 0));
+    let u1 = select3(ok1, u1, [one, zero, zero]);
+    let a2 = col(&a, 1);
+    let d = dot(u1, a2);
+    let (w, ok2) = normalize([
+        sub(a2[0], mul(d, u1[0])),
+        sub(a2[1], mul(d, u1[1])),
+        sub(a2[2], mul(d, u1[2])),
+    ]);
+    let u2 = select3(and(gt(sigma[1], tau), ok2), w, any_orthogonal(u1));
+    let u3 = cross(u1, u2);
+    let flip = and(gt(sigma[2], tau), lt(dot(u3, col(&a, 2)), zero));
+    let u3 = select3(flip, [neg(u3[0]), neg(u3[1]), neg(u3[2])], u3);
+    let degenerate = or(le(sigma[0], zero), is_nan(sigma[0]));
+    let id = identity();
+    let u: M3 = std::array::from_fn(|i| {
+        [
+            select(degenerate, id[i][0], u1[i]),
+            select(degenerate, id[i][1], u2[i]),
+            select(degenerate, id[i][2], u3[i]),
+        ]
+    });
+    let unscaled = eq(inv, one);
+    let sigma = sigma.map(|x| select(unscaled, x, mul(x, magnitude)));
+    SvdLanes { u, sigma, v }
+}
+
+#[inline(always)]
+fn eq_mask(a: Mask, b: Mask) -> Mask {
+    std::array::from_fn(|i| a[i] == b[i])
+}
+
+/// The sign pattern `d = (d01, d01, d2)` of a rule: `d01` is −1 for gis and +1 for Procrustes;
+/// `d2` per lane (see [`rule_lanes`]).
+#[inline(always)]
+pub(crate) fn d01(rule: RotationRule) -> f64 {
+    match rule {
+        RotationRule::Gis => -1.0,
+        RotationRule::Procrustes => 1.0,
+    }
+}
+
+/// `R` of a rotation rule ([`crate::rotation_rule::gis`], [`crate::rotation_rule::procrustes`])
+/// from the lanes' SVD, and the per-lane last sign `d2` of the pattern.
+#[inline(always)]
+pub(crate) fn rule_lanes(svd: &SvdLanes, rule: RotationRule) -> (M3, F) {
+    let sign = mul(det(&svd.u), det(&svd.v));
+    let positive = gt(sign, splat(0.0));
+    // gis: d = (−1, −1, +1) if det U det V > 0 else (−1, −1, −1); Procrustes: (1, 1, ±1).
+    let d2 = select(positive, splat(1.0), splat(-1.0));
+    let d = [splat(d01(rule)), splat(d01(rule)), d2];
+    let ud: M3 = std::array::from_fn(|i| std::array::from_fn(|j| mul(svd.u[i][j], d[j])));
+    let r = matmul(&ud, &transpose(&svd.v));
+    match rule {
+        RotationRule::Gis => (r, d2),
+        RotationRule::Procrustes => (transpose(&r), d2),
+    }
+}
+
+/// [`crate::rotation_rule::rotation_vjp`] lane by lane: `∂ℓ/∂S` from `G = ∂ℓ/∂R`.
+#[inline(always)]
+pub(crate) fn rotation_vjp_lanes(
+    svd: &SvdLanes,
+    d2: F,
+    rule: RotationRule,
+    grad_r: &M3,
+) -> M3 {
+    let g = match rule {
+        RotationRule::Gis => *grad_r,
+        RotationRule::Procrustes => transpose(grad_r),
+    };
+    let sigma = svd.sigma;
+    let zero = splat(0.0);
+    let guard = mul(splat(crate::rotation_rule::SINGULAR_GAP_GUARD), sigma[0]);
+    let degenerate = or(le(sigma[0], zero), is_nan(sigma[0]));
+    let h = matmul(&matmul(&transpose(&svd.u), &g), &svd.v);
+    let d = [splat(d01(rule)), splat(d01(rule)), d2];
+    // d_i = d_j: always for (0, 1); for pairs with 2, where d2 = d01.
+    let same2 = eq(d2, splat(d01(rule)));
+    let mut q: M3 = [[zero; 3]; 3];
+    for i in 0..3 {
+        for j in 0..3 {
+            if i == j {
+                continue;
+            }
+            let den_same = add(sigma[i], sigma[j]);
+            let q_same = select(
+                gt(den_same, guard),
+                div(mul(d[i], sub(h[i][j], h[j][i])), den_same),
+                zero,
+            );
+            if i != 2 && j != 2 {
+                q[i][j] = q_same;
+                continue;
+            }
+            let den_diff = sub(sigma[j], sigma[i]);
+            let q_diff = select(
+                gt(abs(den_diff), guard),
+                div(mul(d[j], add(h[i][j], h[j][i])), den_diff),
+                zero,
+            );
+            q[i][j] = select(same2, q_same, q_diff);
+        }
+    }
+    let ds = matmul(&matmul(&svd.u, &q), &transpose(&svd.v));
+    ds.map(|row| row.map(|x| select(degenerate, zero, x)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::lanes::dispatch;
+    use crate::mat3::Mat3;
+    use crate::rotation_rule::{RotationSvd, gis, procrustes, rotation_vjp};
+    use crate::svd3::svd3;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    fn to_lanes(ms: &[Mat3]) -> M3 {
+        std::array::from_fn(|i| std::array::from_fn(|j| std::array::from_fn(|l| ms[l][i][j])))
+    }
+
+    fn lane(m: &M3, l: usize) -> Mat3 {
+        std::array::from_fn(|i| std::array::from_fn(|j| m[i][j][l]))
+    }
+
+    fn bits(m: &Mat3) -> [[u64; 3]; 3] {
+        m.map(|r| r.map(f64::to_bits))
+    }
+
+    /// Matrices that exercise every branch of the scalar SVD and rules: random, rank 0/1/2,
+    /// repeated singular values (with and without reflections), tiny and huge scales, a
+    /// permutation that needs the sort, and exact zeros in the off-diagonal tests.
+    pub(crate) fn hard_matrices() -> Vec<Mat3> {
+        let c = 0.3f64.cos();
+        let s = 0.3f64.sin();
+        let mut m: Vec<Mat3> = vec![
+            [[0.0; 3]; 3],
+            [[1.0, 2.0, 3.0], [2.0, 4.0, 6.0], [-1.0, -2.0, -3.0]],
+            [[1.0, 2.0, 3.0], [2.0, 4.0, 6.0], [3.0, 6.0, 9.0]],
+            [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 0.0]],
+            [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 5.0]],
+            [[1e-300, 0.0, 0.0], [0.0, 1e-300, 0.0], [0.0, 0.0, 0.0]],
+            [[2.0 * c, -2.0 * s, 0.0], [2.0 * s, 2.0 * c, 0.0], [0.0, 0.0, 2.0]],
+            [[3.0, 0.0, 0.0], [0.0, -3.0, 0.0], [0.0, 0.0, 1.0]],
+            [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+            [[-1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]],
+            [[2.0, 0.0, 0.0], [0.0, 2.0, 0.0], [0.0, 0.0, -2.0]],
+            [[0.0, 0.0, 1.0], [0.0, 3.0, 0.0], [2.0, 0.0, 0.0]],
+            [[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]],
+            [[1e200, 3e199, 0.0], [0.0, 1e199, 0.0], [0.0, 0.0, 1e-100]],
+            [[1.0, 1e-17, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+            [[0.0, 0.0, 0.0], [1.0, 1.0, 1.0], [0.0, 0.0, 0.0]],
+            [[-0.0, 0.0, -0.0], [0.0, -0.0, 0.0], [-0.0, -0.0, -0.0]],
+        ];
+        // Rank-one and rank-two products of random vectors, and matrices with two equal singular
+        // values from random rotations.
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        let r3 = |rng: &mut ChaCha8Rng| -> [f64; 3] {
+            std::array::from_fn(|_| rng.random::<f64>() * 2.0 - 1.0)
+        };
+        for _ in 0..40 {
+            let (a, b, c2, d) = (r3(&mut rng), r3(&mut rng), r3(&mut rng), r3(&mut rng));
+            m.push(std::array::from_fn(|i| std::array::from_fn(|j| a[i] * b[j])));
+            m.push(std::array::from_fn(|i| {
+                std::array::from_fn(|j| a[i] * b[j] + c2[i] * d[j])
+            }));
+            let q = gis(&std::array::from_fn(|i| {
+                std::array::from_fn(|j| a[i] * b[j] + c2[i] * d[j] + (i + j) as f64 * 0.1)
+            }))
+            .0;
+            let p = gis(&std::array::from_fn(|i| {
+                std::array::from_fn(|j| b[i] * c2[j] - (i * j) as f64 * 0.3)
+            }))
+            .0;
+            let sv = [2.0, 2.0, 0.5];
+            let sv2 = [1.5, 0.25, 0.25];
+            for sv in [sv, sv2] {
+                m.push(std::array::from_fn(|i| {
+                    std::array::from_fn(|j| (0..3).map(|k| q[i][k] * sv[k] * p[j][k]).sum())
+                }));
+            }
+        }
+        for _ in 0..400 {
+            m.push(std::array::from_fn(|_| r3(&mut rng)));
+        }
+        m
+    }
+
+    fn check_lanes(ms: &[Mat3]) {
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        for chunk in ms.chunks(W) {
+            let mut batch = chunk.to_vec();
+            batch.resize(W, [[0.0; 3]; 3]);
+            let grads: Vec<Mat3> = (0..W)
+                .map(|_| std::array::from_fn(|_| std::array::from_fn(|_| rng.random::<f64>())))
+                .collect();
+            let s = to_lanes(&batch);
+            let g = to_lanes(&grads);
+            let svd = dispatch(|| svd3_lanes(&s));
+            for rule in [RotationRule::Gis, RotationRule::Procrustes] {
+                let (r, d2) = dispatch(|| rule_lanes(&svd, rule));
+                let ds = dispatch(|| rotation_vjp_lanes(&svd, d2, rule, &g));
+                for (l, m) in batch.iter().enumerate() {
+                    let reference = svd3(m);
+                    assert_eq!(bits(&lane(&svd.u, l)), bits(&reference.u), "U of {m:?}");
+                    assert_eq!(bits(&lane(&svd.v, l)), bits(&reference.v), "V of {m:?}");
+                    for k in 0..3 {
+                        assert_eq!(svd.sigma[k][l].to_bits(), reference.sigma[k].to_bits());
+                    }
+                    let (r_ref, tape): (Mat3, RotationSvd) = match rule {
+                        RotationRule::Gis => gis(m),
+                        RotationRule::Procrustes => procrustes(m),
+                    };
+                    assert_eq!(bits(&lane(&r, l)), bits(&r_ref), "{rule:?} R of {m:?}");
+                    assert_eq!(d2[l], tape.d[2]);
+                    let ds_ref = rotation_vjp(&tape, &grads[l]);
+                    assert_eq!(bits(&lane(&ds, l)), bits(&ds_ref), "{rule:?} vjp of {m:?}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn lanes_reproduce_the_scalar_svd_rules_and_adjoint_bit_for_bit() {
+        check_lanes(&hard_matrices());
+    }
+
+    #[test]
+    fn a_lane_is_independent_of_its_neighbours() {
+        // The same matrix next to matrices that need many more sweeps gives the same bits.
+        let hard = hard_matrices();
+        for m in hard.iter().take(40) {
+            let mut batch = vec![*m; W];
+            check_lanes(&batch);
+            for (k, other) in hard.iter().rev().take(W - 1).enumerate() {
+                batch[k + 1] = *other;
+            }
+            check_lanes(&batch);
+        }
+    }
+}

@@ -1,0 +1,213 @@
+//! Lane arithmetic for the batched local step: `W` independent f64 values processed together, one
+//! vertex per lane (structure of arrays).
+//!
+//! Every operation is the lane-wise IEEE operation (`+ − × ÷ √`, comparisons, selects) — no fused
+//! multiply-add, no approximate reciprocal — so a lane computes bit for bit what the same scalar
+//! expression computes, whatever the instruction set. The helpers are `#[inline(always)]` plain
+//! array loops that the compiler vectorizes; [`dispatch`] runs a kernel with the widest SIMD
+//! instruction set the CPU has (AVX2 where available, detected at run time, safely, by `pulp`).
+
+/// Lanes per batch: two AVX2 registers of f64 (two independent dependency chains hide the latency
+/// of the divisions and square roots).
+pub(crate) const W: usize = 8;
+
+/// `W` f64 lanes.
+pub(crate) type F = [f64; W];
+/// `W` lane conditions.
+pub(crate) type Mask = [bool; W];
+/// A 3-vector of lanes.
+pub(crate) type V3 = [F; 3];
+/// A row-major 3×3 matrix of lanes (`m[row][col]`).
+pub(crate) type M3 = [[F; 3]; 3];
+
+/// Runs `f` compiled for the best SIMD instruction set the CPU supports (the results do not
+/// depend on which: every lane operation is exactly rounded).
+#[inline(always)]
+pub(crate) fn dispatch<R>(f: impl FnOnce() -> R) -> R {
+    pulp::Arch::new().dispatch(f)
+}
+
+#[inline(always)]
+pub(crate) fn splat(x: f64) -> F {
+    [x; W]
+}
+
+#[inline(always)]
+pub(crate) fn add(a: F, b: F) -> F {
+    std::array::from_fn(|i| a[i] + b[i])
+}
+
+#[inline(always)]
+pub(crate) fn sub(a: F, b: F) -> F {
+    std::array::from_fn(|i| a[i] - b[i])
+}
+
+#[inline(always)]
+pub(crate) fn mul(a: F, b: F) -> F {
+    std::array::from_fn(|i| a[i] * b[i])
+}
+
+#[inline(always)]
+pub(crate) fn div(a: F, b: F) -> F {
+    std::array::from_fn(|i| a[i] / b[i])
+}
+
+#[inline(always)]
+pub(crate) fn sqrt(a: F) -> F {
+    std::array::from_fn(|i| a[i].sqrt())
+}
+
+#[inline(always)]
+pub(crate) fn abs(a: F) -> F {
+    std::array::from_fn(|i| a[i].abs())
+}
+
+#[inline(always)]
+pub(crate) fn neg(a: F) -> F {
+    std::array::from_fn(|i| -a[i])
+}
+
+/// `copysign(1, a)`: `f64::signum` for every non-NaN input.
+#[inline(always)]
+pub(crate) fn signum(a: F) -> F {
+    std::array::from_fn(|i| 1.0f64.copysign(a[i]))
+}
+
+#[inline(always)]
+pub(crate) fn gt(a: F, b: F) -> Mask {
+    std::array::from_fn(|i| a[i] > b[i])
+}
+
+#[inline(always)]
+pub(crate) fn ge(a: F, b: F) -> Mask {
+    std::array::from_fn(|i| a[i] >= b[i])
+}
+
+#[inline(always)]
+pub(crate) fn le(a: F, b: F) -> Mask {
+    std::array::from_fn(|i| a[i] <= b[i])
+}
+
+#[inline(always)]
+pub(crate) fn lt(a: F, b: F) -> Mask {
+    std::array::from_fn(|i| a[i] < b[i])
+}
+
+#[inline(always)]
+pub(crate) fn eq(a: F, b: F) -> Mask {
+    std::array::from_fn(|i| a[i] == b[i])
+}
+
+#[inline(always)]
+pub(crate) fn is_nan(a: F) -> Mask {
+    std::array::from_fn(|i| a[i].is_nan())
+}
+
+#[inline(always)]
+pub(crate) fn is_finite(a: F) -> Mask {
+    std::array::from_fn(|i| a[i].is_finite())
+}
+
+#[inline(always)]
+pub(crate) fn and(a: Mask, b: Mask) -> Mask {
+    std::array::from_fn(|i| a[i] & b[i])
+}
+
+#[inline(always)]
+pub(crate) fn or(a: Mask, b: Mask) -> Mask {
+    std::array::from_fn(|i| a[i] | b[i])
+}
+
+#[inline(always)]
+pub(crate) fn not(a: Mask) -> Mask {
+    std::array::from_fn(|i| !a[i])
+}
+
+#[inline(always)]
+pub(crate) fn all(a: Mask) -> bool {
+    a.iter().fold(true, |acc, &x| acc & x)
+}
+
+#[inline(always)]
+pub(crate) fn any(a: Mask) -> bool {
+    a.iter().fold(false, |acc, &x| acc | x)
+}
+
+/// `m ? a : b`, lane-wise.
+#[inline(always)]
+pub(crate) fn select(m: Mask, a: F, b: F) -> F {
+    std::array::from_fn(|i| if m[i] { a[i] } else { b[i] })
+}
+
+#[inline(always)]
+pub(crate) fn select3(m: Mask, a: V3, b: V3) -> V3 {
+    std::array::from_fn(|k| select(m, a[k], b[k]))
+}
+
+/// `a·b`, evaluated as `(a0 b0 + a1 b1) + a2 b2` like `mat3::dot`.
+#[inline(always)]
+pub(crate) fn dot(a: V3, b: V3) -> F {
+    add(add(mul(a[0], b[0]), mul(a[1], b[1])), mul(a[2], b[2]))
+}
+
+/// `a × b`, evaluated like `mat3::cross`.
+#[inline(always)]
+pub(crate) fn cross(a: V3, b: V3) -> V3 {
+    [
+        sub(mul(a[1], b[2]), mul(a[2], b[1])),
+        sub(mul(a[2], b[0]), mul(a[0], b[2])),
+        sub(mul(a[0], b[1]), mul(a[1], b[0])),
+    ]
+}
+
+/// Column `j` of a lane matrix.
+#[inline(always)]
+pub(crate) fn col(m: &M3, j: usize) -> V3 {
+    [m[0][j], m[1][j], m[2][j]]
+}
+
+/// `a·b` for lane matrices, evaluated like `mat3::mul`.
+#[inline(always)]
+pub(crate) fn matmul(a: &M3, b: &M3) -> M3 {
+    std::array::from_fn(|i| {
+        std::array::from_fn(|j| {
+            add(
+                add(mul(a[i][0], b[0][j]), mul(a[i][1], b[1][j])),
+                mul(a[i][2], b[2][j]),
+            )
+        })
+    })
+}
+
+/// `aᵀ`.
+#[inline(always)]
+pub(crate) fn transpose(a: &M3) -> M3 {
+    std::array::from_fn(|i| std::array::from_fn(|j| a[j][i]))
+}
+
+/// `det(m)`, evaluated like `mat3::det`.
+#[inline(always)]
+pub(crate) fn det(m: &M3) -> F {
+    add(
+        sub(
+            mul(
+                m[0][0],
+                sub(mul(m[1][1], m[2][2]), mul(m[1][2], m[2][1])),
+            ),
+            mul(
+                m[0][1],
+                sub(mul(m[1][0], m[2][2]), mul(m[1][2], m[2][0])),
+            ),
+        ),
+        mul(
+            m[0][2],
+            sub(mul(m[1][0], m[2][1]), mul(m[1][1], m[2][0])),
+        ),
+    )
+}
+
+/// The lane-wise identity matrix.
+#[inline(always)]
+pub(crate) fn identity() -> M3 {
+    std::array::from_fn(|i| std::array::from_fn(|j| splat(if i == j { 1.0 } else { 0.0 })))
+}
