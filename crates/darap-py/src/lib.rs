@@ -24,8 +24,8 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use darap::{Darap, DarapOptions, Deformation, PostProcess, RotationRule};
 use numpy::ndarray::{Array2, Array3, ArrayView2};
 use numpy::{
-    IntoPyArray, PyArray1, PyArray2, PyArray3, PyArrayDescrMethods, PyArrayMethods,
-    PyUntypedArray, PyUntypedArrayMethods,
+    IntoPyArray, PyArray1, PyArray2, PyArray3, PyArrayDescrMethods, PyArrayMethods, PyUntypedArray,
+    PyUntypedArrayMethods,
 };
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
@@ -358,9 +358,7 @@ impl PyDarap {
         let n = self.inner.num_vertices();
         let targets = read_rows3(x, "x", Some(n))?;
         let layer = &self.inner;
-        let state = py
-            .detach(|| layer.forward(&targets))
-            .map_err(layer_error)?;
+        let state = py.detach(|| layer.forward(&targets)).map_err(layer_error)?;
         let positions = rows3_to_numpy(py, &state.positions).unbind();
         Ok(PyDeformation {
             state,
