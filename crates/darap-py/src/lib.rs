@@ -22,9 +22,9 @@
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use darap::{Darap, DarapOptions, Deformation, PostProcess, RotationRule};
-use numpy::ndarray::{Array2, Array3, ArrayView2};
+use numpy::ndarray::ArrayView2;
 use numpy::{
-    IntoPyArray, PyArray1, PyArray2, PyArray3, PyArrayDescrMethods, PyArrayMethods, PyUntypedArray,
+    PyArray1, PyArray2, PyArray3, PyArrayDescrMethods, PyArrayMethods, PyUntypedArray,
     PyUntypedArrayMethods,
 };
 use pyo3::exceptions::{PyTypeError, PyValueError};
@@ -282,13 +282,8 @@ fn check_lambda(lam: f64) -> PyResult<f64> {
 // ---------------------------------------------------------------------------------------------
 // Writing arrays
 
-fn rows3_to_numpy<'py>(py: Python<'py>, rows: &[[f64; 3]]) -> Bound<'py, PyArray2<f64>> {
-    let flat = rows.as_flattened().to_vec();
-    match Array2::from_shape_vec((rows.len(), 3), flat) {
-        Ok(a) => a.into_pyarray(py),
-        // Unreachable: the length is rows.len() * 3 by construction.
-        Err(_) => PyArray2::zeros(py, [rows.len(), 3], false),
-    }
+fn rows3_to_numpy<'py>(py: Python<'py>, rows: &[[f64; 3]]) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    PyArray1::from_slice(py, rows.as_flattened()).reshape([rows.len(), 3])
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -359,7 +354,7 @@ impl PyDarap {
         let targets = read_rows3(x, "x", Some(n))?;
         let layer = &self.inner;
         let state = py.detach(|| layer.forward(&targets)).map_err(layer_error)?;
-        let positions = rows3_to_numpy(py, &state.positions).unbind();
+        let positions = rows3_to_numpy(py, &state.positions)?.unbind();
         Ok(PyDeformation {
             state,
             layer_id: self.id,
@@ -390,16 +385,16 @@ impl PyDarap {
         let grad_x = py
             .detach(|| layer.try_backward(state, &grad))
             .map_err(layer_error)?;
-        Ok(rows3_to_numpy(py, &grad_x))
+        rows3_to_numpy(py, &grad_x)
     }
 
     /// Area-weighted rest vertex normals (V, 3): the usual initial x.
-    fn rest_normals<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+    fn rest_normals<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
         rows3_to_numpy(py, self.inner.rest_normals())
     }
 
     /// The rest positions as given (V, 3) float64.
-    fn rest_positions<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+    fn rest_positions<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
         rows3_to_numpy(py, self.inner.rest_positions())
     }
 
@@ -494,19 +489,13 @@ impl PyDeformation {
 
     /// Rotations of the local step (V, 3, 3); R[v] @ e rotates a column vector.
     #[getter]
-    fn rotations<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray3<f64>> {
-        let n = self.state.rotations.len();
-        let flat: Vec<f64> = self
-            .state
-            .rotations
-            .iter()
-            .flat_map(|m| m.iter().flat_map(|row| row.iter().copied()))
-            .collect();
-        match Array3::from_shape_vec((n, 3, 3), flat) {
-            Ok(a) => a.into_pyarray(py),
-            // Unreachable: 9 entries per rotation by construction.
-            Err(_) => PyArray3::zeros(py, [n, 3, 3], false),
-        }
+    fn rotations<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray3<f64>>> {
+        let rotations = &self.state.rotations;
+        PyArray1::from_slice(py, rotations.as_flattened().as_flattened()).reshape([
+            rotations.len(),
+            3,
+            3,
+        ])
     }
 
     /// The λ of the forward pass that produced this deformation.
@@ -541,7 +530,7 @@ fn normalize_side2_cube<'py>(
     PyTuple::new(
         py,
         [
-            rows3_to_numpy(py, &positions).into_any(),
+            rows3_to_numpy(py, &positions)?.into_any(),
             centre.into_any(),
             n.scale.into_pyobject(py)?.into_any(),
         ],
@@ -562,14 +551,11 @@ fn icosphere<'py>(py: Python<'py>, level: u32) -> PyResult<Bound<'py, PyTuple>> 
         .iter()
         .flat_map(|f| f.iter().map(|&v| i64::from(v)))
         .collect();
-    let faces = match Array2::from_shape_vec((mesh.faces.len(), 3), flat) {
-        Ok(a) => a.into_pyarray(py),
-        Err(_) => PyArray2::zeros(py, [mesh.faces.len(), 3], false),
-    };
+    let faces = PyArray1::from_vec(py, flat).reshape([mesh.faces.len(), 3])?;
     PyTuple::new(
         py,
         [
-            rows3_to_numpy(py, &mesh.positions).into_any(),
+            rows3_to_numpy(py, &mesh.positions)?.into_any(),
             faces.into_any(),
         ],
     )
