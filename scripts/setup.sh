@@ -20,4 +20,18 @@ fi
 if [ -x scripts/setup-onnxruntime.sh ] || [ -f scripts/setup-onnxruntime.sh ]; then
   bash scripts/setup-onnxruntime.sh
 fi
+# --- Python bindings (crates/darap-py) -------------------------------------------------------
+# maturin, pytest and NumPy from PyPI into the project-local .venv/ (git-ignored); skipped when
+# they are already there. Needs python3 with venv (Debian: python3-venv).
+if ! .venv/bin/python -c "import numpy, pytest" 2>/dev/null || [ ! -x .venv/bin/maturin ]; then
+  echo "setup: creating .venv with maturin, pytest, numpy (PyPI)"
+  if ! python3 -c "import venv, ensurepip" 2>/dev/null; then
+    SUDO=""; [ "$(id -u)" -ne 0 ] && SUDO="sudo"
+    $SUDO apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends python3-venv >/dev/null
+  fi
+  python3 -m venv .venv
+  .venv/bin/python -m pip install -q --disable-pip-version-check "maturin>=1.9.4,<2" "pytest>=7" "numpy>=1.21"
+fi
+# --- end Python bindings -----------------------------------------------------------------------
 echo "setup: done"

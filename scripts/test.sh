@@ -13,4 +13,9 @@ step "cargo clippy (xtask)";       cargo clippy --manifest-path xtask/Cargo.toml
 step "cargo test";                 cargo test --workspace --locked
 step "cargo xtask check-deps";     cargo xtask check-deps
 step "cargo xtask gradcheck";      cargo xtask gradcheck
+# --- Python bindings (crates/darap-py): build into .venv (dev profile, shared target/), pytest ---
+step "darap-py: maturin develop";  VIRTUAL_ENV="$PWD/.venv" PATH="$PWD/.venv/bin:$PATH" \
+                                   maturin develop --locked --manifest-path crates/darap-py/Cargo.toml
+step "darap-py: pytest";           .venv/bin/python -m pytest crates/darap-py/tests
+# --- end Python bindings ---
 echo; echo "test.sh: all checks passed"

@@ -6,7 +6,32 @@ use std::process::Command;
 const RULES: &[(&str, &[&str])] = &[
     (
         "darap",
-        &["wgpu", "ort", "tokenizers", "tobj", "gltf", "naga", "tokio"],
+        &[
+            "wgpu",
+            "ort",
+            "tokenizers",
+            "tobj",
+            "gltf",
+            "naga",
+            "tokio",
+            // Python stays in crates/darap-py.
+            "pyo3",
+            "numpy",
+        ],
+    ),
+    // The Python bindings: darap plus PyO3/NumPy, nothing heavy (mesh-core without io).
+    (
+        "darap-py",
+        &[
+            "wgpu",
+            "ort",
+            "tokenizers",
+            "tobj",
+            "gltf",
+            "naga",
+            "tokio",
+            "zip",
+        ],
     ),
     ("cotan", &["wgpu", "ort", "tokenizers", "tobj", "gltf"]),
     ("csd", &["ort", "wgpu", "tokenizers"]),

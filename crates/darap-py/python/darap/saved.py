@@ -1,0 +1,190 @@
+"""The reference's saved-deformation ``.npz`` (spec §8; layout in ``docs/formats.md``), read with NumPy.
+
+| key | dtype, shape | meaning |
+|---|---|---|
+| ``verts`` | ``<f4`` (V, 3) | rest mesh after side-2 cube normalization |
+| ``faces`` | ``<i8`` (F, 3) | CCW triangles, 0-based |
+| ``verts_normals`` | ``<f4`` (V, 3) | the raw optimized target normals x (not unit length) |
+| ``deform_by_csd_cfg`` | ``<U…`` 0-d | JSON: ``local_step_procrustes.lamb`` (λ), … |
+| ``dataset_cfg`` | ``<U…`` 0-d | JSON describing the input |
+
+Any other key (this project writes ``format_version``, ``seed``, ``rotation_rule``, …) is kept in
+:attr:`SavedDeformation.extra`.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, field
+from typing import Any, Dict, Optional, Union
+
+import numpy as np
+
+from ._darap import Darap, normalize_side2_cube
+
+STANDARD_KEYS = ("verts", "faces", "verts_normals", "deform_by_csd_cfg", "dataset_cfg")
+
+PathLike = Union[str, "os.PathLike[str]"]
+
+
+@dataclass
+class SavedDeformation:
+    """A saved deformation, arrays as stored (``verts``/``verts_normals`` float32 in the reference).
+
+    ``verts`` were normalized to the side-2 cube in float32 when saved; :meth:`rest_positions`
+    renormalizes them in float64, exactly as ``stylize apply`` does, so :meth:`apply` reproduces the
+    Rust CLI.
+    """
+
+    path: str
+    verts: np.ndarray
+    faces: np.ndarray
+    verts_normals: np.ndarray
+    deform_by_csd_cfg: str
+    dataset_cfg: str
+    extra: Dict[str, np.ndarray] = field(default_factory=dict)
+
+    def csd_cfg(self) -> Dict[str, Any]:
+        """The parsed ``deform_by_csd_cfg`` JSON (``{}`` if it is not a JSON object)."""
+        try:
+            cfg = json.loads(self.deform_by_csd_cfg)
+        except ValueError:
+            return {}
+        return cfg if isinstance(cfg, dict) else {}
+
+    @property
+    def lam(self) -> Optional[float]:
+        """``local_step_procrustes.lamb``: the λ used in training, if recorded."""
+        step = self.csd_cfg().get("local_step_procrustes")
+        value = step.get("lamb") if isinstance(step, dict) else None
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            return float(value)
+        return None
+
+    @property
+    def normalize_target_normals(self) -> bool:
+        """``local_step_procrustes.normalize_target_normals`` (default True, as the reference)."""
+        step = self.csd_cfg().get("local_step_procrustes")
+        value = step.get("normalize_target_normals", True) if isinstance(step, dict) else True
+        return bool(value)
+
+    @property
+    def rotation_rule(self) -> str:
+        """The file's ``rotation_rule`` key (written by this project), else ``"gis"``."""
+        value = self.extra.get("rotation_rule")
+        if value is None:
+            return "gis"
+        rule = str(value.reshape(-1)[0] if value.size else "").strip().lower()
+        if rule not in ("gis", "procrustes"):
+            raise ValueError(f"{self.path}: unknown rotation rule {rule!r} in key `rotation_rule`")
+        return rule
+
+    def rest_positions(self) -> np.ndarray:
+        """``verts`` in float64, normalized to the side-2 cube (longest bbox side [−1, 1], bbox
+        centred at the origin), as ``stylize apply`` and the reference do."""
+        positions, _centre, _scale = normalize_side2_cube(np.asarray(self.verts, dtype=np.float64))
+        return positions
+
+    def targets(self) -> np.ndarray:
+        """The raw target normals ``x`` in float64 (only their directions matter)."""
+        return np.asarray(self.verts_normals, dtype=np.float64)
+
+    def layer(
+        self,
+        lam: Optional[float] = None,
+        rotation_rule: Optional[str] = None,
+        mask: Optional[np.ndarray] = None,
+    ) -> Darap:
+        """A :class:`Darap` layer on :meth:`rest_positions` with the saved λ and rotation rule
+        unless given (λ 8 when the file records none)."""
+        if not self.normalize_target_normals:
+            raise ValueError(
+                f"{self.path}: `normalize_target_normals` is false; only normalized target "
+                "normals are supported"
+            )
+        if lam is None:
+            lam = self.lam if self.lam is not None else 8.0
+        return Darap(
+            self.rest_positions(),
+            self.faces,
+            lam=lam,
+            rotation_rule=rotation_rule if rotation_rule is not None else self.rotation_rule,
+            mask=mask,
+        )
+
+    def apply(
+        self,
+        lam: Optional[float] = None,
+        rotation_rule: Optional[str] = None,
+        mask: Optional[np.ndarray] = None,
+    ) -> np.ndarray:
+        """The deformed positions (V, 3) float64, as ``stylize apply`` writes them (normalized
+        frame, ``recenter_rescale``)."""
+        layer = self.layer(lam=lam, rotation_rule=rotation_rule, mask=mask)
+        return layer.forward(self.targets()).positions
+
+
+def _rows3(path: str, key: str, a: np.ndarray, kind: str) -> np.ndarray:
+    if a.ndim != 2 or a.shape[1] != 3:
+        raise ValueError(f"{path}: key `{key}` must have shape (N, 3), got {a.shape}")
+    if a.dtype.kind not in kind:
+        raise ValueError(f"{path}: key `{key}` has dtype {a.dtype}, expected {'a float' if kind == 'f' else 'an integer'} dtype")
+    return a
+
+
+def _string(path: str, key: str, a: np.ndarray) -> str:
+    if a.dtype.kind not in "US" or a.size != 1:
+        raise ValueError(f"{path}: key `{key}` must be a 0-d string array, got dtype {a.dtype} shape {a.shape}")
+    value = a.reshape(-1)[0]
+    return value.decode("utf-8") if isinstance(value, bytes) else str(value)
+
+
+def load_saved(npz_path: PathLike) -> SavedDeformation:
+    """Reads a saved deformation (``.npz`` in the reference's format, spec §8).
+
+    Checks what ``mesh_core::npz::SavedDeformation::read`` checks: the five standard keys exist,
+    ``verts``/``verts_normals`` are float (V, 3) with the same V, ``faces`` integer (F, 3) with
+    indices in [0, V). Raises ``ValueError`` naming the file and key otherwise (and
+    ``FileNotFoundError`` for a missing file). No pickled data is ever loaded.
+    """
+    path = os.fspath(npz_path)
+    try:
+        archive = np.load(path, allow_pickle=False)
+    except FileNotFoundError:
+        raise
+    except (ValueError, OSError) as e:
+        raise ValueError(f"{path}: not a readable .npz archive ({e})") from e
+    if not isinstance(archive, np.lib.npyio.NpzFile):
+        raise ValueError(f"{path}: a single .npy array, not an .npz archive of a saved deformation")
+    with archive:
+        arrays: Dict[str, np.ndarray] = {}
+        for key in archive.files:
+            try:
+                arrays[key] = archive[key]
+            except ValueError as e:  # pickled object arrays
+                raise ValueError(f"{path}: key `{key}` cannot be read ({e})") from e
+    missing = [k for k in STANDARD_KEYS if k not in arrays]
+    if missing:
+        raise ValueError(f"{path}: missing key(s) {', '.join(f'`{k}`' for k in missing)} of a saved deformation")
+    verts = _rows3(path, "verts", arrays["verts"], "f")
+    verts_normals = _rows3(path, "verts_normals", arrays["verts_normals"], "f")
+    faces = _rows3(path, "faces", arrays["faces"], "iu")
+    if len(verts_normals) != len(verts):
+        raise ValueError(f"{path}: key `verts_normals` has {len(verts_normals)} rows but `verts` has {len(verts)}")
+    if faces.size:
+        bad = np.flatnonzero(((faces < 0) | (faces >= len(verts))).any(axis=1))
+        if bad.size:
+            f = int(bad[0])
+            raise ValueError(
+                f"{path}: key `faces`: face {f} = {faces[f].tolist()} refers to a vertex beyond the {len(verts)} in `verts`"
+            )
+    return SavedDeformation(
+        path=path,
+        verts=verts,
+        faces=faces,
+        verts_normals=verts_normals,
+        deform_by_csd_cfg=_string(path, "deform_by_csd_cfg", arrays["deform_by_csd_cfg"]),
+        dataset_cfg=_string(path, "dataset_cfg", arrays["dataset_cfg"]),
+        extra={k: v for k, v in arrays.items() if k not in STANDARD_KEYS},
+    )
