@@ -37,7 +37,8 @@ impl CscFactor {
         let mut row = Vec::new();
         let mut val = Vec::new();
         col_ptr.push(0);
-        let bad = |what: &str| CotanError::Factorization(format!("unexpected factor layout: {what}"));
+        let bad =
+            |what: &str| CotanError::Factorization(format!("unexpected factor layout: {what}"));
         match symbolic.raw() {
             SymbolicCholeskyRaw::Simplicial(s) => {
                 let ptr = s.col_ptr();
@@ -122,7 +123,11 @@ impl CscFactor {
 
     /// Solves `G Gᵀ x = b` in place (`x` holds `b` on entry), rows in the factor's order.
     pub(crate) fn solve_in_place(&self, x: &mut [[f64; 3]]) {
-        assert_eq!(x.len(), self.size(), "right-hand side has the wrong number of rows");
+        assert_eq!(
+            x.len(),
+            self.size(),
+            "right-hand side has the wrong number of rows"
+        );
         // G y = b: column-oriented forward substitution.
         for (j, &d) in self.diag.iter().enumerate() {
             let xj = x[j];

@@ -115,10 +115,7 @@ pub(crate) fn svd3_lanes(s: &M3) -> SvdLanes {
     let b02 = ge(s0, s2);
     let b12 = ge(s1, s2);
     let to0 = [and(b01, b02), and(not(b01), b12)];
-    let to1 = [
-        not(eq_mask(b01, b02)),
-        eq_mask(b01, b12),
-    ];
+    let to1 = [not(eq_mask(b01, b02)), eq_mask(b01, b12)];
     let to2 = [and(not(b01), not(b02)), and(b01, not(b12))];
     let pick = |m: [Mask; 2], x: [F; 3]| select(m[0], x[0], select(m[1], x[1], x[2]));
     let sigma = [
@@ -199,12 +196,7 @@ pub(crate) fn rule_lanes(svd: &SvdLanes, rule: RotationRule) -> (M3, F) {
 
 /// [`crate::rotation_rule::rotation_vjp`] lane by lane: `∂ℓ/∂S` from `G = ∂ℓ/∂R`.
 #[inline(always)]
-pub(crate) fn rotation_vjp_lanes(
-    svd: &SvdLanes,
-    d2: F,
-    rule: RotationRule,
-    grad_r: &M3,
-) -> M3 {
+pub(crate) fn rotation_vjp_lanes(svd: &SvdLanes, d2: F, rule: RotationRule, grad_r: &M3) -> M3 {
     let g = match rule {
         RotationRule::Gis => *grad_r,
         RotationRule::Procrustes => transpose(grad_r),
@@ -281,7 +273,11 @@ mod tests {
             [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 0.0]],
             [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 5.0]],
             [[1e-300, 0.0, 0.0], [0.0, 1e-300, 0.0], [0.0, 0.0, 0.0]],
-            [[2.0 * c, -2.0 * s, 0.0], [2.0 * s, 2.0 * c, 0.0], [0.0, 0.0, 2.0]],
+            [
+                [2.0 * c, -2.0 * s, 0.0],
+                [2.0 * s, 2.0 * c, 0.0],
+                [0.0, 0.0, 2.0],
+            ],
             [[3.0, 0.0, 0.0], [0.0, -3.0, 0.0], [0.0, 0.0, 1.0]],
             [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
             [[-1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]],
@@ -301,7 +297,9 @@ mod tests {
         };
         for _ in 0..40 {
             let (a, b, c2, d) = (r3(&mut rng), r3(&mut rng), r3(&mut rng), r3(&mut rng));
-            m.push(std::array::from_fn(|i| std::array::from_fn(|j| a[i] * b[j])));
+            m.push(std::array::from_fn(|i| {
+                std::array::from_fn(|j| a[i] * b[j])
+            }));
             m.push(std::array::from_fn(|i| {
                 std::array::from_fn(|j| a[i] * b[j] + c2[i] * d[j])
             }));

@@ -184,7 +184,11 @@ pub fn rhs_vjp(pre: &RhsPrecompute, grad_b: &[[f64; 3]]) -> Vec<Mat3> {
 
 /// [`rhs_vjp`] into `out` (overwritten).
 pub(crate) fn rhs_vjp_into(pre: &RhsPrecompute, grad_b: &[[f64; 3]], out: &mut [Mat3]) {
-    assert_eq!(grad_b.len(), pre.num_rows, "one gradient row per entry of b");
+    assert_eq!(
+        grad_b.len(),
+        pre.num_rows,
+        "one gradient row per entry of b"
+    );
     assert_eq!(out.len(), pre.num_cols, "one rotation per vertex");
     out.par_iter_mut()
         .enumerate()

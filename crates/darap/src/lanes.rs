@@ -190,19 +190,10 @@ pub(crate) fn transpose(a: &M3) -> M3 {
 pub(crate) fn det(m: &M3) -> F {
     add(
         sub(
-            mul(
-                m[0][0],
-                sub(mul(m[1][1], m[2][2]), mul(m[1][2], m[2][1])),
-            ),
-            mul(
-                m[0][1],
-                sub(mul(m[1][0], m[2][2]), mul(m[1][2], m[2][0])),
-            ),
+            mul(m[0][0], sub(mul(m[1][1], m[2][2]), mul(m[1][2], m[2][1]))),
+            mul(m[0][1], sub(mul(m[1][0], m[2][2]), mul(m[1][2], m[2][0]))),
         ),
-        mul(
-            m[0][2],
-            sub(mul(m[1][0], m[2][1]), mul(m[1][1], m[2][0])),
-        ),
+        mul(m[0][2], sub(mul(m[1][0], m[2][1]), mul(m[1][1], m[2][0]))),
     )
 }
 

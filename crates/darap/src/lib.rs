@@ -36,11 +36,11 @@ pub mod svd3;
 
 pub use cotan::CotanError;
 pub use global::{RhsPrecompute, rhs, rhs_vjp};
+use local::normalize_target;
 pub use local::{
     LocalTape, covariance, local_step, local_step_vjp, normalize_targets, normalize_targets_vjp,
     rest_covariances,
 };
-use local::normalize_target;
 pub use mat3::Mat3;
 pub use post::{PostTape, post_process, post_process_vjp};
 
@@ -381,7 +381,11 @@ impl Darap {
     /// # Panics
     /// If `rotations.len()` is not the number of vertices (a programming error).
     pub fn global_step(&self, rotations: &[Mat3]) -> Vec<[f64; 3]> {
-        assert_eq!(rotations.len(), self.num_vertices(), "one rotation per vertex");
+        assert_eq!(
+            rotations.len(),
+            self.num_vertices(),
+            "one rotation per vertex"
+        );
         let rotations_int: Vec<Mat3> = self.order.iter().map(|&v| rotations[v]).collect();
         self.solve_internal(&rotations_int)
     }

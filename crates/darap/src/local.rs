@@ -153,7 +153,8 @@ impl LocalTape {
         if !chunk.free[l] {
             return None;
         }
-        let lane = |m: &M3| -> Mat3 { std::array::from_fn(|i| std::array::from_fn(|j| m[i][j][l])) };
+        let lane =
+            |m: &M3| -> Mat3 { std::array::from_fn(|i| std::array::from_fn(|j| m[i][j][l])) };
         let d01 = d01(self.rule);
         Some(RotationSvd {
             svd: Svd3 {

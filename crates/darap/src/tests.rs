@@ -424,8 +424,7 @@ fn layer_matches_the_stage_functions_chained_in_vertex_order() {
                 let g = random_targets(&n0, 1.0, 22);
 
                 let unit = normalize_targets(&x);
-                let (rot, tape) =
-                    local_step(&k, &mass, lambda, &n0, &unit, rule, mask.as_deref());
+                let (rot, tape) = local_step(&k, &mass, lambda, &n0, &unit, rule, mask.as_deref());
                 let solved = solver.solve_pinned(&rhs(&pre, &rot), &pinned);
                 let (pos, post) = post_process(&solved, diag, PostProcess::RecenterRescale);
                 let out = layer.forward(&x).unwrap();
@@ -437,7 +436,10 @@ fn layer_matches_the_stage_functions_chained_in_vertex_order() {
                 let gu = local_step_vjp(&tape, &mass, lambda, &n0, &rhs_vjp(&pre, &gs));
                 let expected = normalize_targets_vjp(&x, &gu);
                 let got = layer.backward(&out, &g);
-                let gscale = expected.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
+                let gscale = expected
+                    .iter()
+                    .flatten()
+                    .fold(0.0f64, |m, v| m.max(v.abs()));
                 assert!(
                     max_diff(&got, &expected) < 1e-10 * gscale,
                     "{rule:?} masked {masked}: {} vs scale {gscale}",
