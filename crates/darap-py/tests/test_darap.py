@@ -485,3 +485,12 @@ def test_torch_submodule_is_not_imported_by_darap() -> None:
     code = "import sys, darap; assert 'darap.torch' not in sys.modules; print('ok')"
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=False)
     assert result.returncode == 0, result.stderr
+
+
+def test_darap_torch_without_torch_raises_a_clear_import_error() -> None:
+    import importlib.util
+
+    if importlib.util.find_spec("torch") is not None:
+        pytest.skip("torch is installed here (tests/test_torch.py covers darap.torch)")
+    with pytest.raises(ImportError, match="darap.torch needs PyTorch"):
+        import darap.torch  # noqa: F401
