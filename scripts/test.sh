@@ -13,4 +13,5 @@ step "cargo clippy (xtask)";       cargo clippy --manifest-path xtask/Cargo.toml
 step "cargo test";                 cargo test --workspace --locked
 step "cargo xtask check-deps";     cargo xtask check-deps
 step "cargo xtask gradcheck";      cargo xtask gradcheck
+step "cargo xtask fuzz";           cargo xtask fuzz --seconds 60
 echo; echo "test.sh: all checks passed"
