@@ -4,7 +4,7 @@
 demo:
     cargo run --release --bin stylize -- run fixtures/meshes/bunny.obj --style cube --out runs/demo
 
-# Everything CI runs: setup, fmt, clippy, tests, check-deps, gradcheck.
+# Everything CI runs: setup, fmt, clippy, tests, check-deps, gradcheck, fuzz.
 test:
     bash scripts/test.sh
 
@@ -15,6 +15,10 @@ gradcheck filter="":
 # Dependency rules (darap stays light).
 check-deps:
     cargo xtask check-deps
+
+# Mutation fuzzing of every file reader (CI runs 60 s; failures in target/fuzz-failures/).
+fuzz seconds="60" *args="":
+    cargo xtask fuzz --seconds {{seconds}} {{args}}
 
 fmt:
     cargo fmt --all

@@ -18,4 +18,5 @@ step "darap-py: maturin develop";  VIRTUAL_ENV="$PWD/.venv" PATH="$PWD/.venv/bin
                                    maturin develop --locked --manifest-path crates/darap-py/Cargo.toml
 step "darap-py: pytest";           .venv/bin/python -m pytest crates/darap-py/tests
 # --- end Python bindings ---
+step "cargo xtask fuzz";           cargo xtask fuzz --seconds 60
 echo; echo "test.sh: all checks passed"

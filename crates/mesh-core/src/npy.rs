@@ -463,6 +463,12 @@ pub fn parse_npy(bytes: &[u8]) -> Result<NpyArray, String> {
                 .parse()
                 .map_err(|_| format!("malformed unicode dtype '{descr}'"))?;
             let raw = need(w.checked_mul(4).ok_or("unicode width too large")?)?;
+            if w == 0 && n > body.len().max(1 << 16) {
+                // Zero-width strings take no bytes, so the shape alone would size the array.
+                return Err(format!(
+                    "shape {shape:?} of zero-width '{descr}' holds more elements than the file could mean"
+                ));
+            }
             let mut strings = Vec::with_capacity(n);
             if w > 0 {
                 for elem in raw.chunks_exact(w * 4) {

@@ -14,7 +14,7 @@
 //! | exact duplicate vertices (bitwise equal, −0 = +0) on a crack (one unused, or both on an open border) | weld onto the first occurrence |
 //! | coincident vertices inside closed regions (the surface touches itself) | report, keep apart |
 //! | face with a repeated vertex (after welding) | drop |
-//! | zero-area face (area ≤ `zero_area_tolerance` · bbox diagonal²) | drop |
+//! | zero-area face (area ≤ `zero_area_tolerance` · its own longest edge²) | drop |
 //! | duplicate faces (same vertex set, any order) | keep the first, drop the rest |
 //! | unreferenced vertices | drop |
 //! | non-manifold edges (> 2 faces) | report, keep (option: refuse) |
@@ -29,7 +29,7 @@
 
 use std::collections::HashMap;
 
-use crate::geometry::{bbox_diagonal, cross, dot, face_cross, norm, signed_volume, sub};
+use crate::geometry::{cross, dot, norm, sub};
 use crate::topology::{EdgeFaces, connected_components, orient_consistently};
 use crate::{MeshError, TriMesh};
 
@@ -61,7 +61,8 @@ pub struct RepairOptions {
     pub refuse_non_manifold: bool,
     /// Refuse meshes with several connected parts (kept and reported when `false`).
     pub refuse_several_components: bool,
-    /// A face is "zero area" when its area ≤ this × (bounding-box diagonal)².
+    /// A face is "zero area" when its area ≤ this × (its own longest edge)²: a test of shape
+    /// (corners on a line or a point), independent of the mesh's scale and of far-away vertices.
     pub zero_area_tolerance: f64,
     /// A face is a "needle" when its smallest corner angle is below this many degrees.
     pub needle_angle_degrees: f64,
@@ -318,12 +319,48 @@ fn plural(n: usize, one: &str, many: &str) -> String {
     }
 }
 
-/// Smallest corner angle of a triangle, in degrees (0 for a degenerate one).
+/// The edges `p1 − p0`, `p2 − p0` of a triangle divided by their largest absolute component, so
+/// that products of them neither overflow (coordinates of 1e200) nor underflow, with the
+/// differences taken before any rounding (halving is exact, and differences of nearby floats are
+/// exact). `None` when the three corners coincide.
+fn scaled_edges(p: [[f64; 3]; 3]) -> Option<([f64; 3], [f64; 3])> {
+    let half = |q: [f64; 3], r: [f64; 3]| {
+        [
+            0.5 * q[0] - 0.5 * r[0],
+            0.5 * q[1] - 0.5 * r[1],
+            0.5 * q[2] - 0.5 * r[2],
+        ]
+    };
+    let a = half(p[1], p[0]);
+    let b = half(p[2], p[0]);
+    let s = a.iter().chain(&b).fold(0.0f64, |m, c| m.max(c.abs()));
+    if s == 0.0 || !s.is_finite() {
+        return None;
+    }
+    Some((a.map(|c| c / s), b.map(|c| c / s)))
+}
+
+/// Area of a triangle relative to the square of its longest edge, `|e1 × e2| / (2 max|e|²)`
+/// (0 for corners on a line or a point; at most √3/4 for an equilateral triangle). Scale-free.
+fn relative_area(p: [[f64; 3]; 3]) -> f64 {
+    let Some((a, b)) = scaled_edges(p) else {
+        return 0.0;
+    };
+    let longest = dot(a, a).max(dot(b, b)).max(dot(sub(b, a), sub(b, a)));
+    0.5 * norm(cross(a, b)) / longest
+}
+
+/// Smallest corner angle of a triangle, in degrees (0 for a degenerate one), in a scaled frame.
 fn min_angle_degrees(p: [[f64; 3]; 3]) -> f64 {
+    let Some((a, b)) = scaled_edges(p) else {
+        return 0.0;
+    };
+    // The scaled triangle 0, a, b has the same angles.
+    let q = [[0.0; 3], a, b];
     let mut best = f64::INFINITY;
     for i in 0..3 {
-        let a = sub(p[(i + 1) % 3], p[i]);
-        let b = sub(p[(i + 2) % 3], p[i]);
+        let a = sub(q[(i + 1) % 3], q[i]);
+        let b = sub(q[(i + 2) % 3], q[i]);
         let angle = norm(cross(a, b)).atan2(dot(a, b));
         best = best.min(angle);
     }
@@ -332,6 +369,35 @@ fn min_angle_degrees(p: [[f64; 3]; 3]) -> f64 {
     } else {
         0.0
     }
+}
+
+/// Sign of the volume enclosed by `faces`, computed about the centre of their vertices' bounding
+/// box and in units of its half extent so that huge or tiny coordinates cannot overflow
+/// (`Σ q0 · (q1 × q2)`; only the sign is meaningful).
+fn volume_sign(positions: &[[f64; 3]], faces: &[[u32; 3]]) -> f64 {
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    for f in faces {
+        for &v in f {
+            let p = positions[v as usize];
+            for k in 0..3 {
+                lo[k] = lo[k].min(p[k]);
+                hi[k] = hi[k].max(p[k]);
+            }
+        }
+    }
+    // Halves so that neither the centre nor the offsets overflow.
+    let c: [f64; 3] = std::array::from_fn(|k| 0.5 * lo[k] + 0.5 * hi[k]);
+    let half = |p: [f64; 3]| -> [f64; 3] { std::array::from_fn(|k| 0.5 * p[k] - 0.5 * c[k]) };
+    let s = (0..3).fold(0.0f64, |m, k| m.max(0.5 * hi[k] - 0.5 * c[k]));
+    if s == 0.0 || !s.is_finite() {
+        return 0.0;
+    }
+    let q = |v: u32| half(positions[v as usize]).map(|x| x / s);
+    faces
+        .iter()
+        .map(|f| dot(q(f[0]), cross(q(f[1]), q(f[2]))))
+        .sum()
 }
 
 /// Runs the whole policy; refusing issues are recorded and the analysis continues without the
@@ -561,16 +627,14 @@ fn analyse(mesh: &TriMesh, o: &RepairOptions) -> Repaired {
         });
     }
 
-    // 5. Zero-area faces.
-    let live_positions: Vec<[f64; 3]> = (0..nv)
-        .filter(|&v| vertex_alive[v])
-        .map(|v| mesh.positions[v])
-        .collect();
-    let diag = bbox_diagonal(&live_positions);
-    let area_floor = o.zero_area_tolerance * diag * diag;
+    // 5. Zero-area faces: a test of each face's shape at its own scale, so neither far-away
+    //    debris nor an unreferenced outlier changes which faces count as degenerate.
     let zero_area: Vec<u32> = (0..nf)
         .filter(|&f| face_alive[f])
-        .filter(|&f| 0.5 * norm(face_cross(&mesh.positions, welded(mesh.faces[f]))) <= area_floor)
+        .filter(|&f| {
+            let t = welded(mesh.faces[f]).map(|v| mesh.positions[v as usize]);
+            relative_area(t) <= o.zero_area_tolerance
+        })
         .map(|f| f as u32)
         .collect();
     if !zero_area.is_empty() {
@@ -814,7 +878,7 @@ fn analyse(mesh: &TriMesh, o: &RepairOptions) -> Repaired {
             part_faces[labels[f[0] as usize] as usize].push(*f);
         }
         let inward: Vec<usize> = (0..count)
-            .filter(|&c| !part_open[c] && signed_volume(&positions, &part_faces[c]) < 0.0)
+            .filter(|&c| !part_open[c] && volume_sign(&positions, &part_faces[c]) < 0.0)
             .collect();
         if !inward.is_empty() {
             let reps: Vec<u32> = inward

@@ -1,7 +1,7 @@
 //! glTF 2.0 (`.gltf` with external or data-URI buffers, and binary `.glb`).
 //!
 //! Read: every triangle primitive (`TRIANGLES`, `TRIANGLE_STRIP`, `TRIANGLE_FAN`) of every mesh
-//! instance in the scene graph, with node transforms applied (world = parent · local, column
+//! instance in the default scene (else the first scene; without scenes, every root node), with node transforms applied (world = parent · local, column
 //! vectors; faces are flipped where a transform mirrors, so they stay CCW). Meshes no node uses
 //! are read with the identity transform. Primitives are appended one after another, without
 //! welding (repair welds exact duplicates). Normals, when every primitive has them, are
@@ -61,15 +61,370 @@ fn cofactor3(m: &Mat4) -> [[f64; 3]; 3] {
     out
 }
 
+/// Elements (vertices and indices) a file may expand to, beyond its own size: see
+/// [`read_gltf`]'s docs. Legitimate files read each accessor about once, so a file whose
+/// instancing multiplies its data by more than this is refused rather than allowed to fill memory.
+const EXPANSION_PER_BYTE: usize = 16;
+/// Elements always allowed, whatever the input's size.
+const EXPANSION_FLOOR: usize = 1 << 22;
+
+/// A buffer's bytes: the GLB blob, a decoded data URI, or a file next to the `.gltf`.
+struct Buffers {
+    data: Vec<Vec<u8>>,
+}
+
+/// Decodes standard base64 (with or without `=` padding; whitespace is not allowed).
+fn decode_base64(s: &str) -> Option<Vec<u8>> {
+    let val = |c: u8| -> Option<u32> {
+        Some(match c {
+            b'A'..=b'Z' => u32::from(c - b'A'),
+            b'a'..=b'z' => u32::from(c - b'a') + 26,
+            b'0'..=b'9' => u32::from(c - b'0') + 52,
+            b'+' | b'-' => 62,
+            b'/' | b'_' => 63,
+            _ => return None,
+        })
+    };
+    let b = s.trim_end_matches('=').as_bytes();
+    let mut out = Vec::with_capacity(b.len() / 4 * 3 + 3);
+    for chunk in b.chunks(4) {
+        if chunk.len() == 1 {
+            return None;
+        }
+        let mut acc = 0u32;
+        for (i, &c) in chunk.iter().enumerate() {
+            acc |= val(c)? << (18 - 6 * i);
+        }
+        let bytes = acc.to_be_bytes();
+        out.extend_from_slice(&bytes[1..chunk.len()]);
+    }
+    Some(out)
+}
+
+/// Decodes `%XX` escapes of a URI path (invalid escapes are kept as written).
+fn percent_decode(s: &str) -> Vec<u8> {
+    let b = s.as_bytes();
+    let mut out = Vec::with_capacity(b.len());
+    let mut i = 0;
+    while i < b.len() {
+        if b[i] == b'%'
+            && i + 2 < b.len()
+            && let Ok(v) =
+                u8::from_str_radix(std::str::from_utf8(&b[i + 1..i + 3]).unwrap_or("x"), 16)
+        {
+            out.push(v);
+            i += 3;
+        } else {
+            out.push(b[i]);
+            i += 1;
+        }
+    }
+    out
+}
+
+/// Loads every buffer, checking each against its declared `byteLength` and reading no more than
+/// that. URIs: `data:` (base64) or a relative path inside the glTF's folder naming a regular file;
+/// absolute paths, other schemes, `..` and non-regular files (devices, fifos) are refused.
+fn load_buffers(
+    doc: &gltf::Document,
+    blob: Option<Vec<u8>>,
+    path: &Path,
+) -> Result<Buffers, MeshError> {
+    let mut blob = blob;
+    let mut data = Vec::new();
+    for buffer in doc.buffers() {
+        let i = buffer.index();
+        let declared = buffer.length();
+        let bytes = match buffer.source() {
+            gltf::buffer::Source::Bin => blob.take().ok_or_else(|| {
+                parse_err(
+                    path,
+                    format!(
+                        "buffer {i} refers to the GLB binary chunk, which is missing (or used twice)"
+                    ),
+                )
+            })?,
+            gltf::buffer::Source::Uri(uri) if uri.starts_with("data:") => {
+                let (_, payload) = uri.split_once(";base64,").ok_or_else(|| {
+                    parse_err(
+                        path,
+                        format!("buffer {i}: only base64 `data:` URIs are supported"),
+                    )
+                })?;
+                decode_base64(payload).ok_or_else(|| {
+                    parse_err(path, format!("buffer {i}: the data URI is not valid base64"))
+                })?
+            }
+            gltf::buffer::Source::Uri(uri) => {
+                let rel = percent_decode(uri);
+                let rel = String::from_utf8(rel).map_err(|_| {
+                    parse_err(path, format!("buffer {i}: URI {uri:?} is not UTF-8"))
+                })?;
+                let rel_path = Path::new(&rel);
+                let escapes = rel_path.components().any(|c| {
+                    !matches!(
+                        c,
+                        std::path::Component::Normal(_) | std::path::Component::CurDir
+                    )
+                });
+                if rel.contains(':') || rel.is_empty() || escapes {
+                    return Err(parse_err(
+                        path,
+                        format!(
+                            "buffer {i}: URI {uri:?} is not a relative path inside the glTF's folder \
+                             (absolute paths, `..` and URL schemes are refused; put the buffer next to the .gltf)"
+                        ),
+                    ));
+                }
+                let file_path = path.parent().unwrap_or(Path::new("")).join(rel_path);
+                let meta = std::fs::metadata(&file_path).map_err(|e| io_err(&file_path, e))?;
+                if !meta.is_file() {
+                    return Err(parse_err(
+                        path,
+                        format!(
+                            "buffer {i}: {} is not a regular file",
+                            file_path.display()
+                        ),
+                    ));
+                }
+                if meta.len() < declared as u64 {
+                    return Err(parse_err(
+                        path,
+                        format!(
+                            "buffer {i}: {} holds {} bytes but the buffer declares {declared}",
+                            file_path.display(),
+                            meta.len()
+                        ),
+                    ));
+                }
+                let file = std::fs::File::open(&file_path).map_err(|e| io_err(&file_path, e))?;
+                let mut b = Vec::with_capacity(declared);
+                std::io::Read::read_to_end(
+                    &mut std::io::Read::take(file, declared as u64),
+                    &mut b,
+                )
+                .map_err(|e| io_err(&file_path, e))?;
+                b
+            }
+        };
+        if bytes.len() < declared {
+            return Err(parse_err(
+                path,
+                format!(
+                    "buffer {i} declares {declared} bytes but only {} are present (truncated file?)",
+                    bytes.len()
+                ),
+            ));
+        }
+        data.push(bytes);
+    }
+    Ok(Buffers { data })
+}
+
+fn type_name(d: gltf::accessor::Dimensions) -> &'static str {
+    use gltf::accessor::Dimensions as D;
+    match d {
+        D::Scalar => "SCALAR",
+        D::Vec2 => "VEC2",
+        D::Vec3 => "VEC3",
+        D::Vec4 => "VEC4",
+        D::Mat2 => "MAT2",
+        D::Mat3 => "MAT3",
+        D::Mat4 => "MAT4",
+    }
+}
+
+fn component_name(t: gltf::accessor::DataType) -> &'static str {
+    use gltf::accessor::DataType as T;
+    match t {
+        T::I8 => "BYTE",
+        T::U8 => "UNSIGNED_BYTE",
+        T::I16 => "SHORT",
+        T::U16 => "UNSIGNED_SHORT",
+        T::U32 => "UNSIGNED_INT",
+        T::F32 => "FLOAT",
+    }
+}
+
 struct Collector<'a> {
-    buffers: &'a [gltf::buffer::Data],
+    buffers: &'a Buffers,
     positions: Vec<[f64; 3]>,
     faces: Vec<[u32; 3]>,
     normals: Vec<[f64; 3]>,
     all_normals: bool,
+    /// Elements (accessor components) still allowed to be read.
+    budget: usize,
 }
 
-impl Collector<'_> {
+impl<'a> Collector<'a> {
+    /// The bytes of accessor `acc`, each element's `size` bytes checked to lie inside its buffer
+    /// view and the view inside its buffer, before anything is allocated. Returns the view's
+    /// bytes, the accessor's offset in them and the stride.
+    fn accessor_bytes(
+        &mut self,
+        acc: &gltf::Accessor<'_>,
+        what: &str,
+        path: &Path,
+    ) -> Result<(&'a [u8], usize, usize), MeshError> {
+        let ai = acc.index();
+        let bad = |m: String| parse_err(path, format!("{what} (accessor {ai}): {m}"));
+        if acc.sparse().is_some() {
+            return Err(bad("sparse accessors are not supported".into()));
+        }
+        let Some(view) = acc.view() else {
+            return Err(bad("it has no bufferView".into()));
+        };
+        let elem = acc.size();
+        let count = acc.count();
+        let components = count
+            .checked_mul(acc.dimensions().multiplicity())
+            .ok_or_else(|| bad(format!("count {count} is too large")))?;
+        if components > self.budget {
+            return Err(bad(format!(
+                "reading {count} more elements exceeds the limit for a file of this size \
+                 ({EXPANSION_PER_BYTE} elements per input byte; nodes instancing large meshes many times?)"
+            )));
+        }
+        self.budget -= components;
+        let buffers: &'a Buffers = self.buffers;
+        let buf = buffers
+            .data
+            .get(view.buffer().index())
+            .ok_or_else(|| bad(format!("buffer {} is missing", view.buffer().index())))?;
+        let vi = view.index();
+        let vend = view
+            .offset()
+            .checked_add(view.length())
+            .filter(|&e| e <= buf.len())
+            .ok_or_else(|| {
+                bad(format!(
+                    "bufferView {vi} (offset {}, length {}) runs past the end of its {}-byte buffer",
+                    view.offset(),
+                    view.length(),
+                    buf.len()
+                ))
+            })?;
+        let bytes = &buf[view.offset()..vend];
+        let stride = view.stride().unwrap_or(elem);
+        if stride < elem {
+            return Err(bad(format!(
+                "bufferView {vi} has byteStride {stride}, smaller than one {} element ({elem} bytes)",
+                type_name(acc.dimensions())
+            )));
+        }
+        if count > 0 {
+            let need = (count - 1)
+                .checked_mul(stride)
+                .and_then(|x| x.checked_add(elem))
+                .and_then(|x| x.checked_add(acc.offset()));
+            if need.is_none_or(|n| n > bytes.len()) {
+                return Err(bad(format!(
+                    "{count} elements of {elem} bytes (stride {stride}) from offset {} do not fit in \
+                     bufferView {vi} of {} bytes",
+                    acc.offset(),
+                    bytes.len()
+                )));
+            }
+        }
+        Ok((bytes, acc.offset(), stride))
+    }
+
+    /// A `VEC3` attribute (`FLOAT`, or the integer types of KHR_mesh_quantization, normalized or
+    /// not) as `f64` triples.
+    fn read_vec3(
+        &mut self,
+        acc: &gltf::Accessor<'_>,
+        what: &str,
+        path: &Path,
+    ) -> Result<Vec<[f64; 3]>, MeshError> {
+        use gltf::accessor::{DataType as T, Dimensions as D};
+        let ty = acc.data_type();
+        if acc.dimensions() != D::Vec3 || ty == T::U32 {
+            return Err(parse_err(
+                path,
+                format!(
+                    "{what} (accessor {}) is {} of {}; expected VEC3 of FLOAT",
+                    acc.index(),
+                    type_name(acc.dimensions()),
+                    component_name(ty)
+                ),
+            ));
+        }
+        let normalized = acc.normalized();
+        let (bytes, offset, stride) = self.accessor_bytes(acc, what, path)?;
+        let cs = ty.size();
+        let comp = |b: &[u8]| -> f64 {
+            match ty {
+                T::F32 => f64::from(f32::from_le_bytes([b[0], b[1], b[2], b[3]])),
+                T::I8 => {
+                    let v = f64::from(b[0] as i8);
+                    if normalized { (v / 127.0).max(-1.0) } else { v }
+                }
+                T::U8 => {
+                    let v = f64::from(b[0]);
+                    if normalized { v / 255.0 } else { v }
+                }
+                T::I16 => {
+                    let v = f64::from(i16::from_le_bytes([b[0], b[1]]));
+                    if normalized {
+                        (v / 32767.0).max(-1.0)
+                    } else {
+                        v
+                    }
+                }
+                T::U16 => {
+                    let v = f64::from(u16::from_le_bytes([b[0], b[1]]));
+                    if normalized { v / 65535.0 } else { v }
+                }
+                T::U32 => f64::from(u32::from_le_bytes([b[0], b[1], b[2], b[3]])),
+            }
+        };
+        Ok((0..acc.count())
+            .map(|i| {
+                let s = offset + i * stride;
+                [
+                    comp(&bytes[s..s + cs]),
+                    comp(&bytes[s + cs..s + 2 * cs]),
+                    comp(&bytes[s + 2 * cs..s + 3 * cs]),
+                ]
+            })
+            .collect())
+    }
+
+    /// Indices: `SCALAR` of `UNSIGNED_BYTE`, `UNSIGNED_SHORT` or `UNSIGNED_INT`.
+    fn read_indices(
+        &mut self,
+        acc: &gltf::Accessor<'_>,
+        what: &str,
+        path: &Path,
+    ) -> Result<Vec<u32>, MeshError> {
+        use gltf::accessor::{DataType as T, Dimensions as D};
+        let ty = acc.data_type();
+        if acc.dimensions() != D::Scalar || !matches!(ty, T::U8 | T::U16 | T::U32) {
+            return Err(parse_err(
+                path,
+                format!(
+                    "{what} (accessor {}) is {} of {}; expected SCALAR of UNSIGNED_BYTE, \
+                     UNSIGNED_SHORT or UNSIGNED_INT",
+                    acc.index(),
+                    type_name(acc.dimensions()),
+                    component_name(ty)
+                ),
+            ));
+        }
+        let (bytes, offset, stride) = self.accessor_bytes(acc, what, path)?;
+        Ok((0..acc.count())
+            .map(|i| {
+                let b = &bytes[offset + i * stride..];
+                match ty {
+                    T::U8 => u32::from(b[0]),
+                    T::U16 => u32::from(u16::from_le_bytes([b[0], b[1]])),
+                    _ => u32::from_le_bytes([b[0], b[1], b[2], b[3]]),
+                }
+            })
+            .collect())
+    }
+
     fn add_mesh(
         &mut self,
         mesh: gltf::Mesh<'_>,
@@ -79,6 +434,7 @@ impl Collector<'_> {
         let flip = det3(world) < 0.0;
         let cof = cofactor3(world);
         let sign = if flip { -1.0 } else { 1.0 };
+        let mesh_index = mesh.index();
         for prim in mesh.primitives() {
             let mode = prim.mode();
             if !matches!(
@@ -87,20 +443,22 @@ impl Collector<'_> {
             ) {
                 continue;
             }
-            let reader = prim.reader(|b| self.buffers.get(b.index()).map(|d| &d.0[..]));
-            let Some(pos) = reader.read_positions() else {
+            let pi = prim.index();
+            let Some(pos_acc) = prim.get(&gltf::Semantic::Positions) else {
                 return Err(parse_err(
                     path,
                     format!(
-                        "mesh {} has a triangle primitive without POSITION",
-                        mesh.index()
+                        "mesh {mesh_index} primitive {pi} is a triangle primitive without a POSITION attribute"
                     ),
                 ));
             };
+            let local = self.read_vec3(
+                &pos_acc,
+                &format!("mesh {mesh_index} primitive {pi}: POSITION"),
+                path,
+            )?;
             let base = self.positions.len();
-            let local: Vec<[f32; 3]> = pos.collect();
             for p in &local {
-                let p = p.map(f64::from);
                 let mut q = [0.0; 3];
                 for r in 0..3 {
                     q[r] =
@@ -108,10 +466,17 @@ impl Collector<'_> {
                 }
                 self.positions.push(q);
             }
-            match reader.read_normals() {
-                Some(ns) => {
+            let normals = match prim.get(&gltf::Semantic::Normals) {
+                Some(acc) => Some(self.read_vec3(
+                    &acc,
+                    &format!("mesh {mesh_index} primitive {pi}: NORMAL"),
+                    path,
+                )?),
+                None => None,
+            };
+            match normals {
+                Some(ns) if ns.len() == local.len() => {
                     for n in ns {
-                        let n = n.map(f64::from);
                         let mut q = [0.0; 3];
                         for r in 0..3 {
                             q[r] = sign * (cof[r][0] * n[0] + cof[r][1] * n[1] + cof[r][2] * n[2]);
@@ -120,20 +485,27 @@ impl Collector<'_> {
                         self.normals.push(q.map(|c| c / l));
                     }
                 }
-                None => self.all_normals = false,
+                _ => self.all_normals = false,
             }
-            let idx: Vec<u32> = match reader.read_indices() {
-                Some(i) => i.into_u32().collect(),
-                None => (0..local.len() as u32).collect(),
-            };
             let nlocal = local.len();
-            let mesh_index = mesh.index();
+            let idx: Vec<u32> = match prim.indices() {
+                Some(acc) => self.read_indices(
+                    &acc,
+                    &format!("mesh {mesh_index} primitive {pi}: indices"),
+                    path,
+                )?,
+                None => {
+                    let n = u32::try_from(nlocal)
+                        .map_err(|_| parse_err(path, "more than 2³² vertices in one primitive"))?;
+                    (0..n).collect()
+                }
+            };
             let off = |i: u32| -> Result<u32, MeshError> {
                 if i as usize >= nlocal {
                     return Err(parse_err(
                         path,
                         format!(
-                            "mesh {mesh_index}: index {i} is beyond the primitive's {nlocal} vertices"
+                            "mesh {mesh_index} primitive {pi}: index {i} is beyond the primitive's {nlocal} vertices"
                         ),
                     ));
                 }
@@ -170,72 +542,103 @@ impl Collector<'_> {
         Ok(())
     }
 
+    /// Adds `node` and its subtree. `visited` makes the walk linear in the number of nodes: glTF
+    /// requires the node hierarchy to be a forest (each node at most one parent, no cycles), and
+    /// a node reached twice (shared child, cycle, or listed twice as a root) is refused.
     fn add_node(
         &mut self,
         node: gltf::Node<'_>,
         parent: &Mat4,
         depth: usize,
+        visited: &mut [bool],
         path: &Path,
     ) -> Result<(), MeshError> {
         if depth > 256 {
-            return Err(parse_err(
-                path,
-                "node hierarchy is deeper than 256 levels (a cycle?)",
-            ));
+            return Err(parse_err(path, "node hierarchy is deeper than 256 levels"));
+        }
+        let ni = node.index();
+        match visited.get_mut(ni) {
+            Some(v) if *v => {
+                return Err(parse_err(
+                    path,
+                    format!(
+                        "node {ni} is reached twice in the scene (a node shared by two parents, a \
+                         cycle, or a root listed twice); glTF requires the nodes to form trees"
+                    ),
+                ));
+            }
+            Some(v) => *v = true,
+            None => return Err(parse_err(path, format!("node {ni} does not exist"))),
         }
         let world = mat_mul(parent, &to_f64(node.transform().matrix()));
         if let Some(m) = node.mesh() {
             self.add_mesh(m, &world, path)?;
         }
         for child in node.children() {
-            self.add_node(child, &world, depth + 1, path)?;
+            self.add_node(child, &world, depth + 1, visited, path)?;
         }
         Ok(())
     }
 }
 
 /// Reads a `.gltf` or `.glb` file. See the module docs.
+///
+/// Bounded by the input: every accessor is checked against its buffer view and buffer before it
+/// is read; buffers are read up to their declared `byteLength` only; the nodes of one scene (the
+/// default scene, else the first) are visited once each; and the elements read in total are
+/// limited to 16 per byte of input (file plus buffers) plus 4 Mi, so instancing cannot multiply
+/// a small file into gigabytes.
 pub fn read_gltf(path: &Path) -> Result<MeshWithNormals, MeshError> {
-    let gltf = gltf::Gltf::open(path).map_err(|e| match e {
+    let bytes = super::read_bytes(path)?;
+    let gltf = gltf::Gltf::from_slice(&bytes).map_err(|e| match e {
         gltf::Error::Io(source) => io_err(path, source),
         e => parse_err(path, format!("not a valid glTF 2.0 file: {e}")),
     })?;
-    let base = path.parent();
-    let buffers = gltf::import_buffers(&gltf.document, base, gltf.blob.clone())
-        .map_err(|e| parse_err(path, format!("cannot load the glTF buffers: {e}")))?;
-    let doc = &gltf.document;
+    let gltf::Gltf {
+        document: doc,
+        blob,
+    } = gltf;
+    let buffers = load_buffers(&doc, blob, path)?;
+    let input_bytes = bytes.len() + buffers.data.iter().map(Vec::len).sum::<usize>();
     let mut c = Collector {
         buffers: &buffers,
         positions: Vec::new(),
         faces: Vec::new(),
         normals: Vec::new(),
         all_normals: true,
+        budget: input_bytes
+            .saturating_mul(EXPANSION_PER_BYTE)
+            .saturating_add(EXPANSION_FLOOR),
     };
-    // Roots: the nodes of every scene (or, without scenes, nodes that are nobody's child).
-    let mut roots: Vec<usize> = doc
-        .scenes()
-        .flat_map(|s| s.nodes().map(|n| n.index()).collect::<Vec<_>>())
-        .collect();
-    if doc.scenes().len() == 0 {
-        let mut is_child = vec![false; doc.nodes().len()];
-        for n in doc.nodes() {
-            for ch in n.children() {
-                is_child[ch.index()] = true;
-            }
-        }
-        roots = (0..is_child.len()).filter(|&i| !is_child[i]).collect();
-    }
-    roots.dedup();
+    // Roots: the nodes of the default scene (else the first; a file with several scenes holds
+    // alternatives, not parts), or, without scenes, the nodes that are nobody's child.
     let nodes: Vec<gltf::Node<'_>> = doc.nodes().collect();
+    let roots: Vec<usize> = match doc.default_scene().or_else(|| doc.scenes().next()) {
+        Some(scene) => scene.nodes().map(|n| n.index()).collect(),
+        None => {
+            let mut is_child = vec![false; nodes.len()];
+            for n in &nodes {
+                for ch in n.children() {
+                    if let Some(slot) = is_child.get_mut(ch.index()) {
+                        *slot = true;
+                    }
+                }
+            }
+            (0..is_child.len()).filter(|&i| !is_child[i]).collect()
+        }
+    };
     let mut used_mesh = vec![false; doc.meshes().len()];
-    for n in doc.nodes() {
-        if let Some(m) = n.mesh() {
-            used_mesh[m.index()] = true;
+    for n in &nodes {
+        if let Some(m) = n.mesh()
+            && let Some(slot) = used_mesh.get_mut(m.index())
+        {
+            *slot = true;
         }
     }
+    let mut visited = vec![false; nodes.len()];
     for &r in &roots {
         if let Some(node) = nodes.get(r) {
-            c.add_node(node.clone(), &IDENTITY, 0, path)?;
+            c.add_node(node.clone(), &IDENTITY, 0, &mut visited, path)?;
         }
     }
     for m in doc.meshes() {

@@ -127,6 +127,12 @@ pub(crate) fn read_bytes(path: &Path) -> Result<Vec<u8>, MeshError> {
     })
 }
 
+/// `bytes` without a leading UTF-8 byte-order mark (which some Windows tools write at the start of
+/// text files; left in place it would hide the first record).
+pub(crate) fn strip_bom(bytes: &[u8]) -> &[u8] {
+    bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes)
+}
+
 /// A parse error for `path`.
 pub(crate) fn parse_err(path: &Path, message: impl Into<String>) -> MeshError {
     MeshError::Parse {

@@ -21,7 +21,7 @@ pub fn read_obj(path: &Path) -> Result<super::MeshWithNormals, MeshError> {
 }
 
 fn read_obj_bytes(path: &Path, bytes: &[u8]) -> Result<super::MeshWithNormals, MeshError> {
-    let text = String::from_utf8_lossy(bytes);
+    let text = String::from_utf8_lossy(super::strip_bom(bytes));
     let mut positions: Vec<[f64; 3]> = Vec::new();
     let mut vn: Vec<[f64; 3]> = Vec::new();
     // Per polygon: (line number, corners as 0-based (position, normal) indices).
@@ -56,10 +56,18 @@ fn read_obj_bytes(path: &Path, bytes: &[u8]) -> Result<super::MeshWithNormals, M
                 let mut corners = Vec::new();
                 for t in tok {
                     let mut parts = t.split('/');
-                    let v = parse_index(parts.next().unwrap_or(""), positions.len(), path, lineno)?;
+                    let v = parse_index(
+                        parts.next().unwrap_or(""),
+                        positions.len(),
+                        "vertex",
+                        path,
+                        lineno,
+                    )?;
                     let _vt = parts.next();
                     let n = match parts.next() {
-                        Some(s) if !s.is_empty() => Some(parse_index(s, vn.len(), path, lineno)?),
+                        Some(s) if !s.is_empty() => {
+                            Some(parse_index(s, vn.len(), "normal", path, lineno)?)
+                        }
                         _ => None,
                     };
                     corners.push((v, n));
@@ -122,14 +130,21 @@ fn read_obj_bytes(path: &Path, bytes: &[u8]) -> Result<super::MeshWithNormals, M
 /// Resolves an OBJ index (1-based, or negative = relative to the count so far) to 0-based.
 /// Indices beyond the vertices read so far are kept (forward references are legal in some files;
 /// validation reports any that stay out of range).
-fn parse_index(s: &str, count: usize, path: &Path, lineno: usize) -> Result<i64, MeshError> {
+/// `what` names the kind of index in messages (`vertex`, `normal`).
+fn parse_index(
+    s: &str,
+    count: usize,
+    what: &str,
+    path: &Path,
+    lineno: usize,
+) -> Result<i64, MeshError> {
     let i: i64 = s
         .parse()
-        .map_err(|_| parse_err(path, format!("line {lineno}: `{s}` is not a vertex index")))?;
+        .map_err(|_| parse_err(path, format!("line {lineno}: `{s}` is not a {what} index")))?;
     match i {
         0 => Err(parse_err(
             path,
-            format!("line {lineno}: vertex index 0 is invalid (OBJ indices start at 1)"),
+            format!("line {lineno}: {what} index 0 is invalid (OBJ indices start at 1)"),
         )),
         i if i > 0 => Ok(i - 1),
         i => {
@@ -137,7 +152,9 @@ fn parse_index(s: &str, count: usize, path: &Path, lineno: usize) -> Result<i64,
             if r < 0 {
                 Err(parse_err(
                     path,
-                    format!("line {lineno}: relative index {i} points before the first vertex"),
+                    format!(
+                        "line {lineno}: relative {what} index {i} points before the first {what}"
+                    ),
                 ))
             } else {
                 Ok(r)

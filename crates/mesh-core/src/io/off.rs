@@ -18,7 +18,7 @@ pub fn read_off(path: &Path) -> Result<MeshWithNormals, MeshError> {
 }
 
 fn read_off_bytes(path: &Path, bytes: &[u8]) -> Result<MeshWithNormals, MeshError> {
-    let text = String::from_utf8_lossy(bytes);
+    let text = String::from_utf8_lossy(super::strip_bom(bytes));
     // Non-empty lines with comments removed, with their 1-based line numbers.
     let mut lines = text
         .lines()
@@ -126,17 +126,22 @@ fn read_off_bytes(path: &Path, bytes: &[u8]) -> Result<MeshWithNormals, MeshErro
                 format!("line {lineno}: face {i} has {n} corners, at least 3 are needed"),
             ));
         }
-        let mut idx = Vec::with_capacity(n);
-        for _ in 0..n {
-            let t = it.next().ok_or_else(|| {
-                parse_err(
-                    path,
-                    format!("line {lineno}: face {i} announces {n} corners but lists fewer"),
-                )
-            })?;
+        // The corners are read from the line before anything is sized by `n`, so a count of
+        // 10¹² or 2⁶⁴−1 is an error about the line, not an allocation.
+        let mut idx = Vec::new();
+        for t in it.by_ref().take(n) {
             idx.push(t.parse::<u32>().map_err(|_| {
                 parse_err(path, format!("line {lineno}: `{t}` is not a vertex index"))
             })?);
+        }
+        if idx.len() < n {
+            return Err(parse_err(
+                path,
+                format!(
+                    "line {lineno}: face {i} announces {n} corners but lists {}",
+                    idx.len()
+                ),
+            ));
         }
         for k in 1..n - 1 {
             faces.push([idx[0], idx[k], idx[k + 1]]);

@@ -143,7 +143,8 @@ impl Body<'_> {
 
 /// Reads a PLY file (vertices in file order). See the module docs.
 pub fn read_ply(path: &Path) -> Result<MeshWithNormals, MeshError> {
-    let bytes = read_bytes(path)?;
+    let all = read_bytes(path)?;
+    let bytes = super::strip_bom(&all);
     if !bytes.starts_with(b"ply") {
         return Err(parse_err(path, "not a PLY file (it must start with `ply`)"));
     }
@@ -268,6 +269,11 @@ pub fn read_ply(path: &Path) -> Result<MeshWithNormals, MeshError> {
                 path,
                 "element `face` has no `vertex_indices` list",
             ));
+        }
+        if el.properties.is_empty() {
+            // Nothing to read per element: skipping is exact and keeps the work bounded by the
+            // file's size whatever count the header declares.
+            continue;
         }
         let mut values = vec![0.0f64; el.properties.len()];
         let mut poly: Vec<u32> = Vec::new();

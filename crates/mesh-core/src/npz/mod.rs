@@ -7,24 +7,50 @@
 mod saved;
 
 pub use crate::npy::{NpyArray, NpyData, parse_npy, write_npy};
-pub use saved::{FORMAT_VERSION, SavedDeformation};
+pub use saved::{FORMAT_VERSION, MAX_EXTRA_BYTES, SavedDeformation};
 
+use std::cell::{OnceCell, RefCell};
 use std::fs::File;
 use std::io::{BufWriter, Read, Write};
 use std::path::{Path, PathBuf};
 
 use crate::MeshError;
 
-/// All arrays of an `.npz` file, read eagerly, in the order of the zip's entries.
-#[derive(Clone, Debug)]
+/// The most bytes one entry may declare (uncompressed) before it is refused unread.
+pub const MAX_ENTRY_BYTES: u64 = 1 << 32;
+
+/// One `*.npy` entry of the zip's central directory.
+#[derive(Debug)]
+struct Entry {
+    key: String,
+    index: usize,
+    /// Declared uncompressed size.
+    size: u64,
+}
+
+/// The arrays of an `.npz` file, read lazily: [`NpzReader::open`] reads only the zip's directory,
+/// and an entry is inflated (at most its declared size, which must not exceed
+/// [`MAX_ENTRY_BYTES`]) and parsed the first time it is asked for, then kept. Entries nobody asks
+/// for are never inflated, so a large unused entry costs nothing.
 pub struct NpzReader {
     path: PathBuf,
-    arrays: Vec<(String, NpyArray)>,
+    zip: RefCell<zip::ZipArchive<std::io::BufReader<File>>>,
+    entries: Vec<Entry>,
+    loaded: Vec<OnceCell<NpyArray>>,
+}
+
+impl std::fmt::Debug for NpzReader {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("NpzReader")
+            .field("path", &self.path)
+            .field("entries", &self.entries)
+            .finish()
+    }
 }
 
 impl NpzReader {
-    /// Opens and parses every `*.npy` entry of the zip (entries with other names are ignored).
-    /// The key of `verts.npy` is `verts`.
+    /// Opens the zip and lists its `*.npy` entries (entries with other names are ignored);
+    /// nothing is inflated yet. The key of `verts.npy` is `verts`.
     pub fn open(path: impl AsRef<Path>) -> Result<Self, MeshError> {
         let path = path.as_ref().to_path_buf();
         let file = File::open(&path).map_err(|source| MeshError::Io {
@@ -36,31 +62,35 @@ impl NpzReader {
                 path: path.clone(),
                 message: format!("not a readable .npz (zip) archive: {e}"),
             })?;
-        let mut arrays = Vec::with_capacity(zip.len());
+        let mut entries: Vec<Entry> = Vec::new();
         for i in 0..zip.len() {
-            let mut entry = zip.by_index(i).map_err(|e| MeshError::Parse {
+            let entry = zip.by_index_raw(i).map_err(|e| MeshError::Parse {
                 path: path.clone(),
                 message: format!("zip entry {i} is unreadable: {e}"),
             })?;
-            let name = entry.name().to_string();
-            let Some(key) = name.strip_suffix(".npy") else {
+            let Some(key) = entry.name().strip_suffix(".npy") else {
                 continue;
             };
-            let key = key.to_string();
-            let mut bytes = Vec::with_capacity(entry.size().min(1 << 26) as usize);
-            entry.read_to_end(&mut bytes).map_err(|e| MeshError::Npy {
-                path: path.clone(),
-                key: key.clone(),
-                message: format!("cannot decompress the zip entry: {e}"),
-            })?;
-            let array = parse_npy(&bytes).map_err(|message| MeshError::Npy {
-                path: path.clone(),
-                key: key.clone(),
-                message,
-            })?;
-            arrays.push((key, array));
+            if entries.iter().any(|e| e.key == key) {
+                return Err(MeshError::Npy {
+                    path: path.clone(),
+                    key: key.to_string(),
+                    message: "stored twice in the archive".into(),
+                });
+            }
+            entries.push(Entry {
+                key: key.to_string(),
+                index: i,
+                size: entry.size(),
+            });
         }
-        Ok(Self { path, arrays })
+        let loaded = entries.iter().map(|_| OnceCell::new()).collect();
+        Ok(Self {
+            path,
+            zip: RefCell::new(zip),
+            entries,
+            loaded,
+        })
     }
 
     /// The file this was read from.
@@ -70,23 +100,70 @@ impl NpzReader {
 
     /// Keys in file order.
     pub fn keys(&self) -> impl Iterator<Item = &str> {
-        self.arrays.iter().map(|(k, _)| k.as_str())
+        self.entries.iter().map(|e| e.key.as_str())
     }
 
-    /// The array stored under `key`, if any.
+    /// Declared (uncompressed) size in bytes of the entry under `key`, without inflating it.
+    pub fn declared_size(&self, key: &str) -> Option<u64> {
+        self.entries.iter().find(|e| e.key == key).map(|e| e.size)
+    }
+
+    /// The array stored under `key`, if any and readable (use [`NpzReader::require`] to learn why
+    /// one is not).
     pub fn get(&self, key: &str) -> Option<&NpyArray> {
-        self.arrays.iter().find(|(k, _)| k == key).map(|(_, a)| a)
+        self.load(key).ok().flatten()
     }
 
-    /// The array under `key`, or an error naming the missing key.
+    /// The array under `key`, or an error naming the missing or malformed key.
     pub fn require(&self, key: &str) -> Result<&NpyArray, MeshError> {
-        self.get(key)
+        self.load(key)?
             .ok_or_else(|| self.err(key, "missing from the file".into()))
     }
 
-    /// Consumes the reader, returning `(key, array)` pairs in file order.
-    pub fn into_arrays(self) -> Vec<(String, NpyArray)> {
-        self.arrays
+    /// Inflates and parses `key` on first use (`Ok(None)` when there is no such entry).
+    fn load(&self, key: &str) -> Result<Option<&NpyArray>, MeshError> {
+        let Some(k) = self.entries.iter().position(|e| e.key == key) else {
+            return Ok(None);
+        };
+        if let Some(a) = self.loaded[k].get() {
+            return Ok(Some(a));
+        }
+        let Entry { index, size, .. } = self.entries[k];
+        if size > MAX_ENTRY_BYTES {
+            return Err(self.err(
+                key,
+                format!(
+                    "the zip entry declares {size} bytes uncompressed, more than the {MAX_ENTRY_BYTES} allowed"
+                ),
+            ));
+        }
+        let mut zip = self.zip.borrow_mut();
+        let entry = zip
+            .by_index(index)
+            .map_err(|e| self.err(key, format!("the zip entry is unreadable: {e}")))?;
+        // Never more than the declared size, whatever the compressed stream expands to.
+        let mut bytes = Vec::with_capacity(size.min(1 << 26) as usize);
+        entry
+            .take(size)
+            .read_to_end(&mut bytes)
+            .map_err(|e| self.err(key, format!("cannot decompress the zip entry: {e}")))?;
+        drop(zip);
+        let array = parse_npy(&bytes).map_err(|message| self.err(key, message))?;
+        let _ = self.loaded[k].set(array);
+        Ok(self.loaded[k].get())
+    }
+
+    /// Reads every array and returns `(key, array)` pairs in file order.
+    pub fn into_arrays(self) -> Result<Vec<(String, NpyArray)>, MeshError> {
+        for e in &self.entries {
+            self.load(&e.key)?;
+        }
+        Ok(self
+            .entries
+            .into_iter()
+            .zip(self.loaded)
+            .filter_map(|(e, a)| a.into_inner().map(|a| (e.key, a)))
+            .collect())
     }
 
     /// An `(n, 3)` float array (`<f2`, `<f4` or `<f8`, converted) as `f32` rows.

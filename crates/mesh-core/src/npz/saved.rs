@@ -20,8 +20,8 @@ pub const FORMAT_VERSION: i64 = 1;
 /// | `deform_by_csd_cfg` | `<U…` 0-d | JSON: `local_step_procrustes.{lamb, normalize_target_normals}`, `arap_energy_type`, `solve_method`, `pin_first_vertex` |
 /// | `dataset_cfg` | `<U…` 0-d | JSON describing the input |
 ///
-/// Any other keys (ours: `format_version`, `seed`, `rotation_rule`, …) are kept in [`extra`]
-/// in file order and written back after the five standard keys; readers that ignore unknown keys
+/// Any other keys (ours: `format_version`, `seed`, `rotation_rule`, …) up to [`MAX_EXTRA_BYTES`]
+/// each are kept in [`extra`] in file order (larger ones are skipped unread) and written back after the five standard keys; readers that ignore unknown keys
 /// (the reference) are unaffected.
 ///
 /// [`extra`]: SavedDeformation::extra
@@ -40,6 +40,9 @@ pub struct SavedDeformation {
     /// Every other array in the file, in file order.
     pub extra: Vec<(String, NpyArray)>,
 }
+
+/// Extra (non-standard) entries larger than this (declared, uncompressed) are skipped on read.
+pub const MAX_EXTRA_BYTES: u64 = 1 << 24;
 
 const STANDARD_KEYS: [&str; 5] = [
     "verts",
@@ -88,11 +91,17 @@ impl SavedDeformation {
                 ),
             ));
         }
-        let extra = r
-            .into_arrays()
-            .into_iter()
-            .filter(|(k, _)| !STANDARD_KEYS.contains(&k.as_str()))
-            .collect();
+        // Extra keys are metadata (ours are a few bytes); large ones are not loaded at all, so an
+        // unrelated big entry cannot make reading cost memory.
+        let mut extra = Vec::new();
+        for key in r.keys() {
+            if STANDARD_KEYS.contains(&key)
+                || r.declared_size(key).is_none_or(|s| s > MAX_EXTRA_BYTES)
+            {
+                continue;
+            }
+            extra.push((key.to_string(), r.require(key)?.clone()));
+        }
         Ok(Self {
             verts,
             faces,
