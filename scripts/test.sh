@@ -11,6 +11,7 @@ step "cargo fmt --check (xtask)";  cargo fmt --manifest-path xtask/Cargo.toml --
 step "cargo clippy -D warnings";   cargo clippy --workspace --all-targets --locked -- -D warnings
 step "cargo clippy (xtask)";       cargo clippy --manifest-path xtask/Cargo.toml --target-dir target --locked -- -D warnings
 step "cargo test";                 cargo test --workspace --locked
+step "cargo build (xtask)";      cargo build --manifest-path xtask/Cargo.toml --target-dir target --locked   # visible progress; `cargo xtask` runs quietly
 step "cargo xtask check-deps";     cargo xtask check-deps
 step "cargo xtask gradcheck";      cargo xtask gradcheck
 # --- Python bindings (crates/darap-py): build into .venv (dev profile, shared target/), pytest ---
