@@ -238,6 +238,47 @@ fn batch_embeddings<'a>(
         .collect()
 }
 
+/// An error naming `what` when `values` hold NaN or ±∞.
+fn check_finite(values: &[f32], what: impl FnOnce() -> String) -> Result<(), GuidanceError> {
+    let count = crate::count_non_finite(values);
+    if count == 0 {
+        return Ok(());
+    }
+    Err(GuidanceError::NonFinite {
+        tensor: what(),
+        count,
+        total: values.len(),
+        hint: "the renderer produced them (degenerate geometry?); nothing was optimized".into(),
+    })
+}
+
+/// Refuses a UNet prediction ε (the 3 channels the guidance uses) with NaN or ±∞ in either branch:
+/// the reference's `nan_to_num` would silently turn it into a zero or saturated gradient.
+fn check_unet_output(
+    eps_cond: &[f32],
+    eps_uncond: &[f32],
+    stage: &str,
+    model: &dyn Denoiser,
+) -> Result<(), GuidanceError> {
+    for (values, branch) in [(eps_cond, "conditional"), (eps_uncond, "unconditional")] {
+        let count = crate::count_non_finite(values);
+        if count > 0 {
+            return Err(GuidanceError::NonFinite {
+                tensor: format!(
+                    "the {stage} UNet prediction ε, {branch} branch ({})",
+                    model.describe()
+                ),
+                count,
+                total: values.len(),
+                hint: "the UNet overflowed or was fed non-finite embeddings; an fp16 export can overflow where \
+                       fp32 does not (scripts/export_if_onnx.py --dtype fp32)"
+                    .into(),
+            });
+        }
+    }
+    Ok(())
+}
+
 fn tensor(shape: [usize; 4], data: Vec<f32>) -> Tensor {
     Tensor {
         shape: shape.to_vec(),
@@ -265,6 +306,8 @@ impl CascadedGuidance {
                 )));
             }
         }
+        crate::check_embedding_finite(&cond, "the prompt embedding")?;
+        crate::check_embedding_finite(&uncond, "the negative-prompt embedding")?;
         if cond.shape != uncond.shape {
             return Err(GuidanceError::InvalidInput(format!(
                 "prompt embedding {:?} and negative prompt embedding {:?} differ in shape",
@@ -349,6 +392,7 @@ impl CascadedGuidance {
                     }
                 }
             });
+        check_finite(&img, || "the rendered images given to the guidance".into())?;
         let resize = Resize2d::cubic_antialias((height, width), (r, r))?;
         let down1 = Resize2d::bilinear((r, r), (r1, r1))?;
         let mut x = resize.apply(&img)?;
@@ -378,6 +422,7 @@ impl CascadedGuidance {
             )?
         };
         let (c1, u1) = split_cond_uncond(&out1, b, CHANNELS, (r1, r1))?;
+        check_unet_output(&c1, &u1, "stage-I", self.stage1.as_ref())?;
         let g1 = classifier_free_guidance(&c1, &u1, cfg.guidance_scale);
         let grad1 = sds_gradient(&g1, &eps1, &self.weights(&t1)?, cfg.grad_clip)?;
         let loss1 = sds_loss(&grad1, b);
@@ -450,6 +495,7 @@ impl CascadedGuidance {
                 Some(&labels),
             )?;
             let (c2, u2) = split_cond_uncond(&out2, b, CHANNELS, (r2, r2))?;
+            check_unet_output(&c2, &u2, "stage-II", model.as_ref())?;
             let g2 = classifier_free_guidance(&c2, &u2, cfg.guidance_scale);
             let grad2 = sds_gradient(&g2, &eps_t, &self.weights(&t2)?, cfg.grad_clip)?;
             let loss2 = sds_loss(&grad2, b);
