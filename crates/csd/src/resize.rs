@@ -498,6 +498,26 @@ impl PlaneResize {
         tmp.resize(oh * row, 0.0);
         self.rows
             .vertical(&src[..self.rows.in_len() * row], row, tmp);
+        if channels == 3 {
+            // RGB: the three dot products share each weight and read contiguous pixels.
+            let (o0, rest) = out.split_at_mut(oh * ow);
+            let (o1, o2) = rest.split_at_mut(oh * ow);
+            for (i, t) in tmp.chunks_exact(row).enumerate() {
+                for j in 0..ow {
+                    let (start, weights) = self.cols.row(j);
+                    let (mut a, mut b, mut c) = (0.0f32, 0.0f32, 0.0f32);
+                    for (&w, px) in weights.iter().zip(t[start * 3..].chunks_exact(3)) {
+                        a += w * px[0];
+                        b += w * px[1];
+                        c += w * px[2];
+                    }
+                    o0[i * ow + j] = a;
+                    o1[i * ow + j] = b;
+                    o2[i * ow + j] = c;
+                }
+            }
+            return;
+        }
         for (c, plane) in out.chunks_exact_mut(oh * ow).take(channels).enumerate() {
             for (t, o) in tmp.chunks_exact(row).zip(plane.chunks_exact_mut(ow)) {
                 for (j, v) in o.iter_mut().enumerate() {
@@ -530,6 +550,42 @@ impl PlaneResize {
         let (oh, ow) = self.out_hw();
         let row = channels * ow;
         tmp.resize(ih * row, 0.0);
+        if channels == 3 {
+            // RGB: the three dot products share each weight and write one contiguous pixel.
+            let (p0, rest) = planes.split_at(ih * iw);
+            let (p1, p2) = rest.split_at(ih * iw);
+            for (r, t) in tmp.chunks_exact_mut(row).enumerate() {
+                let (s0, s1, s2) = (
+                    &p0[r * iw..(r + 1) * iw],
+                    &p1[r * iw..(r + 1) * iw],
+                    &p2[r * iw..(r + 1) * iw],
+                );
+                for (j, px) in t.chunks_exact_mut(3).enumerate() {
+                    let (start, weights) = self.cols.row(j);
+                    let (mut a, mut b, mut c) = (0.0f32, 0.0f32, 0.0f32);
+                    for (k, &w) in weights.iter().enumerate() {
+                        a += w * s0[start + k];
+                        b += w * s1[start + k];
+                        c += w * s2[start + k];
+                    }
+                    px[0] = a;
+                    px[1] = b;
+                    px[2] = c;
+                }
+            }
+        } else {
+            self.width_to_interleaved(planes, channels, tmp);
+        }
+        let out = &mut out[..oh * row];
+        self.rows.vertical(tmp, row, out);
+        out.iter_mut().for_each(|v| *v = finish(*v));
+    }
+
+    /// The width pass of [`Self::apply_to_interleaved`] for any channel count.
+    fn width_to_interleaved(&self, planes: &[f32], channels: usize, tmp: &mut [f32]) {
+        let (ih, iw) = self.in_hw();
+        let ow = self.cols.out_len();
+        let row = channels * ow;
         for (c, plane) in planes.chunks_exact(ih * iw).take(channels).enumerate() {
             for (s, t) in plane.chunks_exact(iw).zip(tmp.chunks_exact_mut(row)) {
                 for j in 0..ow {
@@ -542,9 +598,6 @@ impl PlaneResize {
                 }
             }
         }
-        let out = &mut out[..oh * row];
-        self.rows.vertical(tmp, row, out);
-        out.iter_mut().for_each(|v| *v = finish(*v));
     }
 
     /// Resizes one plane `input` (in_h × in_w) into `out` (out_h × out_w); `tmp` holds the
