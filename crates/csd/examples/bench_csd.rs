@@ -4,8 +4,8 @@
 //!
 //! `cargo run --release -p csd --example bench_csd` (optional args: views, repetitions).
 
-use csd::resize::Resize2d;
-use csd::schedule::standard_normal;
+use csd::resize::{PlaneResize, Resize2d};
+use csd::schedule::fill_standard_normal;
 use csd::sds::classifier_free_guidance;
 use csd::{CascadedGuidance, Denoiser, Embedding, Guidance, GuidanceConfig, GuidanceError, Tensor};
 use rand::SeedableRng;
@@ -88,49 +88,60 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }),
     );
 
+    // The kernels `evaluate` runs (f32 gather resizes, one plane or one interleaved view at a time),
+    // here single-threaded over all planes/views: their sum over 2 threads ≈ their share of the total.
     let planes = views * 3;
-    let r224 = Resize2d::cubic_antialias((n, n), (224, 224))?;
-    let d64 = Resize2d::bilinear((224, 224), (64, 64))?;
-    let u256 = Resize2d::bilinear((224, 224), (256, 256))?;
-    let u64_256 = Resize2d::bilinear((64, 64), (256, 256))?;
-    let plane512 = vec![0.5f32; planes * n * n];
-    let plane224 = vec![0.5f32; planes * 224 * 224];
-    let plane224_out = vec![0.5f64; planes * 224 * 224];
-    let plane64 = vec![0.5f32; planes * 64 * 64];
-    let plane256_f64 = vec![0.5f64; planes * 256 * 256];
-    let plane64_f64 = vec![0.5f64; planes * 64 * 64];
+    let op = |r: Result<Resize2d, GuidanceError>| {
+        r.map(|o| (PlaneResize::forward(&o), PlaneResize::adjoint(&o)))
+    };
+    let (r224, r224_t) = op(Resize2d::cubic_antialias((n, n), (224, 224)))?;
+    let (d64, d64_t) = op(Resize2d::bilinear((224, 224), (64, 64)))?;
+    let (u256, u256_t) = op(Resize2d::bilinear((224, 224), (256, 256)))?;
+    let (u64_256, _) = op(Resize2d::bilinear((64, 64), (256, 256)))?;
+    let mut tmp = Vec::new();
+    let mut out224 = vec![0.0f32; 3 * 224 * 224];
+    let mut out512 = vec![0.0f32; 3 * n * n];
+    let view = &images[..3 * n * n];
     row(
-        "  cubic AA 512→224 (f32)",
-        time_ms(reps, || drop(r224.apply(&plane512))),
+        "  cubic AA 512→224, interleaved view → planes (all views)",
+        time_ms(reps, || {
+            for _ in 0..views {
+                r224.apply_from_interleaved(view, 3, &mut out224, &mut tmp);
+            }
+        }),
     );
     row(
-        "  cubic AA 512→224 adjoint (f64 in, f32 out)",
-        time_ms(reps, || drop(r224.adjoint_as::<f64, f32>(&plane224_out))),
+        "  cubic AA adjoint 224→512, planes → interleaved (all views)",
+        time_ms(reps, || {
+            for _ in 0..views {
+                r224_t.apply_to_interleaved(&out224, 3, &mut out512, &mut tmp, |v| 2.0 * v);
+            }
+        }),
     );
-    row(
-        "  bilinear 224→64 (f32)",
-        time_ms(reps, || drop(d64.apply(&plane224))),
-    );
-    row(
-        "  bilinear 224→64 adjoint (f64)",
-        time_ms(reps, || drop(d64.adjoint(&plane64_f64))),
-    );
-    row(
-        "  bilinear 224→256 (f32)",
-        time_ms(reps, || drop(u256.apply(&plane224))),
-    );
-    row(
-        "  bilinear 224→256 adjoint (f64)",
-        time_ms(reps, || drop(u256.adjoint(&plane256_f64))),
-    );
-    row(
-        "  bilinear 64→256 (f32)",
-        time_ms(reps, || drop(u64_256.apply(&plane64))),
-    );
+    let plane_row = |what: &str, pr: &PlaneResize, tmp: &mut Vec<f32>| {
+        let (ih, iw) = pr.in_hw();
+        let (oh, ow) = pr.out_hw();
+        let input = vec![0.5f32; ih * iw];
+        let mut out = vec![0.0f32; oh * ow];
+        row(
+            what,
+            time_ms(reps, || {
+                for _ in 0..planes {
+                    pr.apply_plane(&input, &mut out, tmp);
+                }
+            }),
+        );
+    };
+    plane_row("  bilinear 224→64 (all planes)", &d64, &mut tmp);
+    plane_row("  bilinear 224→64 adjoint (all planes)", &d64_t, &mut tmp);
+    plane_row("  bilinear 224→256 (all planes)", &u256, &mut tmp);
+    plane_row("  bilinear 224→256 adjoint (all planes)", &u256_t, &mut tmp);
+    plane_row("  bilinear 64→256 (all planes)", &u64_256, &mut tmp);
     let n2 = 2 * planes * 256 * 256;
+    let mut noise = vec![0.0f32; n2];
     row(
-        &format!("  Gaussian noise, stage II ({n2} samples)"),
-        time_ms(reps, || drop(standard_normal(n2, &mut rng))),
+        &format!("  Gaussian noise, stage II ({n2} samples, 2 threads)"),
+        time_ms(reps, || fill_standard_normal(&mut noise, &mut rng)),
     );
     let eps = vec![0.1f32; planes * 256 * 256];
     row(

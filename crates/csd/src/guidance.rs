@@ -13,9 +13,9 @@
 //! which is spec §7's `100 · [(2/B)·bilinear₆₄ᵀ(grad_I) + w_II·(2/B)·bilinear₂₅₆ᵀ(grad_II)]` through the
 //! 224 resize adjoint; the 2 is ∂x/∂img of `x = 2·img − 1`.
 
-use crate::resize::Resize2d;
-use crate::schedule::{NoiseSchedule, TimestepRange, standard_normal};
-use crate::sds::{classifier_free_guidance, nan_to_num, sds_gradient, sds_loss, split_cond_uncond};
+use crate::resize::{PlaneResize, Resize2d};
+use crate::schedule::{NoiseSchedule, TimestepRange, fill_standard_normal};
+use crate::sds::{check_denoiser_output, classifier_free_guidance, nan_to_num, split_cond_uncond};
 use crate::{Denoiser, Embedding, Guidance, GuidanceError, GuidanceOutput, Tensor};
 use rand::RngCore;
 use rayon::prelude::*;
@@ -199,6 +199,7 @@ pub struct CascadedGuidance {
     uncond: Embedding,
     config: GuidanceConfig,
     schedule: NoiseSchedule,
+    work: Workspace,
 }
 
 impl std::fmt::Debug for CascadedGuidance {
@@ -238,6 +239,32 @@ fn batch_embeddings<'a>(
         .collect()
 }
 
+/// The error for non-finite ε in one branch of a stage's UNet output.
+fn unet_output_error(
+    stage: &str,
+    branch: &str,
+    model: &dyn Denoiser,
+    count: usize,
+    total: usize,
+) -> GuidanceError {
+    GuidanceError::NonFinite {
+        tensor: format!(
+            "the {stage} UNet prediction ε, {branch} branch ({})",
+            model.describe()
+        ),
+        count,
+        total,
+        hint: "the UNet overflowed or was fed non-finite embeddings; an fp16 export can overflow where \
+               fp32 does not (scripts/export_if_onnx.py --dtype fp32)"
+            .into(),
+    }
+}
+
+/// w(t) = 1 − ᾱ_t per view.
+fn weights(schedule: &NoiseSchedule, timesteps: &[i64]) -> Result<Vec<f64>, GuidanceError> {
+    timesteps.iter().map(|&t| schedule.weight(t)).collect()
+}
+
 fn tensor(shape: [usize; 4], data: Vec<f32>) -> Tensor {
     Tensor {
         shape: shape.to_vec(),
@@ -245,9 +272,198 @@ fn tensor(shape: [usize; 4], data: Vec<f32>) -> Tensor {
     }
 }
 
+/// Resize operators (f32 gather form) for one input size; rebuilt when the render size changes.
+#[derive(Debug)]
+struct Operators {
+    input_hw: (usize, usize),
+    /// R: renders → `resolution` (antialiased cubic), and Rᵀ.
+    resize: PlaneResize,
+    resize_t: PlaneResize,
+    /// D: `resolution` → `stage1_resolution`, and Dᵀ.
+    down1: PlaneResize,
+    down1_t: PlaneResize,
+    /// U: `resolution` → `stage2_resolution`, and Uᵀ.
+    up: PlaneResize,
+    up_t: PlaneResize,
+    /// `stage1_resolution` → `stage2_resolution` (ẑ; no adjoint needed).
+    up_low: PlaneResize,
+}
+
+impl Operators {
+    fn new(cfg: &GuidanceConfig, input_hw: (usize, usize)) -> Result<Self, GuidanceError> {
+        let (r, r1, r2) = (cfg.resolution, cfg.stage1_resolution, cfg.stage2_resolution);
+        let resize = Resize2d::cubic_antialias(input_hw, (r, r))?;
+        let down1 = Resize2d::bilinear((r, r), (r1, r1))?;
+        let up = Resize2d::bilinear((r, r), (r2, r2))?;
+        let up_low = Resize2d::bilinear((r1, r1), (r2, r2))?;
+        Ok(Self {
+            input_hw,
+            resize: PlaneResize::forward(&resize),
+            resize_t: PlaneResize::adjoint(&resize),
+            down1: PlaneResize::forward(&down1),
+            down1_t: PlaneResize::adjoint(&down1),
+            up: PlaneResize::forward(&up),
+            up_t: PlaneResize::adjoint(&up),
+            up_low: PlaneResize::forward(&up_low),
+        })
+    }
+}
+
+/// Buffers owned by the guidance and reused by every evaluation (grown on first use), so that no
+/// large intermediate is allocated per call: at 8 views the stage-II batch alone is 2B·6·256² values
+/// (25 MB). Planar NCHW unless stated.
+#[derive(Debug, Default)]
+struct Workspace {
+    ops: Option<Operators>,
+    /// x = 2·R(img) − 1, `(B, 3, r, r)`.
+    x: Vec<f32>,
+    /// z0 = D(x), `(B, 3, r1, r1)`.
+    z0: Vec<f32>,
+    /// Stage-I ε.
+    eps1: Vec<f32>,
+    /// `[z_t; z_t]`, `(2B, 3, r1, r1)`.
+    sample1: Tensor,
+    /// grad_I.
+    grad1: Vec<f32>,
+    /// x0 = U(x), ẑ = U₆₄→₂₅₆(z0), ε_s, ε_t: `(B, 3, r2, r2)` each.
+    x0: Vec<f32>,
+    z_hat: Vec<f32>,
+    eps_s: Vec<f32>,
+    eps_t: Vec<f32>,
+    /// `[x_t ++ ẑ_s] × 2`, `(2B, 6, r2, r2)`.
+    sample2: Tensor,
+    /// grad_II.
+    grad2: Vec<f32>,
+    /// ∂L/∂x, `(B, 3, r, r)`.
+    grad_x: Vec<f32>,
+    /// Per-view scratch for the interleaved resizes (one per view, so views run in parallel).
+    scratch: Vec<Vec<f32>>,
+    /// Per-plane scratch for the planar resizes: (resize intermediate, an output plane).
+    plane_scratch: Vec<(Vec<f32>, Vec<f32>)>,
+}
+
+/// Noise into `buf`: the injected values (length checked) or `len` fresh samples from `rng`.
+fn noise_into(
+    buf: &mut Vec<f32>,
+    injected: &Option<Vec<f32>>,
+    len: usize,
+    what: &str,
+    rng: &mut dyn RngCore,
+) -> Result<(), GuidanceError> {
+    match injected {
+        Some(v) if v.len() == len => {
+            buf.clear();
+            buf.extend_from_slice(v);
+        }
+        Some(v) => {
+            return Err(GuidanceError::InvalidInput(format!(
+                "injected {what} has {} values, expected {len}",
+                v.len()
+            )));
+        }
+        None => {
+            buf.resize(len, 0.0);
+            fill_standard_normal(buf, rng);
+        }
+    }
+    Ok(())
+}
+
+/// `add_noise` coefficients (√ᾱ_t, √(1 − ᾱ_t)) per view, computed in `f64`, applied in `f32`.
+fn noise_coefficients(
+    schedule: &NoiseSchedule,
+    timesteps: &[i64],
+) -> Result<Vec<(f32, f32)>, GuidanceError> {
+    timesteps
+        .iter()
+        .map(|&t| {
+            let a = schedule.alpha_bar(t)?;
+            Ok((a.sqrt() as f32, (1.0 - a).sqrt() as f32))
+        })
+        .collect()
+}
+
+/// The fused per-stage pass over a denoiser output `(2B, C_out, H, W)` (conditional half first): for
+/// every value of the 3 ε channels, ε̂ = ε_c + g·(ε_c − ε_u), grad = clip(nan_to_num(w_b·(ε̂ − ε)))
+/// (exactly [`classifier_free_guidance`] then [`sds_gradient`]), written to `grad`; non-finite ε in
+/// either branch is an error naming the stage, the branch and `model`. Returns L = ½‖grad‖²/B
+/// (summed in `f64` per plane, planes added in order: deterministic for any thread count).
+#[allow(clippy::too_many_arguments)]
+fn fused_sds(
+    out: &Tensor,
+    batch: usize,
+    hw: (usize, usize),
+    noise: &[f32],
+    weights: &[f64],
+    cfg: &GuidanceConfig,
+    grad: &mut Vec<f32>,
+    stage: &str,
+    model: &dyn Denoiser,
+) -> Result<f64, GuidanceError> {
+    check_denoiser_output(out, batch, CHANNELS, hw)?;
+    let c_out = out.shape[1];
+    let plane = hw.0 * hw.1;
+    grad.resize(batch * CHANNELS * plane, 0.0);
+    let g = cfg.guidance_scale;
+    let clip = cfg.grad_clip;
+    let per_plane: Vec<(f64, usize, usize)> = grad
+        .par_chunks_mut(plane)
+        .zip(noise.par_chunks(plane))
+        .enumerate()
+        .map(|(q, (gr, eps))| {
+            let (b, c) = (q / CHANNELS, q % CHANNELS);
+            let w = weights[b] as f32;
+            let cond = &out.data[(b * c_out + c) * plane..][..plane];
+            let uncond = &out.data[((batch + b) * c_out + c) * plane..][..plane];
+            let (mut sum, mut bad_c, mut bad_u) = (0.0f64, 0usize, 0usize);
+            for (((o, &ce), &ue), &e) in gr.iter_mut().zip(cond).zip(uncond).zip(eps) {
+                bad_c += usize::from(!ce.is_finite());
+                bad_u += usize::from(!ue.is_finite());
+                let e_hat = ce + g * (ce - ue);
+                let v = nan_to_num(w * (e_hat - e));
+                let v = match clip {
+                    Some(k) => v.clamp(-k, k),
+                    None => v,
+                };
+                *o = v;
+                sum += f64::from(v) * f64::from(v);
+            }
+            (sum, bad_c, bad_u)
+        })
+        .collect();
+    let (mut sum, mut bad_c, mut bad_u) = (0.0f64, 0usize, 0usize);
+    for (s, c, u) in per_plane {
+        sum += s;
+        bad_c += c;
+        bad_u += u;
+    }
+    for (count, branch) in [(bad_c, "conditional"), (bad_u, "unconditional")] {
+        if count > 0 {
+            return Err(unet_output_error(stage, branch, model, count, grad.len()));
+        }
+    }
+    Ok(0.5 * sum / batch.max(1) as f64)
+}
+
+/// What [`CascadedGuidance::evaluate_core`] leaves besides the workspace buffers.
+struct Core {
+    output: GuidanceOutput,
+    t1: Vec<i64>,
+    loss1: f64,
+    out1: Option<Tensor>,
+    stage2: Option<Stage2Core>,
+}
+
+struct Stage2Core {
+    t2: Vec<i64>,
+    s2: Vec<i64>,
+    loss2: f64,
+    out2: Option<Tensor>,
+}
+
 impl CascadedGuidance {
     /// Builds the guidance. `stage2` may be None (then any positive stage-II weight is an error);
-    /// `cond` and `uncond` are the prompt and negative-prompt embeddings (same shape).
+    /// `cond` and `uncond` are the prompt and negative-prompt embeddings (same shape, finite).
     pub fn new(
         stage1: Box<dyn Denoiser>,
         stage2: Option<Box<dyn Denoiser>>,
@@ -265,6 +481,8 @@ impl CascadedGuidance {
                 )));
             }
         }
+        crate::check_embedding_finite(&cond, "the prompt embedding")?;
+        crate::check_embedding_finite(&uncond, "the negative-prompt embedding")?;
         if cond.shape != uncond.shape {
             return Err(GuidanceError::InvalidInput(format!(
                 "prompt embedding {:?} and negative prompt embedding {:?} differ in shape",
@@ -279,6 +497,7 @@ impl CascadedGuidance {
             uncond,
             config,
             schedule,
+            work: Workspace::default(),
         })
     }
 
@@ -297,12 +516,9 @@ impl CascadedGuidance {
         self.stage2.is_some()
     }
 
-    fn weights(&self, timesteps: &[i64]) -> Result<Vec<f64>, GuidanceError> {
-        timesteps.iter().map(|&t| self.schedule.weight(t)).collect()
-    }
-
-    /// Like [`Guidance::evaluate`], returning every intermediate; `injected` replaces chosen random draws.
-    pub fn evaluate_traced(
+    /// One evaluation into the workspace buffers; the denoiser outputs are kept only for a trace.
+    #[allow(clippy::too_many_arguments)]
+    fn evaluate_core(
         &mut self,
         images: &[f32],
         views: usize,
@@ -311,7 +527,8 @@ impl CascadedGuidance {
         stage2_weight: f64,
         rng: &mut dyn RngCore,
         injected: &InjectedDraws,
-    ) -> Result<GuidanceTrace, GuidanceError> {
+        keep_outputs: bool,
+    ) -> Result<Core, GuidanceError> {
         if views == 0
             || height == 0
             || width == 0
@@ -333,80 +550,156 @@ impl CascadedGuidance {
                 "stage-II weight is {stage2_weight} but no stage-II model was given (use weight 0 to run stage I only)"
             )));
         }
-        let cfg = self.config.clone();
+        let Self {
+            stage1,
+            stage2,
+            cond,
+            uncond,
+            config: cfg,
+            schedule,
+            work,
+        } = self;
         let b = views;
         let (r, r1, r2) = (cfg.resolution, cfg.stage1_resolution, cfg.stage2_resolution);
+        let (pr, p1, p2) = (r * r, r1 * r1, r2 * r2);
+        let plane_in = height * width;
+        if work
+            .ops
+            .as_ref()
+            .is_none_or(|o| o.input_hw != (height, width))
+        {
+            work.ops = Some(Operators::new(cfg, (height, width))?);
+        }
+        let Workspace {
+            ops: Some(ops),
+            x,
+            z0,
+            eps1,
+            sample1,
+            grad1,
+            x0,
+            z_hat,
+            eps_s,
+            eps_t,
+            sample2,
+            grad2,
+            grad_x,
+            scratch,
+            plane_scratch,
+        } = work
+        else {
+            return Err(GuidanceError::InvalidInput(
+                "internal: resize operators missing".into(),
+            ));
+        };
+        scratch.resize_with(b, Vec::new);
+        plane_scratch.resize_with(b * CHANNELS, Default::default);
 
-        // Renders (view, row, col, channel) → NCHW.
-        let plane = height * width;
-        let mut img = vec![0.0f32; images.len()];
-        img.par_chunks_mut(CHANNELS * plane)
-            .zip(images.par_chunks(CHANNELS * plane))
-            .for_each(|(dst, src)| {
-                for (p, px) in src.chunks_exact(CHANNELS).enumerate() {
-                    for (c, &v) in px.iter().enumerate() {
-                        dst[c * plane + p] = v;
-                    }
+        // x = 2·R(img) − 1: renders (view, row, col, channel) straight into planar x; the height pass
+        // runs over whole interleaved rows. Non-finite renders show up as non-finite x.
+        x.resize(b * CHANNELS * pr, 0.0);
+        let bad_x: usize = x
+            .par_chunks_mut(CHANNELS * pr)
+            .zip(images.par_chunks(CHANNELS * plane_in))
+            .zip(scratch.par_iter_mut())
+            .map(|((xv, src), tmp)| {
+                ops.resize.apply_from_interleaved(src, CHANNELS, xv, tmp);
+                let mut bad = 0;
+                for v in xv.iter_mut() {
+                    *v = 2.0 * *v - 1.0;
+                    bad += usize::from(!v.is_finite());
                 }
+                bad
+            })
+            .sum();
+        if bad_x > 0 {
+            let count = crate::count_non_finite(images);
+            return Err(GuidanceError::NonFinite {
+                tensor: if count > 0 {
+                    "the rendered images given to the guidance".into()
+                } else {
+                    "x = 2·resize(renders) − 1 (the renders are finite but so large that the resize overflows)"
+                        .into()
+                },
+                count: if count > 0 { count } else { bad_x },
+                total: if count > 0 { images.len() } else { x.len() },
+                hint: "the renderer produced them (degenerate geometry?); nothing was optimized"
+                    .into(),
             });
-        let resize = Resize2d::cubic_antialias((height, width), (r, r))?;
-        let down1 = Resize2d::bilinear((r, r), (r1, r1))?;
-        let mut x = resize.apply(&img)?;
-        x.iter_mut().for_each(|v| *v = 2.0 * *v - 1.0);
+        }
 
         // Stage I: SDS at r1.
-        let z0 = down1.apply(&x)?;
-        let n1 = b * CHANNELS * r1 * r1;
+        z0.resize(b * CHANNELS * p1, 0.0);
+        z0.par_chunks_mut(p1)
+            .zip(x.par_chunks(pr))
+            .zip(plane_scratch.par_iter_mut())
+            .for_each(|((z, xp), (tmp, _))| ops.down1.apply_plane(xp, z, tmp));
+        let n1 = b * CHANNELS * p1;
         let t1 = draw_or_inject(&injected.stage1_timesteps, b, "stage-I timesteps", || {
             cfg.timesteps.sample(b, rng)
         })?;
-        let eps1 = draw_or_inject(&injected.stage1_noise, n1, "stage-I noise", || {
-            standard_normal(n1, rng)
-        })?;
-        let z_t = self.schedule.add_noise(&z0, &eps1, &t1)?;
-        let mut sample = Vec::with_capacity(2 * n1);
-        sample.extend_from_slice(&z_t);
-        sample.extend_from_slice(&z_t);
+        noise_into(eps1, &injected.stage1_noise, n1, "stage-I noise", rng)?;
+        let coef1 = noise_coefficients(schedule, &t1)?;
+        sample1.shape = vec![2 * b, CHANNELS, r1, r1];
+        sample1.data.resize(2 * n1, 0.0);
+        {
+            let (z_t, copy) = sample1.data.split_at_mut(n1);
+            z_t.par_chunks_mut(CHANNELS * p1)
+                .zip(z0.par_chunks(CHANNELS * p1))
+                .zip(eps1.par_chunks(CHANNELS * p1))
+                .zip(coef1.par_iter())
+                .for_each(|(((o, z), e), &(a, s))| {
+                    for ((o, &z), &e) in o.iter_mut().zip(z).zip(e) {
+                        *o = a * z + s * e;
+                    }
+                });
+            copy.copy_from_slice(z_t);
+        }
         let ts: Vec<i64> = t1.iter().chain(&t1).copied().collect();
         let out1 = {
-            let embeddings = batch_embeddings(&self.cond, &self.uncond, b);
-            self.stage1.predict(
-                &tensor([2 * b, CHANNELS, r1, r1], sample),
-                &ts,
-                &embeddings,
-                None,
-            )?
+            let embeddings = batch_embeddings(cond, uncond, b);
+            stage1.predict(sample1, &ts, &embeddings, None)?
         };
-        let (c1, u1) = split_cond_uncond(&out1, b, CHANNELS, (r1, r1))?;
-        let g1 = classifier_free_guidance(&c1, &u1, cfg.guidance_scale);
-        let grad1 = sds_gradient(&g1, &eps1, &self.weights(&t1)?, cfg.grad_clip)?;
-        let loss1 = sds_loss(&grad1, b);
+        let w1 = weights(schedule, &t1)?;
+        let loss1 = fused_sds(
+            &out1,
+            b,
+            (r1, r1),
+            eps1,
+            &w1,
+            cfg,
+            grad1,
+            "stage-I",
+            stage1.as_ref(),
+        )?;
+        let out1 = keep_outputs.then_some(out1);
 
-        // ∂L/∂x accumulated in f64: (S·a/B)·Dᵀ(grad_I) [+ (S·w_II/B)·Uᵀ(grad_II)].
-        let k1 = cfg.loss_scale * cfg.stage1_weight / b as f64;
-        let scaled1: Vec<f64> = grad1.iter().map(|&g| k1 * g as f64).collect();
-        let mut grad_x = down1.adjoint(&scaled1)?;
-
-        let shape1 = [b, CHANNELS, r1, r1];
-        let stage1 = Stage1Trace {
-            z0: tensor(shape1, z0),
-            timesteps: t1,
-            noise: tensor(shape1, eps1),
-            z_t: tensor(shape1, z_t),
-            eps_cond: tensor(shape1, c1),
-            eps_uncond: tensor(shape1, u1),
-            eps_guided: tensor(shape1, g1),
-            grad: tensor(shape1, grad1),
-            loss: loss1,
-        };
+        // ∂L/∂x = (S·a/B)·Dᵀ(grad_I) [+ (S·w_II/B)·Uᵀ(grad_II)], in f32 (the reference's precision).
+        let k1 = (cfg.loss_scale * cfg.stage1_weight / b as f64) as f32;
+        grad_x.resize(b * CHANNELS * pr, 0.0);
+        grad_x
+            .par_chunks_mut(pr)
+            .zip(grad1.par_chunks(p1))
+            .zip(plane_scratch.par_iter_mut())
+            .for_each(|((gx, g), (tmp, _))| {
+                ops.down1_t.apply_plane(g, gx, tmp);
+                gx.iter_mut().for_each(|v| *v *= k1);
+            });
 
         // Stage II: CSD at r2, conditioned on the noised upsampled stage-I input.
-        let stage2 = if run_stage2 {
-            let up = Resize2d::bilinear((r, r), (r2, r2))?;
-            let up_low = Resize2d::bilinear((r1, r1), (r2, r2))?;
-            let x0 = up.apply(&x)?;
-            let z_hat = up_low.apply(&stage1.z0.data)?;
-            let n2 = b * CHANNELS * r2 * r2;
+        let stage2_core = if run_stage2 {
+            let n2 = b * CHANNELS * p2;
+            x0.resize(n2, 0.0);
+            z_hat.resize(n2, 0.0);
+            x0.par_chunks_mut(p2)
+                .zip(x.par_chunks(pr))
+                .zip(z_hat.par_chunks_mut(p2))
+                .zip(z0.par_chunks(p1))
+                .zip(plane_scratch.par_iter_mut())
+                .for_each(|((((o, xp), zh), zp), (tmp, _))| {
+                    ops.up.apply_plane(xp, o, tmp);
+                    ops.up_low.apply_plane(zp, zh, tmp);
+                });
             let t2 = draw_or_inject(&injected.stage2_timesteps, b, "stage-II timesteps", || {
                 cfg.timesteps.sample(b, rng)
             })?;
@@ -416,102 +709,208 @@ impl CascadedGuidance {
                 "stage-II noise levels",
                 || cfg.timesteps.sample(b, rng),
             )?;
-            let eps_s = draw_or_inject(
+            noise_into(
+                eps_s,
                 &injected.stage2_noise_lowres,
                 n2,
                 "stage-II low-res noise",
-                || standard_normal(n2, rng),
+                rng,
             )?;
-            let eps_t = draw_or_inject(&injected.stage2_noise, n2, "stage-II noise", || {
-                standard_normal(n2, rng)
-            })?;
-            let x_t = self.schedule.add_noise(&x0, &eps_t, &t2)?;
-            let z_hat_s = self.schedule.add_noise(&z_hat, &eps_s, &s2)?;
+            noise_into(eps_t, &injected.stage2_noise, n2, "stage-II noise", rng)?;
+            let (coef_t, coef_s) = (
+                noise_coefficients(schedule, &t2)?,
+                noise_coefficients(schedule, &s2)?,
+            );
             // UNet input per sample: channels [x_t (3), ẑ_s (3)]; the batch is [cond half; uncond half].
-            let per = CHANNELS * r2 * r2;
-            let mut sample = Vec::with_capacity(4 * n2);
-            for _half in 0..2 {
-                for v in 0..b {
-                    sample.extend_from_slice(&x_t[v * per..(v + 1) * per]);
-                    sample.extend_from_slice(&z_hat_s[v * per..(v + 1) * per]);
-                }
-            }
+            sample2.shape = vec![2 * b, 2 * CHANNELS, r2, r2];
+            sample2.data.resize(4 * n2, 0.0);
+            sample2
+                .data
+                .par_chunks_mut(p2)
+                .enumerate()
+                .for_each(|(q, o)| {
+                    let (n, ch) = (q / (2 * CHANNELS), q % (2 * CHANNELS));
+                    let v = n % b;
+                    let (clean, noise, (a, s)) = if ch < CHANNELS {
+                        let i = (v * CHANNELS + ch) * p2;
+                        (&x0[i..i + p2], &eps_t[i..i + p2], coef_t[v])
+                    } else {
+                        let i = (v * CHANNELS + ch - CHANNELS) * p2;
+                        (&z_hat[i..i + p2], &eps_s[i..i + p2], coef_s[v])
+                    };
+                    for ((o, &z), &e) in o.iter_mut().zip(clean).zip(noise) {
+                        *o = a * z + s * e;
+                    }
+                });
             let ts: Vec<i64> = t2.iter().chain(&t2).copied().collect();
             let labels: Vec<i64> = s2.iter().chain(&s2).copied().collect();
-            let embeddings = batch_embeddings(&self.cond, &self.uncond, b);
-            let model = self
-                .stage2
+            let embeddings = batch_embeddings(cond, uncond, b);
+            let model = stage2
                 .as_mut()
                 .ok_or_else(|| GuidanceError::InvalidInput("no stage-II model".into()))?;
-            let out2 = model.predict(
-                &tensor([2 * b, 2 * CHANNELS, r2, r2], sample),
-                &ts,
-                &embeddings,
-                Some(&labels),
+            let out2 = model.predict(sample2, &ts, &embeddings, Some(&labels))?;
+            let w2 = weights(schedule, &t2)?;
+            let loss2 = fused_sds(
+                &out2,
+                b,
+                (r2, r2),
+                eps_t,
+                &w2,
+                cfg,
+                grad2,
+                "stage-II",
+                model.as_ref(),
             )?;
-            let (c2, u2) = split_cond_uncond(&out2, b, CHANNELS, (r2, r2))?;
-            let g2 = classifier_free_guidance(&c2, &u2, cfg.guidance_scale);
-            let grad2 = sds_gradient(&g2, &eps_t, &self.weights(&t2)?, cfg.grad_clip)?;
-            let loss2 = sds_loss(&grad2, b);
-            let k2 = cfg.loss_scale * stage2_weight / b as f64;
-            let scaled2: Vec<f64> = grad2.iter().map(|&g| k2 * g as f64).collect();
-            for (gx, g) in grad_x.iter_mut().zip(up.adjoint(&scaled2)?) {
-                *gx += g;
-            }
-            let shape2 = [b, CHANNELS, r2, r2];
-            Some(Stage2Trace {
-                weight: stage2_weight,
-                x0: tensor(shape2, x0),
-                z_hat: tensor(shape2, z_hat),
-                timesteps: t2,
-                noise_levels: s2,
-                noise: tensor(shape2, eps_t),
-                noise_lowres: tensor(shape2, eps_s),
-                x_t: tensor(shape2, x_t),
-                z_hat_s: tensor(shape2, z_hat_s),
-                eps_cond: tensor(shape2, c2),
-                eps_uncond: tensor(shape2, u2),
-                eps_guided: tensor(shape2, g2),
-                grad: tensor(shape2, grad2),
-                loss: loss2,
+            let out2 = keep_outputs.then_some(out2);
+            let k2 = (cfg.loss_scale * stage2_weight / b as f64) as f32;
+            grad_x
+                .par_chunks_mut(pr)
+                .zip(grad2.par_chunks(p2))
+                .zip(plane_scratch.par_iter_mut())
+                .for_each(|((gx, g), (tmp, up))| {
+                    up.resize(pr, 0.0);
+                    ops.up_t.apply_plane(g, up, tmp);
+                    for (a, &u) in gx.iter_mut().zip(up.iter()) {
+                        *a += k2 * u;
+                    }
+                });
+            Some(Stage2Core {
+                t2,
+                s2,
+                loss2,
+                out2,
             })
         } else {
             None
         };
 
-        // x = 2·R(img) − 1 ⇒ ∂L/∂img = 2·Rᵀ(∂L/∂x). The 224-resize adjoint reads ∂L/∂x in f64 and writes
-        // f32 (f64 accumulation); the factor 2 is applied while converting NCHW → (view, row, col,
-        // channel), with a final NaN/∞ guard.
-        let grad_img: Vec<f32> = resize.adjoint_as::<f64, f32>(&grad_x)?;
+        // x = 2·R(img) − 1 ⇒ ∂L/∂img = 2·Rᵀ(∂L/∂x), written straight into (view, row, col, channel) with
+        // a final NaN/∞ guard.
         let mut grad_images = vec![0.0f32; images.len()];
         grad_images
-            .par_chunks_mut(CHANNELS * plane)
-            .zip(grad_img.par_chunks(CHANNELS * plane))
-            .for_each(|(dst, src)| {
-                for (p, px) in dst.chunks_exact_mut(CHANNELS).enumerate() {
-                    for (c, v) in px.iter_mut().enumerate() {
-                        *v = nan_to_num((2.0 * src[c * plane + p] as f64) as f32);
-                    }
-                }
+            .par_chunks_mut(CHANNELS * plane_in)
+            .zip(grad_x.par_chunks(CHANNELS * pr))
+            .zip(scratch.par_iter_mut())
+            .for_each(|((out, gx), tmp)| {
+                ops.resize_t
+                    .apply_to_interleaved(gx, CHANNELS, out, tmp, |v| nan_to_num(2.0 * v));
             });
         let output = GuidanceOutput {
-            loss_stage1: cfg.loss_scale * cfg.stage1_weight * stage1.loss,
-            loss_stage2: stage2
+            loss_stage1: cfg.loss_scale * cfg.stage1_weight * loss1,
+            loss_stage2: stage2_core
                 .as_ref()
-                .map_or(0.0, |s| cfg.loss_scale * stage2_weight * s.loss),
+                .map_or(0.0, |s| cfg.loss_scale * stage2_weight * s.loss2),
             grad_images,
+        };
+        Ok(Core {
+            output,
+            t1,
+            loss1,
+            out1,
+            stage2: stage2_core,
+        })
+    }
+
+    /// Like [`Guidance::evaluate`], returning every intermediate; `injected` replaces chosen random draws.
+    #[allow(clippy::too_many_arguments)]
+    pub fn evaluate_traced(
+        &mut self,
+        images: &[f32],
+        views: usize,
+        height: usize,
+        width: usize,
+        stage2_weight: f64,
+        rng: &mut dyn RngCore,
+        injected: &InjectedDraws,
+    ) -> Result<GuidanceTrace, GuidanceError> {
+        let core = self.evaluate_core(
+            images,
+            views,
+            height,
+            width,
+            stage2_weight,
+            rng,
+            injected,
+            true,
+        )?;
+        let cfg = &self.config;
+        let w = &self.work;
+        let b = views;
+        let (r, r1, r2) = (cfg.resolution, cfg.stage1_resolution, cfg.stage2_resolution);
+        let g = cfg.guidance_scale;
+        let plane = height * width;
+        let mut img = vec![0.0f32; images.len()];
+        for (dst, src) in img
+            .chunks_mut(CHANNELS * plane)
+            .zip(images.chunks(CHANNELS * plane))
+        {
+            for (p, px) in src.chunks_exact(CHANNELS).enumerate() {
+                for (c, &v) in px.iter().enumerate() {
+                    dst[c * plane + p] = v;
+                }
+            }
+        }
+        let n1 = b * CHANNELS * r1 * r1;
+        let out1 = core.out1.ok_or_else(|| {
+            GuidanceError::InvalidInput("internal: stage-I output not kept".into())
+        })?;
+        let (c1, u1) = split_cond_uncond(&out1, b, CHANNELS, (r1, r1))?;
+        let g1 = classifier_free_guidance(&c1, &u1, g);
+        let shape1 = [b, CHANNELS, r1, r1];
+        let stage1 = Stage1Trace {
+            z0: tensor(shape1, w.z0.clone()),
+            timesteps: core.t1,
+            noise: tensor(shape1, w.eps1.clone()),
+            z_t: tensor(shape1, w.sample1.data[..n1].to_vec()),
+            eps_cond: tensor(shape1, c1),
+            eps_uncond: tensor(shape1, u1),
+            eps_guided: tensor(shape1, g1),
+            grad: tensor(shape1, w.grad1.clone()),
+            loss: core.loss1,
+        };
+        let stage2 = match core.stage2 {
+            Some(s) => {
+                let out2 = s.out2.ok_or_else(|| {
+                    GuidanceError::InvalidInput("internal: stage-II output not kept".into())
+                })?;
+                let (c2, u2) = split_cond_uncond(&out2, b, CHANNELS, (r2, r2))?;
+                let g2 = classifier_free_guidance(&c2, &u2, g);
+                let per = CHANNELS * r2 * r2;
+                let (mut x_t, mut z_hat_s) =
+                    (Vec::with_capacity(b * per), Vec::with_capacity(b * per));
+                for v in 0..b {
+                    let base = v * 2 * per;
+                    x_t.extend_from_slice(&w.sample2.data[base..base + per]);
+                    z_hat_s.extend_from_slice(&w.sample2.data[base + per..base + 2 * per]);
+                }
+                let shape2 = [b, CHANNELS, r2, r2];
+                Some(Stage2Trace {
+                    weight: stage2_weight,
+                    x0: tensor(shape2, w.x0.clone()),
+                    z_hat: tensor(shape2, w.z_hat.clone()),
+                    timesteps: s.t2,
+                    noise_levels: s.s2,
+                    noise: tensor(shape2, w.eps_t.clone()),
+                    noise_lowres: tensor(shape2, w.eps_s.clone()),
+                    x_t: tensor(shape2, x_t),
+                    z_hat_s: tensor(shape2, z_hat_s),
+                    eps_cond: tensor(shape2, c2),
+                    eps_uncond: tensor(shape2, u2),
+                    eps_guided: tensor(shape2, g2),
+                    grad: tensor(shape2, w.grad2.clone()),
+                    loss: s.loss2,
+                })
+            }
+            None => None,
         };
         let shape = [b, CHANNELS, r, r];
         Ok(GuidanceTrace {
             images: tensor([b, CHANNELS, height, width], img),
-            x: tensor(shape, x),
+            x: tensor(shape, w.x.clone()),
             stage1,
             stage2,
-            grad_x: tensor(
-                shape,
-                grad_x.iter().map(|&g| nan_to_num(g as f32)).collect(),
-            ),
-            output,
+            grad_x: tensor(shape, w.grad_x.iter().map(|&v| nan_to_num(v)).collect()),
+            output: core.output,
         })
     }
 }
@@ -527,7 +926,7 @@ impl Guidance for CascadedGuidance {
         rng: &mut dyn RngCore,
     ) -> Result<GuidanceOutput, GuidanceError> {
         Ok(self
-            .evaluate_traced(
+            .evaluate_core(
                 images,
                 views,
                 height,
@@ -535,6 +934,7 @@ impl Guidance for CascadedGuidance {
                 stage2_weight,
                 rng,
                 &InjectedDraws::default(),
+                false,
             )?
             .output)
     }

@@ -98,12 +98,52 @@ pub enum GuidanceError {
     /// Inputs are inconsistent.
     #[error("invalid guidance input: {0}")]
     InvalidInput(String),
+    /// A tensor that must be finite holds NaN or ±∞ (e.g. an fp16 overflow in the text encoder or a
+    /// UNet). Guidance refuses to continue: the reference's `nan_to_num` would turn such values into a
+    /// zero (or saturated) gradient and the run would "succeed" without changing the mesh.
+    #[error("{tensor} has {count} non-finite values (NaN or ±∞) out of {total}; {hint}")]
+    NonFinite {
+        /// Which tensor, with the model or file it came from (e.g. "stage-I UNet output ε, conditional
+        /// branch (stage1 UNet, models/if/unet_stage1.onnx)").
+        tensor: String,
+        /// How many values are NaN or ±∞.
+        count: usize,
+        /// How many values the tensor has.
+        total: usize,
+        /// What to do about it.
+        hint: String,
+    },
+}
+
+/// Number of values that are NaN or ±∞.
+pub fn count_non_finite(values: &[f32]) -> usize {
+    values.iter().filter(|v| !v.is_finite()).count()
+}
+
+/// Checks that an embedding is all finite; `what` names it in the error (e.g. "prompt embedding").
+pub fn check_embedding_finite(embedding: &Embedding, what: &str) -> Result<(), GuidanceError> {
+    let count = count_non_finite(&embedding.data);
+    if count == 0 {
+        return Ok(());
+    }
+    Err(GuidanceError::NonFinite {
+        tensor: what.to_string(),
+        count,
+        total: embedding.data.len(),
+        hint: "recompute it (delete the cached file; an fp16 text encoder can overflow, an fp32 export does not)"
+            .into(),
+    })
 }
 
 /// One UNet stage. `sample` is `(N, C, H, W)`; `embeddings[i]` conditions sample `i`;
 /// `class_labels` is the stage-II noise level (None for stage I). Returns the model output
 /// `(N, C_out, H, W)` (IF: ε in the first 3 channels, learned variance after).
 pub trait Denoiser: Send {
+    /// What this denoiser is, for error messages (e.g. the model file). Default: "the denoiser".
+    fn describe(&self) -> String {
+        "the denoiser".into()
+    }
+
     /// Runs the UNet once on a batch.
     fn predict(
         &mut self,

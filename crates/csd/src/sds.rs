@@ -13,6 +13,27 @@ pub fn split_cond_uncond(
     keep: usize,
     hw: (usize, usize),
 ) -> Result<(Vec<f32>, Vec<f32>), GuidanceError> {
+    check_denoiser_output(output, batch, keep, hw)?;
+    let c_out = output.shape[1];
+    let plane = hw.0 * hw.1;
+    let take = |half: usize| -> Vec<f32> {
+        let mut v = Vec::with_capacity(batch * keep * plane);
+        for b in 0..batch {
+            let base = ((half * batch + b) * c_out) * plane;
+            v.extend_from_slice(&output.data[base..base + keep * plane]);
+        }
+        v
+    };
+    Ok((take(0), take(1)))
+}
+
+/// Checks that a denoiser output is `(2B, ≥ keep, H, W)` with as many values as its shape says.
+pub fn check_denoiser_output(
+    output: &Tensor,
+    batch: usize,
+    keep: usize,
+    hw: (usize, usize),
+) -> Result<(), GuidanceError> {
     let expected_prefix = [2 * batch];
     let ok = output.shape.len() == 4
         && output.shape[..1] == expected_prefix
@@ -29,17 +50,7 @@ pub fn split_cond_uncond(
             hw.1
         )));
     }
-    let c_out = output.shape[1];
-    let plane = hw.0 * hw.1;
-    let take = |half: usize| -> Vec<f32> {
-        let mut v = Vec::with_capacity(batch * keep * plane);
-        for b in 0..batch {
-            let base = ((half * batch + b) * c_out) * plane;
-            v.extend_from_slice(&output.data[base..base + keep * plane]);
-        }
-        v
-    };
-    Ok((take(0), take(1)))
+    Ok(())
 }
 
 /// Classifier-free guidance as the reference codes it: `ε̂ = ε_c + g·(ε_c − ε_u)` (in `f32`).

@@ -356,20 +356,21 @@ fn stage2_is_not_called_at_weight_zero() {
 }
 
 #[test]
-fn nan_and_infinite_predictions_give_finite_gradients() {
-    // Pixel pattern p mod 4 of the conditional ε_c: NaN, +∞, −∞, +∞ with ε_u = 0, 0, 0, +∞:
-    //   ε̂ = NaN                      → grad NaN → 0
-    //   ε̂ = ∞ + 100(∞ − 0) = ∞        → w(∞ − ε) = ∞ → f32::MAX
-    //   ε̂ = −∞ + 100(−∞ − 0) = −∞     → f32::MIN
-    //   ε̂ = ∞ + 100(∞ − ∞) = NaN      → 0
+fn overflowing_guidance_gives_saturated_finite_gradients() {
+    // Finite but huge predictions overflow in ε̂ = ε_c + 100(ε_c − ε_u) (f32, as the reference). Pixel
+    // pattern p mod 4, (ε_c, ε_u):
+    //   (MAX, −MAX): ε_c − ε_u = ∞ ⇒ ε̂ = ∞ ⇒ w(∞ − ε) = ∞ → f32::MAX (nan_to_num)
+    //   (−MAX, MAX): ε̂ = −∞ → f32::MIN
+    //   (1, 0), (0.5, 0.5): finite throughout.
     // The image gradient sums many ±MAX values: it must still come out finite (no NaN, no ∞).
     let rule = |s: &Tensor, t: &[i64]| {
         let b = t.len() / 2;
         output(s, move |n, _, p| match (n < b, p % 4) {
-            (true, 0) => f32::NAN,
-            (true, 1) | (true, 3) | (false, 3) => f32::INFINITY,
-            (true, _) => f32::NEG_INFINITY,
-            (false, _) => 0.0,
+            (true, 0) | (false, 1) => f32::MAX,
+            (true, 1) | (false, 0) => -f32::MAX,
+            (true, 2) => 1.0,
+            (false, 2) => 0.0,
+            _ => 0.5,
         })
     };
     let (stage1, _) = Fake::boxed(rule);
@@ -399,13 +400,140 @@ fn nan_and_infinite_predictions_give_finite_gradients() {
     let st2 = trace.stage2.as_ref().expect("ran");
     for grad in [&trace.stage1.grad, &st2.grad] {
         for (p, &v) in grad.data.iter().enumerate() {
-            let expected = [0.0, f32::MAX, f32::MIN, 0.0][p % 4];
-            assert_eq!(v, expected, "pixel {p}");
+            match p % 4 {
+                0 => assert_eq!(v, f32::MAX, "pixel {p}"),
+                1 => assert_eq!(v, f32::MIN, "pixel {p}"),
+                _ => assert!(v.is_finite() && v.abs() < 1e3, "pixel {p}: {v}"),
+            }
         }
     }
     assert!(trace.output.grad_images.iter().all(|v| v.is_finite()));
     assert!(trace.grad_x.data.iter().all(|v| v.is_finite()));
     assert!(trace.output.loss_stage1.is_finite() && trace.output.loss_stage2.is_finite());
+}
+
+/// A denoiser that names itself, for the error messages.
+struct Named(Box<dyn Denoiser>, &'static str);
+
+impl Denoiser for Named {
+    fn describe(&self) -> String {
+        self.1.to_string()
+    }
+    fn predict(
+        &mut self,
+        sample: &Tensor,
+        timesteps: &[i64],
+        embeddings: &[&Embedding],
+        class_labels: Option<&[i64]>,
+    ) -> Result<Tensor, GuidanceError> {
+        self.0.predict(sample, timesteps, embeddings, class_labels)
+    }
+}
+
+/// The error of one evaluation (2 views of 64², stage-II weight 0.2) with these denoisers.
+fn non_finite_error(stage1: Box<dyn Denoiser>, stage2: Box<dyn Denoiser>) -> GuidanceError {
+    let (cond, uncond) = embeddings();
+    let mut g = CascadedGuidance::new(
+        Box::new(Named(stage1, "fake IF-I, unet1.onnx")),
+        Some(Box::new(Named(stage2, "fake IF-II, unet2.onnx"))),
+        cond,
+        uncond,
+        GuidanceConfig::default(),
+    )
+    .expect("valid");
+    let mut rng = ChaCha8Rng::seed_from_u64(1);
+    match g.evaluate(&renders(2, 64, 64), 2, 64, 64, 0.2, &mut rng) {
+        Ok(out) => panic!(
+            "non-finite predictions were accepted (loss {})",
+            out.loss_stage1 + out.loss_stage2
+        ),
+        Err(e) => e,
+    }
+}
+
+#[test]
+fn non_finite_unet_predictions_are_errors_naming_stage_branch_count_and_model() {
+    // Stage I: 5 NaN in the conditional ε (sample 1, channel 2, pixels 0..5); the learned-variance
+    // channels (1e6 and beyond) are not looked at.
+    let five_nan = |s: &Tensor, t: &[i64]| {
+        let b = t.len() / 2;
+        output(s, move |n, c, p| {
+            if n == b - 1 && c == 2 && p < 5 {
+                f32::NAN
+            } else {
+                0.0
+            }
+        })
+    };
+    let clean = |s: &Tensor, _: &[i64]| output(s, |_, _, _| 0.0);
+    let e = non_finite_error(Fake::boxed(five_nan).0, Fake::boxed(clean).0);
+    let msg = e.to_string();
+    assert!(
+        matches!(e, GuidanceError::NonFinite { count: 5, total, .. } if total == 2 * 3 * 64 * 64),
+        "{e:?}"
+    );
+    assert!(
+        msg.contains("stage-I UNet")
+            && msg.contains("conditional branch")
+            && msg.contains("fake IF-I, unet1.onnx")
+            && msg.contains("5 non-finite"),
+        "{msg}"
+    );
+    // Stage II: +∞ everywhere in the unconditional half; stage I is clean.
+    let inf_uncond = |s: &Tensor, t: &[i64]| {
+        let b = t.len() / 2;
+        output(s, move |n, _, _| if n >= b { f32::INFINITY } else { 0.0 })
+    };
+    let e = non_finite_error(Fake::boxed(clean).0, Fake::boxed(inf_uncond).0);
+    let msg = e.to_string();
+    assert!(
+        msg.contains("stage-II UNet")
+            && msg.contains("unconditional branch")
+            && msg.contains("fake IF-II, unet2.onnx")
+            && msg.contains(&format!("{} non-finite", 2 * 3 * 256 * 256)),
+        "{msg}"
+    );
+}
+
+#[test]
+fn non_finite_embeddings_and_renders_are_refused() {
+    let (cond, uncond) = embeddings();
+    let fake = || Fake::boxed(|s: &Tensor, _: &[i64]| output(s, |_, _, _| 0.0)).0;
+    let mut nan = uncond.clone();
+    nan.data.iter_mut().for_each(|v| *v = f32::NAN);
+    let e = CascadedGuidance::new(fake(), None, cond.clone(), nan, GuidanceConfig::default())
+        .err()
+        .map(|e| e.to_string())
+        .unwrap_or_default();
+    assert!(
+        e.contains("negative-prompt embedding") && e.contains("6 non-finite values"),
+        "{e}"
+    );
+    let mut inf = cond.clone();
+    inf.data[3] = f32::NEG_INFINITY;
+    let e = CascadedGuidance::new(fake(), None, inf, uncond.clone(), GuidanceConfig::default())
+        .err()
+        .map(|e| e.to_string())
+        .unwrap_or_default();
+    assert!(
+        e.contains("the prompt embedding") && e.contains("1 non-finite"),
+        "{e}"
+    );
+
+    let mut g = CascadedGuidance::new(fake(), None, cond, uncond, GuidanceConfig::default())
+        .expect("valid");
+    let mut img = renders(1, 16, 16);
+    img[7] = f32::NAN;
+    let mut rng = ChaCha8Rng::seed_from_u64(0);
+    let e = g
+        .evaluate(&img, 1, 16, 16, 0.0, &mut rng)
+        .err()
+        .map(|e| e.to_string())
+        .unwrap_or_default();
+    assert!(
+        e.contains("rendered images") && e.contains("1 non-finite"),
+        "{e}"
+    );
 }
 
 /// Total gradient for a tiny case where every operator is known in closed form. Config: resolution 64,

@@ -30,6 +30,12 @@ pub fn if_empty_prompt_embedding() -> Result<csd::Embedding, OnnxError> {
             message: format!("unexpected shape {:?}", arr.shape),
         });
     }
+    OnnxError::check_finite(
+        &data,
+        || "IF's built-in empty-prompt embedding".into(),
+        path,
+        "this build's copy is damaged; rebuild from a clean checkout",
+    )?;
     Ok(csd::Embedding {
         shape: [IF_UNCOND_TOKENS, IF_UNCOND_DIM],
         data,

@@ -3,9 +3,20 @@
 //!
 //! Layout: `<dir>/<key>.npy`, f32 `(tokens, dim)`, where `key` is the hex SHA-256 of
 //! `"stylize-embedding-v1\0" + model identity + "\0" + preprocessed prompt` (lower-cased, stripped:
-//! prompts that tokenize the same share an entry). The model identity is
-//! [`ModelDir::text_identity`](crate::ModelDir::text_identity). Files are written atomically.
+//! prompts that tokenize the same share an entry). The model identity ([`EmbeddingCache::identity`])
+//! is the manifest `name`, the embedding shape **and the SHA-256 of the text encoder's files** (the
+//! `.onnx`, its external data, a tokenizer file), so replacing the encoder's weights under the same
+//! name never serves the old encoder's embeddings. Files are written atomically.
+//!
+//! `<dir>/encoders/` holds two kinds of small files:
+//! - `file-<sha256(absolute path)>.txt`: a file's digest memoized with its device, inode, size,
+//!   mtime and ctime, so a 9.5 GB encoder is hashed once, not on every run (any write, copy over or
+//!   rename changes one of those and the file is hashed again);
+//! - `latest-<sha256(name|shape)>.txt`: the encoder digest last seen under a model name. A model
+//!   directory exported without its encoder (`--skip-text-encoder`) has nothing to hash and uses
+//!   this digest, i.e. the embeddings of the encoder most recently used under its name in this cache.
 
+use std::io::Read;
 use std::path::{Path, PathBuf};
 
 use sha2::{Digest, Sha256};
@@ -61,14 +72,92 @@ impl EmbeddingCache {
         &self.dir
     }
 
-    /// The cache key of a prompt for a model.
+    /// The identity of `model`'s text encoder for cache keys:
+    /// `"<name>|<tokens>x<dim>|encoder-sha256:<digest>"`, the digest over the encoder's files (see
+    /// the module docs). A directory without `[text_encoder]` takes the digest last recorded under
+    /// its name in this cache (`encoder-sha256:unknown` when there is none: every lookup misses).
+    pub fn identity(&self, model: &ModelDir) -> Result<String, OnnxError> {
+        let base = model.text_identity();
+        let latest = self
+            .encoders_dir()
+            .join(format!("latest-{}.txt", hex_sha256(base.as_bytes())));
+        let digest = match model.text_encoder_files() {
+            Some(files) => {
+                let digest = self.files_digest(&files)?;
+                // Best effort: a read-only cache still works, only the lean-directory lookup misses.
+                if std::fs::read_to_string(&latest).ok().as_deref() != Some(digest.as_str()) {
+                    let _ = std::fs::create_dir_all(self.encoders_dir())
+                        .and_then(|()| write_atomic(&latest, digest.as_bytes()));
+                }
+                digest
+            }
+            None => std::fs::read_to_string(&latest)
+                .ok()
+                .map(|s| s.trim().to_string())
+                .filter(|s| s.len() == 64 && s.bytes().all(|b| b.is_ascii_hexdigit()))
+                .unwrap_or_else(|| "unknown".into()),
+        };
+        Ok(format!("{base}|encoder-sha256:{digest}"))
+    }
+
+    fn encoders_dir(&self) -> PathBuf {
+        self.dir.join("encoders")
+    }
+
+    /// SHA-256 over `(declared name, SHA-256 of contents)` of each file, in order.
+    fn files_digest(&self, files: &[(String, PathBuf)]) -> Result<String, OnnxError> {
+        let mut h = Sha256::new();
+        h.update(b"stylize-encoder-v1\0");
+        for (name, path) in files {
+            h.update(name.as_bytes());
+            h.update(b"\0");
+            h.update(self.file_digest(path)?.as_bytes());
+            h.update(b"\0");
+        }
+        Ok(hex(&h.finalize()))
+    }
+
+    /// The SHA-256 of a file's contents, memoized under `encoders/` by (device, inode, size, mtime, ctime).
+    fn file_digest(&self, path: &Path) -> Result<String, OnnxError> {
+        let meta = std::fs::metadata(path).map_err(|e| OnnxError::io(path, e))?;
+        let absolute = std::fs::canonicalize(path).map_err(|e| OnnxError::io(path, e))?;
+        let memo = self.encoders_dir().join(format!(
+            "file-{}.txt",
+            hex_sha256(absolute.as_os_str().as_encoded_bytes())
+        ));
+        let stamp = file_stamp(&meta);
+        if let Ok(text) = std::fs::read_to_string(&memo)
+            && let Some((s, d)) = text.trim().rsplit_once(' ')
+            && s == stamp
+            && d.len() == 64
+        {
+            return Ok(d.to_string());
+        }
+        let mut file = std::fs::File::open(path).map_err(|e| OnnxError::io(path, e))?;
+        let mut h = Sha256::new();
+        let mut buf = vec![0u8; 1 << 20];
+        loop {
+            let n = file.read(&mut buf).map_err(|e| OnnxError::io(path, e))?;
+            if n == 0 {
+                break;
+            }
+            h.update(&buf[..n]);
+        }
+        let digest = hex(&h.finalize());
+        // Best effort, as for `latest-*`: without the memo the file is hashed again next time.
+        let _ = std::fs::create_dir_all(self.encoders_dir())
+            .and_then(|()| write_atomic(&memo, format!("{stamp} {digest}\n").as_bytes()));
+        Ok(digest)
+    }
+
+    /// The cache key of a prompt for a model identity ([`Self::identity`]).
     pub fn key(model_identity: &str, prompt: &str) -> String {
         let mut h = Sha256::new();
         h.update(b"stylize-embedding-v1\0");
         h.update(model_identity.as_bytes());
         h.update(b"\0");
         h.update(T5Tokenizer::preprocess(prompt).as_bytes());
-        h.finalize().iter().map(|b| format!("{b:02x}")).collect()
+        hex(&h.finalize())
     }
 
     /// The file an entry lives in.
@@ -95,6 +184,12 @@ impl EmbeddingCache {
                 path.display()
             )));
         };
+        OnnxError::check_finite(
+            &data,
+            || format!("the cached embedding of the prompt {prompt:?}"),
+            &path,
+            "delete the file to recompute it (an fp16 text encoder can overflow; an fp32 export does not)",
+        )?;
         Ok(Some(csd::Embedding {
             shape: [*t, *d],
             data,
@@ -141,15 +236,20 @@ pub fn prompt_embeddings(
     cache: Option<&EmbeddingCache>,
     options: &SessionOptions,
 ) -> Result<(csd::Embedding, csd::Embedding), OnnxError> {
-    let identity = model.text_identity();
+    let mut identity: Option<String> = None;
     let mut encoder: Option<T5Encoder> = None;
     let mut one = |p: &str| -> Result<csd::Embedding, OnnxError> {
         if T5Tokenizer::preprocess(p).is_empty() {
             return model.uncond_embedding();
         }
-        if let Some(c) = cache
-            && let Some(e) = c.get(&identity, p)?
-        {
+        let Some(c) = cache else {
+            return encode(&mut encoder, model, options, p);
+        };
+        if identity.is_none() {
+            identity = Some(c.identity(model)?);
+        }
+        let identity = identity.as_deref().unwrap_or_default();
+        if let Some(e) = c.get(identity, p)? {
             let want = [
                 model.manifest().embeddings.tokens,
                 model.manifest().embeddings.dim,
@@ -159,28 +259,79 @@ pub fn prompt_embeddings(
             }
             return Err(OnnxError::Cache(format!(
                 "{} has shape {:?} but this model's embeddings are {want:?}; delete it to recompute",
-                c.path(&identity, p).display(),
+                c.path(identity, p).display(),
                 e.shape
             )));
         }
-        if encoder.is_none() {
-            encoder = Some(T5Encoder::open(model, options)?);
-        }
-        let enc = encoder
-            .as_mut()
-            .ok_or_else(|| OnnxError::Cache("text encoder unavailable".into()))?;
-        let e = enc
-            .embed_batch(&[p])?
-            .pop()
-            .ok_or_else(|| OnnxError::Cache("the text encoder returned nothing".into()))?;
-        if let Some(c) = cache {
-            c.put(&identity, p, &e)?;
-        }
+        let e = encode(&mut encoder, model, options, p)?;
+        c.put(identity, p, &e)?;
         Ok(e)
     };
     let cond = one(prompt)?;
     let uncond = one(negative_prompt)?;
     Ok((cond, uncond))
+}
+
+/// Encodes one prompt, opening the encoder on first use.
+fn encode(
+    encoder: &mut Option<T5Encoder>,
+    model: &ModelDir,
+    options: &SessionOptions,
+    prompt: &str,
+) -> Result<csd::Embedding, OnnxError> {
+    if encoder.is_none() {
+        *encoder = Some(T5Encoder::open(model, options)?);
+    }
+    let enc = encoder
+        .as_mut()
+        .ok_or_else(|| OnnxError::Cache("text encoder unavailable".into()))?;
+    enc.embed_batch(&[prompt])?
+        .pop()
+        .ok_or_else(|| OnnxError::Cache("the text encoder returned nothing".into()))
+}
+
+fn hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+fn hex_sha256(bytes: &[u8]) -> String {
+    hex(&Sha256::digest(bytes))
+}
+
+/// What identifies a file's version without reading it: size and mtime everywhere, plus device,
+/// inode and ctime on Unix (ctime changes on every write and rename and cannot be set back).
+fn file_stamp(meta: &std::fs::Metadata) -> String {
+    let mtime = meta
+        .modified()
+        .ok()
+        .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
+        .map_or(0, |d| d.as_nanos());
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        format!(
+            "dev{}-ino{}-len{}-mtime{mtime}-ctime{}.{}",
+            meta.dev(),
+            meta.ino(),
+            meta.len(),
+            meta.ctime(),
+            meta.ctime_nsec()
+        )
+    }
+    #[cfg(not(unix))]
+    {
+        format!("len{}-mtime{mtime}", meta.len())
+    }
+}
+
+/// Writes a small file atomically (temporary name with the pid, then rename).
+fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    let tmp = path.with_extension(format!("tmp{}", std::process::id()));
+    std::fs::write(&tmp, bytes)
+        .and_then(|()| std::fs::rename(&tmp, path))
+        .inspect_err(|_| {
+            let _ = std::fs::remove_file(&tmp);
+        })
 }
 
 #[cfg(test)]

@@ -21,6 +21,7 @@ pub struct OnnxDenoiser {
     spec: StageManifest,
     embedding_shape: [usize; 2],
     label: String,
+    file: std::path::PathBuf,
 }
 
 impl std::fmt::Debug for OnnxDenoiser {
@@ -51,7 +52,8 @@ impl OnnxDenoiser {
                 ),
             })?
             .clone();
-        let session = open_session(&model.path_of(&spec.file), options, &label)?;
+        let file = model.path_of(&spec.file);
+        let session = open_session(&file, options, &label)?;
         let mut inputs = vec![
             (spec.sample.as_str(), Kind::Float, 4),
             (spec.timestep.as_str(), Kind::Int64, 1),
@@ -74,6 +76,7 @@ impl OnnxDenoiser {
             spec,
             embedding_shape: [e.tokens, e.dim],
             label,
+            file,
         })
     }
 
@@ -207,6 +210,16 @@ impl OnnxDenoiser {
 }
 
 impl csd::Denoiser for OnnxDenoiser {
+    /// E.g. "stage1 UNet, models/if/unet_stage1.onnx (fp16)".
+    fn describe(&self) -> String {
+        format!(
+            "{}, {} ({})",
+            self.label,
+            self.file.display(),
+            self.spec.dtype.as_str()
+        )
+    }
+
     fn predict(
         &mut self,
         sample: &csd::Tensor,

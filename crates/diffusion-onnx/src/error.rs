@@ -116,6 +116,21 @@ pub enum OnnxError {
     /// The embedding cache is unusable.
     #[error("embedding cache: {0}")]
     Cache(String),
+    /// An embedding (from the text encoder, the cache or a file) holds NaN or ±∞. Guidance with it
+    /// would produce a zero gradient after the reference's `nan_to_num`, so it is refused.
+    #[error("{what} ({path}) has {count} non-finite values (NaN or ±∞) out of {total}; {hint}")]
+    NonFinite {
+        /// Which tensor (e.g. "the cached embedding of prompt \"a cat\"").
+        what: String,
+        /// The file it came from (the model file for an encoder output).
+        path: PathBuf,
+        /// How many values are NaN or ±∞.
+        count: usize,
+        /// How many values the tensor has.
+        total: usize,
+        /// What to do about it.
+        hint: String,
+    },
 }
 
 impl OnnxError {
@@ -124,6 +139,26 @@ impl OnnxError {
             path: path.into(),
             source,
         }
+    }
+
+    /// [`OnnxError::NonFinite`] when `values` hold NaN or ±∞.
+    pub(crate) fn check_finite(
+        values: &[f32],
+        what: impl FnOnce() -> String,
+        path: &std::path::Path,
+        hint: &str,
+    ) -> Result<(), Self> {
+        let count = csd::count_non_finite(values);
+        if count == 0 {
+            return Ok(());
+        }
+        Err(Self::NonFinite {
+            what: what(),
+            path: path.to_path_buf(),
+            count,
+            total: values.len(),
+            hint: hint.to_string(),
+        })
     }
 
     pub(crate) fn ort(context: impl Into<String>, e: impl std::fmt::Display) -> Self {
@@ -138,6 +173,18 @@ impl From<OnnxError> for csd::GuidanceError {
     fn from(e: OnnxError) -> Self {
         match e {
             OnnxError::Shape { .. } => csd::GuidanceError::InvalidInput(e.to_string()),
+            OnnxError::NonFinite {
+                what,
+                path,
+                count,
+                total,
+                hint,
+            } => csd::GuidanceError::NonFinite {
+                tensor: format!("{what} ({})", path.display()),
+                count,
+                total,
+                hint,
+            },
             other => csd::GuidanceError::Model(other.to_string()),
         }
     }

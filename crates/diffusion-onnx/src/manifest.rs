@@ -238,13 +238,27 @@ impl ModelDir {
         self.root.join(file)
     }
 
-    /// A string that identifies the text encoder for the embedding cache: the manifest `name` and the
-    /// embedding shape. It deliberately ignores which files are present, so embeddings computed with
-    /// a full export can be used with a copy exported `--skip-text-encoder` under the same name; give
-    /// an export with different encoder weights a different `name` (`--name`).
+    /// The name part of the text encoder's identity for the embedding cache: the manifest `name` and
+    /// the embedding shape. [`EmbeddingCache::identity`](crate::EmbeddingCache::identity) adds the
+    /// digest of the encoder's files, so replaced weights under the same name are never mixed up.
     pub fn text_identity(&self) -> String {
         let m = &self.manifest;
         format!("{}|{}x{}", m.name, m.embeddings.tokens, m.embeddings.dim)
+    }
+
+    /// The files whose bytes determine the text encoder's output, as `(declared name, path)`: the
+    /// `.onnx`, its external data and a tokenizer file (not the built-in tokenizer). None without
+    /// `[text_encoder]`.
+    pub fn text_encoder_files(&self) -> Option<Vec<(String, PathBuf)>> {
+        let t = self.manifest.text_encoder.as_ref()?;
+        let mut files: Vec<(String, PathBuf)> = std::iter::once(&t.file)
+            .chain(&t.external_data)
+            .map(|f| (f.clone(), self.path_of(f)))
+            .collect();
+        if t.tokenizer != BUILTIN_T5_TOKENIZER {
+            files.push((t.tokenizer.clone(), self.path_of(&t.tokenizer)));
+        }
+        Some(files)
     }
 
     /// The unconditional (empty-prompt) embedding `(tokens, dim)`.
@@ -275,6 +289,13 @@ impl ModelDir {
                 message: format!("expected shape ({}, {}), found {shape:?}", e.tokens, e.dim),
             });
         }
+        OnnxError::check_finite(
+            &data,
+            || "the unconditional (empty-prompt) embedding".into(),
+            &path,
+            "re-export it with scripts/export_if_onnx.py (an fp16 encoder can overflow; use --dtype fp32), or \
+             use uncond = \"builtin:if-t5-v1_1-xxl-empty\" for the real IF model",
+        )?;
         Ok(csd::Embedding { shape, data })
     }
 

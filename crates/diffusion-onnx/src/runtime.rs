@@ -44,7 +44,9 @@ pub fn resolve_dylib_path(
 ) -> Result<PathBuf, OnnxError> {
     if let Some(v) = env_value.filter(|v| !v.is_empty()) {
         let p = PathBuf::from(v);
-        return if p.is_file() {
+        return if p.exists() {
+            // Existing but unusable (a directory, a device, a truncated file) is reported by
+            // `check_library_file` with the reason.
             Ok(p)
         } else {
             Err(OnnxError::RuntimeMissing {
@@ -58,6 +60,166 @@ pub fn resolve_dylib_path(
     Err(OnnxError::RuntimeMissing {
         searched: format!("{ORT_DYLIB_ENV} (not set), {}", default.display()),
     })
+}
+
+/// Checks, without loading it, that `path` can be a shared library for this machine: a regular file,
+/// and on ELF platforms an ELF shared object (`ET_DYN`) of this CPU whose program and section header
+/// tables and every loadable segment lie inside the file.
+///
+/// The dynamic loader maps segments without checking the file size; a truncated library then dies
+/// with SIGBUS on first access, with no message. This check turns that into an error naming the file.
+pub fn check_library_file(path: &Path) -> Result<(), OnnxError> {
+    let unusable = |reason: String| OnnxError::RuntimeUnusable {
+        path: path.to_path_buf(),
+        reason,
+    };
+    let meta = std::fs::metadata(path).map_err(|e| unusable(format!("cannot read it: {e}")))?;
+    if !meta.is_file() {
+        return Err(unusable(
+            "it is not a regular file (a directory or a device?)".into(),
+        ));
+    }
+    #[cfg(all(unix, not(target_os = "macos"), not(target_os = "ios")))]
+    {
+        let mut file =
+            std::fs::File::open(path).map_err(|e| unusable(format!("cannot open it: {e}")))?;
+        check_elf(&mut file, meta.len()).map_err(unusable)?;
+    }
+    Ok(())
+}
+
+/// The ELF checks of [`check_library_file`] on an open file of `len` bytes.
+#[cfg(all(unix, not(target_os = "macos"), not(target_os = "ios")))]
+fn check_elf(file: &mut std::fs::File, len: u64) -> Result<(), String> {
+    use std::io::{Read, Seek, SeekFrom};
+    let mut head = [0u8; 64];
+    let n = file
+        .read(&mut head)
+        .map_err(|e| format!("cannot read it: {e}"))?;
+    if n < 4 || head[..4] != *b"\x7fELF" {
+        return Err(format!(
+            "it is not a shared library (no ELF header; {len} bytes)"
+        ));
+    }
+    let is64 = match head[4] {
+        1 => false,
+        2 => true,
+        c => return Err(format!("unknown ELF class {c}; the file is damaged")),
+    };
+    let little = match head[5] {
+        1 => true,
+        2 => false,
+        d => return Err(format!("unknown ELF byte order {d}; the file is damaged")),
+    };
+    let header_len = if is64 { 64 } else { 52 };
+    if n < header_len {
+        return Err(format!(
+            "the file is truncated ({len} bytes, shorter than an ELF header); download it again"
+        ));
+    }
+    let u16_at = |b: &[u8], o: usize| {
+        let v = [b[o], b[o + 1]];
+        u64::from(if little {
+            u16::from_le_bytes(v)
+        } else {
+            u16::from_be_bytes(v)
+        })
+    };
+    let u32_at = |b: &[u8], o: usize| {
+        let v = [b[o], b[o + 1], b[o + 2], b[o + 3]];
+        u64::from(if little {
+            u32::from_le_bytes(v)
+        } else {
+            u32::from_be_bytes(v)
+        })
+    };
+    let u64_at = |b: &[u8], o: usize| {
+        let mut v = [0u8; 8];
+        v.copy_from_slice(&b[o..o + 8]);
+        if little {
+            u64::from_le_bytes(v)
+        } else {
+            u64::from_be_bytes(v)
+        }
+    };
+    let word_at = |b: &[u8], o32: usize, o64: usize| {
+        if is64 { u64_at(b, o64) } else { u32_at(b, o32) }
+    };
+    let e_type = u16_at(&head, 16);
+    if e_type != 3 {
+        return Err(format!(
+            "it is an ELF file but not a shared library (e_type {e_type}, a shared object is 3)"
+        ));
+    }
+    let machine = u16_at(&head, 18);
+    let host: Option<(u64, &str)> = if cfg!(target_arch = "x86_64") {
+        Some((62, "x86-64"))
+    } else if cfg!(target_arch = "aarch64") {
+        Some((183, "aarch64"))
+    } else {
+        None
+    };
+    if let Some((want, name)) = host
+        && (machine != want || is64 != cfg!(target_pointer_width = "64"))
+    {
+        return Err(format!(
+            "it is built for another CPU (ELF machine {machine}, {} bit); this program needs {name}",
+            if is64 { 64 } else { 32 }
+        ));
+    }
+    let phoff = word_at(&head, 28, 32);
+    let shoff = word_at(&head, 32, 40);
+    let (phentsize, phnum) = (
+        u16_at(&head, header_len - 10),
+        u16_at(&head, header_len - 8),
+    );
+    let (shentsize, shnum) = (u16_at(&head, header_len - 6), u16_at(&head, header_len - 4));
+    let truncated = |what: &str, end: u64| {
+        format!(
+            "the file is truncated or damaged: its {what} ends at byte {end} but the file has {len} bytes; \
+             download or copy it again"
+        )
+    };
+    let table_end = |off: u64, size: u64, num: u64| off.saturating_add(size.saturating_mul(num));
+    if phnum == 0 {
+        return Err("it has no program headers; it is not a loadable library".into());
+    }
+    let min_ph = if is64 { 56 } else { 32 };
+    if phentsize < min_ph {
+        return Err(format!(
+            "program header entries of {phentsize} bytes (at least {min_ph} expected); the file is damaged"
+        ));
+    }
+    let ph_end = table_end(phoff, phentsize, phnum);
+    if ph_end > len {
+        return Err(truncated("program header table", ph_end));
+    }
+    if shoff != 0 {
+        let sh_end = table_end(shoff, shentsize, shnum);
+        if sh_end > len {
+            return Err(truncated("section header table", sh_end));
+        }
+    }
+    // Every loadable segment's bytes must be in the file (what the loader maps).
+    let table_len = usize::try_from(phentsize * phnum).map_err(|e| e.to_string())?;
+    let mut table = vec![0u8; table_len];
+    file.seek(SeekFrom::Start(phoff))
+        .and_then(|_| file.read_exact(&mut table))
+        .map_err(|e| format!("cannot read its program headers: {e}"))?;
+    let step = usize::try_from(phentsize).map_err(|e| e.to_string())?;
+    for (i, ph) in table.chunks_exact(step).enumerate() {
+        const PT_LOAD: u64 = 1;
+        if u32_at(ph, 0) != PT_LOAD {
+            continue;
+        }
+        let offset = word_at(ph, 4, 8);
+        let filesz = word_at(ph, 16, 32);
+        let end = offset.saturating_add(filesz);
+        if end > len {
+            return Err(truncated(&format!("loadable segment {i}"), end));
+        }
+    }
+    Ok(())
 }
 
 static ENVIRONMENT: OnceLock<Environment> = OnceLock::new();
@@ -86,6 +248,7 @@ pub fn environment_from(path: &Path) -> Result<Environment, OnnxError> {
         path: path.to_path_buf(),
         reason,
     };
+    check_library_file(path)?;
     // ort validates the file and its version in `init_from`; the panic guard is a second line of
     // defence for libraries that pass that check but misbehave when the API table is fetched.
     let built = std::panic::catch_unwind(|| -> Result<Environment, OnnxError> {
@@ -240,6 +403,72 @@ mod tests {
                 && msg.contains("setup-onnxruntime.sh"),
             "{msg}"
         );
+    }
+
+    fn reason(r: Result<(), OnnxError>) -> String {
+        match r {
+            Ok(()) => panic!("accepted"),
+            Err(e) => e.to_string(),
+        }
+    }
+
+    #[test]
+    fn non_libraries_are_refused_before_loading() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let msg = reason(check_library_file(dir.path()));
+        assert!(msg.contains("not a regular file"), "{msg}");
+        let text = dir.path().join("libonnxruntime.so");
+        std::fs::write(&text, b"#!/bin/sh\necho not a library\n").expect("write");
+        let msg = reason(check_library_file(&text));
+        assert!(
+            msg.contains("no ELF header") && msg.contains("libonnxruntime.so"),
+            "{msg}"
+        );
+        std::fs::write(&text, b"").expect("write");
+        assert!(reason(check_library_file(&text)).contains("no ELF header"));
+        // An ELF header cut short.
+        std::fs::write(&text, b"\x7fELF\x02\x01\x01\0\0\0").expect("write");
+        assert!(reason(check_library_file(&text)).contains("truncated"));
+        // Devices are not libraries (ORT_DYLIB_PATH=/dev/zero used to be read until memory ran out).
+        let msg = reason(check_library_file(Path::new("/dev/zero")));
+        assert!(msg.contains("not a regular file"), "{msg}");
+    }
+
+    #[test]
+    fn a_truncated_onnx_runtime_is_refused_and_the_whole_one_accepted() {
+        let real = default_dylib_path();
+        let bytes = std::fs::read(&real).unwrap_or_else(|e| {
+            panic!("{}: {e}; run scripts/setup-onnxruntime.sh", real.display())
+        });
+        assert!(check_library_file(&real).is_ok());
+        let dir = tempfile::tempdir().expect("tempdir");
+        let cut = dir.path().join("libonnxruntime.so.1.31.1");
+        // Cut at the end (the section headers), in the middle (a loadable segment) and right after
+        // the ELF header (the program headers).
+        for keep in [bytes.len() - 1, bytes.len() / 2, 100, 64] {
+            std::fs::write(&cut, &bytes[..keep]).expect("write");
+            let msg = reason(check_library_file(&cut));
+            assert!(
+                msg.contains("truncated")
+                    && msg.contains(&format!("{keep} bytes"))
+                    && msg.contains(&cut.display().to_string()),
+                "cut at {keep}: {msg}"
+            );
+        }
+        // A library for another CPU.
+        let mut other = bytes[..4096.min(bytes.len())].to_vec();
+        other[18] = 0x28; // EM_ARM
+        std::fs::write(&cut, &other).expect("write");
+        let msg = reason(check_library_file(&cut));
+        assert!(msg.contains("another CPU"), "{msg}");
+    }
+
+    #[test]
+    fn env_path_to_a_directory_is_resolved_then_refused_with_the_reason() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let got = resolve_dylib_path(Some(dir.path().as_os_str()), &default_dylib_path());
+        assert_eq!(got.ok().as_deref(), Some(dir.path()));
+        assert!(reason(check_library_file(dir.path())).contains("not a regular file"));
     }
 
     #[test]

@@ -19,6 +19,7 @@ pub struct T5Encoder {
     output: String,
     dtype: Dtype,
     shape: [usize; 2],
+    file: std::path::PathBuf,
 }
 
 impl std::fmt::Debug for T5Encoder {
@@ -45,7 +46,8 @@ impl T5Encoder {
         } else {
             T5Tokenizer::from_file(&model.path_of(&t.tokenizer), t.max_tokens)?
         };
-        let session = open_session(&model.path_of(&t.file), options, "text encoder")?;
+        let file = model.path_of(&t.file);
+        let session = open_session(&file, options, "text encoder")?;
         check_signature(
             &session,
             "text encoder",
@@ -64,6 +66,7 @@ impl T5Encoder {
             output: t.output.clone(),
             dtype: t.dtype,
             shape: [t.max_tokens, t.embedding_dim],
+            file,
         })
     }
 
@@ -113,13 +116,22 @@ impl T5Encoder {
                 message: format!("output shape {shape:?}, expected [{n}, {tokens}, {dim}]"),
             });
         }
-        Ok(data
-            .chunks_exact(tokens * dim)
-            .map(|c| csd::Embedding {
-                shape: [tokens, dim],
-                data: c.to_vec(),
+        data.chunks_exact(tokens * dim)
+            .zip(prompts)
+            .map(|(c, p)| {
+                OnnxError::check_finite(
+                    c,
+                    || format!("the text encoder's embedding of the prompt {p:?}"),
+                    &self.file,
+                    "the encoder overflowed (fp16 T5 can; export it with --dtype fp32) or its weights are broken; \
+                     nothing was cached",
+                )?;
+                Ok(csd::Embedding {
+                    shape: [tokens, dim],
+                    data: c.to_vec(),
+                })
             })
-            .collect())
+            .collect()
     }
 }
 

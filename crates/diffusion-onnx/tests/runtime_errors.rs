@@ -22,6 +22,28 @@ fn a_file_that_is_not_a_library_is_refused_with_instructions() {
     assert!(msg.contains(&fake.display().to_string()), "{msg}");
 }
 
+/// A truncated copy of the real library used to die with SIGBUS inside the dynamic loader (no
+/// message at all); it is now refused before loading, naming the file and the cut.
+#[test]
+fn a_truncated_library_is_refused_before_it_can_crash_the_loader() {
+    let real = diffusion_onnx::runtime::default_dylib_path();
+    let bytes = std::fs::read(&real)
+        .unwrap_or_else(|e| panic!("{}: {e}; run scripts/setup-onnxruntime.sh", real.display()));
+    let dir = tempfile::tempdir().expect("tempdir");
+    let cut = dir.path().join("libonnxruntime.so.1.31.1");
+    std::fs::write(&cut, &bytes[..bytes.len() * 2 / 3]).expect("write");
+    let msg = match environment_from(&cut) {
+        Ok(_) => panic!("a truncated library was loaded"),
+        Err(e) => e.to_string(),
+    };
+    assert!(
+        msg.contains("truncated")
+            && msg.contains(&cut.display().to_string())
+            && msg.contains("setup-onnxruntime.sh"),
+        "{msg}"
+    );
+}
+
 /// A stand-in library with ONNX Runtime's entry point that reports version 1.10.0 (and would hand out
 /// no API table): the "too old" case, which ort checks before touching the API.
 const OLD_ORT_C: &str = r#"

@@ -443,11 +443,8 @@ fn cached_embeddings_serve_a_directory_without_text_encoder() {
         prompt_embeddings(&model, "a photo of a cat", "", Some(&cache), &options())
             .expect("embeddings");
     assert_eq!(uncond, model.uncond_embedding().expect("uncond"));
-    assert!(
-        cache
-            .path(&model.text_identity(), "a photo of a cat")
-            .is_file()
-    );
+    let identity = cache.identity(&model).expect("identity");
+    assert!(cache.path(&identity, "a photo of a cat").is_file());
     let want = &ref_f32("t5_last_hidden_state").1[..77 * 8];
     assert_close(&cond.data, want, FP32_TOL, "cached cond");
 
@@ -472,5 +469,147 @@ fn cached_embeddings_serve_a_directory_without_text_encoder() {
     assert!(
         msg.contains("no [text_encoder]") && msg.contains("stylize embed"),
         "{msg}"
+    );
+}
+
+// ---------------------------------------------------------------------------------------------
+// Non-finite embeddings and the encoder's identity in the cache
+// ---------------------------------------------------------------------------------------------
+
+fn write_f32_npy(path: &Path, shape: Vec<usize>, data: Vec<f32>) {
+    diffusion_onnx::npy::write_npy(
+        path,
+        &diffusion_onnx::npy::NpyArray {
+            shape,
+            data: diffusion_onnx::npy::NpyData::F32(data),
+        },
+    )
+    .expect("write npy");
+}
+
+#[test]
+fn all_nan_unconditional_embedding_is_an_error_naming_the_file() {
+    let tmp = edited("tiny-if", |s| s);
+    let file = tmp.path().join("uncond_embedding.npy");
+    write_f32_npy(&file, vec![77, 8], vec![f32::NAN; 77 * 8]);
+    let model = ModelDir::open(tmp.path()).expect("model dir");
+    let err = model
+        .uncond_embedding()
+        .expect_err("NaN embedding accepted");
+    assert!(
+        matches!(&err, OnnxError::NonFinite { count: 616, total: 616, path, .. } if *path == file),
+        "{err:?}"
+    );
+    // The empty negative prompt goes through the same file in `prompt_embeddings`.
+    let msg = err_text(prompt_embeddings(&model, "a cat", "", None, &options()));
+    assert!(
+        msg.contains("unconditional")
+            && msg.contains("uncond_embedding.npy")
+            && msg.contains("616 non-finite"),
+        "{msg}"
+    );
+}
+
+#[test]
+fn nan_cached_embedding_is_an_error_naming_the_entry() {
+    let cache_dir = tempfile::tempdir().expect("tempdir");
+    let cache = EmbeddingCache::new(cache_dir.path());
+    let model = ModelDir::open(tiny()).expect("model dir");
+    let identity = cache.identity(&model).expect("identity");
+    let mut data = vec![0.5f32; 77 * 8];
+    data[10] = f32::NAN;
+    data[11] = f32::INFINITY;
+    cache
+        .put(
+            &identity,
+            "a photo of a cat",
+            &Embedding {
+                shape: [77, 8],
+                data,
+            },
+        )
+        .expect("put");
+    let msg = err_text(prompt_embeddings(
+        &model,
+        "a photo of a cat",
+        "",
+        Some(&cache),
+        &options(),
+    ));
+    let entry = cache.path(&identity, "a photo of a cat");
+    assert!(
+        msg.contains("cached embedding")
+            && msg.contains("a photo of a cat")
+            && msg.contains(&entry.display().to_string())
+            && msg.contains("2 non-finite")
+            && msg.contains("delete"),
+        "{msg}"
+    );
+}
+
+#[test]
+fn replacing_the_text_encoder_under_the_same_name_never_serves_stale_embeddings() {
+    let cache_dir = tempfile::tempdir().expect("tempdir");
+    let cache = EmbeddingCache::new(cache_dir.path());
+    let tmp = edited("tiny-if", |s| s);
+    let model = ModelDir::open(tmp.path()).expect("model dir");
+    let (old, _) = prompt_embeddings(&model, "a photo of a cat", "", Some(&cache), &options())
+        .expect("fp32 encoder");
+    let old_identity = cache.identity(&model).expect("identity");
+
+    // Same `name`, new weights: the fp16 export of the encoder (different bytes, close outputs).
+    for f in ["text_encoder.onnx", "text_encoder.onnx.data"] {
+        std::fs::copy(fixtures().join("tiny-if-fp16").join(f), tmp.path().join(f)).expect("copy");
+    }
+    let m = tmp.path().join("manifest.toml");
+    let text = std::fs::read_to_string(&m).expect("manifest");
+    let text = text.replacen(
+        "external_data = []\ndtype = \"fp32\"",
+        "external_data = [\"text_encoder.onnx.data\"]\ndtype = \"fp16\"",
+        1,
+    );
+    assert!(text.contains("text_encoder.onnx.data"), "manifest edit");
+    std::fs::write(&m, text).expect("write manifest");
+    let model = ModelDir::open(tmp.path()).expect("model dir");
+    assert_eq!(
+        model.text_identity(),
+        ModelDir::open(tiny()).expect("dir").text_identity()
+    );
+    let new_identity = cache.identity(&model).expect("identity");
+    assert_ne!(new_identity, old_identity);
+    let (new, _) = prompt_embeddings(&model, "a photo of a cat", "", Some(&cache), &options())
+        .expect("fp16 encoder");
+    let fresh = T5Encoder::open(&model, &options())
+        .expect("open")
+        .embed_batch(&["a photo of a cat"])
+        .expect("embed");
+    assert_eq!(Some(&new), fresh.first(), "the new encoder's output");
+    assert_ne!(new, old, "fp16 and fp32 encoders differ in the last bits");
+
+    // Bytes replaced in place (same size, same name): the memoized digest is not trusted.
+    let onnx = tmp.path().join("text_encoder.onnx");
+    let mut bytes = std::fs::read(&onnx).expect("read");
+    bytes.iter_mut().for_each(|b| *b = 0);
+    std::fs::write(&onnx, &bytes).expect("write");
+    assert_ne!(cache.identity(&model).expect("identity"), new_identity);
+    let msg = err_text(prompt_embeddings(
+        &model,
+        "a photo of a cat",
+        "",
+        Some(&cache),
+        &options(),
+    ));
+    assert!(msg.contains("text encoder"), "{msg}");
+}
+
+#[test]
+fn denoiser_describes_itself_with_its_model_file() {
+    use csd::Denoiser as _;
+    let model = ModelDir::open(tiny()).expect("model dir");
+    let unet = OnnxDenoiser::open(&model, Stage::Two, &options()).expect("open UNet");
+    let d = unet.describe();
+    assert!(
+        d.contains("stage2 UNet") && d.contains("unet_stage2.onnx") && d.contains("fp32"),
+        "{d}"
     );
 }

@@ -37,6 +37,13 @@ pub fn guidance_config(config: &Config) -> GuidanceConfig {
 struct Shared(Arc<Mutex<OnnxDenoiser>>);
 
 impl Denoiser for Shared {
+    fn describe(&self) -> String {
+        self.0.lock().map_or_else(
+            |_| "a UNet whose last run panicked".into(),
+            |d| d.describe(),
+        )
+    }
+
     fn predict(
         &mut self,
         sample: &Tensor,

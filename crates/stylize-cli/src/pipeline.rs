@@ -116,6 +116,39 @@ fn add_term(terms: &mut Vec<(&'static str, f64)>, name: &'static str, value: f64
     }
 }
 
+/// Consecutive iterations with an exactly zero gradient after which [`run_loop`] warns.
+pub const ZERO_GRADIENT_WARN_AFTER: u64 = 3;
+
+/// Counts consecutive iterations whose accumulated gradient with respect to x is exactly zero: the
+/// sign of an objective that silently does nothing (e.g. non-finite values turned into zeros by the
+/// reference's `nan_to_num`). The streak is recorded in `metrics.jsonl` as `grad_zero_streak` (on
+/// the iterations where it is ≥ 1) and warned about on stderr once per streak.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ZeroGradientWatch {
+    streak: u64,
+}
+
+impl ZeroGradientWatch {
+    /// Records one iteration's gradient norm; returns the warning to print when the streak reaches
+    /// [`ZERO_GRADIENT_WARN_AFTER`] (once per streak).
+    pub fn observe(&mut self, iteration: u64, grad_norm: f64) -> Option<String> {
+        self.streak = if grad_norm == 0.0 { self.streak + 1 } else { 0 };
+        (self.streak == ZERO_GRADIENT_WARN_AFTER).then(|| {
+            format!(
+                "warning: the gradient with respect to the deformation has been exactly zero for {} iterations \
+                 (up to iteration {iteration}): the objective is not changing the mesh. Check the prompt \
+                 embeddings and the model (metrics.jsonl field grad_zero_streak)",
+                self.streak
+            )
+        })
+    }
+
+    /// The current streak (0 after a non-zero gradient).
+    pub fn streak(&self) -> u64 {
+        self.streak
+    }
+}
+
 /// Runs iterations `state.iteration + 1 ..= spec.iterations`.
 pub fn run_loop(
     darap: &Darap,
@@ -131,6 +164,7 @@ pub fn run_loop(
     if state.x.len() != n {
         bail!("x has {} rows, the mesh {} vertices", state.x.len(), n);
     }
+    let mut zero_watch = ZeroGradientWatch::default();
     while state.iteration < spec.iterations && spec.halt_after.is_none_or(|h| state.iteration < h) {
         let iteration = state.iteration + 1;
         let start = Instant::now();
@@ -181,6 +215,14 @@ pub fn run_loop(
             .map(|g| g * g)
             .sum::<f64>()
             .sqrt();
+        if let Some(warning) = zero_watch.observe(iteration, record.grad_norm) {
+            eprintln!("{warning}");
+        }
+        if zero_watch.streak() > 0 {
+            record
+                .terms
+                .push(("grad_zero_streak", zero_watch.streak() as f64));
+        }
         state.iteration = iteration;
         record
             .timings
@@ -396,5 +438,113 @@ impl Objective for TextObjective {
 
     fn current_images(&self) -> Option<&Images> {
         self.images.as_ref()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+
+    /// An objective whose gradient is zero on the iterations in `zero` and constant elsewhere.
+    struct Flat {
+        zero: std::ops::RangeInclusive<u64>,
+    }
+
+    impl Objective for Flat {
+        fn describe(&self) -> String {
+            "flat".into()
+        }
+        fn evaluate(
+            &mut self,
+            iteration: u64,
+            _substep: u32,
+            deformed: &[[f64; 3]],
+            _rng: &mut ChaCha8Rng,
+        ) -> anyhow::Result<StepEval> {
+            let g = if self.zero.contains(&iteration) {
+                0.0
+            } else {
+                1e-3
+            };
+            Ok(StepEval {
+                terms: vec![("loss", 0.0)],
+                timings: Vec::new(),
+                grad_positions: vec![[g, 0.0, 0.0]; deformed.len()],
+            })
+        }
+    }
+
+    #[derive(Default)]
+    struct Records(Vec<IterationRecord>);
+
+    impl Observer for Records {
+        fn iteration(&mut self, record: &IterationRecord) -> anyhow::Result<()> {
+            self.0.push(record.clone());
+            Ok(())
+        }
+        fn checkpoint(&mut self, _: &LoopState) -> anyhow::Result<()> {
+            Ok(())
+        }
+        fn preview(&mut self, _: u64, _: &[[f64; 3]], _: Option<&Images>) -> anyhow::Result<()> {
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn zero_gradient_watch_warns_once_per_streak() {
+        let mut w = ZeroGradientWatch::default();
+        let warned: Vec<bool> = [0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0]
+            .iter()
+            .enumerate()
+            .map(|(i, &g)| w.observe(i as u64 + 1, g).is_some())
+            .collect();
+        assert_eq!(
+            warned,
+            [false, false, true, false, false, false, false, true]
+        );
+        assert_eq!(w.streak(), 3);
+    }
+
+    #[test]
+    fn zero_gradient_streak_is_recorded_in_the_iteration_records() -> anyhow::Result<()> {
+        let (p, f) = raster_diff::shapes::icosphere(1);
+        let darap = Darap::new(&p, &f, darap::DarapOptions::default())?;
+        let mut state = LoopState {
+            iteration: 0,
+            x: darap.rest_normals().to_vec(),
+            adam: Adam::new(3 * p.len(), optim::AdamConfig::default())?,
+            rng: ChaCha8Rng::seed_from_u64(0),
+        };
+        let spec = LoopSpec {
+            iterations: 6,
+            steps_per_batch: 1,
+            checkpoint_every: 0,
+            preview_every: 0,
+            halt_after: None,
+        };
+        let mut records = Records::default();
+        run_loop(
+            &darap,
+            &spec,
+            &mut state,
+            &mut Flat { zero: 2..=5 },
+            &mut records,
+        )?;
+        let streaks: Vec<Option<f64>> = records
+            .0
+            .iter()
+            .map(|r| {
+                r.terms
+                    .iter()
+                    .find(|t| t.0 == "grad_zero_streak")
+                    .map(|t| t.1)
+            })
+            .collect();
+        assert_eq!(
+            streaks,
+            [None, Some(1.0), Some(2.0), Some(3.0), Some(4.0), None]
+        );
+        Ok(())
     }
 }

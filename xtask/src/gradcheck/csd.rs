@@ -27,10 +27,12 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
 
-/// A denoiser whose output is a fixed smooth function of position, channel and batch index — and NaN/±∞
-/// on a pattern of pixels when `degenerate`.
+/// A denoiser whose output is a fixed smooth function of position, channel and batch index — and ±f32::MAX
+/// (finite, but overflowing to ±∞ in classifier-free guidance) on a pattern of pixels when `degenerate`,
+/// NaN/±∞ there when `non_finite` (which the guidance must refuse).
 struct PatternDenoiser {
     degenerate: bool,
+    non_finite: bool,
 }
 
 impl Denoiser for PatternDenoiser {
@@ -46,8 +48,10 @@ impl Denoiser for PatternDenoiser {
         let mut data = vec![0.0f32; n * 6 * plane];
         for (i, v) in data.iter_mut().enumerate() {
             let (k, p) = (i / plane, i % plane);
-            *v = if self.degenerate && p % 7 == 0 {
+            *v = if self.non_finite && p % 7 == 0 {
                 [f32::NAN, f32::INFINITY, f32::NEG_INFINITY][k % 3]
+            } else if self.degenerate && p % 7 == 0 {
+                [f32::MAX, -f32::MAX, 0.5 * f32::MAX][k % 3]
             } else {
                 0.3 * ((k as f32) * 0.7 + (p as f32) * 0.013).sin()
             };
@@ -60,6 +64,10 @@ impl Denoiser for PatternDenoiser {
 }
 
 fn guidance(degenerate: bool) -> anyhow::Result<CascadedGuidance> {
+    guidance_with(degenerate, false)
+}
+
+fn guidance_with(degenerate: bool, non_finite: bool) -> anyhow::Result<CascadedGuidance> {
     let cond = Embedding {
         shape: [2, 2],
         data: vec![1.0, 2.0, 3.0, 4.0],
@@ -69,8 +77,14 @@ fn guidance(degenerate: bool) -> anyhow::Result<CascadedGuidance> {
         data: vec![0.0; 4],
     };
     Ok(CascadedGuidance::new(
-        Box::new(PatternDenoiser { degenerate }),
-        Some(Box::new(PatternDenoiser { degenerate })),
+        Box::new(PatternDenoiser {
+            degenerate,
+            non_finite,
+        }),
+        Some(Box::new(PatternDenoiser {
+            degenerate,
+            non_finite,
+        })),
         cond,
         uncond,
         GuidanceConfig::default(),
@@ -182,7 +196,22 @@ fn check_guidance_chain(
 }
 
 fn check_degenerate(report: &mut Report) -> anyhow::Result<()> {
-    let name = "csd/degenerate predictions (NaN, ±inf) and images stay finite";
+    let name =
+        "csd/overflowing predictions (±f32::MAX) and images stay finite; NaN/±inf ones are refused";
+    let mut refusing = guidance_with(false, true)?;
+    let mut rng = ChaCha8Rng::seed_from_u64(98);
+    let img = vec![0.5f32; 2 * 64 * 64 * 3];
+    match refusing.evaluate_traced(&img, 2, 64, 64, 1.0, &mut rng, &InjectedDraws::default()) {
+        Err(GuidanceError::NonFinite { .. }) => {}
+        Err(e) => {
+            report.fail(name, format!("NaN predictions: wrong error {e}"));
+            return Ok(());
+        }
+        Ok(_) => {
+            report.fail(name, "NaN predictions were accepted".to_string());
+            return Ok(());
+        }
+    }
     let mut g = guidance(true)?;
     let (views, h, w) = (2, 64, 64);
     let mut rng = ChaCha8Rng::seed_from_u64(99);
