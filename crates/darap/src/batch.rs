@@ -63,7 +63,12 @@ pub(crate) fn svd3_lanes(s: &M3) -> SvdLanes {
     }
     let scaled = and(gt(magnitude, splat(0.0)), is_finite(magnitude));
     let inv = select(scaled, div(splat(1.0), magnitude), splat(1.0));
-    let mut a: M3 = s.map(|row| row.map(|x| mul(x, inv)));
+    let mut a: M3 = *s;
+    for row in a.iter_mut() {
+        for x in row.iter_mut() {
+            *x = mul(*x, inv);
+        }
+    }
     let mut v = identity();
     const PAIRS: [(usize, usize); 3] = [(0, 1), (0, 2), (1, 2)];
     for _sweep in 0..32 {
@@ -124,10 +129,11 @@ pub(crate) fn svd3_lanes(s: &M3) -> SvdLanes {
         pick(to2, [s0, s1, s2]),
     ];
     let permute = |m: &M3| -> M3 {
-        std::array::from_fn(|i| {
-            let r = m[i];
-            [pick(to0, r), pick(to1, r), pick(to2, r)]
-        })
+        let mut out = *m;
+        for (o, r) in out.iter_mut().zip(m) {
+            *o = [pick(to0, *r), pick(to1, *r), pick(to2, *r)];
+        }
+        out
     };
     let a = permute(&a);
     let v = permute(&v);
@@ -150,21 +156,30 @@ pub(crate) fn svd3_lanes(s: &M3) -> SvdLanes {
     let u3 = select3(flip, [neg(u3[0]), neg(u3[1]), neg(u3[2])], u3);
     let degenerate = or(le(sigma[0], zero), is_nan(sigma[0]));
     let id = identity();
-    let u: M3 = std::array::from_fn(|i| {
-        [
+    let mut u: M3 = id;
+    for i in 0..3 {
+        u[i] = [
             select(degenerate, id[i][0], u1[i]),
             select(degenerate, id[i][1], u2[i]),
             select(degenerate, id[i][2], u3[i]),
-        ]
-    });
+        ];
+    }
     let unscaled = eq(inv, one);
-    let sigma = sigma.map(|x| select(unscaled, x, mul(x, magnitude)));
+    let sigma = [
+        select(unscaled, sigma[0], mul(sigma[0], magnitude)),
+        select(unscaled, sigma[1], mul(sigma[1], magnitude)),
+        select(unscaled, sigma[2], mul(sigma[2], magnitude)),
+    ];
     SvdLanes { u, sigma, v }
 }
 
 #[inline(always)]
 fn eq_mask(a: Mask, b: Mask) -> Mask {
-    std::array::from_fn(|i| a[i] == b[i])
+    let mut r = a;
+    for i in 0..W {
+        r[i] = a[i] == b[i];
+    }
+    r
 }
 
 /// The sign pattern `d = (d01, d01, d2)` of a rule: `d01` is −1 for gis and +1 for Procrustes;
@@ -186,7 +201,12 @@ pub(crate) fn rule_lanes(svd: &SvdLanes, rule: RotationRule) -> (M3, F) {
     // gis: d = (−1, −1, +1) if det U det V > 0 else (−1, −1, −1); Procrustes: (1, 1, ±1).
     let d2 = select(positive, splat(1.0), splat(-1.0));
     let d = [splat(d01(rule)), splat(d01(rule)), d2];
-    let ud: M3 = std::array::from_fn(|i| std::array::from_fn(|j| mul(svd.u[i][j], d[j])));
+    let mut ud: M3 = svd.u;
+    for row in ud.iter_mut() {
+        for j in 0..3 {
+            row[j] = mul(row[j], d[j]);
+        }
+    }
     let r = matmul(&ud, &transpose(&svd.v));
     match rule {
         RotationRule::Gis => (r, d2),
@@ -235,7 +255,13 @@ pub(crate) fn rotation_vjp_lanes(svd: &SvdLanes, d2: F, rule: RotationRule, grad
         }
     }
     let ds = matmul(&matmul(&svd.u, &q), &transpose(&svd.v));
-    ds.map(|row| row.map(|x| select(degenerate, zero, x)))
+    let mut ds = ds;
+    for row in ds.iter_mut() {
+        for x in row.iter_mut() {
+            *x = select(degenerate, zero, *x);
+        }
+    }
+    ds
 }
 
 #[cfg(test)]

@@ -34,93 +34,165 @@ pub(crate) fn splat(x: f64) -> F {
 
 #[inline(always)]
 pub(crate) fn add(a: F, b: F) -> F {
-    std::array::from_fn(|i| a[i] + b[i])
+    let mut r = a;
+    for i in 0..W {
+        r[i] = a[i] + b[i];
+    }
+    r
 }
 
 #[inline(always)]
 pub(crate) fn sub(a: F, b: F) -> F {
-    std::array::from_fn(|i| a[i] - b[i])
+    let mut r = a;
+    for i in 0..W {
+        r[i] = a[i] - b[i];
+    }
+    r
 }
 
 #[inline(always)]
 pub(crate) fn mul(a: F, b: F) -> F {
-    std::array::from_fn(|i| a[i] * b[i])
+    let mut r = a;
+    for i in 0..W {
+        r[i] = a[i] * b[i];
+    }
+    r
 }
 
 #[inline(always)]
 pub(crate) fn div(a: F, b: F) -> F {
-    std::array::from_fn(|i| a[i] / b[i])
+    let mut r = a;
+    for i in 0..W {
+        r[i] = a[i] / b[i];
+    }
+    r
 }
 
 #[inline(always)]
 pub(crate) fn sqrt(a: F) -> F {
-    std::array::from_fn(|i| a[i].sqrt())
+    let mut r = a;
+    for i in 0..W {
+        r[i] = a[i].sqrt();
+    }
+    r
 }
 
 #[inline(always)]
 pub(crate) fn abs(a: F) -> F {
-    std::array::from_fn(|i| a[i].abs())
+    let mut r = a;
+    for i in 0..W {
+        r[i] = a[i].abs();
+    }
+    r
 }
 
 #[inline(always)]
 pub(crate) fn neg(a: F) -> F {
-    std::array::from_fn(|i| -a[i])
+    let mut r = a;
+    for i in 0..W {
+        r[i] = -a[i];
+    }
+    r
 }
 
 /// `copysign(1, a)`: `f64::signum` for every non-NaN input.
 #[inline(always)]
 pub(crate) fn signum(a: F) -> F {
-    std::array::from_fn(|i| 1.0f64.copysign(a[i]))
+    let mut r = a;
+    for i in 0..W {
+        r[i] = 1.0f64.copysign(a[i]);
+    }
+    r
 }
 
 #[inline(always)]
 pub(crate) fn gt(a: F, b: F) -> Mask {
-    std::array::from_fn(|i| a[i] > b[i])
+    let mut r = [false; W];
+    for i in 0..W {
+        r[i] = a[i] > b[i];
+    }
+    r
 }
 
 #[inline(always)]
 pub(crate) fn ge(a: F, b: F) -> Mask {
-    std::array::from_fn(|i| a[i] >= b[i])
+    let mut r = [false; W];
+    for i in 0..W {
+        r[i] = a[i] >= b[i];
+    }
+    r
 }
 
 #[inline(always)]
 pub(crate) fn le(a: F, b: F) -> Mask {
-    std::array::from_fn(|i| a[i] <= b[i])
+    let mut r = [false; W];
+    for i in 0..W {
+        r[i] = a[i] <= b[i];
+    }
+    r
 }
 
 #[inline(always)]
 pub(crate) fn lt(a: F, b: F) -> Mask {
-    std::array::from_fn(|i| a[i] < b[i])
+    let mut r = [false; W];
+    for i in 0..W {
+        r[i] = a[i] < b[i];
+    }
+    r
 }
 
 #[inline(always)]
 pub(crate) fn eq(a: F, b: F) -> Mask {
-    std::array::from_fn(|i| a[i] == b[i])
+    let mut r = [false; W];
+    for i in 0..W {
+        r[i] = a[i] == b[i];
+    }
+    r
 }
 
 #[inline(always)]
 pub(crate) fn is_nan(a: F) -> Mask {
-    std::array::from_fn(|i| a[i].is_nan())
+    let mut r = [false; W];
+    for i in 0..W {
+        r[i] = a[i].is_nan();
+    }
+    r
 }
 
 #[inline(always)]
 pub(crate) fn is_finite(a: F) -> Mask {
-    std::array::from_fn(|i| a[i].is_finite())
+    let mut r = [false; W];
+    for i in 0..W {
+        r[i] = a[i].is_finite();
+    }
+    r
 }
 
 #[inline(always)]
 pub(crate) fn and(a: Mask, b: Mask) -> Mask {
-    std::array::from_fn(|i| a[i] & b[i])
+    let mut r = a;
+    for i in 0..W {
+        r[i] = a[i] & b[i];
+    }
+    r
 }
 
 #[inline(always)]
 pub(crate) fn or(a: Mask, b: Mask) -> Mask {
-    std::array::from_fn(|i| a[i] | b[i])
+    let mut r = a;
+    for i in 0..W {
+        r[i] = a[i] | b[i];
+    }
+    r
 }
 
 #[inline(always)]
 pub(crate) fn not(a: Mask) -> Mask {
-    std::array::from_fn(|i| !a[i])
+    let mut r = a;
+    for i in 0..W {
+        r[i] = !a[i];
+    }
+    r
 }
 
 #[inline(always)]
@@ -136,12 +208,20 @@ pub(crate) fn any(a: Mask) -> bool {
 /// `m ? a : b`, lane-wise.
 #[inline(always)]
 pub(crate) fn select(m: Mask, a: F, b: F) -> F {
-    std::array::from_fn(|i| if m[i] { a[i] } else { b[i] })
+    let mut r = b;
+    for i in 0..W {
+        r[i] = if m[i] { a[i] } else { b[i] };
+    }
+    r
 }
 
 #[inline(always)]
 pub(crate) fn select3(m: Mask, a: V3, b: V3) -> V3 {
-    std::array::from_fn(|k| select(m, a[k], b[k]))
+    [
+        select(m, a[0], b[0]),
+        select(m, a[1], b[1]),
+        select(m, a[2], b[2]),
+    ]
 }
 
 /// `a·b`, evaluated as `(a0 b0 + a1 b1) + a2 b2` like `mat3::dot`.
@@ -169,20 +249,28 @@ pub(crate) fn col(m: &M3, j: usize) -> V3 {
 /// `a·b` for lane matrices, evaluated like `mat3::mul`.
 #[inline(always)]
 pub(crate) fn matmul(a: &M3, b: &M3) -> M3 {
-    std::array::from_fn(|i| {
-        std::array::from_fn(|j| {
-            add(
+    let mut c = [[[0.0; W]; 3]; 3];
+    for i in 0..3 {
+        for j in 0..3 {
+            c[i][j] = add(
                 add(mul(a[i][0], b[0][j]), mul(a[i][1], b[1][j])),
                 mul(a[i][2], b[2][j]),
-            )
-        })
-    })
+            );
+        }
+    }
+    c
 }
 
 /// `aᵀ`.
 #[inline(always)]
 pub(crate) fn transpose(a: &M3) -> M3 {
-    std::array::from_fn(|i| std::array::from_fn(|j| a[j][i]))
+    let mut t = *a;
+    for i in 0..3 {
+        for j in 0..3 {
+            t[i][j] = a[j][i];
+        }
+    }
+    t
 }
 
 /// `det(m)`, evaluated like `mat3::det`.
@@ -200,5 +288,9 @@ pub(crate) fn det(m: &M3) -> F {
 /// The lane-wise identity matrix.
 #[inline(always)]
 pub(crate) fn identity() -> M3 {
-    std::array::from_fn(|i| std::array::from_fn(|j| splat(if i == j { 1.0 } else { 0.0 })))
+    let mut m = [[[0.0; W]; 3]; 3];
+    for i in 0..3 {
+        m[i][i] = splat(1.0);
+    }
+    m
 }
