@@ -408,6 +408,27 @@ fn glb_with_a_lying_byte_length_or_missing_chunk_is_refused() {
     );
 }
 
+#[test]
+fn glb_header_lengths_below_the_header_or_beyond_the_file_are_refused() {
+    // Found by `cargo xtask fuzz` (glb, seed 1): a total length under 12 overflowed inside the
+    // `gltf` crate.
+    let dir = tempfile::tempdir().expect("tempdir");
+    let p = dir.path().join("t.glb");
+    write_glb(&p, &bunny(), None).expect("writes");
+    let bytes = std::fs::read(&p).expect("read");
+    for declared in [0u32, 4, 11, bytes.len() as u32 + 1] {
+        let mut b = bytes.clone();
+        b[8..12].copy_from_slice(&declared.to_le_bytes());
+        let e = err_of(read_mesh(put(dir.path(), "len.glb", &b)));
+        assert!(
+            e.contains(&format!("declares a length of {declared} bytes")),
+            "{e}"
+        );
+    }
+    let e = err_of(read_mesh(put(dir.path(), "short.glb", b"glTF\x02\0\0\0")));
+    assert!(e.contains("truncated"), "{e}");
+}
+
 // ---------------------------------------------------------------- npz / npy
 
 #[test]

@@ -590,6 +590,26 @@ impl<'a> Collector<'a> {
 /// a small file into gigabytes.
 pub fn read_gltf(path: &Path) -> Result<MeshWithNormals, MeshError> {
     let bytes = super::read_bytes(path)?;
+    if bytes.starts_with(b"glTF") {
+        // The GLB header's total length, checked here: the `gltf` crate subtracts 12 from it
+        // unchecked.
+        let declared = bytes
+            .get(8..12)
+            .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize);
+        match declared {
+            Some(n) if (12..=bytes.len()).contains(&n) => {}
+            Some(n) => {
+                return Err(parse_err(
+                    path,
+                    format!(
+                        "the GLB header declares a length of {n} bytes; the file has {} (at least 12 are needed)",
+                        bytes.len()
+                    ),
+                ));
+            }
+            None => return Err(parse_err(path, "the GLB header is truncated")),
+        }
+    }
     let gltf = gltf::Gltf::from_slice(&bytes).map_err(|e| match e {
         gltf::Error::Io(source) => io_err(path, source),
         e => parse_err(path, format!("not a valid glTF 2.0 file: {e}")),
