@@ -200,6 +200,21 @@ fn gltf_triangle_reads_and_byte_stride_smaller_than_an_element_is_refused() {
 }
 
 #[test]
+fn gltf_attribute_naming_a_missing_accessor_is_an_error() {
+    // Found by `cargo xtask fuzz` (gltf, seed 7): the `gltf` crate's validation indexed it.
+    let dir = tempfile::tempdir().expect("tempdir");
+    for index in ["7", "4294967295"] {
+        let bad = triangle_gltf(ONE_NODE, "VEC3", 5126, 0)
+            .replace("\"POSITION\": 0", &format!("\"POSITION\": {index}"));
+        let e = err_of(read_mesh(put(dir.path(), "acc.gltf", bad.as_bytes())));
+        assert!(
+            e.contains(&format!("attribute accessor {index} does not exist")),
+            "{e}"
+        );
+    }
+}
+
+#[test]
 fn gltf_wrongly_typed_position_accessor_is_named_as_such() {
     let dir = tempfile::tempdir().expect("tempdir");
     let bad = triangle_gltf(ONE_NODE, "SCALAR", 5126, 0);

@@ -610,14 +610,32 @@ pub fn read_gltf(path: &Path) -> Result<MeshWithNormals, MeshError> {
             None => return Err(parse_err(path, "the GLB header is truncated")),
         }
     }
-    let gltf = gltf::Gltf::from_slice(&bytes).map_err(|e| match e {
+    let invalid = |e: gltf::Error| match e {
         gltf::Error::Io(source) => io_err(path, source),
         e => parse_err(path, format!("not a valid glTF 2.0 file: {e}")),
-    })?;
-    let gltf::Gltf {
-        document: doc,
-        blob,
-    } = gltf;
+    };
+    let gltf::Gltf { document, blob } =
+        gltf::Gltf::from_slice_without_validation(&bytes).map_err(invalid)?;
+    // The `gltf` crate's validation indexes the POSITION accessor unchecked: check every
+    // attribute's accessor index first.
+    let root = document.into_json();
+    for (mi, m) in root.meshes.iter().enumerate() {
+        for (pi, prim) in m.primitives.iter().enumerate() {
+            for index in prim.attributes.values() {
+                if index.value() >= root.accessors.len() {
+                    return Err(parse_err(
+                        path,
+                        format!(
+                            "mesh {mi} primitive {pi}: attribute accessor {} does not exist ({} accessors)",
+                            index.value(),
+                            root.accessors.len()
+                        ),
+                    ));
+                }
+            }
+        }
+    }
+    let doc = gltf::Document::from_json(root).map_err(invalid)?;
     let buffers = load_buffers(&doc, blob, path)?;
     let input_bytes = bytes.len() + buffers.data.iter().map(Vec::len).sum::<usize>();
     let mut c = Collector {
