@@ -200,6 +200,21 @@ fn gltf_triangle_reads_and_byte_stride_smaller_than_an_element_is_refused() {
 }
 
 #[test]
+fn gltf_attribute_naming_a_missing_accessor_is_an_error() {
+    // Found by `cargo xtask fuzz` (gltf, seed 7): the `gltf` crate's validation indexed it.
+    let dir = tempfile::tempdir().expect("tempdir");
+    for index in ["7", "4294967295"] {
+        let bad = triangle_gltf(ONE_NODE, "VEC3", 5126, 0)
+            .replace("\"POSITION\": 0", &format!("\"POSITION\": {index}"));
+        let e = err_of(read_mesh(put(dir.path(), "acc.gltf", bad.as_bytes())));
+        assert!(
+            e.contains(&format!("attribute accessor {index} does not exist")),
+            "{e}"
+        );
+    }
+}
+
+#[test]
 fn gltf_wrongly_typed_position_accessor_is_named_as_such() {
     let dir = tempfile::tempdir().expect("tempdir");
     let bad = triangle_gltf(ONE_NODE, "SCALAR", 5126, 0);
@@ -406,6 +421,27 @@ fn glb_with_a_lying_byte_length_or_missing_chunk_is_refused() {
         e.contains("declares") || e.contains("not a valid glTF"),
         "{e}"
     );
+}
+
+#[test]
+fn glb_header_lengths_below_the_header_or_beyond_the_file_are_refused() {
+    // Found by `cargo xtask fuzz` (glb, seed 1): a total length under 12 overflowed inside the
+    // `gltf` crate.
+    let dir = tempfile::tempdir().expect("tempdir");
+    let p = dir.path().join("t.glb");
+    write_glb(&p, &bunny(), None).expect("writes");
+    let bytes = std::fs::read(&p).expect("read");
+    for declared in [0u32, 4, 11, bytes.len() as u32 + 1] {
+        let mut b = bytes.clone();
+        b[8..12].copy_from_slice(&declared.to_le_bytes());
+        let e = err_of(read_mesh(put(dir.path(), "len.glb", &b)));
+        assert!(
+            e.contains(&format!("declares a length of {declared} bytes")),
+            "{e}"
+        );
+    }
+    let e = err_of(read_mesh(put(dir.path(), "short.glb", b"glTF\x02\0\0\0")));
+    assert!(e.contains("truncated"), "{e}");
 }
 
 // ---------------------------------------------------------------- npz / npy

@@ -408,7 +408,14 @@ fn run_capped(t: &'static Target, path: &Path, input_len: usize) -> Outcome {
         Ok(handle) => match rx.recv_timeout(TIME_CAP) {
             Ok(true) => {
                 let _ = handle.join();
-                Outcome::Fine
+                match alloc::breached() {
+                    // A refused allocation that the reader handled (`try_reserve`): still an
+                    // attempt to use memory beyond what the input justifies.
+                    Some(bytes) => Outcome::Panic(format!(
+                        "an allocation of {bytes} bytes beyond the memory cap was refused"
+                    )),
+                    None => Outcome::Fine,
+                }
             }
             Ok(false) => {
                 let _ = handle.join();

@@ -180,7 +180,7 @@ fn duplicate(d: &mut Vec<u8>, rng: &mut ChaCha8Rng) {
     let lines: Vec<usize> = d
         .iter()
         .enumerate()
-        .filter(|(_, &b)| b == b'\n')
+        .filter(|(_, b)| **b == b'\n')
         .map(|(i, _)| i + 1)
         .collect();
     let (s, e) = if lines.len() >= 2 && rng.random_bool(0.7) {

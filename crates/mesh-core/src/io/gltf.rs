@@ -590,14 +590,52 @@ impl<'a> Collector<'a> {
 /// a small file into gigabytes.
 pub fn read_gltf(path: &Path) -> Result<MeshWithNormals, MeshError> {
     let bytes = super::read_bytes(path)?;
-    let gltf = gltf::Gltf::from_slice(&bytes).map_err(|e| match e {
+    if bytes.starts_with(b"glTF") {
+        // The GLB header's total length, checked here: the `gltf` crate subtracts 12 from it
+        // unchecked.
+        let declared = bytes
+            .get(8..12)
+            .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize);
+        match declared {
+            Some(n) if (12..=bytes.len()).contains(&n) => {}
+            Some(n) => {
+                return Err(parse_err(
+                    path,
+                    format!(
+                        "the GLB header declares a length of {n} bytes; the file has {} (at least 12 are needed)",
+                        bytes.len()
+                    ),
+                ));
+            }
+            None => return Err(parse_err(path, "the GLB header is truncated")),
+        }
+    }
+    let invalid = |e: gltf::Error| match e {
         gltf::Error::Io(source) => io_err(path, source),
         e => parse_err(path, format!("not a valid glTF 2.0 file: {e}")),
-    })?;
-    let gltf::Gltf {
-        document: doc,
-        blob,
-    } = gltf;
+    };
+    let gltf::Gltf { document, blob } =
+        gltf::Gltf::from_slice_without_validation(&bytes).map_err(invalid)?;
+    // The `gltf` crate's validation indexes the POSITION accessor unchecked: check every
+    // attribute's accessor index first.
+    let root = document.into_json();
+    for (mi, m) in root.meshes.iter().enumerate() {
+        for (pi, prim) in m.primitives.iter().enumerate() {
+            for index in prim.attributes.values() {
+                if index.value() >= root.accessors.len() {
+                    return Err(parse_err(
+                        path,
+                        format!(
+                            "mesh {mi} primitive {pi}: attribute accessor {} does not exist ({} accessors)",
+                            index.value(),
+                            root.accessors.len()
+                        ),
+                    ));
+                }
+            }
+        }
+    }
+    let doc = gltf::Document::from_json(root).map_err(invalid)?;
     let buffers = load_buffers(&doc, blob, path)?;
     let input_bytes = bytes.len() + buffers.data.iter().map(Vec::len).sum::<usize>();
     let mut c = Collector {
