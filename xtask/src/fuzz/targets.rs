@@ -326,6 +326,16 @@ fn checkpoint_seed(scratch: &Path) -> anyhow::Result<Vec<u8>> {
         },
         rng: rand_chacha::ChaCha8Rng::seed_from_u64(9),
         config_toml: "[run]\nseed = 9\n".into(),
+        identity: Some(stylize_cli::identity::TaskIdentity {
+            fields: [
+                ("mesh_sha256", "00ff"),
+                ("objective", "style:cube"),
+                ("darap.lambda", "8"),
+            ]
+            .into_iter()
+            .map(|(k, v)| (k.to_string(), v.to_string()))
+            .collect(),
+        }),
     };
     let p = scratch.join("checkpoint.json");
     c.save_atomic(&p)?;
