@@ -423,10 +423,14 @@ impl RunDir {
             if !diffs.is_empty() {
                 bail!(
                     "refusing to resume: the checkpoint in {dir} belongs to a different task \
-                     ({} field{} differ):\n  {}\nresume with the run's own settings (see its \
+                     ({} {}):\n  {}\nresume with the run's own settings (see its \
                      config.toml and task.json), or pass --force to start over",
                     diffs.len(),
-                    if diffs.len() == 1 { "" } else { "s" },
+                    if diffs.len() == 1 {
+                        "field differs"
+                    } else {
+                        "fields differ"
+                    },
                     diffs.join("\n  ")
                 );
             }
