@@ -8,14 +8,16 @@ use std::path::PathBuf;
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum MeshError {
-    /// The operating system refused to open, read or write a file.
-    #[error("cannot access {}: {source}", path.display())]
+    /// The operating system refused to open, read or write a file (or the path names something
+    /// that is not a regular file). The reason is part of the message and deliberately not the
+    /// error's [`source`](std::error::Error::source): reporters that print the chain (`anyhow`'s
+    /// `{:#}`) would otherwise say it twice.
+    #[error("cannot access {}: {error}", path.display())]
     Io {
         /// The file.
         path: PathBuf,
         /// The underlying error.
-        #[source]
-        source: std::io::Error,
+        error: std::io::Error,
     },
     /// The file's contents do not follow its format.
     #[error("{}: {message}", path.display())]

@@ -606,3 +606,65 @@ fn collinear_faces_are_zero_area_at_any_scale_and_tiny_well_shaped_faces_are_not
         );
     }
 }
+
+/// Runs `f` in a thread; fails the test (instead of hanging it) when `f` blocks past [`HANG`].
+fn within_hang_bound<T: Send + 'static>(f: impl FnOnce() -> T + Send + 'static) -> T {
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let _ = tx.send(f());
+    });
+    rx.recv_timeout(HANG).expect(
+        "the reader blocked: it must refuse a path that is not a regular file without opening it",
+    )
+}
+
+#[test]
+fn paths_that_are_not_regular_files_are_refused_without_being_opened() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    // A directory named like a mesh.
+    let d = dir.path().join("folder.obj");
+    std::fs::create_dir(&d).expect("mkdir");
+    // A link to an endless device, named like a mesh and like an .npz.
+    let zero_obj = dir.path().join("zero.obj");
+    std::os::unix::fs::symlink("/dev/zero", &zero_obj).expect("symlink");
+    let zero_npz = dir.path().join("zero.npz");
+    std::os::unix::fs::symlink("/dev/zero", &zero_npz).expect("symlink");
+    // A named pipe nobody writes to: opening it for reading would block forever.
+    let fifo = dir.path().join("pipe.ply");
+    let made_fifo = std::process::Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .map(|s| s.success())
+        .unwrap_or(false);
+
+    let e = err_of(read_mesh(&d));
+    assert!(e.contains("a directory, not a regular file"), "{e}");
+    let e = within_hang_bound(move || err_of(read_mesh(&zero_obj)));
+    assert!(e.contains("a device, not a regular file"), "{e}");
+    let e = within_hang_bound(move || {
+        NpzReader::open(&zero_npz)
+            .expect_err("a device is not an .npz")
+            .to_string()
+    });
+    assert!(e.contains("a device, not a regular file"), "{e}");
+    if made_fifo {
+        let e = within_hang_bound(move || err_of(read_mesh(&fifo)));
+        assert!(e.contains("a named pipe (FIFO), not a regular file"), "{e}");
+    } else {
+        eprintln!("mkfifo unavailable: the FIFO case was not exercised");
+    }
+}
+
+#[test]
+fn io_errors_state_their_reason_once() {
+    // The reason is in the message and not also the error's source, so a reporter that prints the
+    // chain (anyhow's `{:#}`) does not repeat it.
+    let dir = tempfile::tempdir().expect("tempdir");
+    let e = read_mesh(dir.path().join("missing.obj")).expect_err("missing");
+    let text = e.to_string();
+    assert!(
+        text.contains("missing.obj") && text.contains("No such file"),
+        "{text}"
+    );
+    assert!(std::error::Error::source(&e).is_none(), "{text}");
+}

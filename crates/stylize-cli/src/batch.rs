@@ -70,7 +70,7 @@ struct TomlManifest {
 
 /// Reads a manifest; relative paths are resolved against its folder.
 pub fn read_manifest(path: &Path) -> anyhow::Result<Vec<Row>> {
-    let text = std::fs::read_to_string(path)
+    let text = crate::input::read_to_string(path)
         .with_context(|| format!("cannot read manifest {}", path.display()))?;
     let is_toml = path
         .extension()

@@ -300,7 +300,7 @@ impl Config {
     /// Reads a TOML file, or (extension `.json`) the reference implementation's JSON layout (see
     /// [`crate::reference_config`]; its notes about ignored keys are printed to stderr).
     pub fn load(path: &Path) -> anyhow::Result<Self> {
-        let text = std::fs::read_to_string(path)
+        let text = crate::input::read_to_string(path)
             .with_context(|| format!("cannot read config {}", path.display()))?;
         if path
             .extension()

@@ -53,7 +53,7 @@ impl ModelIdentity {
     pub fn of_dir(dir: &Path) -> anyhow::Result<Self> {
         let path = dir.join("manifest.toml");
         let bytes =
-            std::fs::read(&path).with_context(|| format!("cannot read {}", path.display()))?;
+            crate::input::read(&path).with_context(|| format!("cannot read {}", path.display()))?;
         let name = std::str::from_utf8(&bytes)
             .ok()
             .and_then(|t| toml::from_str::<toml::Table>(t).ok())

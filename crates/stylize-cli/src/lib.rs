@@ -8,6 +8,7 @@ pub mod config;
 pub mod durable;
 pub mod eval;
 pub mod identity;
+pub mod input;
 pub mod lock;
 pub mod models;
 pub mod pipeline;

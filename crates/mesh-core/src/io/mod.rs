@@ -111,20 +111,57 @@ pub(crate) fn create_parent_dirs(path: &Path) -> Result<(), MeshError> {
     if let Some(parent) = path.parent()
         && !parent.as_os_str().is_empty()
     {
-        std::fs::create_dir_all(parent).map_err(|source| MeshError::Io {
+        std::fs::create_dir_all(parent).map_err(|error| MeshError::Io {
             path: parent.to_path_buf(),
-            source,
+            error,
         })?;
     }
     Ok(())
 }
 
-/// Reads a whole file.
+/// Checks, without opening it, that `path` is a regular file (symbolic links followed). A
+/// directory, named pipe, socket or device is refused with an [`std::io::ErrorKind::InvalidInput`]
+/// error saying which: opening a named pipe would block until some other process writes to it, and a
+/// device such as `/dev/zero` never ends. Every reader of a user-named file should call this first.
+pub fn ensure_regular_file(path: &Path) -> std::io::Result<()> {
+    let meta = std::fs::metadata(path)?;
+    if meta.is_file() {
+        return Ok(());
+    }
+    let ft = meta.file_type();
+    let what = if ft.is_dir() {
+        "a directory"
+    } else {
+        use std::os::unix::fs::FileTypeExt;
+        if ft.is_fifo() {
+            "a named pipe (FIFO)"
+        } else if ft.is_socket() {
+            "a socket"
+        } else if ft.is_block_device() || ft.is_char_device() {
+            "a device"
+        } else {
+            "something else"
+        }
+    };
+    Err(std::io::Error::new(
+        std::io::ErrorKind::InvalidInput,
+        format!("it is {what}, not a regular file"),
+    ))
+}
+
+/// Opens `path` for reading after [`ensure_regular_file`].
+pub fn open_regular(path: &Path) -> Result<std::fs::File, MeshError> {
+    ensure_regular_file(path).map_err(|e| io_err(path, e))?;
+    std::fs::File::open(path).map_err(|e| io_err(path, e))
+}
+
+/// Reads a whole regular file (see [`open_regular`]).
 pub(crate) fn read_bytes(path: &Path) -> Result<Vec<u8>, MeshError> {
-    std::fs::read(path).map_err(|source| MeshError::Io {
-        path: path.to_path_buf(),
-        source,
-    })
+    use std::io::Read;
+    let mut file = open_regular(path)?;
+    let mut bytes = Vec::new();
+    file.read_to_end(&mut bytes).map_err(|e| io_err(path, e))?;
+    Ok(bytes)
 }
 
 /// `bytes` without a leading UTF-8 byte-order mark (which some Windows tools write at the start of
@@ -165,9 +202,9 @@ pub(crate) fn truncation_hint(e: MeshError, bytes: &[u8]) -> MeshError {
 }
 
 /// An I/O error for `path`.
-pub(crate) fn io_err(path: &Path, source: std::io::Error) -> MeshError {
+pub(crate) fn io_err(path: &Path, error: std::io::Error) -> MeshError {
     MeshError::Io {
         path: path.to_path_buf(),
-        source,
+        error,
     }
 }

@@ -53,10 +53,7 @@ impl NpzReader {
     /// nothing is inflated yet. The key of `verts.npy` is `verts`.
     pub fn open(path: impl AsRef<Path>) -> Result<Self, MeshError> {
         let path = path.as_ref().to_path_buf();
-        let file = File::open(&path).map_err(|source| MeshError::Io {
-            path: path.clone(),
-            source,
-        })?;
+        let file = crate::io::open_regular(&path)?;
         let mut zip =
             zip::ZipArchive::new(std::io::BufReader::new(file)).map_err(|e| MeshError::Parse {
                 path: path.clone(),
@@ -280,9 +277,9 @@ impl NpzWriter {
     pub fn create(path: impl AsRef<Path>) -> Result<Self, MeshError> {
         let path = path.as_ref().to_path_buf();
         crate::io::create_parent_dirs(&path)?;
-        let file = File::create(&path).map_err(|source| MeshError::Io {
+        let file = File::create(&path).map_err(|error| MeshError::Io {
             path: path.clone(),
-            source,
+            error,
         })?;
         Ok(Self {
             path,
@@ -319,21 +316,21 @@ impl NpzWriter {
         let path = self.path.clone();
         let w = self.zip.finish().map_err(|e| MeshError::Io {
             path: path.clone(),
-            source: std::io::Error::other(e.to_string()),
+            error: std::io::Error::other(e.to_string()),
         })?;
         w.into_inner()
             .map_err(|e| MeshError::Io {
                 path: path.clone(),
-                source: e.into_error(),
+                error: e.into_error(),
             })?
             .sync_all()
-            .map_err(|source| MeshError::Io { path, source })
+            .map_err(|error| MeshError::Io { path, error })
     }
 
     fn io_err(&self, msg: String) -> MeshError {
         MeshError::Io {
             path: self.path.clone(),
-            source: std::io::Error::other(msg),
+            error: std::io::Error::other(msg),
         }
     }
 }

@@ -92,7 +92,7 @@ pub fn output_paths(output: &Path, lambdas: &[f64]) -> anyhow::Result<Vec<PathBu
 /// Parses a mask file: one 0-based vertex index per line (`#` comments and blank lines ignored);
 /// returns `free[v]` (true for listed vertices).
 pub fn read_mask(path: &Path, num_vertices: usize) -> anyhow::Result<Vec<bool>> {
-    let text = std::fs::read_to_string(path)
+    let text = crate::input::read_to_string(path)
         .with_context(|| format!("cannot read mask file {}", path.display()))?;
     let mut free = vec![false; num_vertices];
     for (lineno, line) in text.lines().enumerate() {
