@@ -3,6 +3,30 @@
 use crate::TriMesh;
 use crate::subdivide;
 
+/// The regular octahedron with vertices `±e_x, ±e_y, ±e_z` (in that order: +x, −x, +y, −y, +z, −z);
+/// faces CCW seen from outside. `V = 6`, `F = 8`.
+pub fn octahedron() -> TriMesh {
+    let positions = vec![
+        [1.0, 0.0, 0.0],
+        [-1.0, 0.0, 0.0],
+        [0.0, 1.0, 0.0],
+        [0.0, -1.0, 0.0],
+        [0.0, 0.0, 1.0],
+        [0.0, 0.0, -1.0],
+    ];
+    let faces = vec![
+        [0, 2, 4],
+        [2, 1, 4],
+        [1, 3, 4],
+        [3, 0, 4],
+        [2, 0, 5],
+        [1, 2, 5],
+        [3, 1, 5],
+        [0, 3, 5],
+    ];
+    TriMesh::new(positions, faces)
+}
+
 /// A unit-radius icosphere: the regular icosahedron, then `level` rounds of midpoint subdivision
 /// ([`subdivide::midpoint`]), every vertex projected back to the unit sphere after each round (so
 /// the triangles stay nearly equilateral; all cotangent weights are positive). Faces are CCW seen
@@ -79,5 +103,14 @@ mod tests {
         // Positive signed volume (outward faces), a bit below 4π/3.
         let ball = 4.0 / 3.0 * std::f64::consts::PI;
         assert!(vol > 0.9 * ball && vol < ball, "volume {vol}");
+    }
+
+    #[test]
+    fn octahedron_is_closed_and_outward() {
+        let m = octahedron();
+        assert_eq!((m.positions.len(), m.faces.len()), (6, 8));
+        // Volume of the regular octahedron with unit circumradius is 4/3; positive = outward faces.
+        let vol = crate::geometry::signed_volume(&m.positions, &m.faces);
+        assert!((vol - 4.0 / 3.0).abs() < 1e-12, "volume {vol}");
     }
 }

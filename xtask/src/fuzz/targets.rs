@@ -130,29 +130,6 @@ pub const TARGETS: &[Target] = &[
     },
 ];
 
-/// A small closed mesh (an octahedron) for generated seeds.
-fn octahedron() -> TriMesh {
-    let p = vec![
-        [1.0, 0.0, 0.0],
-        [-1.0, 0.0, 0.0],
-        [0.0, 1.0, 0.0],
-        [0.0, -1.0, 0.0],
-        [0.0, 0.0, 1.0],
-        [0.0, 0.0, -1.0],
-    ];
-    let f = vec![
-        [0, 2, 4],
-        [2, 1, 4],
-        [1, 3, 4],
-        [3, 0, 4],
-        [2, 0, 5],
-        [1, 2, 5],
-        [3, 1, 5],
-        [0, 3, 5],
-    ];
-    TriMesh::new(p, f)
-}
-
 fn base64(bytes: &[u8]) -> String {
     const A: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
     let mut s = String::new();
@@ -229,7 +206,7 @@ pub fn seeds(target: &str, root: &Path, scratch: &Path) -> anyhow::Result<Vec<Ve
         let p = root.join(rel);
         std::fs::read(&p).with_context(|| format!("cannot read seed {}", p.display()))
     };
-    let m = octahedron();
+    let m = mesh_core::shapes::octahedron();
     let generate = |name: &str, write: &dyn Fn(&Path) -> Result<(), mesh_core::MeshError>| {
         let p: PathBuf = scratch.join(name);
         write(&p).with_context(|| format!("cannot write seed {}", p.display()))?;
