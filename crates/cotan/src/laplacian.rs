@@ -157,26 +157,10 @@ pub fn laplacian(positions: &[[f64; 3]], faces: &[[u32; 3]]) -> Result<Symmetric
 mod tests {
     use super::*;
 
+    /// The shared regular octahedron ([`mesh_core::shapes::octahedron`]) as position/face lists.
     fn octahedron() -> (Vec<[f64; 3]>, Vec<[u32; 3]>) {
-        let p = vec![
-            [1.0, 0.0, 0.0],
-            [-1.0, 0.0, 0.0],
-            [0.0, 1.0, 0.0],
-            [0.0, -1.0, 0.0],
-            [0.0, 0.0, 1.0],
-            [0.0, 0.0, -1.0],
-        ];
-        let f = vec![
-            [0, 2, 4],
-            [2, 1, 4],
-            [1, 3, 4],
-            [3, 0, 4],
-            [2, 0, 5],
-            [1, 2, 5],
-            [3, 1, 5],
-            [0, 3, 5],
-        ];
-        (p, f)
+        let m = mesh_core::shapes::octahedron();
+        (m.positions, m.faces)
     }
 
     #[test]

@@ -182,27 +182,9 @@ mod tests {
     fn exemplar_octahedron_file_reproduces_the_cube_style() {
         // The regular octahedron's area-weighted vertex normals are exactly ±e_i, so as an
         // exemplar it must give the cube style's targets.
-        let p = vec![
-            [1.0, 0.0, 0.0],
-            [-1.0, 0.0, 0.0],
-            [0.0, 1.0, 0.0],
-            [0.0, -1.0, 0.0],
-            [0.0, 0.0, 1.0],
-            [0.0, 0.0, -1.0],
-        ];
-        let f = vec![
-            [0, 2, 4],
-            [2, 1, 4],
-            [1, 3, 4],
-            [3, 0, 4],
-            [2, 0, 5],
-            [1, 2, 5],
-            [3, 1, 5],
-            [0, 3, 5],
-        ];
         let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
         let path = dir.path().join("octahedron.obj");
-        mesh_core::io::write_mesh(&path, &mesh_core::TriMesh::new(p, f), None)
+        mesh_core::io::write_mesh(&path, &mesh_core::shapes::octahedron(), None)
             .unwrap_or_else(|e| panic!("{e}"));
         let spec = format!("exemplar:{}", path.display());
         let style = Style::parse(&spec).unwrap_or_else(|e| panic!("{e:#}"));
