@@ -37,7 +37,16 @@ const RULES: &[(&str, &[&str])] = &[
     ("csd", &["ort", "wgpu", "tokenizers"]),
     ("optim", &["wgpu", "ort", "faer", "tokenizers"]),
     ("raster-diff", &["ort", "tokenizers"]),
-    ("diffusion-onnx", &["wgpu"]),
+    // `.npy` only from the npy crate: no zip, and no mesh code.
+    ("diffusion-onnx", &["wgpu", "mesh-core", "zip"]),
+    // NumPy files: zip (feature npz, on here) and half, nothing heavy and nothing of ours.
+    (
+        "npy",
+        &[
+            "wgpu", "ort", "tokenizers", "gltf", "naga", "tokio", "faer", "glam", "rayon", "serde",
+            "mesh-core",
+        ],
+    ),
 ];
 
 pub fn run() -> anyhow::Result<()> {
