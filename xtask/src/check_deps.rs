@@ -39,11 +39,25 @@ const RULES: &[(&str, &[&str])] = &[
     ("raster-diff", &["ort", "tokenizers"]),
     // `.npy` only from the npy crate: no zip, and no mesh code.
     ("diffusion-onnx", &["wgpu", "mesh-core", "zip"]),
+    // The optimization as a library: no command line, no terminal UI, no signal handling.
+    (
+        "stylize",
+        &["clap", "indicatif", "console", "signal-hook", "crossterm"],
+    ),
     // NumPy files: zip (feature npz, on here) and half, nothing heavy and nothing of ours.
     (
         "npy",
         &[
-            "wgpu", "ort", "tokenizers", "gltf", "naga", "tokio", "faer", "glam", "rayon", "serde",
+            "wgpu",
+            "ort",
+            "tokenizers",
+            "gltf",
+            "naga",
+            "tokio",
+            "faer",
+            "glam",
+            "rayon",
+            "serde",
             "mesh-core",
         ],
     ),

@@ -9,9 +9,8 @@
 //!
 //! Layers: plain slice functions ([`geometry`], [`normals`], [`normalize`], [`topology`],
 //! [`subdivide`], [`shapes`]) work on `&[[f64; 3]]` / `&[[u32; 3]]`; [`validate`] checks and repairs a
-//! [`TriMesh`]; with the default feature `io`, [`io`] reads and writes OBJ, OFF, PLY and glTF/GLB
-//! and [`npz`] reads and writes `.npz` files through the `npy` crate (including the reference's
-//! saved-deformation format).
+//! [`TriMesh`]; with the default feature `io`, [`io`] reads and writes OBJ, OFF, PLY and glTF/GLB.
+//! NumPy files live in the `npy` crate, the reference's saved-deformation `.npz` in `stylize`.
 
 mod error;
 pub mod geometry;
@@ -24,8 +23,6 @@ pub mod validate;
 
 #[cfg(feature = "io")]
 pub mod io;
-#[cfg(feature = "io")]
-pub mod npz;
 
 pub use error::MeshError;
 

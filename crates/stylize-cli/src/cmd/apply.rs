@@ -20,7 +20,8 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, bail, ensure};
 use darap::{Darap, DarapOptions, PostProcess, RotationRule};
 use mesh_core::TriMesh;
-use mesh_core::npz::{NpyData, SavedDeformation};
+use npy::NpyData;
+use stylize::saved::SavedDeformation;
 
 /// Rotation rule on the command line.
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]

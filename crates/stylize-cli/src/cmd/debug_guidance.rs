@@ -25,7 +25,8 @@ use csd::{CascadedGuidance, Denoiser, GuidanceConfig, InjectedDraws};
 use diffusion_onnx::{
     EmbeddingCache, ModelDir, OnnxDenoiser, SessionOptions, Stage, prompt_embeddings,
 };
-use mesh_core::npz::{NpyArray, NpyData, NpzWriter, parse_npy};
+use npy::npz::NpzWriter;
+use npy::{NpyArray, NpyData, parse_npy};
 use rand::SeedableRng;
 
 /// Arguments of `stylize debug-guidance`.
@@ -246,7 +247,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use mesh_core::npz::NpzReader;
+    use npy::npz::NpzReader;
 
     fn tiny() -> PathBuf {
         PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/models/tiny-if")
@@ -257,7 +258,7 @@ mod tests {
         let data: Vec<f32> = (0..n).map(|i| ((i * 7919) % 1000) as f32 / 999.0).collect();
         let a = NpyArray::new(vec![views, side, side, 3], NpyData::F32(data))
             .map_err(|e| anyhow::anyhow!(e))?;
-        std::fs::write(path, mesh_core::npz::write_npy(&a))?;
+        std::fs::write(path, npy::write_npy(&a))?;
         Ok(())
     }
 
@@ -325,7 +326,7 @@ mod tests {
         let dir = tempfile::tempdir()?;
         let a = NpyArray::new(vec![1, 4, 4, 3], NpyData::F32(vec![2.0; 48]))
             .map_err(|e| anyhow::anyhow!(e))?;
-        std::fs::write(dir.path().join("imgs.npy"), mesh_core::npz::write_npy(&a))?;
+        std::fs::write(dir.path().join("imgs.npy"), npy::write_npy(&a))?;
         let msg = run(args(dir.path(), 0.0, 1, "d.npz"))
             .err()
             .map(|e| format!("{e:#}"))

@@ -76,7 +76,7 @@ pub fn resolve_config(
     negative_prompt: Option<&str>,
 ) -> anyhow::Result<Config> {
     let base = match file {
-        Some(p) => Config::load(p)?,
+        Some(p) => crate::config::load(p)?,
         None => Config::default(),
     };
     let mut config = base.with_overrides(set)?;

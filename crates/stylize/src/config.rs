@@ -1,5 +1,6 @@
 //! The run configuration: a TOML file whose sections mirror the crates, every default the
-//! reference's (spec §5–§7), plus typed `--set section.key=value` overrides.
+//! reference's (spec §5–§7), plus typed `section.key=value` overrides. Reading files (TOML or the reference's JSON) is the
+//! command line's job (`stylize_cli::config::load`).
 //!
 //! ```toml
 //! [darap]    lambda = 8.0, rotation_rule = "gis", post_process = "recenter_rescale"
@@ -13,8 +14,6 @@
 //! [run]      seed, checkpoint_every, preview_every, turntable_views, turntable_size
 //! ```
 //! `docs/cli.md` lists every key with its meaning.
-
-use std::path::Path;
 
 use anyhow::{Context, bail};
 use serde::{Deserialize, Serialize};
@@ -297,25 +296,6 @@ impl Config {
         Ok(config)
     }
 
-    /// Reads a TOML file, or (extension `.json`) the reference implementation's JSON layout (see
-    /// [`crate::reference_config`]; its notes about ignored keys are printed to stderr).
-    pub fn load(path: &Path) -> anyhow::Result<Self> {
-        let text = crate::input::read_to_string(path)
-            .with_context(|| format!("cannot read config {}", path.display()))?;
-        if path
-            .extension()
-            .is_some_and(|e| e.eq_ignore_ascii_case("json"))
-        {
-            let (config, notes) = crate::reference_config::from_reference_json(&text)
-                .with_context(|| format!("in reference config {}", path.display()))?;
-            for n in notes {
-                eprintln!("note: {}: {n}", path.display());
-            }
-            return Ok(config);
-        }
-        Self::from_toml_str(&text).with_context(|| format!("in config {}", path.display()))
-    }
-
     /// The resolved configuration as TOML (what a run directory's `config.toml` holds).
     pub fn to_toml_string(&self) -> anyhow::Result<String> {
         toml::to_string_pretty(self).context("cannot serialize the configuration")
@@ -568,26 +548,5 @@ mod tests {
             .err()
             .map(|e| format!("{e:#}"));
         assert!(e.is_some_and(|m| m.contains("lamda")));
-    }
-
-    #[test]
-    fn reference_fixture_equals_builtin_defaults() {
-        let path =
-            Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/configs/reference.toml");
-        assert_eq!(ok(Config::load(&path)), Config::default());
-    }
-
-    #[test]
-    fn shipped_fixture_configs_parse() {
-        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/configs");
-        let mut n = 0;
-        for entry in ok(std::fs::read_dir(&dir).context("fixtures/configs")) {
-            let path = ok(entry.context("dir entry")).path();
-            if path.extension().is_some_and(|e| e == "toml") {
-                ok(Config::load(&path));
-                n += 1;
-            }
-        }
-        assert!(n >= 1, "no configs in {}", dir.display());
     }
 }

@@ -3,13 +3,14 @@
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 use anyhow::{Context, bail};
 use csd::Guidance;
 use darap::Darap;
 use mesh_core::TriMesh;
-use mesh_core::npz::{NpyArray, NpyData, SavedDeformation};
+use npy::{NpyArray, NpyData};
 use optim::{Adam, AdamConfig};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -24,21 +25,62 @@ use crate::pipeline::{
     ViewSettings, run_loop,
 };
 use crate::rundir::{Claim, ResumeMode, RunDir, Start};
-use crate::signals::Interrupted;
+use crate::saved::SavedDeformation;
 use crate::style::Style;
 
 /// Format version of our extra keys in `deformation.npz`.
-pub const NPZ_FORMAT_VERSION: i64 = mesh_core::npz::FORMAT_VERSION;
+pub const NPZ_FORMAT_VERSION: i64 = crate::saved::FORMAT_VERSION;
 
-/// How progress is reported.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum LogMode {
-    /// An indicatif progress bar on stderr.
-    Bar,
-    /// One JSON object per iteration on stdout (the `metrics.jsonl` line).
-    Jsonl,
-    /// Nothing but errors.
-    Quiet,
+/// Receives a run's progress. Every method has a default that does nothing; the command line
+/// draws a progress bar, prints plain lines or JSON.
+pub trait Progress {
+    /// The loop is about to run iterations `at + 1 ..= total`; `headline` describes the run (what
+    /// is optimized on which mesh, the renderer chosen).
+    fn start(&mut self, _total: u64, _at: u64, _headline: &[String]) {}
+    /// An iteration finished; `json` is its `metrics.jsonl` line.
+    fn iteration(&mut self, _record: &IterationRecord, _json: &str) {}
+    /// A warning that does not stop the run.
+    fn warning(&mut self, _message: &str) {}
+    /// The loop ended (finished, halted, stopped or failed).
+    fn finish(&mut self) {}
+}
+
+/// A [`Progress`] that reports nothing.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct NoProgress;
+
+impl Progress for NoProgress {}
+
+/// What a caller plugs into [`execute_with`]: where progress goes, and a cancellation flag.
+pub struct RunHooks<'a> {
+    /// Progress reporting.
+    pub progress: &'a mut dyn Progress,
+    /// Set it (from a signal handler, another thread, a UI) to stop the run: the loop finishes the
+    /// current iteration, writes a checkpoint and returns [`Stopped`]. Polled after every iteration
+    /// and before expensive loading.
+    pub cancel: &'a AtomicBool,
+}
+
+impl std::fmt::Debug for RunHooks<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("RunHooks")
+            .field("cancel", &self.cancel)
+            .finish_non_exhaustive()
+    }
+}
+
+/// A run stopped through [`RunHooks::cancel`] (the error [`execute_with`] returns; the command line
+/// turns it into its signal message and exit status).
+#[derive(Debug, thiserror::Error)]
+#[error("{}", match .checkpoint_iteration {
+    Some(i) => format!("stopped after iteration {i}, checkpoint written to {}", .dir.join("checkpoint.json").display()),
+    None => format!("stopped before the first iteration; nothing to resume in {}", .dir.display()),
+})]
+pub struct Stopped {
+    /// The run directory.
+    pub dir: PathBuf,
+    /// The iteration the checkpoint holds (`None`: stopped before any checkpoint was written).
+    pub checkpoint_iteration: Option<u64>,
 }
 
 /// What to optimize.
@@ -76,8 +118,6 @@ pub struct RunRequest {
     pub force: bool,
     /// Continue from a checkpoint if there is one.
     pub resume: bool,
-    /// Progress reporting.
-    pub log: LogMode,
     /// Stop after this iteration without final outputs (tests of `--resume`).
     pub halt_after: Option<u64>,
 }
@@ -145,9 +185,9 @@ pub fn renderer(config: &Config) -> (Box<dyn Renderer>, String) {
     raster_diff::select_renderer(config.render.backend != Backend::Cpu)
 }
 
-/// The loop was asked to stop by a signal (returned by the observer after a full iteration).
+/// The loop was asked to stop (returned by the observer after a full iteration).
 #[derive(Debug, thiserror::Error)]
-#[error("stop requested by a signal")]
+#[error("stop requested")]
 struct StopRequested;
 
 struct RunObserver<'a> {
@@ -155,8 +195,8 @@ struct RunObserver<'a> {
     lock: &'a RunLock,
     identity: TaskIdentity,
     metrics: std::fs::File,
-    log: LogMode,
-    bar: Option<indicatif::ProgressBar>,
+    progress: &'a mut dyn Progress,
+    cancel: &'a AtomicBool,
     config_toml: String,
     preview_size: usize,
     fov: f64,
@@ -232,25 +272,15 @@ impl Observer for RunObserver<'_> {
     fn iteration(&mut self, record: &IterationRecord) -> anyhow::Result<()> {
         let line = record_json(record).to_string();
         writeln!(self.metrics, "{line}").context("cannot write metrics.jsonl")?;
-        match self.log {
-            LogMode::Jsonl => println!("{line}"),
-            LogMode::Bar => {
-                if let Some(bar) = &self.bar {
-                    let loss = record
-                        .terms
-                        .iter()
-                        .find(|(k, _)| *k == "loss")
-                        .map_or(f64::NAN, |t| t.1);
-                    bar.set_position(record.iteration);
-                    bar.set_message(format!("loss {loss:.5}"));
-                }
-            }
-            LogMode::Quiet => {}
-        }
-        if crate::signals::pending().is_some() {
+        self.progress.iteration(record, &line);
+        if self.cancel.load(Ordering::SeqCst) {
             return Err(StopRequested.into());
         }
         Ok(())
+    }
+
+    fn warning(&mut self, message: &str) {
+        self.progress.warning(message);
     }
 
     fn checkpoint(&mut self, state: &LoopState) -> anyhow::Result<()> {
@@ -324,14 +354,19 @@ pub fn objective_identity(task: &Task) -> ObjectiveIdentity {
     }
 }
 
-/// Runs one request to completion (or to `halt_after`).
+/// Runs one request to completion (or to `halt_after`), reporting nothing and never cancelled.
 pub fn execute(request: &RunRequest, task: Task) -> anyhow::Result<RunOutcome> {
     let objective = objective_identity(&task);
     let mut options = RunOptions::default();
     if let Task::Style(Style::Exemplar { path, .. }) = &task {
         options.inputs.push(("exemplar mesh".into(), path.clone()));
     }
-    execute_with(request, objective, || Ok(task), &options)
+    let never = AtomicBool::new(false);
+    let hooks = RunHooks {
+        progress: &mut NoProgress,
+        cancel: &never,
+    };
+    execute_with(request, objective, || Ok(task), &options, hooks)
 }
 
 /// Runs one request: `objective` is the task's identity, `make_task` builds the task (e.g. loads
@@ -342,7 +377,10 @@ pub fn execute_with(
     mut objective: ObjectiveIdentity,
     make_task: impl FnOnce() -> anyhow::Result<Task>,
     options: &RunOptions,
+    hooks: RunHooks<'_>,
 ) -> anyhow::Result<RunOutcome> {
+    let RunHooks { progress, cancel } = hooks;
+    let cancelled = || cancel.load(Ordering::SeqCst);
     let config = &request.config;
     config.validate()?;
     let config_toml = config.to_toml_string()?;
@@ -356,7 +394,6 @@ pub fn execute_with(
         .context("dARAP precomputation")?;
     let setup_seconds = setup.elapsed().as_secs_f64();
     // Everything that can fail on bad input happens before the run directory is touched.
-    crate::signals::install()?;
     let dir = RunDir::new(&request.out);
     let mut inputs = vec![("input mesh".to_string(), request.mesh.clone())];
     inputs.extend(options.inputs.iter().cloned());
@@ -384,8 +421,7 @@ pub fn execute_with(
         });
     }
     let interrupted_before = |start: &Start| {
-        crate::signals::pending().map(|signal| Interrupted {
-            signal,
+        cancelled().then(|| Stopped {
             dir: request.out.clone(),
             checkpoint_iteration: match start {
                 Start::Resume(c) => Some(c.iteration),
@@ -512,54 +548,38 @@ pub fn execute_with(
         .create(true)
         .open(dir.metrics())
         .context("cannot open metrics.jsonl")?;
-    let bar = (request.log == LogMode::Bar).then(|| {
-        let bar = indicatif::ProgressBar::new(spec.iterations);
-        let style = indicatif::ProgressStyle::with_template(
-            "{bar:30} {pos}/{len} {msg} {per_sec} ETA {eta}",
-        )
-        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar());
-        bar.set_style(style);
-        bar.set_position(state.iteration);
-        bar
-    });
+    let mut headline = vec![format!(
+        "{} on {} ({} vertices)",
+        objective.describe(),
+        request.mesh.display(),
+        mesh.positions.len()
+    )];
+    if let Some(why) = &renderer_choice {
+        headline.push(format!("renderer: {why}"));
+    }
+    progress.start(spec.iterations, state.iteration, &headline);
     let mut observer = RunObserver {
         dir: &dir,
         lock: &lock,
         identity: identity.clone(),
         metrics,
-        log: request.log,
-        bar: bar.clone(),
+        progress,
+        cancel,
         config_toml: config_toml.clone(),
         preview_size: config.run.turntable_size,
         fov: config.camera.fov_deg,
         faces: mesh.faces.clone(),
         preview_renderer: raster_diff::CpuRenderer::default(),
     };
-    if request.log == LogMode::Bar
-        && let Some(b) = &bar
-    {
-        b.println(format!(
-            "{} on {} ({} vertices)",
-            objective.describe(),
-            request.mesh.display(),
-            mesh.positions.len()
-        ));
-        if let Some(why) = &renderer_choice {
-            b.println(format!("renderer: {why}"));
-        }
-    }
     let loop_start = Instant::now();
     let looped = run_loop(&darap, &spec, &mut state, objective.as_mut(), &mut observer);
-    if let Some(b) = &bar {
-        b.finish_and_clear();
-    }
+    observer.progress.finish();
     match looped {
         Ok(()) => {}
         Err(e) if e.is::<StopRequested>() => {
             // The iteration is complete (state is consistent): keep it.
             observer.checkpoint(&state)?;
-            return Err(Interrupted {
-                signal: crate::signals::pending().unwrap_or(signal_hook::consts::signal::SIGTERM),
+            return Err(Stopped {
                 dir: request.out.clone(),
                 checkpoint_iteration: Some(state.iteration),
             }
@@ -577,10 +597,9 @@ pub fn execute_with(
             already_complete: false,
         });
     }
-    if let Some(signal) = crate::signals::pending() {
+    if cancelled() {
         // The final checkpoint is written; the outputs are left to the resume.
-        return Err(Interrupted {
-            signal,
+        return Err(Stopped {
             dir: request.out.clone(),
             checkpoint_iteration: Some(state.iteration),
         }

@@ -106,6 +106,9 @@ pub trait Observer {
         deformed: &[[f64; 3]],
         images: Option<&Images>,
     ) -> anyhow::Result<()>;
+    /// Something the user should know that does not stop the loop (e.g. a streak of zero
+    /// gradients). The default drops it; the command line prints it.
+    fn warning(&mut self, _message: &str) {}
 }
 
 fn add_term(terms: &mut Vec<(&'static str, f64)>, name: &'static str, value: f64, sum: bool) {
@@ -216,7 +219,7 @@ pub fn run_loop(
             .sum::<f64>()
             .sqrt();
         if let Some(warning) = zero_watch.observe(iteration, record.grad_norm) {
-            eprintln!("{warning}");
+            observer.warning(&warning);
         }
         if zero_watch.streak() > 0 {
             record
