@@ -584,7 +584,7 @@ fn paths_that_are_not_regular_files_are_refused_without_being_opened() {
     let e = within_hang_bound(move || err_of(read_mesh(&zero_obj)));
     assert!(e.contains("a device, not a regular file"), "{e}");
     let e = within_hang_bound(move || {
-        NpzReader::open(&zero_npz)
+        npy::npz::NpzReader::open(&zero_npz)
             .expect_err("a device is not an .npz")
             .to_string()
     });

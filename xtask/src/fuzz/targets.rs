@@ -255,8 +255,12 @@ pub fn seeds(target: &str, root: &Path, scratch: &Path) -> anyhow::Result<Vec<Ve
                     NpyArray::new(vec![], NpyData::I64(vec![3])).map_err(anyhow::Error::msg)?,
                 )],
             };
+            let p = scratch.join("s.npz");
+            saved
+                .write(&p)
+                .with_context(|| format!("cannot write seed {}", p.display()))?;
             vec![
-                generate("s.npz", &|p| saved.write(p))?,
+                std::fs::read(&p).with_context(|| format!("cannot read seed {}", p.display()))?,
                 fx("fixtures/meshes/numpy_tet.npz")?,
                 fx("fixtures/meshes/bunny_targets.npz")?,
             ]
