@@ -415,15 +415,18 @@ fn run_row(
                 prompt: prompt.clone(),
                 model: None,
             };
+            let config = &config;
             execute_with(
                 &request,
                 objective,
-                || {
+                // `move`: the closure takes the `&mut` to the model set, so the guidance it builds
+                // may borrow the UNets for the whole run.
+                move || {
                     let set = models.get_or_insert_with(|| ModelSet::open(model, &options.config));
-                    let set = set.as_ref().map_err(|e| anyhow::anyhow!("{e:#}"))?;
+                    let set = set.as_mut().map_err(|e| anyhow::anyhow!("{e:#}"))?;
                     Ok(Task::Text {
                         prompt: prompt.clone(),
-                        guidance: set.guidance_for(prompt, &config)?,
+                        guidance: Box::new(set.guidance_for(prompt, config)?),
                     })
                 },
                 &run_options,

@@ -185,7 +185,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 || {
                     Ok(Task::Text {
                         prompt: prompt.clone(),
-                        guidance: crate::models::load_guidance(model, prompt, &config)?,
+                        guidance: Box::new(crate::models::load_guidance(model, prompt, &config)?),
                     })
                 },
                 &options,
