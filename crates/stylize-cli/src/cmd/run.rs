@@ -32,7 +32,7 @@ pub struct Args {
     #[command(flatten)]
     pub settings: RunSettings,
     /// Seed (same as `--set run.seed=N`).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub seed: Option<u64>,
     /// Continue an interrupted run from its checkpoint (an error when there is none). Without
     /// --config/--set/--seed/--negative-prompt, the run's own `config.toml` is used. The task
