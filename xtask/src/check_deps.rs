@@ -34,7 +34,23 @@ const RULES: &[(&str, &[&str])] = &[
         ],
     ),
     ("cotan", &["wgpu", "ort", "tokenizers", "tobj", "gltf"]),
-    ("csd", &["ort", "wgpu", "tokenizers"]),
+    (
+        "csd",
+        &["ort", "wgpu", "tokenizers", "raster-diff", "mesh-core"],
+    ),
+    // The image batch between renderer and guidance: plain data.
+    (
+        "image-batch",
+        &[
+            "wgpu",
+            "ort",
+            "tokenizers",
+            "mesh-core",
+            "glam",
+            "rayon",
+            "png",
+        ],
+    ),
     ("optim", &["wgpu", "ort", "faer", "tokenizers"]),
     ("raster-diff", &["ort", "tokenizers"]),
     // `.npy` only from the npy crate: no zip, and no mesh code.

@@ -60,7 +60,7 @@ impl RunRequest {
 
 /// Runs one request to completion (or to `halt_after`) with the signal handlers installed and
 /// progress shown as `request.log` says.
-pub fn execute(request: &RunRequest, task: Task) -> anyhow::Result<RunOutcome> {
+pub fn execute(request: &RunRequest, task: Task<'_>) -> anyhow::Result<RunOutcome> {
     let objective = objective_identity(&task);
     let mut options = RunOptions::default();
     if let Task::Style(stylize::style::Style::Exemplar { path, .. }) = &task {
@@ -72,10 +72,10 @@ pub fn execute(request: &RunRequest, task: Task) -> anyhow::Result<RunOutcome> {
 /// [`stylize::runner::execute_with`] with the SIGINT/SIGTERM flag as its cancellation hook and
 /// the progress display of `request.log`; a stop becomes [`Interrupted`] (with the signal, for
 /// the message and the exit status).
-pub fn execute_with(
+pub fn execute_with<'g>(
     request: &RunRequest,
     objective: ObjectiveIdentity,
-    make_task: impl FnOnce() -> anyhow::Result<Task>,
+    make_task: impl FnOnce() -> anyhow::Result<Task<'g>>,
     options: &RunOptions,
 ) -> anyhow::Result<RunOutcome> {
     crate::signals::install()?;

@@ -84,19 +84,19 @@ pub struct Stopped {
 }
 
 /// What to optimize.
-pub enum Task {
+pub enum Task<'g> {
     /// The model-free path.
     Style(Style),
     /// The text path: a prompt and a ready guidance (models loaded by the caller).
     Text {
         /// The prompt (recorded).
         prompt: String,
-        /// The guidance.
-        guidance: Box<dyn Guidance>,
+        /// The guidance (it may borrow models that outlive the run, `'g`).
+        guidance: Box<dyn Guidance + 'g>,
     },
 }
 
-impl std::fmt::Debug for Task {
+impl std::fmt::Debug for Task<'_> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             Task::Style(s) => write!(f, "Style({})", s.name()),
@@ -344,7 +344,7 @@ pub struct RunOptions {
 }
 
 /// The identity of a ready task's objective (without model).
-pub fn objective_identity(task: &Task) -> ObjectiveIdentity {
+pub fn objective_identity(task: &Task<'_>) -> ObjectiveIdentity {
     match task {
         Task::Style(s) => ObjectiveIdentity::of_style(s),
         Task::Text { prompt, .. } => ObjectiveIdentity::Prompt {
@@ -355,7 +355,7 @@ pub fn objective_identity(task: &Task) -> ObjectiveIdentity {
 }
 
 /// Runs one request to completion (or to `halt_after`), reporting nothing and never cancelled.
-pub fn execute(request: &RunRequest, task: Task) -> anyhow::Result<RunOutcome> {
+pub fn execute(request: &RunRequest, task: Task<'_>) -> anyhow::Result<RunOutcome> {
     let objective = objective_identity(&task);
     let mut options = RunOptions::default();
     if let Task::Style(Style::Exemplar { path, .. }) = &task {
@@ -372,10 +372,10 @@ pub fn execute(request: &RunRequest, task: Task) -> anyhow::Result<RunOutcome> {
 /// Runs one request: `objective` is the task's identity, `make_task` builds the task (e.g. loads
 /// the models) — called only once the run directory is claimed, so refusals come before any
 /// expensive loading.
-pub fn execute_with(
+pub fn execute_with<'g>(
     request: &RunRequest,
     mut objective: ObjectiveIdentity,
-    make_task: impl FnOnce() -> anyhow::Result<Task>,
+    make_task: impl FnOnce() -> anyhow::Result<Task<'g>>,
     options: &RunOptions,
     hooks: RunHooks<'_>,
 ) -> anyhow::Result<RunOutcome> {
@@ -454,7 +454,7 @@ pub fn execute_with(
 
     let mut renderer_choice: Option<String> = None;
     let (mut objective, spec, lr, style_objective): (
-        Box<dyn Objective>,
+        Box<dyn Objective + 'g>,
         LoopSpec,
         f64,
         Option<StyleObjective>,
@@ -486,13 +486,7 @@ pub fn execute_with(
                 height: config.render.height,
                 adapt_distance: config.camera.adapt_distance,
             };
-            let obj = TextObjective::new(
-                renderer,
-                guidance,
-                &mesh.faces,
-                views,
-                config.stage2_schedule()?,
-            );
+            let obj = TextObjective::new(renderer, guidance, &mesh.faces, views);
             let spec = LoopSpec {
                 iterations: config.optim.iterations,
                 steps_per_batch: config.optim.steps_per_batch,

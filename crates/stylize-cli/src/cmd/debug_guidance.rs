@@ -167,10 +167,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(args.seed);
     let trace = guidance
         .evaluate_traced(
-            &images,
-            views,
-            height,
-            width,
+            &csd::Images::new(views, height, width, images)?,
             args.stage2_weight,
             &mut rng,
             &InjectedDraws::default(),
@@ -184,38 +181,38 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let s1 = &trace.stage1;
     for (k, t) in [
         ("z0", &s1.z0),
-        ("noise", &s1.noise),
+        ("noise", &s1.score.noise),
         ("z_t", &s1.z_t),
-        ("eps_cond", &s1.eps_cond),
-        ("eps_uncond", &s1.eps_uncond),
-        ("eps_guided", &s1.eps_guided),
-        ("grad", &s1.grad),
+        ("eps_cond", &s1.score.eps_cond),
+        ("eps_uncond", &s1.score.eps_uncond),
+        ("eps_guided", &s1.score.eps_guided),
+        ("grad", &s1.score.grad),
     ] {
         tensor(&mut w, &format!("stage1_{k}"), t)?;
     }
-    ints(&mut w, "stage1_timesteps", &s1.timesteps)?;
+    ints(&mut w, "stage1_timesteps", &s1.score.timesteps)?;
     if let Some(s2) = &trace.stage2 {
         for (k, t) in [
             ("x0", &s2.x0),
             ("z_hat", &s2.z_hat),
-            ("noise", &s2.noise),
+            ("noise", &s2.score.noise),
             ("noise_lowres", &s2.noise_lowres),
             ("x_t", &s2.x_t),
             ("z_hat_s", &s2.z_hat_s),
-            ("eps_cond", &s2.eps_cond),
-            ("eps_uncond", &s2.eps_uncond),
-            ("eps_guided", &s2.eps_guided),
-            ("grad", &s2.grad),
+            ("eps_cond", &s2.score.eps_cond),
+            ("eps_uncond", &s2.score.eps_uncond),
+            ("eps_guided", &s2.score.eps_guided),
+            ("grad", &s2.score.grad),
         ] {
             tensor(&mut w, &format!("stage2_{k}"), t)?;
         }
-        ints(&mut w, "stage2_timesteps", &s2.timesteps)?;
+        ints(&mut w, "stage2_timesteps", &s2.score.timesteps)?;
         ints(&mut w, "stage2_noise_levels", &s2.noise_levels)?;
     }
     tensor(&mut w, "grad_x", &trace.grad_x)?;
     w.add(
         "grad_images",
-        &f32_array(&[views, height, width, 3], &trace.output.grad_images)?,
+        &f32_array(&[views, height, width, 3], &trace.output.grad_images.rgb)?,
     )
     .context("writing grad_images")?;
     scalar(&mut w, "loss_stage1", trace.output.loss_stage1)?;
@@ -238,6 +235,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         trace
             .output
             .grad_images
+            .rgb
             .iter()
             .fold(0.0f32, |m, v| m.max(v.abs()))
     );
