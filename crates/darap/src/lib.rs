@@ -30,7 +30,6 @@ mod lanes;
 mod local;
 pub mod mat3;
 mod post;
-pub mod procedural;
 pub mod rotation_rule;
 pub mod svd3;
 

@@ -3,7 +3,7 @@
 use glam::DVec3;
 use raster_diff::cpu::raster::NO_TRIANGLE;
 use raster_diff::cpu::shading::RADIANCE_SCALE;
-use raster_diff::{CpuRenderer, Images, RenderError, RenderSettings, Renderer, View, shapes};
+use raster_diff::{CpuRenderer, Images, RenderError, RenderSettings, Renderer, View};
 
 fn front_view(eye_z: f64, light: [f64; 3]) -> View {
     View {
@@ -204,7 +204,7 @@ fn silhouette_gradient_moves_the_edge_towards_darker_target() {
 /// Directional finite difference of ⟨G, image⟩ through shading, normals and antialiasing.
 #[test]
 fn sphere_gradient_matches_central_differences() {
-    let (v, f) = shapes::icosphere(2);
+    let (v, f) = mesh_core::shapes::icosphere(2).into_parts();
     let views = [
         View {
             eye: [2.2, 0.9, 1.1],
@@ -307,7 +307,7 @@ fn bad_inputs_give_typed_errors() {
 
 #[test]
 fn render_and_backward_are_deterministic_and_repeatable() {
-    let (v, f) = shapes::icosphere(3);
+    let (v, f) = mesh_core::shapes::icosphere(3).into_parts();
     let views = raster_diff::orbit_views(3, 25.0, 2.6, 90.0);
     let mut r = CpuRenderer::default();
     let a = r.render(&v, &f, &views, 48, 48).expect("render");

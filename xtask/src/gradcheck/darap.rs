@@ -65,8 +65,8 @@ fn meshes() -> anyhow::Result<Vec<(&'static str, TriMesh)>> {
     let mut bunny = mesh_core::io::read_mesh(path)?;
     mesh_core::normalize::side2_cube(&mut bunny.positions);
     Ok(vec![
-        ("icosphere2", darap::procedural::icosphere(2)),
-        ("obtuse_grid8", darap::procedural::obtuse_wavy_grid(8)),
+        ("icosphere2", mesh_core::shapes::icosphere(2)),
+        ("obtuse_grid8", mesh_core::shapes::obtuse_wavy_grid(8)),
         ("bunny", bunny),
     ])
 }
