@@ -28,20 +28,47 @@ mod batch;
 mod global;
 mod lanes;
 mod local;
-pub mod mat3;
+mod mat3;
 mod post;
-pub mod rotation_rule;
-pub mod svd3;
+mod rotation_rule;
+mod svd3;
 
 pub use cotan::CotanError;
-pub use global::{RhsPrecompute, rhs, rhs_vjp};
-use local::normalize_target;
-pub use local::{
-    LocalTape, covariance, local_step, local_step_vjp, normalize_targets, normalize_targets_vjp,
+pub use mat3::Mat3;
+
+use global::{RhsPrecompute, rhs_vjp};
+use local::{
+    LocalTape, local_step, local_step_vjp, normalize_target, normalize_targets_vjp,
     rest_covariances,
 };
-pub use mat3::Mat3;
-pub use post::{PostTape, post_process, post_process_vjp};
+use post::{PostTape, post_process, post_process_vjp};
+
+/// The stages of the layer and their vector–Jacobian products, each callable alone (the gradient
+/// checks of `cargo xtask gradcheck` test them one by one; [`Darap`] composes them):
+///
+/// | stage | forward | VJP |
+/// |---|---|---|
+/// | target normalization `t̂ = x/|x|` | [`normalize_targets`] | [`normalize_targets_vjp`] |
+/// | rest covariances `K_v` | [`rest_covariances`] | (constant) |
+/// | covariance `S_v = ±K_v + λ a_v n0_v t̂_vᵀ` | [`covariance`] | (inside [`local_step_vjp`]) |
+/// | rotation rule `S → R` | [`gis`], [`procrustes`] (via [`svd3`]) | [`rotation_vjp`] |
+/// | local step (all vertices, tape [`LocalTape`]) | [`local_step`] | [`local_step_vjp`] |
+/// | right-hand side `b` (spec §4.1) | [`rhs`] ([`RhsPrecompute`]) | [`rhs_vjp`] |
+/// | post-processing (tape [`PostTape`]) | [`post_process`] | [`post_process_vjp`] |
+///
+/// The pinned solve between `rhs` and `post_process` is `cotan::PinnedCholesky` (self-adjoint).
+pub mod stages {
+    pub use crate::global::{RhsPrecompute, rhs, rhs_vjp};
+    pub use crate::local::{
+        LocalTape, covariance, local_step, local_step_vjp, normalize_targets,
+        normalize_targets_vjp, rest_covariances,
+    };
+    pub use crate::post::{PostTape, post_process, post_process_vjp};
+    pub use crate::rotation_rule::{
+        RotationSvd, SINGULAR_GAP_GUARD, gis, procrustes, rotation_vjp,
+    };
+    pub use crate::svd3::{Svd3, svd3};
+}
 
 use cotan::PinnedCholesky;
 

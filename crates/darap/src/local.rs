@@ -141,8 +141,8 @@ impl LocalTape {
         self.rule
     }
 
-    /// Vertex `v`'s record (as the scalar [`crate::rotation_rule::gis`] /
-    /// [`crate::rotation_rule::procrustes`] return it); `None` where the mask forced `R = I` or
+    /// Vertex `v`'s record (as the scalar [`crate::stages::gis`] /
+    /// [`crate::stages::procrustes`] return it); `None` where the mask forced `R = I` or
     /// `v` is out of range.
     pub fn get(&self, v: usize) -> Option<RotationSvd> {
         if v >= self.len {
@@ -173,7 +173,7 @@ impl LocalTape {
 ///
 /// `targets_unit` are unit target normals (see [`normalize_targets`]). Runs [`W`] vertices per
 /// SIMD batch; each vertex's result is bit for bit that of the scalar rule
-/// ([`crate::rotation_rule::gis`], [`crate::rotation_rule::procrustes`]). Deterministic for any
+/// ([`crate::stages::gis`], [`crate::stages::procrustes`]). Deterministic for any
 /// number of rayon threads (each vertex is independent).
 ///
 /// # Panics
@@ -274,7 +274,7 @@ fn local_chunk(
 
 /// Adjoint of [`local_step`] with respect to the unit targets:
 /// `∂ℓ/∂t̂_v = λ a_v · (∂ℓ/∂S_v)ᵀ n0_v`, zero at masked vertices. Each vertex's `∂ℓ/∂S_v` is bit
-/// for bit [`crate::rotation_rule::rotation_vjp`].
+/// for bit [`crate::stages::rotation_vjp`].
 ///
 /// # Panics
 /// If the slices differ in length from the tape (a programming error).

@@ -2,6 +2,7 @@
 
 use super::*;
 use crate::mat3::IDENTITY;
+use crate::stages::{normalize_targets, rhs};
 use mesh_core::shapes::{icosphere, obtuse_wavy_grid};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
