@@ -36,7 +36,8 @@ const RULES: &[(&str, &[&str])] = &[
     ("cotan", &["wgpu", "ort", "tokenizers", "tobj", "gltf"]),
     ("csd", &["ort", "wgpu", "tokenizers"]),
     ("optim", &["wgpu", "ort", "faer", "tokenizers"]),
-    ("raster-diff", &["ort", "tokenizers"]),
+    // mesh-core without `io` (geometry helpers only: bbox for the camera distance).
+    ("raster-diff", &["ort", "tokenizers", "gltf", "zip", "tobj"]),
     ("diffusion-onnx", &["wgpu"]),
 ];
 

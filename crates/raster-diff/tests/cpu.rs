@@ -374,3 +374,30 @@ fn antialiasing_makes_the_image_continuous_as_an_edge_crosses_a_pixel_centre() {
         "without AA the pixel jumps: {plain_before} → {plain_after}"
     );
 }
+
+#[test]
+fn backward_state_bytes_counts_ids_colour_and_mesh_and_clears_on_a_failed_render() {
+    let (v, f) = quad(0.5);
+    let view = front_view(2.0, [0.0, 0.0, 2.0]);
+    let mut r = no_aa();
+    assert_eq!(r.backward_state_bytes(), 0, "nothing kept before a render");
+    let (w, h) = (16, 8);
+    r.render(&v, &f, &[view.clone(), view.clone()], w, h)
+        .expect("render");
+    // At least 12 bytes per pixel per view (u32 id + f64 colour) plus the vertex and face copies.
+    let floor = 2 * w * h * 12 + v.len() * 24 + f.len() * 12;
+    let kept = r.backward_state_bytes();
+    assert!(kept >= floor, "{kept} < {floor}");
+    // Twice the views: the per-pixel part doubles.
+    r.render(
+        &v,
+        &f,
+        &[view.clone(), view.clone(), view.clone(), view.clone()],
+        w,
+        h,
+    )
+    .expect("render");
+    assert!(r.backward_state_bytes() >= kept + 2 * w * h * 12);
+    assert!(r.render(&v, &[[0, 1, 9]], &[view], w, h).is_err());
+    assert_eq!(r.backward_state_bytes(), 0, "a failed render keeps nothing");
+}
