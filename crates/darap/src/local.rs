@@ -110,7 +110,8 @@ pub fn covariance(
 }
 
 /// What [`local_step_vjp`] needs: per vertex the SVD of `S_v`, the rule's sign pattern and
-/// whether the vertex was free, stored by batches of [`W`] vertices (structure of arrays).
+/// whether the vertex was free, stored by batches of 8 vertices (the lane width; structure of
+/// arrays).
 #[derive(Clone, Debug)]
 pub struct LocalTape {
     rule: RotationRule,
@@ -171,8 +172,8 @@ impl LocalTape {
 /// The local step: `R_v = rule(S_v)` with `S_v` from [`covariance`] and normal weight
 /// `λ·mass[v]`; vertices with `free[v] == false` get `R_v = I`.
 ///
-/// `targets_unit` are unit target normals (see [`normalize_targets`]). Runs [`W`] vertices per
-/// SIMD batch; each vertex's result is bit for bit that of the scalar rule
+/// `targets_unit` are unit target normals (see [`normalize_targets`]). Runs 8 vertices (the lane
+/// width) per SIMD batch; each vertex's result is bit for bit that of the scalar rule
 /// ([`crate::stages::gis`], [`crate::stages::procrustes`]). Deterministic for any
 /// number of rayon threads (each vertex is independent).
 ///
