@@ -38,7 +38,25 @@ const RULES: &[(&str, &[&str])] = &[
     ("optim", &["wgpu", "ort", "faer", "tokenizers"]),
     // mesh-core without `io` (geometry helpers only: bbox for the camera distance).
     ("raster-diff", &["ort", "tokenizers", "gltf", "zip", "tobj"]),
-    ("diffusion-onnx", &["wgpu"]),
+    // `.npy` only from the npy crate: no zip, and no mesh code.
+    ("diffusion-onnx", &["wgpu", "mesh-core", "zip"]),
+    // NumPy files: zip (feature npz, on here) and half, nothing heavy and nothing of ours.
+    (
+        "npy",
+        &[
+            "wgpu",
+            "ort",
+            "tokenizers",
+            "gltf",
+            "naga",
+            "tokio",
+            "faer",
+            "glam",
+            "rayon",
+            "serde",
+            "mesh-core",
+        ],
+    ),
 ];
 
 pub fn run() -> anyhow::Result<()> {

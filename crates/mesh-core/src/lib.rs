@@ -9,14 +9,14 @@
 //!
 //! Layers: plain slice functions ([`geometry`], [`normals`], [`normalize`], [`topology`],
 //! [`subdivide`], [`shapes`]) work on `&[[f64; 3]]` / `&[[u32; 3]]`; [`validate`] checks and repairs a
-//! [`TriMesh`]; [`npy`] reads and writes NumPy `.npy` arrays; with the default feature `io`, [`io`] reads and writes OBJ, OFF, PLY and glTF/GLB
-//! and [`npz`] reads and writes `.npz` files (including the reference's saved-deformation format).
+//! [`TriMesh`]; with the default feature `io`, [`io`] reads and writes OBJ, OFF, PLY and glTF/GLB
+//! and [`npz`] reads and writes `.npz` files through the `npy` crate (including the reference's
+//! saved-deformation format).
 
 mod error;
 pub mod geometry;
 pub mod normalize;
 pub mod normals;
-pub mod npy;
 pub mod shapes;
 pub mod subdivide;
 pub mod topology;

@@ -497,7 +497,7 @@ fn npy_zero_width_strings_with_a_huge_shape_are_refused() {
     let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
     bytes.extend_from_slice(&(header.len() as u16).to_le_bytes());
     bytes.extend_from_slice(header.as_bytes());
-    let e = mesh_core::npy::parse_npy(&bytes).expect_err("refused");
+    let e = mesh_core::npz::parse_npy(&bytes).expect_err("refused");
     assert!(e.contains("zero-width"), "{e}");
 }
 

@@ -133,7 +133,7 @@ impl SavedDeformation {
         for (k, a) in &self.extra {
             w.add(k, a)?;
         }
-        w.finish()
+        Ok(w.finish()?)
     }
 
     /// The extra array under `key`.
