@@ -2,7 +2,8 @@
 
 use super::*;
 use crate::mat3::IDENTITY;
-use crate::procedural::{icosphere, obtuse_wavy_grid};
+use crate::stages::{normalize_targets, rhs};
+use mesh_core::shapes::{icosphere, obtuse_wavy_grid};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
