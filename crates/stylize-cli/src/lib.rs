@@ -15,5 +15,7 @@ pub mod pipeline;
 pub mod reference_config;
 pub mod rundir;
 pub mod runner;
+pub mod sanity;
 pub mod signals;
 pub mod style;
+pub mod view;
