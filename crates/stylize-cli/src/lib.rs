@@ -11,6 +11,7 @@ pub mod identity;
 pub mod input;
 pub mod lock;
 pub mod models;
+pub mod open_hint;
 pub mod pipeline;
 pub mod reference_config;
 pub mod rundir;
