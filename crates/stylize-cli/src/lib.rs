@@ -14,6 +14,7 @@ pub mod models;
 pub mod open_hint;
 pub mod pipeline;
 pub mod reference_config;
+pub mod run_pictures;
 pub mod rundir;
 pub mod runner;
 pub mod sanity;

@@ -639,6 +639,15 @@ pub fn execute_with(
         config.camera.fov_deg,
     )?;
     write_grid(&dir.file("turntable.png"), &tt)?;
+    crate::run_pictures::write_before_after(
+        &dir.file("before_after.png"),
+        &mesh.positions,
+        &deformed.positions,
+        &deformed.faces,
+        config.run.turntable_views,
+        config.run.turntable_size,
+        config.camera.fov_deg,
+    )?;
     let alignment = match (&style_objective, alignment_before) {
         (Some(o), Some(before)) => Some((before, o.mean_alignment(&deformed.positions))),
         _ => None,
