@@ -104,7 +104,7 @@ fn silhouette_square(sets: &[&Images], size: usize) -> (usize, usize, usize) {
     let extent = (hi[0] - lo[0]).max(hi[1] - lo[1]) + 1;
     let side = ((extent as f64 * 1.04).ceil() as usize).clamp(1, size);
     let start = |lo: usize, hi: usize| {
-        let centre = (lo + hi + 1) / 2;
+        let centre = (lo + hi).div_ceil(2);
         centre.saturating_sub(side / 2).min(size - side)
     };
     (start(lo[0], hi[0]), start(lo[1], hi[1]), side)
