@@ -73,7 +73,28 @@ struct Shot {
     console: Vec<String>,
 }
 
+/// Runs Chromium up to three times: on this machine it sometimes exits with status 0 after about a
+/// second without writing the screenshot (seen about one run in three, with no error of the
+/// page); each retry is reported on stderr.
 fn screenshot(chromium: &Path, url: &str, out: &Path, profile: &Path) -> Shot {
+    let mut attempt = 1;
+    loop {
+        let _ = std::fs::remove_dir_all(profile);
+        match screenshot_once(chromium, url, out, profile) {
+            Ok(shot) => return shot,
+            Err(e) if attempt < 3 => {
+                eprintln!(
+                    "view_browser: chromium attempt {attempt} wrote no screenshot, retrying ({})",
+                    e.lines().next().unwrap_or_default()
+                );
+                attempt += 1;
+            }
+            Err(e) => panic!("{e}"),
+        }
+    }
+}
+
+fn screenshot_once(chromium: &Path, url: &str, out: &Path, profile: &Path) -> Result<Shot, String> {
     let output = Command::new(chromium)
         .args([
             "--headless=new",
@@ -93,11 +114,9 @@ fn screenshot(chromium: &Path, url: &str, out: &Path, profile: &Path) -> Shot {
         .output()
         .unwrap();
     let stderr = String::from_utf8_lossy(&output.stderr);
-    assert!(
-        output.status.success() && out.is_file(),
-        "chromium failed ({}): {stderr}",
-        output.status
-    );
+    if !(output.status.success() && out.is_file()) {
+        return Err(format!("chromium failed ({}): {stderr}", output.status));
+    }
     let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(out).unwrap()));
     let mut reader = decoder.read_info().unwrap();
     let mut buf = vec![0; reader.output_buffer_size()];
@@ -108,7 +127,7 @@ fn screenshot(chromium: &Path, url: &str, out: &Path, profile: &Path) -> Shot {
         .chunks_exact(channels)
         .flat_map(|p| [p[0], p[1], p[2]])
         .collect();
-    Shot {
+    Ok(Shot {
         rgb,
         width: info.width as usize,
         height: info.height as usize,
@@ -118,7 +137,7 @@ fn screenshot(chromium: &Path, url: &str, out: &Path, profile: &Path) -> Shot {
             .filter(|l| l.contains("CONSOLE"))
             .map(str::to_string)
             .collect(),
-    }
+    })
 }
 
 impl Shot {
