@@ -1,13 +1,14 @@
 #!/usr/bin/env bash
 # Installs what building and testing need beyond the Rust toolchain, from package registries only.
 #   - Debian: mesa-vulkan-drivers + libvulkan1 (lavapipe: wgpu on the CPU, for the GPU backend's tests)
+#             chromium (headless; the `stylize view` page's browser test, WebGL through SwiftShader)
 #   - PyPI:   ONNX Runtime's shared library (scripts/setup-onnxruntime.sh → .deps/onnxruntime/)
 # Idempotent: re-running skips what is already there. Needs root (or sudo) for apt-get.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
 need_apt=()
-for pkg in mesa-vulkan-drivers libvulkan1; do
+for pkg in mesa-vulkan-drivers libvulkan1 chromium; do
   dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || need_apt+=("$pkg")
 done
 if ((${#need_apt[@]})); then

@@ -6,9 +6,14 @@ pub mod batch;
 pub mod cmd;
 pub mod config;
 pub mod input;
+pub mod open_hint;
 pub mod progress;
 pub mod reference_config;
 pub mod runner;
+pub mod sanity;
 pub mod signals;
+pub mod view;
 
-pub use stylize::{checkpoint, durable, eval, identity, lock, models, pipeline, rundir, style};
+pub use stylize::{
+    checkpoint, durable, eval, identity, lock, models, pipeline, run_pictures, rundir, style,
+};

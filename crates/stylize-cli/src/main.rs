@@ -27,6 +27,8 @@ enum Command {
     Batch(cmd::batch::Args),
     /// Identity metrics (per-face area ratio, volume ratio) and CLIP similarity with --clip DIR.
     Eval(cmd::eval::Args),
+    /// Show runs and meshes in a local web page with a live λ slider (prints the URL).
+    View(cmd::view::Args),
     /// Run one guidance evaluation with given noise/timesteps and dump every intermediate to .npz.
     #[command(hide = true, name = "debug-guidance")]
     DebugGuidance(cmd::debug_guidance::Args),
@@ -65,6 +67,7 @@ fn main() -> std::process::ExitCode {
         Command::Run(a) => cmd::run::run(a),
         Command::Batch(a) => cmd::batch::run(a),
         Command::Eval(a) => cmd::eval::run(a),
+        Command::View(a) => cmd::view::run(a),
         Command::DebugGuidance(a) => cmd::debug_guidance::run(a),
     };
     match result {

@@ -9,7 +9,7 @@
 //! - [`rundir`], [`lock`], [`durable`], [`checkpoint`], [`identity`]: the run directory (locked,
 //!   every file replaced atomically and durably), checkpoints and the task identity that guards a
 //!   resume;
-//! - [`saved`]: the reference's saved-deformation `.npz`;
+//! - [`saved`]: the reference's saved-deformation `.npz`; [`run_pictures`]: the before/after sheet;
 //! - [`models`]: DeepFloyd IF guidance from a model directory; [`eval`]: metrics of finished runs.
 //!
 //! The command line (`stylize-cli`) adds argument parsing, config files, progress display and
@@ -23,6 +23,7 @@ pub mod identity;
 pub mod lock;
 pub mod models;
 pub mod pipeline;
+pub mod run_pictures;
 pub mod rundir;
 pub mod runner;
 pub mod saved;

@@ -12,6 +12,7 @@
 //!   mesh.obj, mesh.ply, mesh.glb   deformed mesh (side-2 cube frame) with vertex normals
 //!   deformation.npz    reference format (spec §8) + format_version, seed, rotation_rule
 //!   turntable.png      contact sheet of an orbit around the result
+//!   before_after.png   source (top) and result (bottom), same views and crop (crate::run_pictures)
 //!   run.json           summary; written last — its presence marks the run complete
 //! ```
 //!
@@ -51,6 +52,7 @@ pub const RUN_FILES: &[&str] = &[
     "mesh.glb",
     "deformation.npz",
     "turntable.png",
+    "before_after.png",
     "run.json",
 ];
 

@@ -548,7 +548,7 @@ pub fn initial_state(
 }
 
 /// Stage 5: the final outputs of a finished loop — `mesh.obj/.ply/.glb` (formats this build cannot
-/// write become warnings), `deformation.npz` and `turntable.png`. Returns the deformed mesh.
+/// write become warnings), `deformation.npz`, `turntable.png` and `before_after.png`. Returns the deformed mesh.
 ///
 /// The outputs are the deformation of x as saved (f32), so re-applying `deformation.npz`
 /// reproduces `mesh.*` exactly.
@@ -602,6 +602,15 @@ pub fn write_outputs(
         config.camera.fov_deg,
     )?;
     write_grid(&dir.file("turntable.png"), &tt)?;
+    crate::run_pictures::write_before_after(
+        &dir.file("before_after.png"),
+        &mesh.positions,
+        &deformed.positions,
+        &deformed.faces,
+        config.run.turntable_views,
+        config.run.turntable_size,
+        config.camera.fov_deg,
+    )?;
     Ok(deformed)
 }
 

@@ -1,5 +1,9 @@
 //! `stylize apply`: re-apply a saved deformation (spec §8) at one or several strengths λ.
 //!
+//! After each output, one line of λ sanity ([`crate::sanity`]: volume ratio, face-area ratio,
+//! share of vertices whose rotation flipped past 90°), and a warning on stderr when the result
+//! is collapsing.
+//!
 //! Reads the saved `.npz`, normalizes `verts` to the side-2 cube in f64, builds the dARAP layer
 //! with the requested λ (default: the saved `local_step_procrustes.lamb`), runs local step →
 //! global step → `recenter_rescale`, and writes the deformed mesh (in the normalized frame, as the
@@ -119,7 +123,8 @@ pub fn read_mask(path: &Path, num_vertices: usize) -> anyhow::Result<Vec<bool>> 
     Ok(free)
 }
 
-fn saved_rotation_rule(saved: &SavedDeformation) -> anyhow::Result<Option<RuleArg>> {
+/// The rotation rule a saved file records (`rotation_rule` key), if any.
+pub fn saved_rotation_rule(saved: &SavedDeformation) -> anyhow::Result<Option<RuleArg>> {
     let Some(array) = saved.extra("rotation_rule") else {
         return Ok(None);
     };
@@ -206,6 +211,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut rest = saved.verts_f64();
     mesh_core::normalize::side2_cube(&mut rest);
     let targets = saved.verts_normals_f64();
+    let rest_mesh = TriMesh::new(rest.clone(), saved.faces.clone());
     let options = DarapOptions {
         lambda: lambdas[0],
         rotation_rule: rule.into(),
@@ -222,6 +228,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let deformed = layer
             .forward(&targets)
             .with_context(|| format!("dARAP forward failed at λ = {lambda}"))?;
+        let sanity = crate::sanity::LambdaSanity::assess(&rest_mesh, &deformed, lambda)?;
         let mesh = TriMesh::new(deformed.positions, saved.faces.clone());
         let normals =
             mesh_core::normals::vertex_normals_area_weighted(&mesh.positions, &mesh.faces);
@@ -236,6 +243,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         })
         .with_context(|| format!("cannot write {}", out.display()))?;
         println!("λ = {lambda}: wrote {}", out.display());
+        println!("  {}", sanity.summary());
+        for w in sanity.warnings() {
+            eprintln!("warning: {w}");
+        }
     }
     Ok(())
 }

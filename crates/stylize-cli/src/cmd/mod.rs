@@ -9,3 +9,4 @@ pub mod mesh;
 pub mod render;
 pub mod run;
 pub mod shared;
+pub mod view;

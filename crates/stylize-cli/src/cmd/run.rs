@@ -197,6 +197,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             if let Some((before, after)) = outcome.alignment {
                 eprintln!("normal alignment (area-weighted mean n·t): {before:.4} → {after:.4}");
             }
+            crate::open_hint::lines(&args.out)
+                .iter()
+                .for_each(|l| eprintln!("{l}"));
         } else {
             eprintln!(
                 "stopped after iteration {} (resume with --resume)",

@@ -1,0 +1,96 @@
+//! Latency of the viewer's λ slider: one `GET api/items/0/result?lambda=L` answered by the
+//! viewer's router (dARAP re-solve at λ with the prefactored layer, λ diagnostics, f32 framing) —
+//! everything the server does for one slider move; the browser's upload and draw come on top.
+//!
+//! Meshes: the golden bunny and its midpoint subdivisions; targets are the cube style's (each rest
+//! normal snapped to the nearest axis), saved as a run's `deformation.npz` at λ = 8.
+//!
+//! `cargo run --release -p stylize-cli --example view_latency [REPEATS]`
+
+#![allow(clippy::unwrap_used)]
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use axum::body::Body;
+use axum::http::Request;
+use mesh_core::TriMesh;
+use stylize::saved::SavedDeformation;
+use stylize_cli::view::{Viewer, server::router};
+use tower::ServiceExt;
+
+fn snap(n: [f64; 3]) -> [f32; 3] {
+    let k = (0..3)
+        .max_by(|&a, &b| n[a].abs().total_cmp(&n[b].abs()))
+        .unwrap();
+    let mut t = [0.0f32; 3];
+    t[k] = n[k].signum() as f32;
+    t
+}
+
+fn main() {
+    let repeats: usize = std::env::args()
+        .nth(1)
+        .and_then(|a| a.parse().ok())
+        .unwrap_or(30);
+    let golden = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../fixtures/golden/bunny_targets.npz");
+    let base = SavedDeformation::read(&golden).unwrap();
+    let mut mesh = TriMesh::new(
+        base.verts.iter().map(|v| v.map(f64::from)).collect(),
+        base.faces.clone(),
+    );
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .build()
+        .unwrap();
+    println!("| vertices | faces | median ms | p90 ms |");
+    println!("|---:|---:|---:|---:|");
+    for _ in 0..4 {
+        let dir = tempfile::tempdir().unwrap();
+        let run = dir.path().join("run");
+        std::fs::create_dir_all(&run).unwrap();
+        let normals =
+            mesh_core::normals::vertex_normals_area_weighted(&mesh.positions, &mesh.faces);
+        let saved = SavedDeformation {
+            verts: mesh.positions.iter().map(|p| p.map(|c| c as f32)).collect(),
+            faces: mesh.faces.clone(),
+            verts_normals: normals.iter().map(|&n| snap(n)).collect(),
+            ..base.clone()
+        };
+        saved.write(run.join("deformation.npz")).unwrap();
+        let app = router(Arc::new(
+            Viewer::open(std::slice::from_ref(&run), "t".into()).unwrap(),
+        ));
+        let mut ms = Vec::new();
+        rt.block_on(async {
+            for i in 0..repeats + 1 {
+                // Alternate λ like a slider moving back and forth.
+                let lambda = 4.0 + (i % 7) as f64;
+                let req = Request::builder()
+                    .uri(format!("/t/api/items/0/result?lambda={lambda}"))
+                    .body(Body::empty())
+                    .unwrap();
+                let t0 = Instant::now();
+                let resp = app.clone().oneshot(req).await.unwrap();
+                let body = axum::body::to_bytes(resp.into_body(), usize::MAX)
+                    .await
+                    .unwrap();
+                let dt = t0.elapsed().as_secs_f64() * 1e3;
+                assert!(body.len() >= 12 * mesh.positions.len());
+                if i > 0 {
+                    // The first request builds and factors the layer.
+                    ms.push(dt);
+                }
+            }
+        });
+        ms.sort_by(f64::total_cmp);
+        println!(
+            "| {} | {} | {:.1} | {:.1} |",
+            mesh.positions.len(),
+            mesh.faces.len(),
+            ms[ms.len() / 2],
+            ms[(ms.len() * 9) / 10]
+        );
+        mesh = mesh_core::subdivide::midpoint(&mesh);
+    }
+}

@@ -1,0 +1,341 @@
+//! The viewer's HTTP routes (axum). Every URL starts with the secret token; anything else is
+//! answered `403 Forbidden`. Only `GET` is served.
+//!
+//! ```text
+//! /TOKEN/                                   the page
+//! /TOKEN/static/PATH                        the page's scripts, styles and vendored three.js
+//! /TOKEN/api/items                          JSON: one ItemInfo per command-line argument
+//! /TOKEN/api/items/ID/source                framed: header JSON + f32 positions + u32 faces
+//! /TOKEN/api/items/ID/result?lambda=L       framed: header JSON (λ diagnostics) + f32 positions
+//! /TOKEN/api/items/ID/download?lambda=L&format=obj|ply|glb   the mesh at λ as a file
+//! /TOKEN/api/items/ID/files/PATH            a file inside a run directory (images, metrics)
+//! ```
+//!
+//! **Framed responses** (`application/octet-stream`): a little-endian `u32` header length `H`, `H`
+//! bytes of UTF-8 JSON, zero bytes up to the next multiple of 4, then the payload: `3·n`
+//! little-endian `f32` positions (side-2 cube frame), and for `source` also `3·m` little-endian
+//! `u32` vertex indices. The header holds `vertices`, `faces` and, for results, the λ diagnostics
+//! ([`crate::sanity::LambdaSanity`]) and their `warnings`.
+//!
+//! Status codes: 400 bad λ or path (λ must be finite and in `[0, LAMBDA_MAX]`), 403 missing or
+//! wrong token, 404 no such item or file, 405 other methods, 409 a run without its result yet,
+//! 500 a file that cannot be read.
+
+use std::sync::Arc;
+
+use axum::Router;
+use axum::extract::{Path, Query, State};
+use axum::http::{HeaderValue, StatusCode, Uri, header};
+use axum::response::{IntoResponse, Redirect, Response};
+use axum::routing::get;
+use serde::Deserialize;
+
+use super::{Shape, ViewError, Viewer};
+
+impl IntoResponse for ViewError {
+    fn into_response(self) -> Response {
+        let status = match &self {
+            ViewError::BadRequest(_) => StatusCode::BAD_REQUEST,
+            ViewError::NotFound(_) => StatusCode::NOT_FOUND,
+            ViewError::NotReady(_) => StatusCode::CONFLICT,
+            ViewError::Failed(_) => StatusCode::INTERNAL_SERVER_ERROR,
+        };
+        (status, no_store(), self.to_string()).into_response()
+    }
+}
+
+fn no_store() -> [(header::HeaderName, HeaderValue); 1] {
+    [(header::CACHE_CONTROL, HeaderValue::from_static("no-store"))]
+}
+
+/// The router for `viewer`.
+pub fn router(viewer: Arc<Viewer>) -> Router {
+    let t = viewer.token.clone();
+    let page_url = format!("/{t}/");
+    Router::new()
+        .route(
+            &format!("/{t}"),
+            get(move || async move { Redirect::to(&page_url) }),
+        )
+        .route(&format!("/{t}/"), get(index))
+        .route(&format!("/{t}/static/{{*path}}"), get(static_asset))
+        .route(&format!("/{t}/api/items"), get(items))
+        .route(&format!("/{t}/api/items/{{id}}/source"), get(source))
+        .route(&format!("/{t}/api/items/{{id}}/result"), get(result))
+        .route(&format!("/{t}/api/items/{{id}}/download"), get(download))
+        .route(&format!("/{t}/api/items/{{id}}/files/{{*path}}"), get(file))
+        .fallback(fallback)
+        .with_state(viewer)
+}
+
+/// 404 inside the token's space, 403 outside it (no hint whether a path exists).
+async fn fallback(State(viewer): State<Arc<Viewer>>, uri: Uri) -> Response {
+    let prefix = format!("/{}/", viewer.token);
+    if uri.path().starts_with(&prefix) {
+        (StatusCode::NOT_FOUND, "not found").into_response()
+    } else {
+        (
+            StatusCode::FORBIDDEN,
+            "missing or wrong token: open the URL that `stylize view` printed",
+        )
+            .into_response()
+    }
+}
+
+async fn index() -> Response {
+    static_response("index.html")
+}
+
+async fn static_asset(Path(path): Path<String>) -> Response {
+    static_response(&path)
+}
+
+fn static_response(path: &str) -> Response {
+    match super::assets::asset(path) {
+        Some((content_type, bytes)) => (
+            [(header::CONTENT_TYPE, HeaderValue::from_static(content_type))],
+            bytes,
+        )
+            .into_response(),
+        None => (StatusCode::NOT_FOUND, "not found").into_response(),
+    }
+}
+
+async fn items(State(viewer): State<Arc<Viewer>>) -> Response {
+    let v = Arc::clone(&viewer);
+    let infos = tokio::task::spawn_blocking(move || {
+        v.items
+            .iter()
+            .enumerate()
+            .map(|(i, item)| item.info(i))
+            .collect::<Vec<_>>()
+    })
+    .await;
+    match infos {
+        Ok(infos) => match serde_json::to_vec(&infos) {
+            Ok(json) => (
+                no_store(),
+                [(
+                    header::CONTENT_TYPE,
+                    HeaderValue::from_static("application/json"),
+                )],
+                json,
+            )
+                .into_response(),
+            Err(e) => ViewError::Failed(e.into()).into_response(),
+        },
+        Err(e) => ViewError::Failed(e.into()).into_response(),
+    }
+}
+
+/// Runs a blocking computation on an item off the async thread.
+async fn on_item<T: Send + 'static>(
+    viewer: Arc<Viewer>,
+    id: usize,
+    f: impl FnOnce(&super::Item) -> Result<T, ViewError> + Send + 'static,
+) -> Result<T, ViewError> {
+    tokio::task::spawn_blocking(move || f(viewer.item(id)?))
+        .await
+        .map_err(|e| ViewError::Failed(anyhow::anyhow!("the computation failed: {e}")))?
+}
+
+/// A framed response (see the module documentation).
+pub fn frame(header_json: &serde_json::Value, payload: &[&[u8]]) -> Vec<u8> {
+    let head = header_json.to_string().into_bytes();
+    let padded = head.len().div_ceil(4) * 4;
+    let mut out = Vec::with_capacity(4 + padded + payload.iter().map(|p| p.len()).sum::<usize>());
+    out.extend_from_slice(&(head.len() as u32).to_le_bytes());
+    out.extend_from_slice(&head);
+    out.resize(4 + padded, 0);
+    for p in payload {
+        out.extend_from_slice(p);
+    }
+    out
+}
+
+fn f32_bytes(positions: &[[f64; 3]]) -> Vec<u8> {
+    positions
+        .iter()
+        .flatten()
+        .flat_map(|&c| (c as f32).to_le_bytes())
+        .collect()
+}
+
+fn framed(body: Vec<u8>) -> Response {
+    (
+        no_store(),
+        [(
+            header::CONTENT_TYPE,
+            HeaderValue::from_static("application/octet-stream"),
+        )],
+        body,
+    )
+        .into_response()
+}
+
+async fn source(State(viewer): State<Arc<Viewer>>, Path(id): Path<usize>) -> Response {
+    match on_item(viewer, id, |item| item.source()).await {
+        Ok(shape) => {
+            let head = serde_json::json!({
+                "vertices": shape.positions.len(),
+                "faces": shape.faces.len(),
+            });
+            let faces: Vec<u8> = shape
+                .faces
+                .iter()
+                .flatten()
+                .flat_map(|v| v.to_le_bytes())
+                .collect();
+            framed(frame(&head, &[&f32_bytes(&shape.positions), &faces]))
+        }
+        Err(e) => e.into_response(),
+    }
+}
+
+/// `?lambda=L` (required).
+#[derive(Debug, Deserialize)]
+struct LambdaQuery {
+    lambda: f64,
+}
+
+fn result_header(shape: &Shape) -> serde_json::Value {
+    let mut head = serde_json::json!({
+        "vertices": shape.positions.len(),
+        "faces": shape.faces.len(),
+    });
+    if let Some(s) = &shape.sanity {
+        head["lambda"] = s.lambda.into();
+        head["flipped"] = s.flipped.into();
+        head["flipped_fraction"] = s.flipped_fraction.into();
+        // JSON has no NaN: a source without volume gives null.
+        head["volume_ratio"] = if s.volume_ratio.is_finite() {
+            s.volume_ratio.into()
+        } else {
+            serde_json::Value::Null
+        };
+        head["area_ratio_mean"] = s.area_ratio_mean.into();
+        head["area_ratio_std"] = s.area_ratio_std.into();
+        head["warnings"] = s.warnings().into();
+    }
+    head
+}
+
+async fn result(
+    State(viewer): State<Arc<Viewer>>,
+    Path(id): Path<usize>,
+    Query(q): Query<LambdaQuery>,
+) -> Response {
+    match on_item(viewer, id, move |item| item.at_lambda(q.lambda)).await {
+        Ok(shape) => framed(frame(
+            &result_header(&shape),
+            &[&f32_bytes(&shape.positions)],
+        )),
+        Err(e) => e.into_response(),
+    }
+}
+
+/// `?lambda=L&format=obj|ply|glb`.
+#[derive(Debug, Deserialize)]
+struct DownloadQuery {
+    lambda: f64,
+    format: String,
+}
+
+async fn download(
+    State(viewer): State<Arc<Viewer>>,
+    Path(id): Path<usize>,
+    Query(q): Query<DownloadQuery>,
+) -> Response {
+    let format = q.format.to_ascii_lowercase();
+    if !matches!(format.as_str(), "obj" | "ply" | "glb") {
+        return ViewError::BadRequest(format!(
+            "format must be obj, ply or glb, got {:?}",
+            q.format
+        ))
+        .into_response();
+    }
+    let fmt = format.clone();
+    let made = on_item(viewer, id, move |item| {
+        let shape = item.at_lambda(q.lambda)?;
+        let mesh = mesh_core::TriMesh::new(shape.positions, shape.faces);
+        let normals =
+            mesh_core::normals::vertex_normals_area_weighted(&mesh.positions, &mesh.faces);
+        let dir = tempfile::tempdir().map_err(|e| ViewError::Failed(e.into()))?;
+        let path = dir.path().join(format!("mesh.{fmt}"));
+        mesh_core::io::write_mesh(&path, &mesh, Some(&normals))
+            .map_err(|e| ViewError::Failed(e.into()))?;
+        let bytes = std::fs::read(&path).map_err(|e| ViewError::Failed(e.into()))?;
+        Ok((format!("{}_lambda{}.{fmt}", item.stem(), q.lambda), bytes))
+    })
+    .await;
+    match made {
+        Ok((name, bytes)) => {
+            let disposition = HeaderValue::from_str(&format!("attachment; filename=\"{name}\""))
+                .unwrap_or_else(|_| HeaderValue::from_static("attachment"));
+            (
+                no_store(),
+                [
+                    (
+                        header::CONTENT_TYPE,
+                        HeaderValue::from_static(content_type(&format)),
+                    ),
+                    (header::CONTENT_DISPOSITION, disposition),
+                ],
+                bytes,
+            )
+                .into_response()
+        }
+        Err(e) => e.into_response(),
+    }
+}
+
+fn content_type(ext: &str) -> &'static str {
+    match ext {
+        "png" => "image/png",
+        "gif" => "image/gif",
+        "json" => "application/json",
+        "jsonl" | "toml" | "txt" | "obj" | "off" => "text/plain; charset=utf-8",
+        _ => "application/octet-stream",
+    }
+}
+
+async fn file(
+    State(viewer): State<Arc<Viewer>>,
+    Path((id, path)): Path<(usize, String)>,
+) -> Response {
+    let read = on_item(viewer, id, move |item| match item {
+        super::Item::Run(run) => {
+            let resolved = run.resolve_file(&path)?;
+            let bytes = std::fs::read(&resolved).map_err(|e| {
+                ViewError::Failed(
+                    anyhow::Error::from(e).context(format!("cannot read {}", resolved.display())),
+                )
+            })?;
+            let ext = resolved
+                .extension()
+                .and_then(|e| e.to_str())
+                .map(str::to_ascii_lowercase)
+                .unwrap_or_default();
+            Ok((content_type(&ext), bytes))
+        }
+        super::Item::Mesh(m) => Err(ViewError::NotFound(format!(
+            "{} is a mesh, not a run directory: it has no files",
+            m.name
+        ))),
+    })
+    .await;
+    match read {
+        Ok((content_type, bytes)) => (
+            no_store(),
+            [(header::CONTENT_TYPE, HeaderValue::from_static(content_type))],
+            bytes,
+        )
+            .into_response(),
+        Err(e) => e.into_response(),
+    }
+}
+
+/// Serves until the process ends.
+pub async fn serve(listener: tokio::net::TcpListener, viewer: Arc<Viewer>) -> std::io::Result<()> {
+    axum::serve(listener, router(viewer)).await
+}

@@ -1,0 +1,480 @@
+//! `stylize view`'s HTTP API, in process (the router answers requests without a socket) and end to
+//! end (the binary prints its URL and answers on 127.0.0.1): token, status codes, path traversal
+//! (plain, percent-encoded, symbolic links), λ validation, runs still being written, downloads.
+
+#![allow(clippy::unwrap_used)]
+
+use std::io::{BufRead, BufReader, Read, Write};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use axum::body::Body;
+use axum::http::{Request, StatusCode};
+use stylize_cli::view::{Viewer, server::router};
+use tower::ServiceExt;
+
+const TOKEN: &str = "0123456789abcdef0123456789abcdef";
+
+fn golden(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../fixtures/golden")
+        .join(name)
+}
+
+/// A complete run directory holding the golden bunny's saved deformation (λ = 8).
+fn complete_run(parent: &Path, name: &str) -> PathBuf {
+    let dir = parent.join(name);
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::copy(golden("bunny_targets.npz"), dir.join("deformation.npz")).unwrap();
+    std::fs::write(dir.join("run.json"), "{}").unwrap();
+    std::fs::write(dir.join("metrics.jsonl"), "{\"iteration\":1}\n").unwrap();
+    dir
+}
+
+struct Reply {
+    status: StatusCode,
+    headers: axum::http::HeaderMap,
+    body: Vec<u8>,
+}
+
+impl Reply {
+    fn text(&self) -> String {
+        String::from_utf8_lossy(&self.body).into_owned()
+    }
+}
+
+async fn get(app: &axum::Router, uri: &str) -> Reply {
+    let req = Request::builder().uri(uri).body(Body::empty()).unwrap();
+    let resp = app.clone().oneshot(req).await.unwrap();
+    let status = resp.status();
+    let headers = resp.headers().clone();
+    let body = axum::body::to_bytes(resp.into_body(), usize::MAX)
+        .await
+        .unwrap()
+        .to_vec();
+    Reply {
+        status,
+        headers,
+        body,
+    }
+}
+
+fn app(paths: &[PathBuf]) -> axum::Router {
+    router(Arc::new(Viewer::open(paths, TOKEN.to_string()).unwrap()))
+}
+
+fn rt() -> tokio::runtime::Runtime {
+    tokio::runtime::Builder::new_current_thread()
+        .build()
+        .unwrap()
+}
+
+/// Splits a framed response: (header JSON, payload).
+fn unframe(body: &[u8]) -> (serde_json::Value, &[u8]) {
+    let len = u32::from_le_bytes(body[..4].try_into().unwrap()) as usize;
+    let head = serde_json::from_slice(&body[4..4 + len]).unwrap();
+    (head, &body[4 + len.div_ceil(4) * 4..])
+}
+
+fn f32s(bytes: &[u8]) -> Vec<f32> {
+    bytes
+        .chunks_exact(4)
+        .map(|c| f32::from_le_bytes(c.try_into().unwrap()))
+        .collect()
+}
+
+#[test]
+fn every_request_needs_the_token() {
+    let dir = tempfile::tempdir().unwrap();
+    let app = app(&[complete_run(dir.path(), "run")]);
+    rt().block_on(async {
+        assert_eq!(
+            get(&app, &format!("/{TOKEN}/")).await.status,
+            StatusCode::OK
+        );
+        for uri in [
+            "/",
+            "/api/items",
+            "/index.html",
+            "/static/app.js",
+            "/api/items/0/files/run.json",
+            "/0123456789abcdef0123456789abcdee/api/items",
+            "/0123456789abcdef0123456789abcdef0/api/items",
+            "/0123456789ABCDEF0123456789ABCDEF/api/items",
+            &format!("/x/{TOKEN}/api/items"),
+            &format!("/api/items?token={TOKEN}"),
+        ] {
+            let r = get(&app, uri).await;
+            assert_eq!(r.status, StatusCode::FORBIDDEN, "{uri}: {}", r.text());
+            assert!(r.text().contains("token"), "{uri}: {}", r.text());
+        }
+        // Inside the token's space, unknown paths are 404.
+        let r = get(&app, &format!("/{TOKEN}/nothing")).await;
+        assert_eq!(r.status, StatusCode::NOT_FOUND);
+        // The bare token redirects to the page (relative URLs need the slash).
+        let r = get(&app, &format!("/{TOKEN}")).await;
+        assert!(r.status.is_redirection(), "{}", r.status);
+    });
+}
+
+#[test]
+fn only_get_is_served() {
+    let dir = tempfile::tempdir().unwrap();
+    let app = app(&[complete_run(dir.path(), "run")]);
+    rt().block_on(async {
+        for method in ["POST", "PUT", "DELETE"] {
+            let req = Request::builder()
+                .method(method)
+                .uri(format!("/{TOKEN}/api/items/0/result?lambda=3"))
+                .body(Body::empty())
+                .unwrap();
+            let resp = app.clone().oneshot(req).await.unwrap();
+            assert_eq!(resp.status(), StatusCode::METHOD_NOT_ALLOWED, "{method}");
+        }
+    });
+}
+
+#[test]
+fn page_and_vendored_three_js_are_embedded() {
+    let dir = tempfile::tempdir().unwrap();
+    let app = app(&[complete_run(dir.path(), "run")]);
+    rt().block_on(async {
+        let page = get(&app, &format!("/{TOKEN}/")).await;
+        assert!(page.text().contains("static/app.js"));
+        assert!(
+            page.headers["content-type"]
+                .to_str()
+                .unwrap()
+                .starts_with("text/html")
+        );
+        for asset in [
+            "static/app.js",
+            "static/style.css",
+            "static/vendor/three/three.module.js",
+            "static/vendor/three/three.core.js",
+            "static/vendor/three/OrbitControls.js",
+            "static/vendor/three/LICENSE",
+        ] {
+            let r = get(&app, &format!("/{TOKEN}/{asset}")).await;
+            assert_eq!(r.status, StatusCode::OK, "{asset}");
+            assert!(r.body.len() > 100, "{asset}");
+        }
+        let r = get(&app, &format!("/{TOKEN}/static/../static/app.js")).await;
+        assert_ne!(r.status, StatusCode::OK);
+        let r = get(&app, &format!("/{TOKEN}/static/nope.js")).await;
+        assert_eq!(r.status, StatusCode::NOT_FOUND);
+    });
+}
+
+#[test]
+fn items_source_and_result_at_lambda() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = complete_run(dir.path(), "run");
+    let app = app(&[run, golden("bunny.obj")]);
+    rt().block_on(async {
+        let r = get(&app, &format!("/{TOKEN}/api/items")).await;
+        assert_eq!(r.status, StatusCode::OK);
+        let items: serde_json::Value = serde_json::from_slice(&r.body).unwrap();
+        assert_eq!(items[0]["kind"], "run");
+        assert_eq!(items[0]["status"], "complete");
+        assert_eq!(items[0]["lambda"], 8.0);
+        assert_eq!(items[0]["has_deformation"], true);
+        assert_eq!(items[1]["kind"], "mesh");
+
+        let r = get(&app, &format!("/{TOKEN}/api/items/0/source")).await;
+        assert_eq!(r.status, StatusCode::OK);
+        let (head, payload) = unframe(&r.body);
+        let (n, m) = (
+            head["vertices"].as_u64().unwrap() as usize,
+            head["faces"].as_u64().unwrap() as usize,
+        );
+        assert_eq!(payload.len(), 12 * n + 12 * m);
+        let source = f32s(&payload[..12 * n]);
+
+        // At the saved λ the result is the golden apply output (f32 on the wire).
+        let r = get(&app, &format!("/{TOKEN}/api/items/0/result?lambda=8")).await;
+        assert_eq!(r.status, StatusCode::OK, "{}", r.text());
+        let (head, payload) = unframe(&r.body);
+        assert_eq!(payload.len(), 12 * n);
+        let at8 = f32s(payload);
+        let golden8 = mesh_core::io::read_mesh(golden("bunny_lambda8_gis.obj")).unwrap();
+        let err = golden8
+            .positions
+            .iter()
+            .flatten()
+            .zip(&at8)
+            .map(|(a, b)| (a - *b as f64).abs())
+            .fold(0.0, f64::max);
+        assert!(err < 1e-5, "max deviation from golden {err}");
+        assert_eq!(head["lambda"], 8.0);
+        for key in ["volume_ratio", "area_ratio_mean", "flipped_fraction"] {
+            assert!(head[key].as_f64().unwrap().is_finite(), "{key}: {head}");
+        }
+        // Another λ gives another shape and other identity metrics.
+        let r = get(&app, &format!("/{TOKEN}/api/items/0/result?lambda=2.5")).await;
+        let (head2, payload2) = unframe(&r.body);
+        assert_ne!(f32s(payload2), at8);
+        assert_ne!(head2["volume_ratio"], head["volume_ratio"]);
+        // λ = 0 keeps (almost) the source (up to recentring/rescaling and the gis rule's
+        // few non-identity vertices): closer to it than λ = 8 is.
+        let r = get(&app, &format!("/{TOKEN}/api/items/0/result?lambda=0")).await;
+        let (_, payload0) = unframe(&r.body);
+        let dist = |a: &[f32]| -> f64 {
+            a.iter()
+                .zip(&source)
+                .map(|(x, y)| ((x - y) as f64).powi(2))
+                .sum::<f64>()
+        };
+        assert!(dist(&f32s(payload0)) < dist(&at8));
+
+        // A mesh item has a source but no result.
+        let r = get(&app, &format!("/{TOKEN}/api/items/1/source")).await;
+        assert_eq!(r.status, StatusCode::OK);
+        let r = get(&app, &format!("/{TOKEN}/api/items/1/result?lambda=3")).await;
+        assert_eq!(r.status, StatusCode::BAD_REQUEST);
+        let r = get(&app, &format!("/{TOKEN}/api/items/7/source")).await;
+        assert_eq!(r.status, StatusCode::NOT_FOUND);
+        let r = get(&app, &format!("/{TOKEN}/api/items/-1/source")).await;
+        assert_eq!(r.status, StatusCode::BAD_REQUEST);
+    });
+}
+
+#[test]
+fn collapsing_lambda_is_reported_in_the_result_header() {
+    let dir = tempfile::tempdir().unwrap();
+    let app = app(&[complete_run(dir.path(), "run")]);
+    rt().block_on(async {
+        let r = get(&app, &format!("/{TOKEN}/api/items/0/result?lambda=20")).await;
+        let (head, _) = unframe(&r.body);
+        let warnings = head["warnings"].as_array().unwrap();
+        assert!(!warnings.is_empty(), "{head}");
+        let r = get(&app, &format!("/{TOKEN}/api/items/0/result?lambda=5")).await;
+        let (head, _) = unframe(&r.body);
+        assert!(head["warnings"].as_array().unwrap().is_empty(), "{head}");
+    });
+}
+
+#[test]
+fn bad_lambdas_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let app = app(&[complete_run(dir.path(), "run")]);
+    rt().block_on(async {
+        for l in [
+            "NaN", "nan", "inf", "-inf", "-1", "-0.001", "100.5", "1e300", "1e400", "abc", "",
+            "8%00", "0x10",
+        ] {
+            let r = get(&app, &format!("/{TOKEN}/api/items/0/result?lambda={l}")).await;
+            assert_eq!(r.status, StatusCode::BAD_REQUEST, "λ = {l}: {}", r.text());
+            let r = get(
+                &app,
+                &format!("/{TOKEN}/api/items/0/download?lambda={l}&format=obj"),
+            )
+            .await;
+            assert_eq!(r.status, StatusCode::BAD_REQUEST, "download λ = {l}");
+        }
+        let r = get(&app, &format!("/{TOKEN}/api/items/0/result")).await;
+        assert_eq!(r.status, StatusCode::BAD_REQUEST);
+        // The bounds themselves are accepted.
+        for l in ["0", "100"] {
+            let r = get(&app, &format!("/{TOKEN}/api/items/0/result?lambda={l}")).await;
+            assert_eq!(r.status, StatusCode::OK, "λ = {l}: {}", r.text());
+        }
+    });
+}
+
+#[test]
+fn downloads_are_meshes_at_the_chosen_lambda() {
+    let dir = tempfile::tempdir().unwrap();
+    let app = app(&[complete_run(dir.path(), "bunny run")]);
+    rt().block_on(async {
+        for format in ["obj", "ply", "glb"] {
+            let r = get(
+                &app,
+                &format!("/{TOKEN}/api/items/0/download?lambda=5&format={format}"),
+            )
+            .await;
+            assert_eq!(r.status, StatusCode::OK, "{format}: {}", r.text());
+            let disposition = r.headers["content-disposition"].to_str().unwrap();
+            assert!(
+                disposition.contains(&format!("bunny_run_lambda5.{format}")),
+                "{disposition}"
+            );
+            let path = dir.path().join(format!("got.{format}"));
+            std::fs::write(&path, &r.body).unwrap();
+            let got = mesh_core::io::read_mesh(&path).unwrap();
+            let golden5 = mesh_core::io::read_mesh(golden("bunny_lambda5_gis.obj")).unwrap();
+            assert_eq!(got.faces, golden5.faces);
+            let err = got
+                .positions
+                .iter()
+                .flatten()
+                .zip(golden5.positions.iter().flatten())
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0, f64::max);
+            assert!(err < 1e-5, "{format}: {err}");
+        }
+        let r = get(
+            &app,
+            &format!("/{TOKEN}/api/items/0/download?lambda=5&format=exe"),
+        )
+        .await;
+        assert_eq!(r.status, StatusCode::BAD_REQUEST);
+    });
+}
+
+#[test]
+fn files_are_served_from_inside_the_run_only() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = complete_run(dir.path(), "run");
+    std::fs::write(dir.path().join("secret.txt"), "TOP-SECRET-CONTENT").unwrap();
+    std::fs::create_dir_all(run.join("previews")).unwrap();
+    std::fs::write(run.join("previews/iter_000001.png"), "png").unwrap();
+    std::os::unix::fs::symlink(dir.path().join("secret.txt"), run.join("escape.txt")).unwrap();
+    std::os::unix::fs::symlink(dir.path(), run.join("parent")).unwrap();
+    std::os::unix::fs::symlink("/etc/passwd", run.join("passwd")).unwrap();
+    std::os::unix::fs::symlink(run.join("run.json"), run.join("inside.json")).unwrap();
+    let app = app(&[run]);
+    rt().block_on(async {
+        let base = format!("/{TOKEN}/api/items/0/files");
+        let r = get(&app, &format!("{base}/run.json")).await;
+        assert_eq!(r.status, StatusCode::OK);
+        assert_eq!(r.text(), "{}");
+        let r = get(&app, &format!("{base}/previews/iter_000001.png")).await;
+        assert_eq!(r.status, StatusCode::OK);
+        assert_eq!(r.headers["content-type"], "image/png");
+        // A link that stays inside the run is fine.
+        let r = get(&app, &format!("{base}/inside.json")).await;
+        assert_eq!(r.status, StatusCode::OK);
+        for attempt in [
+            "../secret.txt",
+            "%2e%2e/secret.txt",
+            "%2E%2E%2Fsecret.txt",
+            "previews/../../secret.txt",
+            "previews%2F..%2F..%2Fsecret.txt",
+            "./run.json",
+            "%2Fetc%2Fpasswd",
+            "/etc/passwd",
+            "escape.txt",
+            "parent/secret.txt",
+            "passwd",
+            "previews",
+            "nothing.png",
+            "run.json%00.png",
+        ] {
+            let r = get(&app, &format!("{base}/{attempt}")).await;
+            assert!(
+                matches!(
+                    r.status,
+                    StatusCode::BAD_REQUEST | StatusCode::NOT_FOUND | StatusCode::FORBIDDEN
+                ),
+                "{attempt}: {} {}",
+                r.status,
+                r.text()
+            );
+            assert!(!r.text().contains("TOP-SECRET"), "{attempt}: {}", r.text());
+            assert!(!r.text().contains("root:"), "{attempt}");
+        }
+    });
+}
+
+#[test]
+fn a_run_still_being_written_answers_409_and_appears_when_complete() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("running");
+    std::fs::create_dir_all(&run).unwrap();
+    std::fs::write(run.join("task.json"), "{}").unwrap();
+    std::fs::write(run.join("run.lock"), "{}").unwrap();
+    let app = app(std::slice::from_ref(&run));
+    rt().block_on(async {
+        let r = get(&app, &format!("/{TOKEN}/api/items")).await;
+        let items: serde_json::Value = serde_json::from_slice(&r.body).unwrap();
+        assert_eq!(items[0]["status"], "running");
+        assert_eq!(items[0]["has_deformation"], false);
+        for what in ["source", "result?lambda=3", "download?lambda=3&format=obj"] {
+            let r = get(&app, &format!("/{TOKEN}/api/items/0/{what}")).await;
+            assert_eq!(r.status, StatusCode::CONFLICT, "{what}: {}", r.text());
+            assert!(r.text().contains("deformation.npz"), "{}", r.text());
+        }
+        // A damaged result is an error naming the file, and the server keeps serving.
+        std::fs::write(run.join("deformation.npz"), b"PK\x03\x04 not really").unwrap();
+        let r = get(&app, &format!("/{TOKEN}/api/items/0/result?lambda=3")).await;
+        assert_eq!(r.status, StatusCode::INTERNAL_SERVER_ERROR);
+        assert!(r.text().contains("deformation.npz"), "{}", r.text());
+        // The run completes: the same server now computes it.
+        std::fs::copy(golden("bunny_targets.npz"), run.join("deformation.npz")).unwrap();
+        std::fs::write(run.join("run.json"), "{}").unwrap();
+        std::fs::remove_file(run.join("run.lock")).unwrap();
+        let r = get(&app, &format!("/{TOKEN}/api/items/0/result?lambda=3")).await;
+        assert_eq!(r.status, StatusCode::OK, "{}", r.text());
+        let r = get(&app, &format!("/{TOKEN}/api/items")).await;
+        let items: serde_json::Value = serde_json::from_slice(&r.body).unwrap();
+        assert_eq!(items[0]["status"], "complete");
+    });
+}
+
+#[test]
+fn arguments_that_are_neither_runs_nor_meshes_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let notes = dir.path().join("notes.txt");
+    std::fs::write(&notes, "hi").unwrap();
+    let e = Viewer::open(&[notes], TOKEN.into()).unwrap_err();
+    assert!(format!("{e:#}").contains("notes.txt"), "{e:#}");
+    let e = Viewer::open(&[dir.path().join("missing")], TOKEN.into()).unwrap_err();
+    assert!(format!("{e:#}").contains("missing"), "{e:#}");
+    assert!(Viewer::open(&[], TOKEN.into()).is_err());
+}
+
+/// The binary binds 127.0.0.1, prints a URL with a fresh token, and answers over TCP.
+#[test]
+fn binary_prints_a_loopback_url_with_a_token_and_serves_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = complete_run(dir.path(), "run");
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_stylize"))
+        .args(["view", "--port", "0"])
+        .arg(&run)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut lines = BufReader::new(child.stdout.take().unwrap()).lines();
+    let url = loop {
+        let line = lines
+            .next()
+            .expect("the server exited before printing its URL")
+            .unwrap();
+        if let Some(u) = line.trim().strip_prefix("http://") {
+            break u.to_string();
+        }
+    };
+    // Hang up on the banner: a closed stdout must not stop the server.
+    drop(lines);
+    std::thread::sleep(std::time::Duration::from_millis(300));
+    let (authority, path) = url.split_once('/').unwrap();
+    assert!(authority.starts_with("127.0.0.1:"), "{url}");
+    let token = path.trim_end_matches('/');
+    assert_eq!(token.len(), 32, "{url}");
+    assert!(token.chars().all(|c| c.is_ascii_hexdigit()));
+    assert_ne!(token, TOKEN);
+    let http_get = |p: &str| -> String {
+        let mut s = std::net::TcpStream::connect(authority).unwrap();
+        write!(
+            s,
+            "GET {p} HTTP/1.1\r\nHost: {authority}\r\nConnection: close\r\n\r\n"
+        )
+        .unwrap();
+        let mut out = String::new();
+        s.read_to_string(&mut out).unwrap();
+        out
+    };
+    let ok = http_get(&format!("/{token}/api/items"));
+    let bad = http_get("/api/items");
+    let traversal = http_get(&format!(
+        "/{token}/api/items/0/files/..%2F..%2Fetc%2Fpasswd"
+    ));
+    child.kill().unwrap();
+    child.wait().unwrap();
+    assert!(ok.starts_with("HTTP/1.1 200"), "{ok}");
+    assert!(ok.contains("\"complete\""), "{ok}");
+    assert!(bad.starts_with("HTTP/1.1 403"), "{bad}");
+    assert!(traversal.starts_with("HTTP/1.1 400"), "{traversal}");
+}
