@@ -455,3 +455,116 @@ fn layer_matches_the_stage_functions_chained_in_vertex_order() {
         }
     }
 }
+
+/// Feather weights on an icosphere: 0 for `x < −0.3`, a ramp for `−0.3 ≤ x < 0.2`, 1 beyond.
+fn feather(mesh: &mesh_core::TriMesh) -> Vec<f64> {
+    mesh.positions
+        .iter()
+        .map(|p| ((p[0] + 0.3) / 0.5).clamp(0.0, 1.0))
+        .collect()
+}
+
+#[test]
+fn feathered_region_blends_rotations_with_the_identity_and_its_vjp_matches_the_chain() {
+    let mesh = icosphere(2);
+    let n = mesh.positions.len();
+    let mut layer = Darap::new(&mesh.positions, &mesh.faces, DarapOptions::default()).unwrap();
+    let x = random_targets(layer.rest_normals(), 0.6, 31);
+    let g = random_targets(layer.rest_normals(), 1.0, 32);
+    let free_out = layer.forward(&x).unwrap();
+    let w = feather(&mesh);
+    assert!(w.iter().any(|&v| v == 0.0) && w.iter().any(|&v| v > 0.0 && v < 1.0));
+    layer.set_region_weights(Some(w.clone())).unwrap();
+    assert_eq!(layer.region_weights().unwrap(), w);
+    let out = layer.forward(&x).unwrap();
+    // The rotation used is w·R + (1 − w)·I of the unmasked local step.
+    for v in 0..n {
+        let expected: Mat3 = std::array::from_fn(|i| {
+            std::array::from_fn(|j| {
+                w[v] * free_out.rotations[v][i][j] + (1.0 - w[v]) * IDENTITY[i][j]
+            })
+        });
+        for i in 0..3 {
+            for j in 0..3 {
+                assert!((out.rotations[v][i][j] - expected[i][j]).abs() < 1e-15);
+            }
+        }
+    }
+    // Positions: the global step of the blended rotations.
+    let solved = layer.global_step(&out.rotations);
+    let (pos, _) = post_process(
+        &solved,
+        mesh_core::geometry::bbox_diagonal(&mesh.positions),
+        PostProcess::RecenterRescale,
+    );
+    assert!(max_diff(&out.positions, &pos) < 1e-12);
+    // The gradient is exactly zero where w = 0, and matches a central difference elsewhere.
+    let grad = layer.backward(&out, &g);
+    for v in (0..n).filter(|&v| w[v] == 0.0) {
+        assert_eq!(grad[v], [0.0; 3], "vertex {v} outside the region");
+    }
+    let loss = |x: &[[f64; 3]]| -> f64 {
+        let p = layer.forward(x).unwrap().positions;
+        p.iter()
+            .zip(&g)
+            .map(|(a, b)| a[0] * b[0] + a[1] * b[1] + a[2] * b[2])
+            .sum()
+    };
+    let dir = random_targets(layer.rest_normals(), 1.0, 33);
+    let h = 1e-6;
+    let xp: Vec<[f64; 3]> = x
+        .iter()
+        .zip(&dir)
+        .map(|(a, d)| std::array::from_fn(|c| a[c] + h * d[c]))
+        .collect();
+    let xm: Vec<[f64; 3]> = x
+        .iter()
+        .zip(&dir)
+        .map(|(a, d)| std::array::from_fn(|c| a[c] - h * d[c]))
+        .collect();
+    let fd = (loss(&xp) - loss(&xm)) / (2.0 * h);
+    let an: f64 = grad
+        .iter()
+        .zip(&dir)
+        .map(|(a, d)| a[0] * d[0] + a[1] * d[1] + a[2] * d[2])
+        .sum();
+    assert!(
+        (fd - an).abs() < 1e-6 * (1.0 + an.abs()),
+        "fd {fd} vs adjoint {an}"
+    );
+}
+
+#[test]
+fn region_weights_of_zero_and_one_are_the_hard_mask() {
+    let mesh = squashed_sphere();
+    let n = mesh.positions.len();
+    let free: Vec<bool> = (0..n).map(|v| v % 4 != 1).collect();
+    let mut masked = Darap::new(&mesh.positions, &mesh.faces, DarapOptions::default()).unwrap();
+    masked.set_mask(Some(free.clone())).unwrap();
+    let mut weighted = Darap::new(&mesh.positions, &mesh.faces, DarapOptions::default()).unwrap();
+    weighted
+        .set_region_weights(Some(
+            free.iter().map(|&f| if f { 1.0 } else { 0.0 }).collect(),
+        ))
+        .unwrap();
+    let x = random_targets(masked.rest_normals(), 0.7, 41);
+    let a = masked.forward(&x).unwrap();
+    let b = weighted.forward(&x).unwrap();
+    assert_eq!(a.positions, b.positions);
+    assert_eq!(masked.backward(&a, &x), weighted.backward(&b, &x));
+    // Out-of-range and wrong-length weights are errors; None clears the region.
+    assert!(matches!(
+        weighted.set_region_weights(Some(vec![1.5; n])),
+        Err(DarapError::OutOfRange { index: 0, .. })
+    ));
+    assert!(matches!(
+        weighted.set_region_weights(Some(vec![f64::NAN; n])),
+        Err(DarapError::OutOfRange { .. })
+    ));
+    assert!(matches!(
+        weighted.set_region_weights(Some(vec![0.5; 2])),
+        Err(DarapError::LengthMismatch { .. })
+    ));
+    weighted.set_region_weights(None).unwrap();
+    assert!(weighted.region_weights().is_none());
+}
