@@ -153,6 +153,8 @@ pub struct Darap {
     free_int: Option<Vec<bool>>,
     /// Feather weights in internal order (`None` when every weight is 0 or 1).
     weights_int: Option<Vec<f64>>,
+    /// `w_v·a_v` in internal order, the local step's masses when feathered.
+    feathered_mass_int: Option<Vec<f64>>,
     /// Rows: free vertices in solver order; columns: internal order.
     rhs: RhsPrecompute,
     /// `−L[free, pins]·x_pins` in solver order (the pins stay at rest).
@@ -176,8 +178,8 @@ pub struct Deformation {
     local: LocalTape,
     post: PostTape,
     lambda: f64,
-    /// Feather weights (internal order) the forward pass blended with, if any.
-    weights_int: Option<Vec<f64>>,
+    /// The local step's masses (internal order) when the forward pass was feathered.
+    feathered_mass_int: Option<Vec<f64>>,
 }
 
 impl Darap {
@@ -234,6 +236,7 @@ impl Darap {
             normals_int: order.iter().map(|&v| rest_normals[v]).collect(),
             free_int: None,
             weights_int: None,
+            feathered_mass_int: None,
             order,
             rest_positions: rest_positions.to_vec(),
             rest_normals,
@@ -288,13 +291,14 @@ impl Darap {
             .map(|m| self.order.iter().map(|&v| m[v]).collect());
         self.free = free;
         self.weights_int = None;
+        self.feathered_mass_int = None;
         Ok(())
     }
 
-    /// Sets a feathered region: per vertex a weight `w_v ∈ [0, 1]`, and the rotation used by the
-    /// global step is `w_v·R_v + (1 − w_v)·I` ([`region::blend_with_identity`]). `w = 0` is the
-    /// hard mask of [`Darap::set_mask`] (`R = I`, exactly zero gradient), `w = 1` a free vertex.
-    /// `None` lets every vertex rotate.
+    /// Sets a feathered region: per vertex a weight `w_v ∈ [0, 1]` that scales the strength of
+    /// the normal term, `λ·w_v·a_v` (see [`region`]). `w = 0` is the hard mask of
+    /// [`Darap::set_mask`] (`R = I`, exactly zero gradient), `w = 1` a free vertex. `None` lets
+    /// every vertex rotate.
     pub fn set_region_weights(&mut self, weights: Option<Vec<f64>>) -> Result<(), DarapError> {
         let Some(w) = weights else {
             return self.set_mask(None);
@@ -314,7 +318,9 @@ impl Darap {
         }
         self.set_mask(Some(w.iter().map(|&x| x > 0.0).collect()))?;
         if w.iter().any(|&x| x > 0.0 && x < 1.0) {
-            self.weights_int = Some(self.order.iter().map(|&v| w[v]).collect());
+            let wi: Vec<f64> = self.order.iter().map(|&v| w[v]).collect();
+            self.feathered_mass_int = Some(region::feathered_mass(&self.mass_int, &wi));
+            self.weights_int = Some(wi);
         }
         Ok(())
     }
@@ -392,18 +398,16 @@ impl Darap {
         }
         // Targets gathered into the internal order and normalized in one pass.
         let unit: Vec<[f64; 3]> = self.order.iter().map(|&v| normalize_target(x[v])).collect();
-        let (mut rotations_int, local) = local_step(
+        let mass_int = self.feathered_mass_int.as_ref().unwrap_or(&self.mass_int);
+        let (rotations_int, local) = local_step(
             &self.covariance_int,
-            &self.mass_int,
+            mass_int,
             self.options.lambda,
             &self.normals_int,
             &unit,
             self.options.rotation_rule,
             self.free_int.as_deref(),
         );
-        if let Some(w) = &self.weights_int {
-            region::blend_with_identity(&mut rotations_int, w);
-        }
         let solved = self.solve_internal(&rotations_int);
         let (positions, post) = post_process(&solved, self.rest_diag, self.options.post_process);
         let mut rotations = vec![mat3::ZERO; n];
@@ -417,7 +421,7 @@ impl Darap {
             local,
             post,
             lambda: self.options.lambda,
-            weights_int: self.weights_int.clone(),
+            feathered_mass_int: self.feathered_mass_int.clone(),
         })
     }
 
@@ -492,13 +496,10 @@ impl Darap {
             .map(|&v| grad_solved[v])
             .collect();
         self.solver.solve_ordered_in_place(&mut grad_b);
-        let mut grad_r = rhs_vjp(&self.rhs, &grad_b);
-        if let Some(w) = &state.weights_int {
-            region::blend_with_identity_vjp(&mut grad_r, w);
-        }
+        let grad_r = rhs_vjp(&self.rhs, &grad_b);
         let grad_unit_int = local_step_vjp(
             &state.local,
-            &self.mass_int,
+            state.feathered_mass_int.as_ref().unwrap_or(&self.mass_int),
             state.lambda,
             &self.normals_int,
             &grad_r,

@@ -1,60 +1,31 @@
-//! Feathered regions: a per-vertex weight that blends each rotation with the identity.
+//! Feathered regions: a per-vertex weight that fades the stylization strength λ to zero.
 //!
 //! A localized stylization (method spec: "R = I outside the region") is a weight `w_v ∈ [0, 1]`
-//! per vertex. The local step's rotation `R_v` is replaced by
+//! per vertex:
 //!
-//! ```text
-//! R̃_v = w_v · R_v + (1 − w_v) · I
-//! ```
+//! - `w_v = 0`: the hard mask, `R_v = I` (the vertex keeps its rest one-ring shape and its target
+//!   receives exactly zero gradient);
+//! - `w_v > 0`: the local step runs with the normal term weighted by `λ·w_v·a_v` instead of
+//!   `λ·a_v`, i.e. `S_v = K_v + λ w_v a_v n0_v t̂_vᵀ` (spec §3.2), and `R_v` is the rotation rule
+//!   of that covariance.
 //!
-//! before the global step. `w = 1` is the free vertex, `w = 0` the hard mask (`R̃ = I`, the
-//! vertex keeps its rest one-ring shape). In between, `R̃` is not a rotation but a linear blend:
-//! the global step is linear in the per-vertex matrices (spec §4.1), so the blend moves the
-//! *edge targets* `R̃ e` linearly from the rest edges to the rotated ones. This is what
-//! `--region-feather K` uses over the `K` rings inside a region's boundary
-//! (`mesh_core::region::feather_weights`).
+//! So the feather fades the **strength** λ over the band, and every `R_v` stays a rotation (a
+//! linear blend `w·R + (1 − w)·I` would not be one: it shrinks edges by `cos(θ/2)` at `w = ½`). As
+//! `w_v → 0`, `R_v → rule(K_v)`, which is the identity wherever `K_v` is negative definite (every
+//! vertex of a well-shaped mesh under the `gis` rule: `K_v = −U Σ Uᵀ` gives `R = −U·(−U)ᵀ = I`); at
+//! vertices with strongly obtuse one-rings the limit can differ slightly from `I`, so the step to
+//! the hard mask at the region's edge is small, not zero.
 //!
-//! Adjoint: `∂ℓ/∂R_v = w_v · ∂ℓ/∂R̃_v` (the identity term is constant), so the gradient that
-//! reaches the targets of a vertex with `w_v = 0` is exactly zero.
+//! Adjoint: the same local-step VJP with `a_v` replaced by `w_v·a_v`
+//! (`∂ℓ/∂t̂_v = λ w_v a_v (∂ℓ/∂S_v)ᵀ n0_v`). `mesh_core::region::feather_weights` builds the
+//! weights (a ramp over `K` rings inside the region's boundary).
 
-use crate::mat3::Mat3;
-
-/// `R ← w·R + (1 − w)·I` for every vertex, in place. `weights[v] == 1` leaves `R_v` bit for bit.
+/// Per-vertex normal weights `w_v·a_v` for the local step (the masses the layer passes to
+/// [`crate::local_step`] and [`crate::local_step_vjp`] for a feathered region).
 ///
 /// # Panics
 /// If the slices differ in length (a programming error).
-pub fn blend_with_identity(rotations: &mut [Mat3], weights: &[f64]) {
-    assert_eq!(rotations.len(), weights.len(), "one weight per rotation");
-    for (r, &w) in rotations.iter_mut().zip(weights) {
-        if w == 1.0 {
-            continue;
-        }
-        for (i, row) in r.iter_mut().enumerate() {
-            for (j, x) in row.iter_mut().enumerate() {
-                *x = w * *x + if i == j { 1.0 - w } else { 0.0 };
-            }
-        }
-    }
-}
-
-/// Adjoint of [`blend_with_identity`]: `∂ℓ/∂R ← w·∂ℓ/∂R̃`, in place.
-///
-/// # Panics
-/// If the slices differ in length (a programming error).
-pub fn blend_with_identity_vjp(grad_rotations: &mut [Mat3], weights: &[f64]) {
-    assert_eq!(
-        grad_rotations.len(),
-        weights.len(),
-        "one weight per rotation"
-    );
-    for (g, &w) in grad_rotations.iter_mut().zip(weights) {
-        if w == 1.0 {
-            continue;
-        }
-        for row in g.iter_mut() {
-            for x in row.iter_mut() {
-                *x *= w;
-            }
-        }
-    }
+pub fn feathered_mass(mass: &[f64], weights: &[f64]) -> Vec<f64> {
+    assert_eq!(mass.len(), weights.len(), "one weight per vertex");
+    mass.iter().zip(weights).map(|(a, w)| a * w).collect()
 }
