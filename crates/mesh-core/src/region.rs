@@ -606,6 +606,14 @@ fn select_one(spec: &RegionSpec, input: &RegionInput<'_>) -> Result<Vec<bool>, R
     })
 }
 
+/// The vertices one spec selects on the repaired mesh (no emptiness check; see [`select`]).
+pub fn select_vertices(
+    spec: &RegionSpec,
+    input: &RegionInput<'_>,
+) -> Result<Vec<bool>, RegionError> {
+    select_one(spec, input)
+}
+
 /// The union of `specs` on the repaired mesh.
 ///
 /// Errors: a spec that does not parse or names a missing part/property/vertex, or a union that

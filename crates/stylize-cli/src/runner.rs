@@ -10,6 +10,7 @@ use csd::Guidance;
 use darap::Darap;
 use mesh_core::TriMesh;
 use mesh_core::npz::{NpyArray, NpyData, SavedDeformation};
+use mesh_core::region::{RegionInput, RegionSpec};
 use optim::{Adam, AdamConfig};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -102,7 +103,62 @@ pub struct RunOutcome {
 /// values `deformation.npz` stores and normalized again in f64 — so `stylize apply` on the saved
 /// file rebuilds exactly this rest mesh.
 pub fn prepare_mesh(path: &Path) -> anyhow::Result<(TriMesh, Vec<String>)> {
-    let mesh = mesh_core::io::read_mesh(path)
+    prepare_mesh_with_region(path, &crate::config::RegionSection::default()).map(|(m, w, _)| (m, w))
+}
+
+/// A resolved region of a prepared mesh.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ResolvedRegion {
+    /// Vertices that may rotate (prepared mesh's numbering).
+    pub free: Vec<bool>,
+    /// Per-vertex weights for `Darap::set_region_weights` (feathered).
+    pub weights: Vec<f64>,
+}
+
+/// Region specs parsed, with vertex files read (relative paths as given: from the working
+/// directory; a batch manifest rebases them on its folder).
+pub fn parse_region_specs(specs: &[String]) -> anyhow::Result<Vec<RegionSpec>> {
+    specs
+        .iter()
+        .map(|s| {
+            RegionSpec::parse(s)?.with_indices(&mut |path: &Path| -> anyhow::Result<Vec<usize>> {
+                let text = crate::input::read_to_string(path)
+                    .with_context(|| format!("cannot read vertex file {}", path.display()))?;
+                mesh_core::region::parse_index_list(&text)
+                    .map_err(|e| anyhow::anyhow!("vertex file {}: {e}", path.display()))
+            })
+        })
+        .collect()
+}
+
+/// Resolves `section` on a prepared mesh (`Ok(None)` when no spec is given). Warnings (a spec
+/// that selects nothing, a region covering everything) are appended to `warnings`.
+pub fn resolve_region(
+    section: &crate::config::RegionSection,
+    input: &RegionInput<'_>,
+    warnings: &mut Vec<String>,
+) -> anyhow::Result<Option<ResolvedRegion>> {
+    if section.specs.is_empty() {
+        return Ok(None);
+    }
+    let specs = parse_region_specs(&section.specs)?;
+    let region = mesh_core::region::select(&specs, input)?;
+    warnings.extend(region.warnings.iter().cloned());
+    let weights =
+        mesh_core::region::feather_weights(&region.free, input.faces, section.feather as usize);
+    Ok(Some(ResolvedRegion {
+        free: region.free,
+        weights,
+    }))
+}
+
+/// [`prepare_mesh`] and the region of `section` on it (parts of the file and repair maps
+/// followed; boxes and spheres evaluated on the prepared, normalized positions).
+pub fn prepare_mesh_with_region(
+    path: &Path,
+    section: &crate::config::RegionSection,
+) -> anyhow::Result<(TriMesh, Vec<String>, Option<ResolvedRegion>)> {
+    let (mesh, parts) = mesh_core::io::read_mesh_with_parts(path)
         .with_context(|| format!("cannot read mesh {}", path.display()))?;
     let repaired =
         mesh_core::validate::repair(&mesh, &mesh_core::validate::RepairOptions::default())
@@ -113,13 +169,23 @@ pub fn prepare_mesh(path: &Path) -> anyhow::Result<(TriMesh, Vec<String>)> {
         .iter()
         .map(|i| i.message.clone())
         .collect();
-    let mut m = repaired.mesh;
+    let mut m = repaired.mesh.clone();
     mesh_core::normalize::side2_cube(&mut m.positions);
     for p in &mut m.positions {
         *p = p.map(|c| f64::from(c as f32));
     }
     mesh_core::normalize::side2_cube(&mut m.positions);
-    Ok((m, warnings))
+    let mut warnings = warnings;
+    let input = RegionInput {
+        positions: &m.positions,
+        faces: &m.faces,
+        vertex_map: &repaired.vertex_map,
+        face_map: &repaired.face_map,
+        parts: &parts,
+    };
+    let region = resolve_region(section, &input, &mut warnings)
+        .with_context(|| format!("region of {}", path.display()))?;
+    Ok((m, warnings, region))
 }
 
 /// dARAP options from the configuration.
@@ -346,14 +412,22 @@ pub fn execute_with(
     let config = &request.config;
     config.validate()?;
     let config_toml = config.to_toml_string()?;
-    let (mesh, mut warnings) = prepare_mesh(&request.mesh)?;
+    let (mesh, mut warnings, region) = prepare_mesh_with_region(&request.mesh, &config.region)?;
     if let (ObjectiveIdentity::Prompt { model, .. }, Some(m)) = (&mut objective, &options.model) {
         *model = Some(m.clone());
     }
-    let identity = TaskIdentity::new(&mesh.positions, &mesh.faces, &objective, config)?;
+    let mut identity = TaskIdentity::new(&mesh.positions, &mesh.faces, &objective, config)?;
+    if let Some(r) = &region {
+        identity = identity.with_region(&config.region.specs, config.region.feather, &r.weights);
+    }
     let setup = Instant::now();
-    let darap = Darap::new(&mesh.positions, &mesh.faces, darap_options(config))
+    let mut darap = Darap::new(&mesh.positions, &mesh.faces, darap_options(config))
         .context("dARAP precomputation")?;
+    if let Some(r) = &region {
+        darap
+            .set_region_weights(Some(r.weights.clone()))
+            .context("region weights")?;
+    }
     let setup_seconds = setup.elapsed().as_secs_f64();
     // Everything that can fail on bad input happens before the run directory is touched.
     crate::signals::install()?;
@@ -628,6 +702,7 @@ pub fn execute_with(
         &request.mesh,
         task_label.0,
         &task_label.1,
+        region.as_ref(),
     )?;
     let mut tt_renderer = raster_diff::CpuRenderer::default();
     let tt = turntable(
@@ -659,6 +734,11 @@ pub fn execute_with(
         "renderer": renderer_choice,
         "seconds": { "setup": setup_seconds, "loop": loop_seconds },
         "warnings": warnings,
+        "region": region.as_ref().map(|r| serde_json::json!({
+            "specs": config.region.specs,
+            "feather": config.region.feather,
+            "vertices": r.free.iter().filter(|&&f| f).count(),
+        })),
         "task": identity.fields,
     });
     lock.ensure_held()?;
@@ -679,7 +759,9 @@ pub fn execute_with(
     })
 }
 
-/// Writes `deformation.npz` in the reference format plus our keys.
+/// Writes `deformation.npz` in the reference format plus our keys (for a localized run:
+/// `region_weights`, one f64 per vertex, `region_specs`, newline separated, and `region_feather`).
+#[allow(clippy::too_many_arguments)]
 fn write_deformation(
     dir: &RunDir,
     mesh: &TriMesh,
@@ -688,6 +770,7 @@ fn write_deformation(
     source: &Path,
     task_key: &str,
     task_value: &str,
+    region: Option<&ResolvedRegion>,
 ) -> anyhow::Result<()> {
     let csd_cfg = serde_json::json!({
         "local_step_procrustes": { "lamb": config.darap.lambda, "normalize_target_normals": true },
@@ -716,6 +799,21 @@ fn write_deformation(
         "rotation_rule",
         NpyArray::scalar_str(config.darap.rotation_rule.name()),
     )?;
+    if let Some(r) = region {
+        saved.set_extra(
+            "region_weights",
+            NpyArray::new(vec![r.weights.len()], NpyData::F64(r.weights.clone()))
+                .map_err(anyhow::Error::msg)?,
+        )?;
+        saved.set_extra(
+            "region_specs",
+            NpyArray::scalar_str(&config.region.specs.join("\n")),
+        )?;
+        saved.set_extra(
+            "region_feather",
+            scalar_i64(i64::from(config.region.feather))?,
+        )?;
+    }
     crate::durable::replace_with(&dir.deformation(), |tmp| {
         saved.write(tmp).map_err(anyhow::Error::from)
     })
