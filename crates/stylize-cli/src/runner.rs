@@ -228,6 +228,8 @@ struct RunObserver<'a> {
     fov: f64,
     faces: Vec<[u32; 3]>,
     preview_renderer: raster_diff::CpuRenderer,
+    /// Region to tint in model-free previews (`region.tint`).
+    tint: Option<Vec<bool>>,
 }
 
 fn record_json(r: &IterationRecord) -> serde_json::Value {
@@ -265,6 +267,25 @@ pub fn write_grid(path: &Path, images: &Images) -> anyhow::Result<()> {
         )
         .with_context(|| format!("cannot write {}", path.display()))
     })
+}
+
+/// Tint of [`tint_region`] (a warm orange, multiplied into the shading).
+pub const REGION_TINT: [f32; 3] = [1.0, 0.62, 0.3];
+
+/// Tints, in place, the pixels whose visible triangle (`ids`, one per pixel as
+/// `CpuRenderer::triangle_ids` returns them) has a corner in the region `free`.
+pub fn tint_region(images: &mut Images, ids: &[u32], faces: &[[u32; 3]], free: &[bool]) {
+    for (pixel, &t) in images.rgb.chunks_exact_mut(3).zip(ids) {
+        let inside = faces.get(t as usize).is_some_and(|f| {
+            f.iter()
+                .any(|&v| free.get(v as usize).copied().unwrap_or(false))
+        });
+        if inside {
+            for (c, k) in pixel.iter_mut().zip(REGION_TINT) {
+                *c *= k;
+            }
+        }
+    }
 }
 
 /// Renders `n` turntable views of a mesh (CPU renderer, elevation 20°, looking at the origin).
@@ -348,7 +369,7 @@ impl Observer for RunObserver<'_> {
         match images {
             Some(images) => write_grid(&path, images),
             None => {
-                let images = turntable(
+                let mut images = turntable(
                     &mut self.preview_renderer,
                     deformed,
                     &self.faces,
@@ -356,6 +377,10 @@ impl Observer for RunObserver<'_> {
                     self.preview_size,
                     self.fov,
                 )?;
+                if let (Some(free), Some(ids)) = (&self.tint, self.preview_renderer.triangle_ids())
+                {
+                    tint_region(&mut images, &ids, &self.faces, free);
+                }
                 write_grid(&path, &images)
             }
         }
@@ -608,6 +633,10 @@ pub fn execute_with(
         fov: config.camera.fov_deg,
         faces: mesh.faces.clone(),
         preview_renderer: raster_diff::CpuRenderer::default(),
+        tint: region
+            .as_ref()
+            .filter(|_| config.region.tint)
+            .map(|r| r.free.clone()),
     };
     if request.log == LogMode::Bar
         && let Some(b) = &bar
@@ -705,7 +734,7 @@ pub fn execute_with(
         region.as_ref(),
     )?;
     let mut tt_renderer = raster_diff::CpuRenderer::default();
-    let tt = turntable(
+    let mut tt = turntable(
         &mut tt_renderer,
         &deformed.positions,
         &deformed.faces,
@@ -713,6 +742,9 @@ pub fn execute_with(
         config.run.turntable_size,
         config.camera.fov_deg,
     )?;
+    if let (Some(r), true, Some(ids)) = (&region, config.region.tint, tt_renderer.triangle_ids()) {
+        tint_region(&mut tt, &ids, &deformed.faces, &r.free);
+    }
     write_grid(&dir.file("turntable.png"), &tt)?;
     let alignment = match (&style_objective, alignment_before) {
         (Some(o), Some(before)) => Some((before, o.mean_alignment(&deformed.positions))),
