@@ -508,6 +508,42 @@ mod tests {
     }
 
     #[test]
+    fn region_columns_are_read_and_vertex_files_rebased_on_the_manifest_folder() {
+        let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+        let path = dir.path().join("m.toml");
+        std::fs::write(
+            &path,
+            "[[run]]\nmesh = \"a.obj\"\nstyle = \"cube\"\nout = \"a\"\nregion = [\"box:-1,-1,-1,0,1,1\", \"not:vertices:head.txt\", \"vertices:/abs/v.txt\"]\nregion_feather = 2\n",
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        let rows = read_manifest(&path).unwrap_or_else(|e| panic!("{e:#}"));
+        assert_eq!(rows[0].region_feather, Some(2));
+        assert_eq!(rows[0].region[0], "box:-1,-1,-1,0,1,1");
+        assert_eq!(
+            rows[0].region[1],
+            format!("not:vertices:{}", dir.path().join("head.txt").display())
+        );
+        assert_eq!(rows[0].region[2], "vertices:/abs/v.txt");
+        std::fs::write(
+            &path,
+            "[[run]]\nmesh = \"a.obj\"\nstyle = \"cube\"\nout = \"a\"\nregion = [\"cube:1\"]\n",
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        let e = read_manifest(&path).map(|_| ()).unwrap_err();
+        assert!(
+            format!("{e:#}").contains("row 0") && format!("{e:#}").contains("cube:1"),
+            "{e:#}"
+        );
+        let config = Config::default()
+            .with_region_flags(&rows[0].region[..1], rows[0].region_feather, false)
+            .unwrap_or_else(|e| panic!("{e:#}"));
+        assert_eq!(config.region.specs, ["box:-1,-1,-1,0,1,1"]);
+        assert_eq!(config.region.feather, 2);
+        let e = Config::default().with_region_flags(&["box:1".to_string()], None, false);
+        assert!(format!("{:#}", e.unwrap_err()).contains("region.specs"));
+    }
+
+    #[test]
     fn manifests_in_toml_and_jsonl_resolve_relative_paths() {
         let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
         let toml_path = dir.path().join("m.toml");

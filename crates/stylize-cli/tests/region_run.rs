@@ -245,3 +245,98 @@ fn resume_with_another_region_is_refused_and_an_empty_region_is_an_error() {
     let e = run(&empty, config(6, &["part:head"], 0), false, None).unwrap_err();
     assert!(format!("{e:#}").contains("no part named `head`"), "{e:#}");
 }
+
+/// An icosphere OBJ with groups `top` (faces whose centroid has z > 0) and `bottom`.
+fn grouped_sphere(dir: &Path) -> PathBuf {
+    let (p, f) = raster_diff::shapes::icosphere(2);
+    let mut text = String::new();
+    for q in &p {
+        text.push_str(&format!("v {} {} {}\n", q[0], 1.2 * q[1], q[2]));
+    }
+    for (name, top) in [("top", true), ("bottom", false)] {
+        text.push_str(&format!("g {name}\n"));
+        for t in &f {
+            let z: f64 = t.iter().map(|&v| p[v as usize][2]).sum();
+            if (z > 0.0) == top {
+                text.push_str(&format!("f {} {} {}\n", t[0] + 1, t[1] + 1, t[2] + 1));
+            }
+        }
+    }
+    let path = dir.join("grouped.obj");
+    ok(std::fs::write(&path, text));
+    path
+}
+
+#[test]
+fn the_binary_lists_parts_and_stylizes_a_named_part() {
+    let tmp = ok(tempfile::tempdir());
+    let mesh = grouped_sphere(tmp.path());
+    let stylize = |args: &[&str]| {
+        ok(Command::new(env!("CARGO_BIN_EXE_stylize"))
+            .args(args)
+            .output())
+    };
+    let m = mesh.to_str().unwrap_or_default();
+    let listed = stylize(&["mesh", "check", m, "--regions"]);
+    assert!(listed.status.success());
+    let text = String::from_utf8_lossy(&listed.stdout);
+    assert!(
+        text.contains("part:top") && text.contains("part:bottom"),
+        "{text}"
+    );
+    let out = tmp.path().join("run");
+    let o = out.to_str().unwrap_or_default();
+    let ran = stylize(&[
+        "run",
+        m,
+        "--style",
+        "cube",
+        "-o",
+        o,
+        "--region",
+        "part:top",
+        "--region-feather",
+        "1",
+        "--tint-region",
+        "--set",
+        "style.iterations=5",
+        "--set",
+        "run.turntable_size=32",
+        "--set",
+        "run.turntable_views=2",
+        "-q",
+    ]);
+    assert!(
+        ran.status.success(),
+        "{}",
+        String::from_utf8_lossy(&ran.stderr)
+    );
+    let summary: serde_json::Value = ok(serde_json::from_str(&ok(std::fs::read_to_string(
+        out.join("run.json"),
+    ))));
+    assert_eq!(summary["region"]["specs"][0], "part:top");
+    assert_eq!(summary["region"]["feather"], 1);
+    let n = summary["vertices"].as_u64().unwrap_or(0);
+    let selected = summary["region"]["vertices"].as_u64().unwrap_or(0);
+    assert!(
+        selected > n / 3 && selected < 2 * n / 3,
+        "{selected} of {n}"
+    );
+    let missing = stylize(&[
+        "run",
+        m,
+        "--style",
+        "cube",
+        "-o",
+        o,
+        "--force",
+        "--region",
+        "part:seat",
+    ]);
+    assert!(!missing.status.success());
+    let err = String::from_utf8_lossy(&missing.stderr);
+    assert!(
+        err.contains("no part named `seat`") && err.contains("group `top`"),
+        "{err}"
+    );
+}
