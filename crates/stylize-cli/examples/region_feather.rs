@@ -63,8 +63,9 @@ fn main() -> anyhow::Result<()> {
     let tmp = tempfile::tempdir()?;
     println!("bunny, cube style, {iterations} iterations, region {REGION}");
     println!(
-        "K | seam+2 rings: max |Δdihedral| | mean |Δdihedral| | seam crease max (rest) | region alignment"
+        "| K | band: max abs Δdihedral | band: mean | seam: max abs Δdihedral | seam: mean | region alignment |"
     );
+    println!("|---|---|---|---|---|---|");
     let mut sheet_meshes = None;
     for k in [0u32, 2, 4] {
         let mut c = Config::default();
