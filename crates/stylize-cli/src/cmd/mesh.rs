@@ -343,7 +343,36 @@ mod tests {
             drop_nonfinite: false,
             drop_out_of_range: false,
             needle_angle: 1.0,
+            regions: false,
         }
+    }
+
+    #[test]
+    fn regions_list_parts_with_the_vertices_they_select_or_say_there_are_none() {
+        let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+        let path = dir.path().join("two.obj");
+        std::fs::write(
+            &path,
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nusemtl red\nf 1 2 3\nusemtl blue\nf 2 4 3\n",
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        let rows = region_rows(&path).unwrap_or_else(|e| panic!("{e:#}"));
+        let got: Vec<(&str, &str, usize)> = rows
+            .iter()
+            .map(|r| (r.0.as_str(), r.1.as_str(), r.2))
+            .collect();
+        assert_eq!(
+            got,
+            [("part:red", "material", 3), ("part:blue", "material", 3)]
+        );
+        assert!(
+            region_rows(&fixture("cow.off"))
+                .unwrap_or_else(|e| panic!("{e:#}"))
+                .is_empty()
+        );
+        let mut a = args("cow.off", false);
+        a.regions = true;
+        assert!(check(a).is_ok());
     }
 
     #[test]
