@@ -768,12 +768,12 @@ mod tests {
             "not:box:0,0,0,1,1,1",
             "not:not:part:legs",
         ] {
-            let spec = RegionSpec::parse(s).unwrap();
+            let spec = RegionSpec::parse(s).expect("ok");
             assert_eq!(spec.to_string(), s);
-            assert_eq!(RegionSpec::parse(&spec.to_string()).unwrap(), spec);
+            assert_eq!(RegionSpec::parse(&spec.to_string()).expect("ok"), spec);
         }
         assert_eq!(
-            RegionSpec::parse("property: label == 3").unwrap(),
+            RegionSpec::parse("property: label == 3").expect("ok"),
             RegionSpec::Property {
                 name: "label".into(),
                 op: Comparison::Eq,
@@ -798,7 +798,7 @@ mod tests {
             ("ellipsoid:1", "unknown region kind `ellipsoid`"),
             ("not:box:1", "6 comma-separated"),
         ] {
-            let e = RegionSpec::parse(s).unwrap_err().to_string();
+            let e = RegionSpec::parse(s).expect_err("an error").to_string();
             assert!(e.contains(s.trim()) && e.contains(needle), "{s}: {e}");
         }
     }
@@ -815,8 +815,8 @@ mod tests {
             face_map: &fm,
             parts: &parts,
         };
-        let left = RegionSpec::parse("box:-1,-1,-1,-0.5,1,1").unwrap();
-        let r = select(std::slice::from_ref(&left), &input).unwrap();
+        let left = RegionSpec::parse("box:-1,-1,-1,-0.5,1,1").expect("ok");
+        let r = select(std::slice::from_ref(&left), &input).expect("ok");
         assert_eq!(
             r.free,
             [
@@ -824,13 +824,13 @@ mod tests {
             ]
         );
         let not_left = RegionSpec::Not(Box::new(left.clone()));
-        let r = select(&[not_left.clone()], &input).unwrap();
+        let r = select(std::slice::from_ref(&not_left), &input).expect("ok");
         assert_eq!(r.count(), 6);
-        let r = select(&[left, not_left], &input).unwrap();
+        let r = select(&[left, not_left], &input).expect("ok");
         assert!(r.is_everything());
         assert!(r.warnings.iter().any(|w| w.contains("covers every vertex")));
-        let ball = RegionSpec::parse("sphere:1,0,0,0.1").unwrap();
-        let r = select(&[ball], &input).unwrap();
+        let ball = RegionSpec::parse("sphere:1,0,0,0.1").expect("ok");
+        let r = select(&[ball], &input).expect("ok");
         assert_eq!(r.count(), 1);
         assert!(r.free[8]);
     }
@@ -847,15 +847,15 @@ mod tests {
             face_map: &fm,
             parts: &parts,
         };
-        let far = RegionSpec::parse("sphere:5,5,5,1").unwrap();
-        let e = select(std::slice::from_ref(&far), &input).unwrap_err();
+        let far = RegionSpec::parse("sphere:5,5,5,1").expect("ok");
+        let e = select(std::slice::from_ref(&far), &input).expect_err("an error");
         assert!(matches!(e, RegionError::Empty { .. }), "{e}");
         assert!(e.to_string().contains("sphere:5,5,5,1"));
         let r = select(
-            &[far, RegionSpec::parse("sphere:1,0,0,0.1").unwrap()],
+            &[far, RegionSpec::parse("sphere:1,0,0,0.1").expect("ok")],
             &input,
         )
-        .unwrap();
+        .expect("ok");
         assert!(r.warnings.iter().any(|w| w.contains("sphere:5,5,5,1")));
     }
 
@@ -898,35 +898,40 @@ mod tests {
             parts: &parts,
         };
         // Faces 0 and 1 are the first quad: vertices 0, 1, 2, 3 (any-face rule).
-        let r = select(&[RegionSpec::Part("first".into())], &input).unwrap();
+        let r = select(&[RegionSpec::Part("first".into())], &input).expect("ok");
         assert_eq!(
             (0..10).filter(|&v| r.free[v]).collect::<Vec<_>>(),
             [0, 1, 2, 3]
         );
         // The welded input vertex 10 carries label 3: its repaired vertex 4 is selected.
-        let r = select(&[RegionSpec::parse("property:label==3").unwrap()], &input).unwrap();
+        let r = select(
+            &[RegionSpec::parse("property:label==3").expect("ok")],
+            &input,
+        )
+        .expect("ok");
         assert_eq!((0..10).filter(|&v| r.free[v]).collect::<Vec<_>>(), [4]);
         // Face 7 (kept) is selected; face 8 (dropped) contributes nothing.
         let r = select(
-            &[RegionSpec::parse("property:quality>0.5").unwrap()],
+            &[RegionSpec::parse("property:quality>0.5").expect("ok")],
             &input,
         )
-        .unwrap();
+        .expect("ok");
         let f7 = f[7];
         assert_eq!(r.count(), 3);
         assert!(f7.iter().all(|&v| r.free[v as usize]));
         // A part whose faces were all dropped selects nothing: an error, not a silent no-op.
-        let e = select(&[RegionSpec::Part("dropped".into())], &input).unwrap_err();
+        let e = select(&[RegionSpec::Part("dropped".into())], &input).expect_err("an error");
         assert!(matches!(e, RegionError::Empty { .. }));
         // Missing names list what is on offer.
         let e = select(&[RegionSpec::Part("seat".into())], &input)
-            .unwrap_err()
+            .expect_err("an error")
             .to_string();
         assert!(
             e.contains("no part named `seat`") && e.contains("group `first`"),
             "{e}"
         );
-        let e = select(&[RegionSpec::parse("property:foo>1").unwrap()], &input).unwrap_err();
+        let e = select(&[RegionSpec::parse("property:foo>1").expect("ok")], &input)
+            .expect_err("an error");
         assert!(e.to_string().contains("vertex property `label`"), "{e}");
         // Vertex lists follow the maps and refuse out-of-range indices.
         let r = select(
@@ -936,7 +941,7 @@ mod tests {
             }],
             &input,
         )
-        .unwrap();
+        .expect("ok");
         assert_eq!((0..10).filter(|&v| r.free[v]).collect::<Vec<_>>(), [4]);
         let e = select(
             &[RegionSpec::Vertices {
@@ -945,16 +950,16 @@ mod tests {
             }],
             &input,
         )
-        .unwrap_err();
+        .expect_err("an error");
         assert!(e.to_string().contains("vertex 11 is out of range"), "{e}");
-        let e = select(&[RegionSpec::VertexFile("a.txt".into())], &input).unwrap_err();
+        let e = select(&[RegionSpec::VertexFile("a.txt".into())], &input).expect_err("an error");
         assert!(matches!(e, RegionError::UnresolvedFile { .. }));
     }
 
     #[test]
     fn index_lists_parse_and_report_the_line() {
-        assert_eq!(parse_index_list("# head\n3\n\n 7 \n").unwrap(), [3, 7]);
-        let e = parse_index_list("1\n-2\n").unwrap_err();
+        assert_eq!(parse_index_list("# head\n3\n\n 7 \n").expect("ok"), [3, 7]);
+        let e = parse_index_list("1\n-2\n").expect_err("an error");
         assert!(e.contains("line 2") && e.contains("-2"), "{e}");
     }
 

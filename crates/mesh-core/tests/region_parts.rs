@@ -104,7 +104,7 @@ fn obj_groups_objects_and_materials_are_parts_and_follow_repair() {
         face_map: &r.face_map,
         parts: &parts,
     };
-    let e = select(&[RegionSpec::Part("junk".into())], &input).unwrap_err();
+    let e = select(&[RegionSpec::Part("junk".into())], &input).expect_err("an error");
     assert!(e.to_string().contains("selects no vertex"), "{e}");
 }
 
@@ -160,7 +160,7 @@ end_header
         face_map: &r.face_map,
         parts: &parts,
     };
-    let e = select(&[e], &input).unwrap_err().to_string();
+    let e = select(&[e], &input).expect_err("an error").to_string();
     assert!(
         e.contains("no property named `colour`") && e.contains("face property `part_id`"),
         "{e}"

@@ -529,7 +529,7 @@ mod tests {
             "[[run]]\nmesh = \"a.obj\"\nstyle = \"cube\"\nout = \"a\"\nregion = [\"cube:1\"]\n",
         )
         .unwrap_or_else(|e| panic!("{e}"));
-        let e = read_manifest(&path).map(|_| ()).unwrap_err();
+        let e = read_manifest(&path).map(|_| ()).expect_err("an error");
         assert!(
             format!("{e:#}").contains("row 0") && format!("{e:#}").contains("cube:1"),
             "{e:#}"
@@ -540,7 +540,7 @@ mod tests {
         assert_eq!(config.region.specs, ["box:-1,-1,-1,0,1,1"]);
         assert_eq!(config.region.feather, 2);
         let e = Config::default().with_region_flags(&["box:1".to_string()], None, false);
-        assert!(format!("{:#}", e.unwrap_err()).contains("region.specs"));
+        assert!(format!("{:#}", e.expect_err("an error")).contains("region.specs"));
     }
 
     #[test]

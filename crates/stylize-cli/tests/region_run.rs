@@ -217,7 +217,7 @@ fn resume_with_another_region_is_refused_and_an_empty_region_is_an_error() {
     };
     let halted = ok(run(&out, with_checkpoints(&[LEFT_HALF], 0), false, Some(3)));
     assert!(!halted.complete);
-    let e = run(&out, with_checkpoints(&[LEFT_HALF], 2), true, None).unwrap_err();
+    let e = run(&out, with_checkpoints(&[LEFT_HALF], 2), true, None).expect_err("an error");
     let msg = format!("{e:#}");
     assert!(
         msg.contains("region.feather") && msg.contains("region.weights_sha256"),
@@ -229,20 +229,20 @@ fn resume_with_another_region_is_refused_and_an_empty_region_is_an_error() {
         true,
         None,
     )
-    .unwrap_err();
+    .expect_err("an error");
     assert!(format!("{e:#}").contains("region.specs"), "{e:#}");
     // The same region resumes.
     assert!(ok(run(&out, with_checkpoints(&[LEFT_HALF], 0), true, None)).complete);
 
     let empty = tmp.path().join("empty");
-    let e = run(&empty, config(6, &["sphere:5,5,5,0.5"], 0), false, None).unwrap_err();
+    let e = run(&empty, config(6, &["sphere:5,5,5,0.5"], 0), false, None).expect_err("an error");
     let msg = format!("{e:#}");
     assert!(
         msg.contains("selects no vertex") && msg.contains("sphere:5,5,5,0.5"),
         "{msg}"
     );
     assert!(!empty.exists(), "nothing is written for a refused region");
-    let e = run(&empty, config(6, &["part:head"], 0), false, None).unwrap_err();
+    let e = run(&empty, config(6, &["part:head"], 0), false, None).expect_err("an error");
     assert!(format!("{e:#}").contains("no part named `head`"), "{e:#}");
 }
 
