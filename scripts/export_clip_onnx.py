@@ -36,20 +36,17 @@ Needs: torch (CPU is enough), transformers, onnx, onnxscript, onnxruntime, numpy
 from __future__ import annotations
 
 import argparse
-import hashlib
 import json
 import os
-import sys
 from pathlib import Path
 
 import numpy as np
 
 # Shared with the IF exporter (this directory is on sys.path when a script here runs).
-from export_if_onnx import strip_debug_info
+import onnx_export_common as common
+from onnx_export_common import sha256
 
-SCRIPT_DIR = Path(__file__).resolve().parent
-REPO_ROOT = SCRIPT_DIR.parent
-TOKENIZER_JSON = REPO_ROOT / "crates" / "diffusion-onnx" / "assets" / "clip_tokenizer.json"
+TOKENIZER_JSON = common.ASSETS / "clip_tokenizer.json"
 FORMAT_VERSION = 1
 CONTEXT_LENGTH = 77
 BOS_ID = 49406
@@ -160,49 +157,11 @@ def make_wrappers():
 
 
 def export_module(module, arg, name_in: str, name_out: str, path: Path):
-    import torch
-
-    with torch.no_grad():
-        torch.onnx.export(
-            module,
-            (arg,),
-            str(path),
-            input_names=[name_in],
-            output_names=[name_out],
-            dynamic_shapes={name_in: {0: torch.export.Dim.DYNAMIC}},
-            dynamo=True,
-            external_data=False,
-            opset_version=18,
-        )
-    strip_debug_info(path)
-    data = path.with_name(path.name + ".data")
-    if data.exists():
-        data.unlink()
+    common.export_module(module, (arg,), [name_in], name_out, path, {name_in: [0]}, big=False)
 
 
 def verify(path: Path, module, name_in: str, x: np.ndarray, label: str) -> np.ndarray:
-    import onnxruntime as ort
-    import torch
-
-    sess = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
-    got = sess.run(None, {name_in: x})[0].astype(np.float32)
-    with torch.no_grad():
-        ref = module(torch.from_numpy(x)).float().numpy()
-    err = float(np.max(np.abs(got - ref)))
-    scale = float(np.max(np.abs(ref)))
-    tol = ATOL + RTOL * scale
-    print(f"[verify] {label}: max |onnx - torch| = {err:.3e} (max |torch| = {scale:.3e}, tolerance {tol:.3e})")
-    if not np.isfinite(got).all() or err > tol:
-        raise SystemExit(f"error: {label} disagrees with PyTorch beyond tolerance")
-    return ref
-
-
-def sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
+    return common.verify(path, module, {name_in: x}, ATOL, RTOL, label)
 
 
 def reference_images(rng: np.random.Generator, n: int, side: int) -> np.ndarray:
@@ -299,22 +258,14 @@ def export_clip(clip, out: Path, name: str, description: str, size: int, mean, s
 
 
 def versions() -> dict:
-    import onnx
-    import onnxruntime
-    import onnxscript
-    import PIL
-    import torch
-    import transformers
-
-    return {
-        "torch": torch.__version__,
-        "transformers": transformers.__version__,
-        "onnx": onnx.__version__,
-        "onnxscript": onnxscript.__version__,
-        "onnxruntime": onnxruntime.__version__,
-        "pillow": PIL.__version__,
-        "python": sys.version.split()[0],
-    }
+    return common.versions({
+        "torch": "torch",
+        "transformers": "transformers",
+        "onnx": "onnx",
+        "onnxscript": "onnxscript",
+        "onnxruntime": "onnxruntime",
+        "pillow": "PIL",
+    })
 
 
 def build_tiny(seed: int):

@@ -27,15 +27,16 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-SCRIPT_DIR = Path(__file__).resolve().parent
-REPO_ROOT = SCRIPT_DIR.parent
-TOKENIZER_JSON = REPO_ROOT / "crates" / "diffusion-onnx" / "assets" / "t5_tokenizer.json"
+# Shared with the CLIP exporter (this directory is on sys.path when a script here runs).
+import onnx_export_common as common
+from onnx_export_common import export_module, external_files
+
+TOKENIZER_JSON = common.ASSETS / "t5_tokenizer.json"
 MAX_TOKENS = 77
 FORMAT_VERSION = 1
 
@@ -190,91 +191,9 @@ def tokenize(prompts: list[str]) -> tuple[np.ndarray, np.ndarray]:
     return ids, mask
 
 
-def external_files(onnx_path: Path) -> list[str]:
-    import onnx
-
-    model = onnx.load(str(onnx_path), load_external_data=False)
-    files: set[str] = set()
-    for t in model.graph.initializer:
-        if t.data_location == onnx.TensorProto.EXTERNAL:
-            for kv in t.external_data:
-                if kv.key == "location":
-                    files.add(kv.value)
-    return sorted(files)
-
-
-def strip_debug_info(path: Path):
-    """Drop the exporter's per-node stack traces and metadata (more than half of a tiny model's bytes).
-    Weights are untouched; external-data references are kept as they are."""
-    import onnx
-
-    model = onnx.load(str(path), load_external_data=False)
-
-    def strip_graph(g):
-        g.doc_string = ""
-        for node in g.node:
-            node.doc_string = ""
-            del node.metadata_props[:]
-            for attr in node.attribute:
-                if attr.type == onnx.AttributeProto.GRAPH:
-                    strip_graph(attr.g)
-                elif attr.type == onnx.AttributeProto.GRAPHS:
-                    for sub in attr.graphs:
-                        strip_graph(sub)
-        for vi in list(g.value_info):
-            del vi.metadata_props[:]
-        for t in g.initializer:
-            del t.metadata_props[:]
-
-    strip_graph(model.graph)
-    del model.metadata_props[:]
-    onnx.save(model, str(path))
-
-
-def export_module(module, args: tuple, names_in: list[str], name_out: str, path: Path, dynamic: dict, big: bool):
-    torch = _torch()
-
-    dyn = {}
-    for name, axes in dynamic.items():
-        dyn[name] = {ax: torch.export.Dim.DYNAMIC for ax in axes}
-    with torch.no_grad():
-        torch.onnx.export(
-            module,
-            args,
-            str(path),
-            input_names=names_in,
-            output_names=[name_out],
-            dynamic_shapes=dyn,
-            dynamo=True,
-            external_data=big,
-            opset_version=18,
-        )
-    strip_debug_info(path)
-    # The dynamo exporter may leave an empty external-data file next to a small model: drop it.
-    data = path.with_name(path.name + ".data")
-    if not big and data.exists():
-        if external_files(path):
-            raise RuntimeError(f"{path} references external data although it is small")
-        data.unlink()
-
-
 def verify(path: Path, module, feeds: dict[str, np.ndarray], dtype: str, label: str) -> np.ndarray:
-    torch = _torch()
-    import onnxruntime as ort
-
-    sess = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
-    got = sess.run(None, feeds)[0]
-    with torch.no_grad():
-        ref = module(*[torch.from_numpy(v) for v in feeds.values()]).float().numpy()
-    got32 = got.astype(np.float32)
-    err = float(np.max(np.abs(got32 - ref)))
-    scale = float(np.max(np.abs(ref)))
     atol, rtol = TOLERANCE[dtype]
-    tol = atol + rtol * scale
-    print(f"[verify] {label}: max |onnx - torch| = {err:.3e} (max |torch| = {scale:.3e}, tolerance {tol:.3e})")
-    if not np.isfinite(got32).all() or err > tol:
-        raise SystemExit(f"error: {label} disagrees with PyTorch beyond tolerance")
-    return ref
+    return common.verify(path, module, feeds, atol, rtol, label)
 
 
 @dataclass
@@ -458,22 +377,14 @@ def export_all(t5, stage1, stage2, out: Path, dtype: str, seed: int, big: bool, 
 
 
 def versions() -> dict:
-    import diffusers
-    import onnx
-    import onnxruntime
-    import onnxscript
-    import torch
-    import transformers
-
-    return {
-        "torch": torch.__version__,
-        "diffusers": diffusers.__version__,
-        "transformers": transformers.__version__,
-        "onnx": onnx.__version__,
-        "onnxscript": onnxscript.__version__,
-        "onnxruntime": onnxruntime.__version__,
-        "python": sys.version.split()[0],
-    }
+    return common.versions({
+        "torch": "torch",
+        "diffusers": "diffusers",
+        "transformers": "transformers",
+        "onnx": "onnx",
+        "onnxscript": "onnxscript",
+        "onnxruntime": "onnxruntime",
+    })
 
 
 def run_tiny(out: Path, seed: int):

@@ -34,10 +34,49 @@ const RULES: &[(&str, &[&str])] = &[
         ],
     ),
     ("cotan", &["wgpu", "ort", "tokenizers", "tobj", "gltf"]),
-    ("csd", &["ort", "wgpu", "tokenizers"]),
+    (
+        "csd",
+        &["ort", "wgpu", "tokenizers", "raster-diff", "mesh-core"],
+    ),
+    // The image batch between renderer and guidance: plain data.
+    (
+        "image-batch",
+        &[
+            "wgpu",
+            "ort",
+            "tokenizers",
+            "mesh-core",
+            "glam",
+            "rayon",
+            "png",
+        ],
+    ),
     ("optim", &["wgpu", "ort", "faer", "tokenizers"]),
     ("raster-diff", &["ort", "tokenizers"]),
-    ("diffusion-onnx", &["wgpu"]),
+    // `.npy` only from the npy crate: no zip, and no mesh code.
+    ("diffusion-onnx", &["wgpu", "mesh-core", "zip"]),
+    // The optimization as a library: no command line, no terminal UI, no signal handling.
+    (
+        "stylize",
+        &["clap", "indicatif", "console", "signal-hook", "crossterm"],
+    ),
+    // NumPy files: zip (feature npz, on here) and half, nothing heavy and nothing of ours.
+    (
+        "npy",
+        &[
+            "wgpu",
+            "ort",
+            "tokenizers",
+            "gltf",
+            "naga",
+            "tokio",
+            "faer",
+            "glam",
+            "rayon",
+            "serde",
+            "mesh-core",
+        ],
+    ),
 ];
 
 pub fn run() -> anyhow::Result<()> {

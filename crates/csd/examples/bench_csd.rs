@@ -7,7 +7,7 @@
 use csd::resize::{PlaneResize, Resize2d};
 use csd::schedule::fill_standard_normal;
 use csd::sds::classifier_free_guidance;
-use csd::{CascadedGuidance, Denoiser, Embedding, Guidance, GuidanceConfig, GuidanceError, Tensor};
+use csd::{CascadedGuidance, Denoiser, Embedding, GuidanceConfig, GuidanceError, Images, Tensor};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use std::time::Instant;
@@ -64,6 +64,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         emb,
         GuidanceConfig::default(),
     )?;
+    let batch = Images::new(views, n, n, images.clone())?;
     let mut rng = ChaCha8Rng::seed_from_u64(0);
     println!(
         "csd overhead: {views} views of {n}×{n}, median of {reps} runs, {} rayon threads",
@@ -75,7 +76,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "evaluate, stage I + stage II (w_II = 0.3)",
         time_ms(reps, || {
             guidance
-                .evaluate(&images, views, n, n, 0.3, &mut rng)
+                .evaluate_with_weight(&batch, 0.3, &mut rng)
                 .expect("fake guidance evaluates");
         }),
     );
@@ -83,7 +84,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "evaluate, stage I only (w_II = 0)",
         time_ms(reps, || {
             guidance
-                .evaluate(&images, views, n, n, 0.0, &mut rng)
+                .evaluate_with_weight(&batch, 0.0, &mut rng)
                 .expect("fake guidance evaluates");
         }),
     );

@@ -16,7 +16,8 @@
 use crate::resize::{PlaneResize, Resize2d};
 use crate::schedule::{NoiseSchedule, TimestepRange, fill_standard_normal};
 use crate::sds::{check_denoiser_output, classifier_free_guidance, nan_to_num, split_cond_uncond};
-use crate::{Denoiser, Embedding, Guidance, GuidanceError, GuidanceOutput, Tensor};
+use crate::{Denoiser, Embedding, Guidance, GuidanceError, GuidanceOutput, Images, Tensor};
+use optim::Schedule;
 use rand::RngCore;
 use rayon::prelude::*;
 
@@ -114,27 +115,35 @@ pub struct InjectedDraws {
     pub stage2_noise: Option<Vec<f32>>,
 }
 
-/// Every intermediate of stage I (SDS at 64 px). Tensors are NCHW.
+/// What both stages trace alike: one score-distillation step on a UNet batch. Tensors are NCHW
+/// `(B, 3, side, side)` at the stage's resolution.
 #[derive(Clone, Debug)]
-pub struct Stage1Trace {
-    /// z0 = bilinear(x → 64), `(B, 3, 64, 64)`.
-    pub z0: Tensor,
+pub struct ScoreTrace {
     /// t per view.
     pub timesteps: Vec<i64>,
-    /// ε, `(B, 3, 64, 64)`.
+    /// ε added to the clean stage input (stage II: ε_t added to x0).
     pub noise: Tensor,
-    /// z_t = √ᾱ_t z0 + √(1 − ᾱ_t) ε.
-    pub z_t: Tensor,
     /// Conditional prediction ε_c (first 3 output channels).
     pub eps_cond: Tensor,
     /// Unconditional prediction ε_u.
     pub eps_uncond: Tensor,
     /// ε̂ = ε_c + g(ε_c − ε_u).
     pub eps_guided: Tensor,
-    /// grad_I = nan_to_num(w(t)(ε̂ − ε)), `(B, 3, 64, 64)`.
+    /// grad = nan_to_num(w(t)(ε̂ − ε)).
     pub grad: Tensor,
-    /// L_I = ½‖grad_I‖²/B (unweighted).
+    /// L = ½‖grad‖²/B (unweighted).
     pub loss: f64,
+}
+
+/// Every intermediate of stage I (SDS at 64 px). Tensors are NCHW.
+#[derive(Clone, Debug)]
+pub struct Stage1Trace {
+    /// z0 = bilinear(x → 64), `(B, 3, 64, 64)`.
+    pub z0: Tensor,
+    /// z_t = √ᾱ_t z0 + √(1 − ᾱ_t) ε.
+    pub z_t: Tensor,
+    /// t, ε, the predictions, grad_I and L_I.
+    pub score: ScoreTrace,
 }
 
 /// Every intermediate of stage II (CSD at 256 px). Tensors are NCHW.
@@ -146,28 +155,16 @@ pub struct Stage2Trace {
     pub x0: Tensor,
     /// ẑ = bilinear(z0 → 256) (no gradient flows through it).
     pub z_hat: Tensor,
-    /// t per view.
-    pub timesteps: Vec<i64>,
     /// s per view (the class label).
     pub noise_levels: Vec<i64>,
-    /// ε_t added to x0.
-    pub noise: Tensor,
     /// ε_s added to ẑ.
     pub noise_lowres: Tensor,
     /// x_t = add_noise(x0, ε_t, t).
     pub x_t: Tensor,
     /// ẑ_s = add_noise(ẑ, ε_s, s).
     pub z_hat_s: Tensor,
-    /// Conditional prediction ε_c (first 3 output channels).
-    pub eps_cond: Tensor,
-    /// Unconditional prediction ε_u.
-    pub eps_uncond: Tensor,
-    /// ε̂ = ε_c + g(ε_c − ε_u).
-    pub eps_guided: Tensor,
-    /// grad_II = nan_to_num(w(t)(ε̂ − ε_t)), `(B, 3, 256, 256)`.
-    pub grad: Tensor,
-    /// L_II = ½‖grad_II‖²/B (unweighted).
-    pub loss: f64,
+    /// t, ε_t, the predictions, grad_II and L_II.
+    pub score: ScoreTrace,
 }
 
 /// One guidance evaluation with every intermediate, for `stylize debug-guidance`.
@@ -187,25 +184,43 @@ pub struct GuidanceTrace {
     pub output: GuidanceOutput,
 }
 
+/// The stage-II weight schedule of the reference (`stage_II_weight_schedule`): w_II ramps 0 → 0.2
+/// over iterations 1–1000, then 0.2 → 0.3 over the next 750, then stays at 0.3.
+pub fn reference_stage2_weight() -> Schedule {
+    Schedule::parse(REFERENCE_STAGE2_WEIGHT).unwrap_or_else(|_| Schedule::constant(0.0))
+}
+
+/// [`reference_stage2_weight`] in the schedule grammar of [`optim::Schedule`].
+pub const REFERENCE_STAGE2_WEIGHT: &str = "0.0>0.2:1000; 0.2>0.3:750";
+
 /// SDS (IF stage I) + CSD (IF stage II) guidance, see the module docs for the exact objective.
 ///
 /// Loss values reported in [`GuidanceOutput`]: `loss_stage1 = S·a·L_I` and `loss_stage2 = S·w_II·L_II`
 /// with the reference's per-stage form `L = ½‖grad‖²/B`, so `loss_stage1 + loss_stage2` is exactly the
 /// surrogate whose gradient `grad_images` is.
-pub struct CascadedGuidance {
-    stage1: Box<dyn Denoiser>,
-    stage2: Option<Box<dyn Denoiser>>,
+///
+/// The denoisers are boxed trait objects that may borrow (`'m`): `Box::new(&mut unet)` lends a UNet
+/// that outlives the guidance (a batch of prompts reuses one set of sessions), `Box::new(unet)` hands
+/// it over (`CascadedGuidance<'static>`).
+pub struct CascadedGuidance<'m> {
+    stage1: Box<dyn Denoiser + 'm>,
+    stage2: Option<Box<dyn Denoiser + 'm>>,
+    /// w_II(iteration), read by [`Guidance::evaluate`].
+    stage2_weight: Schedule,
     cond: Embedding,
     uncond: Embedding,
     config: GuidanceConfig,
     schedule: NoiseSchedule,
+    /// Resize operators for the current render size (rebuilt when it changes).
+    ops: Option<Operators>,
     work: Workspace,
 }
 
-impl std::fmt::Debug for CascadedGuidance {
+impl std::fmt::Debug for CascadedGuidance<'_> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("CascadedGuidance")
             .field("has_stage2", &self.stage2.is_some())
+            .field("stage2_weight", &self.stage2_weight)
             .field("embedding_shape", &self.cond.shape)
             .field("config", &self.config)
             .finish_non_exhaustive()
@@ -314,7 +329,6 @@ impl Operators {
 /// (25 MB). Planar NCHW unless stated.
 #[derive(Debug, Default)]
 struct Workspace {
-    ops: Option<Operators>,
     /// x = 2·R(img) − 1, `(B, 3, r, r)`.
     x: Vec<f32>,
     /// z0 = D(x), `(B, 3, r1, r1)`.
@@ -445,28 +459,396 @@ fn fused_sds(
     Ok(0.5 * sum / batch.max(1) as f64)
 }
 
-/// What [`CascadedGuidance::evaluate_core`] leaves besides the workspace buffers.
-struct Core {
-    output: GuidanceOutput,
+/// What stage I leaves besides the workspace buffers.
+struct Stage1Core {
     t1: Vec<i64>,
     loss1: f64,
+    /// The UNet output, kept only for a trace.
     out1: Option<Tensor>,
-    stage2: Option<Stage2Core>,
 }
 
+/// What stage II leaves besides the workspace buffers.
 struct Stage2Core {
     t2: Vec<i64>,
     s2: Vec<i64>,
     loss2: f64,
+    /// The UNet output, kept only for a trace.
     out2: Option<Tensor>,
 }
 
-impl CascadedGuidance {
+/// What [`CascadedGuidance::evaluate_core`] leaves besides the workspace buffers.
+struct Core {
+    output: GuidanceOutput,
+    stage1: Stage1Core,
+    stage2: Option<Stage2Core>,
+}
+
+/// What every stage of one evaluation reads.
+struct Stages<'a> {
+    cfg: &'a GuidanceConfig,
+    schedule: &'a NoiseSchedule,
+    ops: &'a Operators,
+    cond: &'a Embedding,
+    uncond: &'a Embedding,
+    /// B, the number of views.
+    views: usize,
+    /// Keep the denoiser outputs (for a trace).
+    keep_outputs: bool,
+}
+
+impl Stages<'_> {
+    /// x = 2·R(img) − 1: renders (view, row, col, channel) straight into planar x; the height pass
+    /// runs over whole interleaved rows. Non-finite renders show up as non-finite x (an error).
+    fn encode_renders(&self, images: &Images, w: &mut Workspace) -> Result<(), GuidanceError> {
+        let (b, pr) = (self.views, self.cfg.resolution * self.cfg.resolution);
+        let plane_in = images.height * images.width;
+        let ops = self.ops;
+        w.scratch.resize_with(b, Vec::new);
+        w.plane_scratch.resize_with(b * CHANNELS, Default::default);
+        w.x.resize(b * CHANNELS * pr, 0.0);
+        let bad_x: usize =
+            w.x.par_chunks_mut(CHANNELS * pr)
+                .zip(images.rgb.par_chunks(CHANNELS * plane_in))
+                .zip(w.scratch.par_iter_mut())
+                .map(|((xv, src), tmp)| {
+                    ops.resize.apply_from_interleaved(src, CHANNELS, xv, tmp);
+                    let mut bad = 0;
+                    for v in xv.iter_mut() {
+                        *v = 2.0 * *v - 1.0;
+                        bad += usize::from(!v.is_finite());
+                    }
+                    bad
+                })
+                .sum();
+        if bad_x == 0 {
+            return Ok(());
+        }
+        let count = crate::count_non_finite(&images.rgb);
+        Err(GuidanceError::NonFinite {
+            tensor: if count > 0 {
+                "the rendered images given to the guidance".into()
+            } else {
+                "x = 2·resize(renders) − 1 (the renders are finite but so large that the resize overflows)"
+                    .into()
+            },
+            count: if count > 0 { count } else { bad_x },
+            total: if count > 0 {
+                images.rgb.len()
+            } else {
+                w.x.len()
+            },
+            hint: "the renderer produced them (degenerate geometry?); nothing was optimized".into(),
+        })
+    }
+
+    /// Stage I, SDS at r1: z0 = D(x), z_t, one UNet call on [z_t; z_t], grad_I; then starts
+    /// ∂L/∂x = (S·a/B)·Dᵀ(grad_I) (in f32, the reference's precision).
+    fn stage1(
+        &self,
+        model: &mut dyn Denoiser,
+        w: &mut Workspace,
+        rng: &mut dyn RngCore,
+        injected: &InjectedDraws,
+    ) -> Result<Stage1Core, GuidanceError> {
+        let (cfg, ops, b) = (self.cfg, self.ops, self.views);
+        let (r, r1) = (cfg.resolution, cfg.stage1_resolution);
+        let (pr, p1) = (r * r, r1 * r1);
+        w.z0.resize(b * CHANNELS * p1, 0.0);
+        w.z0.par_chunks_mut(p1)
+            .zip(w.x.par_chunks(pr))
+            .zip(w.plane_scratch.par_iter_mut())
+            .for_each(|((z, xp), (tmp, _))| ops.down1.apply_plane(xp, z, tmp));
+        let n1 = b * CHANNELS * p1;
+        let t1 = draw_or_inject(&injected.stage1_timesteps, b, "stage-I timesteps", || {
+            cfg.timesteps.sample(b, rng)
+        })?;
+        noise_into(
+            &mut w.eps1,
+            &injected.stage1_noise,
+            n1,
+            "stage-I noise",
+            rng,
+        )?;
+        let coef1 = noise_coefficients(self.schedule, &t1)?;
+        w.sample1.shape = vec![2 * b, CHANNELS, r1, r1];
+        w.sample1.data.resize(2 * n1, 0.0);
+        {
+            let (z_t, copy) = w.sample1.data.split_at_mut(n1);
+            z_t.par_chunks_mut(CHANNELS * p1)
+                .zip(w.z0.par_chunks(CHANNELS * p1))
+                .zip(w.eps1.par_chunks(CHANNELS * p1))
+                .zip(coef1.par_iter())
+                .for_each(|(((o, z), e), &(a, s))| {
+                    for ((o, &z), &e) in o.iter_mut().zip(z).zip(e) {
+                        *o = a * z + s * e;
+                    }
+                });
+            copy.copy_from_slice(z_t);
+        }
+        let ts: Vec<i64> = t1.iter().chain(&t1).copied().collect();
+        let embeddings = batch_embeddings(self.cond, self.uncond, b);
+        let out1 = model.predict(&w.sample1, &ts, &embeddings, None)?;
+        let w1 = weights(self.schedule, &t1)?;
+        let loss1 = fused_sds(
+            &out1,
+            b,
+            (r1, r1),
+            &w.eps1,
+            &w1,
+            cfg,
+            &mut w.grad1,
+            "stage-I",
+            &*model,
+        )?;
+        let k1 = (cfg.loss_scale * cfg.stage1_weight / b as f64) as f32;
+        w.grad_x.resize(b * CHANNELS * pr, 0.0);
+        w.grad_x
+            .par_chunks_mut(pr)
+            .zip(w.grad1.par_chunks(p1))
+            .zip(w.plane_scratch.par_iter_mut())
+            .for_each(|((gx, g), (tmp, _))| {
+                ops.down1_t.apply_plane(g, gx, tmp);
+                gx.iter_mut().for_each(|v| *v *= k1);
+            });
+        Ok(Stage1Core {
+            t1,
+            loss1,
+            out1: self.keep_outputs.then_some(out1),
+        })
+    }
+
+    /// Stage II, CSD at r2 conditioned on the noised upsampled stage-I input: x0 = U(x),
+    /// ẑ = U₆₄→₂₅₆(z0), one UNet call on [x_t ++ ẑ_s] × 2, grad_II; then adds (S·w_II/B)·Uᵀ(grad_II)
+    /// to ∂L/∂x.
+    #[allow(clippy::too_many_arguments)]
+    fn stage2(
+        &self,
+        model: &mut dyn Denoiser,
+        weight: f64,
+        w: &mut Workspace,
+        rng: &mut dyn RngCore,
+        injected: &InjectedDraws,
+    ) -> Result<Stage2Core, GuidanceError> {
+        let (cfg, ops, b) = (self.cfg, self.ops, self.views);
+        let (r, r1, r2) = (cfg.resolution, cfg.stage1_resolution, cfg.stage2_resolution);
+        let (pr, p1, p2) = (r * r, r1 * r1, r2 * r2);
+        let n2 = b * CHANNELS * p2;
+        w.x0.resize(n2, 0.0);
+        w.z_hat.resize(n2, 0.0);
+        w.x0.par_chunks_mut(p2)
+            .zip(w.x.par_chunks(pr))
+            .zip(w.z_hat.par_chunks_mut(p2))
+            .zip(w.z0.par_chunks(p1))
+            .zip(w.plane_scratch.par_iter_mut())
+            .for_each(|((((o, xp), zh), zp), (tmp, _))| {
+                ops.up.apply_plane(xp, o, tmp);
+                ops.up_low.apply_plane(zp, zh, tmp);
+            });
+        let t2 = draw_or_inject(&injected.stage2_timesteps, b, "stage-II timesteps", || {
+            cfg.timesteps.sample(b, rng)
+        })?;
+        let s2 = draw_or_inject(
+            &injected.stage2_noise_levels,
+            b,
+            "stage-II noise levels",
+            || cfg.timesteps.sample(b, rng),
+        )?;
+        noise_into(
+            &mut w.eps_s,
+            &injected.stage2_noise_lowres,
+            n2,
+            "stage-II low-res noise",
+            rng,
+        )?;
+        noise_into(
+            &mut w.eps_t,
+            &injected.stage2_noise,
+            n2,
+            "stage-II noise",
+            rng,
+        )?;
+        let (coef_t, coef_s) = (
+            noise_coefficients(self.schedule, &t2)?,
+            noise_coefficients(self.schedule, &s2)?,
+        );
+        // UNet input per sample: channels [x_t (3), ẑ_s (3)]; the batch is [cond half; uncond half].
+        w.sample2.shape = vec![2 * b, 2 * CHANNELS, r2, r2];
+        w.sample2.data.resize(4 * n2, 0.0);
+        let (x0, eps_t, z_hat, eps_s) = (&w.x0, &w.eps_t, &w.z_hat, &w.eps_s);
+        w.sample2
+            .data
+            .par_chunks_mut(p2)
+            .enumerate()
+            .for_each(|(q, o)| {
+                let (n, ch) = (q / (2 * CHANNELS), q % (2 * CHANNELS));
+                let v = n % b;
+                let (clean, noise, (a, s)) = if ch < CHANNELS {
+                    let i = (v * CHANNELS + ch) * p2;
+                    (&x0[i..i + p2], &eps_t[i..i + p2], coef_t[v])
+                } else {
+                    let i = (v * CHANNELS + ch - CHANNELS) * p2;
+                    (&z_hat[i..i + p2], &eps_s[i..i + p2], coef_s[v])
+                };
+                for ((o, &z), &e) in o.iter_mut().zip(clean).zip(noise) {
+                    *o = a * z + s * e;
+                }
+            });
+        let ts: Vec<i64> = t2.iter().chain(&t2).copied().collect();
+        let labels: Vec<i64> = s2.iter().chain(&s2).copied().collect();
+        let embeddings = batch_embeddings(self.cond, self.uncond, b);
+        let out2 = model.predict(&w.sample2, &ts, &embeddings, Some(&labels))?;
+        let w2 = weights(self.schedule, &t2)?;
+        let loss2 = fused_sds(
+            &out2,
+            b,
+            (r2, r2),
+            &w.eps_t,
+            &w2,
+            cfg,
+            &mut w.grad2,
+            "stage-II",
+            &*model,
+        )?;
+        let k2 = (cfg.loss_scale * weight / b as f64) as f32;
+        w.grad_x
+            .par_chunks_mut(pr)
+            .zip(w.grad2.par_chunks(p2))
+            .zip(w.plane_scratch.par_iter_mut())
+            .for_each(|((gx, g), (tmp, up))| {
+                up.resize(pr, 0.0);
+                ops.up_t.apply_plane(g, up, tmp);
+                for (a, &u) in gx.iter_mut().zip(up.iter()) {
+                    *a += k2 * u;
+                }
+            });
+        Ok(Stage2Core {
+            t2,
+            s2,
+            loss2,
+            out2: self.keep_outputs.then_some(out2),
+        })
+    }
+
+    /// x = 2·R(img) − 1 ⇒ ∂L/∂img = 2·Rᵀ(∂L/∂x), written straight into (view, row, col, channel)
+    /// with a final NaN/∞ guard.
+    fn decode_gradient(&self, images: &Images, w: &mut Workspace) -> Images {
+        let pr = self.cfg.resolution * self.cfg.resolution;
+        let plane_in = images.height * images.width;
+        let mut grad = images.zeros_like();
+        grad.rgb
+            .par_chunks_mut(CHANNELS * plane_in)
+            .zip(w.grad_x.par_chunks(CHANNELS * pr))
+            .zip(w.scratch.par_iter_mut())
+            .for_each(|((out, gx), tmp)| {
+                self.ops
+                    .resize_t
+                    .apply_to_interleaved(gx, CHANNELS, out, tmp, |v| nan_to_num(2.0 * v));
+            });
+        grad
+    }
+
+    /// The shared part of a stage's trace from its UNet output and workspace buffers.
+    #[allow(clippy::too_many_arguments)]
+    fn score_trace(
+        &self,
+        out: Option<Tensor>,
+        side: usize,
+        timesteps: Vec<i64>,
+        noise: &[f32],
+        grad: &[f32],
+        loss: f64,
+        stage: &str,
+    ) -> Result<ScoreTrace, GuidanceError> {
+        let out = out.ok_or_else(|| {
+            GuidanceError::InvalidInput(format!("internal: {stage} output not kept"))
+        })?;
+        let b = self.views;
+        let (c, u) = split_cond_uncond(&out, b, CHANNELS, (side, side))?;
+        let g = classifier_free_guidance(&c, &u, self.cfg.guidance_scale);
+        let shape = [b, CHANNELS, side, side];
+        Ok(ScoreTrace {
+            timesteps,
+            noise: tensor(shape, noise.to_vec()),
+            eps_cond: tensor(shape, c),
+            eps_uncond: tensor(shape, u),
+            eps_guided: tensor(shape, g),
+            grad: tensor(shape, grad.to_vec()),
+            loss,
+        })
+    }
+
+    /// Stage I's trace.
+    fn stage1_trace(&self, core: Stage1Core, w: &Workspace) -> Result<Stage1Trace, GuidanceError> {
+        let (b, r1) = (self.views, self.cfg.stage1_resolution);
+        let shape = [b, CHANNELS, r1, r1];
+        let n1 = b * CHANNELS * r1 * r1;
+        Ok(Stage1Trace {
+            z0: tensor(shape, w.z0.clone()),
+            z_t: tensor(shape, w.sample1.data[..n1].to_vec()),
+            score: self.score_trace(
+                core.out1, r1, core.t1, &w.eps1, &w.grad1, core.loss1, "stage-I",
+            )?,
+        })
+    }
+
+    /// Stage II's trace; `weight` is the w_II used.
+    fn stage2_trace(
+        &self,
+        core: Stage2Core,
+        weight: f64,
+        w: &Workspace,
+    ) -> Result<Stage2Trace, GuidanceError> {
+        let (b, r2) = (self.views, self.cfg.stage2_resolution);
+        let per = CHANNELS * r2 * r2;
+        let (mut x_t, mut z_hat_s) = (Vec::with_capacity(b * per), Vec::with_capacity(b * per));
+        for v in 0..b {
+            let base = v * 2 * per;
+            x_t.extend_from_slice(&w.sample2.data[base..base + per]);
+            z_hat_s.extend_from_slice(&w.sample2.data[base + per..base + 2 * per]);
+        }
+        let shape = [b, CHANNELS, r2, r2];
+        Ok(Stage2Trace {
+            weight,
+            x0: tensor(shape, w.x0.clone()),
+            z_hat: tensor(shape, w.z_hat.clone()),
+            noise_levels: core.s2,
+            noise_lowres: tensor(shape, w.eps_s.clone()),
+            x_t: tensor(shape, x_t),
+            z_hat_s: tensor(shape, z_hat_s),
+            score: self.score_trace(
+                core.out2, r2, core.t2, &w.eps_t, &w.grad2, core.loss2, "stage-II",
+            )?,
+        })
+    }
+}
+
+/// NCHW copy of `(view, row, col, channel)` images.
+fn planar(images: &Images) -> Tensor {
+    let plane = images.height * images.width;
+    let mut data = vec![0.0f32; images.rgb.len()];
+    for (dst, src) in data
+        .chunks_mut(CHANNELS * plane)
+        .zip(images.rgb.chunks(CHANNELS * plane))
+    {
+        for (p, px) in src.chunks_exact(CHANNELS).enumerate() {
+            for (c, &v) in px.iter().enumerate() {
+                dst[c * plane + p] = v;
+            }
+        }
+    }
+    tensor([images.count, CHANNELS, images.height, images.width], data)
+}
+
+impl<'m> CascadedGuidance<'m> {
     /// Builds the guidance. `stage2` may be None (then any positive stage-II weight is an error);
     /// `cond` and `uncond` are the prompt and negative-prompt embeddings (same shape, finite).
+    ///
+    /// The stage-II weight schedule read by [`Guidance::evaluate`] starts as the reference's
+    /// ([`reference_stage2_weight`]) when a stage-II model is given and as constant 0 without one;
+    /// [`Self::with_stage2_weight`] replaces it.
     pub fn new(
-        stage1: Box<dyn Denoiser>,
-        stage2: Option<Box<dyn Denoiser>>,
+        stage1: Box<dyn Denoiser + 'm>,
+        stage2: Option<Box<dyn Denoiser + 'm>>,
         cond: Embedding,
         uncond: Embedding,
         config: GuidanceConfig,
@@ -490,15 +872,34 @@ impl CascadedGuidance {
             )));
         }
         let schedule = NoiseSchedule::squaredcos_cap_v2(config.num_train_timesteps)?;
+        let stage2_weight = if stage2.is_some() {
+            reference_stage2_weight()
+        } else {
+            Schedule::constant(0.0)
+        };
         Ok(Self {
             stage1,
             stage2,
+            stage2_weight,
             cond,
             uncond,
             config,
             schedule,
+            ops: None,
             work: Workspace::default(),
         })
+    }
+
+    /// Replaces the stage-II weight schedule w_II(iteration) that [`Guidance::evaluate`] reads.
+    #[must_use]
+    pub fn with_stage2_weight(mut self, schedule: Schedule) -> Self {
+        self.stage2_weight = schedule;
+        self
+    }
+
+    /// The stage-II weight schedule.
+    pub fn stage2_weight(&self) -> &Schedule {
+        &self.stage2_weight
     }
 
     /// The settings.
@@ -516,27 +917,17 @@ impl CascadedGuidance {
         self.stage2.is_some()
     }
 
-    /// One evaluation into the workspace buffers; the denoiser outputs are kept only for a trace.
-    #[allow(clippy::too_many_arguments)]
-    fn evaluate_core(
-        &mut self,
-        images: &[f32],
-        views: usize,
-        height: usize,
-        width: usize,
-        stage2_weight: f64,
-        rng: &mut dyn RngCore,
-        injected: &InjectedDraws,
-        keep_outputs: bool,
-    ) -> Result<Core, GuidanceError> {
+    /// Checks one call's inputs.
+    fn check_call(&self, images: &Images, stage2_weight: f64) -> Result<(), GuidanceError> {
+        let (views, height, width) = (images.count, images.height, images.width);
         if views == 0
             || height == 0
             || width == 0
-            || images.len() != views * height * width * CHANNELS
+            || images.rgb.len() != views * height * width * CHANNELS
         {
             return Err(GuidanceError::InvalidInput(format!(
                 "{} image values for {views} views of {height}×{width}×{CHANNELS}",
-                images.len()
+                images.rgb.len()
             )));
         }
         if !stage2_weight.is_finite() || stage2_weight < 0.0 {
@@ -544,11 +935,29 @@ impl CascadedGuidance {
                 "stage-II weight {stage2_weight} must be finite and ≥ 0"
             )));
         }
-        let run_stage2 = stage2_weight > 0.0;
-        if run_stage2 && self.stage2.is_none() {
+        if stage2_weight > 0.0 && self.stage2.is_none() {
             return Err(GuidanceError::InvalidInput(format!(
                 "stage-II weight is {stage2_weight} but no stage-II model was given (use weight 0 to run stage I only)"
             )));
+        }
+        Ok(())
+    }
+
+    /// One evaluation into the workspace buffers, stage by stage: encode the renders, stage I,
+    /// stage II (when its weight is positive), decode the gradient. Returns the output and what a
+    /// trace needs; the denoiser outputs are kept only with `keep_outputs`.
+    fn evaluate_core(
+        &mut self,
+        images: &Images,
+        stage2_weight: f64,
+        rng: &mut dyn RngCore,
+        injected: &InjectedDraws,
+        keep_outputs: bool,
+    ) -> Result<(Core, Stages<'_>, &mut Workspace), GuidanceError> {
+        self.check_call(images, stage2_weight)?;
+        let input_hw = (images.height, images.width);
+        if self.ops.as_ref().is_none_or(|o| o.input_hw != input_hw) {
+            self.ops = Some(Operators::new(&self.config, input_hw)?);
         }
         let Self {
             stage1,
@@ -557,385 +966,100 @@ impl CascadedGuidance {
             uncond,
             config: cfg,
             schedule,
-            work,
-        } = self;
-        let b = views;
-        let (r, r1, r2) = (cfg.resolution, cfg.stage1_resolution, cfg.stage2_resolution);
-        let (pr, p1, p2) = (r * r, r1 * r1, r2 * r2);
-        let plane_in = height * width;
-        if work
-            .ops
-            .as_ref()
-            .is_none_or(|o| o.input_hw != (height, width))
-        {
-            work.ops = Some(Operators::new(cfg, (height, width))?);
-        }
-        let Workspace {
             ops: Some(ops),
-            x,
-            z0,
-            eps1,
-            sample1,
-            grad1,
-            x0,
-            z_hat,
-            eps_s,
-            eps_t,
-            sample2,
-            grad2,
-            grad_x,
-            scratch,
-            plane_scratch,
-        } = work
+            work,
+            ..
+        } = self
         else {
             return Err(GuidanceError::InvalidInput(
                 "internal: resize operators missing".into(),
             ));
         };
-        scratch.resize_with(b, Vec::new);
-        plane_scratch.resize_with(b * CHANNELS, Default::default);
-
-        // x = 2·R(img) − 1: renders (view, row, col, channel) straight into planar x; the height pass
-        // runs over whole interleaved rows. Non-finite renders show up as non-finite x.
-        x.resize(b * CHANNELS * pr, 0.0);
-        let bad_x: usize = x
-            .par_chunks_mut(CHANNELS * pr)
-            .zip(images.par_chunks(CHANNELS * plane_in))
-            .zip(scratch.par_iter_mut())
-            .map(|((xv, src), tmp)| {
-                ops.resize.apply_from_interleaved(src, CHANNELS, xv, tmp);
-                let mut bad = 0;
-                for v in xv.iter_mut() {
-                    *v = 2.0 * *v - 1.0;
-                    bad += usize::from(!v.is_finite());
-                }
-                bad
-            })
-            .sum();
-        if bad_x > 0 {
-            let count = crate::count_non_finite(images);
-            return Err(GuidanceError::NonFinite {
-                tensor: if count > 0 {
-                    "the rendered images given to the guidance".into()
-                } else {
-                    "x = 2·resize(renders) − 1 (the renders are finite but so large that the resize overflows)"
-                        .into()
-                },
-                count: if count > 0 { count } else { bad_x },
-                total: if count > 0 { images.len() } else { x.len() },
-                hint: "the renderer produced them (degenerate geometry?); nothing was optimized"
-                    .into(),
-            });
-        }
-
-        // Stage I: SDS at r1.
-        z0.resize(b * CHANNELS * p1, 0.0);
-        z0.par_chunks_mut(p1)
-            .zip(x.par_chunks(pr))
-            .zip(plane_scratch.par_iter_mut())
-            .for_each(|((z, xp), (tmp, _))| ops.down1.apply_plane(xp, z, tmp));
-        let n1 = b * CHANNELS * p1;
-        let t1 = draw_or_inject(&injected.stage1_timesteps, b, "stage-I timesteps", || {
-            cfg.timesteps.sample(b, rng)
-        })?;
-        noise_into(eps1, &injected.stage1_noise, n1, "stage-I noise", rng)?;
-        let coef1 = noise_coefficients(schedule, &t1)?;
-        sample1.shape = vec![2 * b, CHANNELS, r1, r1];
-        sample1.data.resize(2 * n1, 0.0);
-        {
-            let (z_t, copy) = sample1.data.split_at_mut(n1);
-            z_t.par_chunks_mut(CHANNELS * p1)
-                .zip(z0.par_chunks(CHANNELS * p1))
-                .zip(eps1.par_chunks(CHANNELS * p1))
-                .zip(coef1.par_iter())
-                .for_each(|(((o, z), e), &(a, s))| {
-                    for ((o, &z), &e) in o.iter_mut().zip(z).zip(e) {
-                        *o = a * z + s * e;
-                    }
-                });
-            copy.copy_from_slice(z_t);
-        }
-        let ts: Vec<i64> = t1.iter().chain(&t1).copied().collect();
-        let out1 = {
-            let embeddings = batch_embeddings(cond, uncond, b);
-            stage1.predict(sample1, &ts, &embeddings, None)?
-        };
-        let w1 = weights(schedule, &t1)?;
-        let loss1 = fused_sds(
-            &out1,
-            b,
-            (r1, r1),
-            eps1,
-            &w1,
+        let stages = Stages {
             cfg,
-            grad1,
-            "stage-I",
-            stage1.as_ref(),
-        )?;
-        let out1 = keep_outputs.then_some(out1);
-
-        // ∂L/∂x = (S·a/B)·Dᵀ(grad_I) [+ (S·w_II/B)·Uᵀ(grad_II)], in f32 (the reference's precision).
-        let k1 = (cfg.loss_scale * cfg.stage1_weight / b as f64) as f32;
-        grad_x.resize(b * CHANNELS * pr, 0.0);
-        grad_x
-            .par_chunks_mut(pr)
-            .zip(grad1.par_chunks(p1))
-            .zip(plane_scratch.par_iter_mut())
-            .for_each(|((gx, g), (tmp, _))| {
-                ops.down1_t.apply_plane(g, gx, tmp);
-                gx.iter_mut().for_each(|v| *v *= k1);
-            });
-
-        // Stage II: CSD at r2, conditioned on the noised upsampled stage-I input.
-        let stage2_core = if run_stage2 {
-            let n2 = b * CHANNELS * p2;
-            x0.resize(n2, 0.0);
-            z_hat.resize(n2, 0.0);
-            x0.par_chunks_mut(p2)
-                .zip(x.par_chunks(pr))
-                .zip(z_hat.par_chunks_mut(p2))
-                .zip(z0.par_chunks(p1))
-                .zip(plane_scratch.par_iter_mut())
-                .for_each(|((((o, xp), zh), zp), (tmp, _))| {
-                    ops.up.apply_plane(xp, o, tmp);
-                    ops.up_low.apply_plane(zp, zh, tmp);
-                });
-            let t2 = draw_or_inject(&injected.stage2_timesteps, b, "stage-II timesteps", || {
-                cfg.timesteps.sample(b, rng)
-            })?;
-            let s2 = draw_or_inject(
-                &injected.stage2_noise_levels,
-                b,
-                "stage-II noise levels",
-                || cfg.timesteps.sample(b, rng),
-            )?;
-            noise_into(
-                eps_s,
-                &injected.stage2_noise_lowres,
-                n2,
-                "stage-II low-res noise",
-                rng,
-            )?;
-            noise_into(eps_t, &injected.stage2_noise, n2, "stage-II noise", rng)?;
-            let (coef_t, coef_s) = (
-                noise_coefficients(schedule, &t2)?,
-                noise_coefficients(schedule, &s2)?,
-            );
-            // UNet input per sample: channels [x_t (3), ẑ_s (3)]; the batch is [cond half; uncond half].
-            sample2.shape = vec![2 * b, 2 * CHANNELS, r2, r2];
-            sample2.data.resize(4 * n2, 0.0);
-            sample2
-                .data
-                .par_chunks_mut(p2)
-                .enumerate()
-                .for_each(|(q, o)| {
-                    let (n, ch) = (q / (2 * CHANNELS), q % (2 * CHANNELS));
-                    let v = n % b;
-                    let (clean, noise, (a, s)) = if ch < CHANNELS {
-                        let i = (v * CHANNELS + ch) * p2;
-                        (&x0[i..i + p2], &eps_t[i..i + p2], coef_t[v])
-                    } else {
-                        let i = (v * CHANNELS + ch - CHANNELS) * p2;
-                        (&z_hat[i..i + p2], &eps_s[i..i + p2], coef_s[v])
-                    };
-                    for ((o, &z), &e) in o.iter_mut().zip(clean).zip(noise) {
-                        *o = a * z + s * e;
-                    }
-                });
-            let ts: Vec<i64> = t2.iter().chain(&t2).copied().collect();
-            let labels: Vec<i64> = s2.iter().chain(&s2).copied().collect();
-            let embeddings = batch_embeddings(cond, uncond, b);
-            let model = stage2
-                .as_mut()
-                .ok_or_else(|| GuidanceError::InvalidInput("no stage-II model".into()))?;
-            let out2 = model.predict(sample2, &ts, &embeddings, Some(&labels))?;
-            let w2 = weights(schedule, &t2)?;
-            let loss2 = fused_sds(
-                &out2,
-                b,
-                (r2, r2),
-                eps_t,
-                &w2,
-                cfg,
-                grad2,
-                "stage-II",
-                model.as_ref(),
-            )?;
-            let out2 = keep_outputs.then_some(out2);
-            let k2 = (cfg.loss_scale * stage2_weight / b as f64) as f32;
-            grad_x
-                .par_chunks_mut(pr)
-                .zip(grad2.par_chunks(p2))
-                .zip(plane_scratch.par_iter_mut())
-                .for_each(|((gx, g), (tmp, up))| {
-                    up.resize(pr, 0.0);
-                    ops.up_t.apply_plane(g, up, tmp);
-                    for (a, &u) in gx.iter_mut().zip(up.iter()) {
-                        *a += k2 * u;
-                    }
-                });
-            Some(Stage2Core {
-                t2,
-                s2,
-                loss2,
-                out2,
-            })
-        } else {
-            None
+            schedule,
+            ops,
+            cond,
+            uncond,
+            views: images.count,
+            keep_outputs,
         };
-
-        // x = 2·R(img) − 1 ⇒ ∂L/∂img = 2·Rᵀ(∂L/∂x), written straight into (view, row, col, channel) with
-        // a final NaN/∞ guard.
-        let mut grad_images = vec![0.0f32; images.len()];
-        grad_images
-            .par_chunks_mut(CHANNELS * plane_in)
-            .zip(grad_x.par_chunks(CHANNELS * pr))
-            .zip(scratch.par_iter_mut())
-            .for_each(|((out, gx), tmp)| {
-                ops.resize_t
-                    .apply_to_interleaved(gx, CHANNELS, out, tmp, |v| nan_to_num(2.0 * v));
-            });
+        stages.encode_renders(images, work)?;
+        let stage1 = stages.stage1(stage1.as_mut(), work, rng, injected)?;
+        let stage2 = match stage2 {
+            Some(model) if stage2_weight > 0.0 => {
+                Some(stages.stage2(model.as_mut(), stage2_weight, work, rng, injected)?)
+            }
+            _ => None,
+        };
         let output = GuidanceOutput {
-            loss_stage1: cfg.loss_scale * cfg.stage1_weight * loss1,
-            loss_stage2: stage2_core
+            loss_stage1: cfg.loss_scale * cfg.stage1_weight * stage1.loss1,
+            loss_stage2: stage2
                 .as_ref()
                 .map_or(0.0, |s| cfg.loss_scale * stage2_weight * s.loss2),
-            grad_images,
+            stage2_weight,
+            grad_images: stages.decode_gradient(images, work),
         };
-        Ok(Core {
-            output,
-            t1,
-            loss1,
-            out1,
-            stage2: stage2_core,
-        })
+        Ok((
+            Core {
+                output,
+                stage1,
+                stage2,
+            },
+            stages,
+            work,
+        ))
     }
 
-    /// Like [`Guidance::evaluate`], returning every intermediate; `injected` replaces chosen random draws.
-    #[allow(clippy::too_many_arguments)]
+    /// [`Guidance::evaluate`] with an explicit stage-II weight w_II instead of the schedule's value
+    /// (0 runs stage I only).
+    pub fn evaluate_with_weight(
+        &mut self,
+        images: &Images,
+        stage2_weight: f64,
+        rng: &mut dyn RngCore,
+    ) -> Result<GuidanceOutput, GuidanceError> {
+        let (core, _, _) =
+            self.evaluate_core(images, stage2_weight, rng, &InjectedDraws::default(), false)?;
+        Ok(core.output)
+    }
+
+    /// Like [`Self::evaluate_with_weight`], returning every intermediate; `injected` replaces chosen
+    /// random draws.
     pub fn evaluate_traced(
         &mut self,
-        images: &[f32],
-        views: usize,
-        height: usize,
-        width: usize,
+        images: &Images,
         stage2_weight: f64,
         rng: &mut dyn RngCore,
         injected: &InjectedDraws,
     ) -> Result<GuidanceTrace, GuidanceError> {
-        let core = self.evaluate_core(
-            images,
-            views,
-            height,
-            width,
-            stage2_weight,
-            rng,
-            injected,
-            true,
-        )?;
-        let cfg = &self.config;
-        let w = &self.work;
-        let b = views;
-        let (r, r1, r2) = (cfg.resolution, cfg.stage1_resolution, cfg.stage2_resolution);
-        let g = cfg.guidance_scale;
-        let plane = height * width;
-        let mut img = vec![0.0f32; images.len()];
-        for (dst, src) in img
-            .chunks_mut(CHANNELS * plane)
-            .zip(images.chunks(CHANNELS * plane))
-        {
-            for (p, px) in src.chunks_exact(CHANNELS).enumerate() {
-                for (c, &v) in px.iter().enumerate() {
-                    dst[c * plane + p] = v;
-                }
-            }
-        }
-        let n1 = b * CHANNELS * r1 * r1;
-        let out1 = core.out1.ok_or_else(|| {
-            GuidanceError::InvalidInput("internal: stage-I output not kept".into())
-        })?;
-        let (c1, u1) = split_cond_uncond(&out1, b, CHANNELS, (r1, r1))?;
-        let g1 = classifier_free_guidance(&c1, &u1, g);
-        let shape1 = [b, CHANNELS, r1, r1];
-        let stage1 = Stage1Trace {
-            z0: tensor(shape1, w.z0.clone()),
-            timesteps: core.t1,
-            noise: tensor(shape1, w.eps1.clone()),
-            z_t: tensor(shape1, w.sample1.data[..n1].to_vec()),
-            eps_cond: tensor(shape1, c1),
-            eps_uncond: tensor(shape1, u1),
-            eps_guided: tensor(shape1, g1),
-            grad: tensor(shape1, w.grad1.clone()),
-            loss: core.loss1,
-        };
-        let stage2 = match core.stage2 {
-            Some(s) => {
-                let out2 = s.out2.ok_or_else(|| {
-                    GuidanceError::InvalidInput("internal: stage-II output not kept".into())
-                })?;
-                let (c2, u2) = split_cond_uncond(&out2, b, CHANNELS, (r2, r2))?;
-                let g2 = classifier_free_guidance(&c2, &u2, g);
-                let per = CHANNELS * r2 * r2;
-                let (mut x_t, mut z_hat_s) =
-                    (Vec::with_capacity(b * per), Vec::with_capacity(b * per));
-                for v in 0..b {
-                    let base = v * 2 * per;
-                    x_t.extend_from_slice(&w.sample2.data[base..base + per]);
-                    z_hat_s.extend_from_slice(&w.sample2.data[base + per..base + 2 * per]);
-                }
-                let shape2 = [b, CHANNELS, r2, r2];
-                Some(Stage2Trace {
-                    weight: stage2_weight,
-                    x0: tensor(shape2, w.x0.clone()),
-                    z_hat: tensor(shape2, w.z_hat.clone()),
-                    timesteps: s.t2,
-                    noise_levels: s.s2,
-                    noise: tensor(shape2, w.eps_t.clone()),
-                    noise_lowres: tensor(shape2, w.eps_s.clone()),
-                    x_t: tensor(shape2, x_t),
-                    z_hat_s: tensor(shape2, z_hat_s),
-                    eps_cond: tensor(shape2, c2),
-                    eps_uncond: tensor(shape2, u2),
-                    eps_guided: tensor(shape2, g2),
-                    grad: tensor(shape2, w.grad2.clone()),
-                    loss: s.loss2,
-                })
-            }
-            None => None,
-        };
-        let shape = [b, CHANNELS, r, r];
+        let (core, stages, work) =
+            self.evaluate_core(images, stage2_weight, rng, injected, true)?;
+        let r = stages.cfg.resolution;
+        let shape = [images.count, CHANNELS, r, r];
         Ok(GuidanceTrace {
-            images: tensor([b, CHANNELS, height, width], img),
-            x: tensor(shape, w.x.clone()),
-            stage1,
-            stage2,
-            grad_x: tensor(shape, w.grad_x.iter().map(|&v| nan_to_num(v)).collect()),
+            images: planar(images),
+            x: tensor(shape, work.x.clone()),
+            stage1: stages.stage1_trace(core.stage1, work)?,
+            stage2: core
+                .stage2
+                .map(|s| stages.stage2_trace(s, stage2_weight, work))
+                .transpose()?,
+            grad_x: tensor(shape, work.grad_x.iter().map(|&v| nan_to_num(v)).collect()),
             output: core.output,
         })
     }
 }
 
-impl Guidance for CascadedGuidance {
+impl Guidance for CascadedGuidance<'_> {
+    /// w_II is the stage-II weight schedule at `iteration`.
     fn evaluate(
         &mut self,
-        images: &[f32],
-        views: usize,
-        height: usize,
-        width: usize,
-        stage2_weight: f64,
+        images: &Images,
+        iteration: u64,
         rng: &mut dyn RngCore,
     ) -> Result<GuidanceOutput, GuidanceError> {
-        Ok(self
-            .evaluate_core(
-                images,
-                views,
-                height,
-                width,
-                stage2_weight,
-                rng,
-                &InjectedDraws::default(),
-                false,
-            )?
-            .output)
+        let weight = self.stage2_weight.at(iteration);
+        self.evaluate_with_weight(images, weight, rng)
     }
 }

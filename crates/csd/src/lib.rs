@@ -11,7 +11,7 @@
 //!   evaluation for debugging. The full chain rule is derived in `docs/guidance.md`.
 //!
 //! ```
-//! use csd::{CascadedGuidance, Denoiser, Embedding, Guidance, GuidanceConfig, GuidanceError, Tensor};
+//! use csd::{CascadedGuidance, Denoiser, Embedding, Guidance, GuidanceConfig, GuidanceError, Images, Tensor};
 //! use rand::SeedableRng;
 //!
 //! /// Predicts ε = 0 for every input (a real backend runs the IF UNet here).
@@ -27,14 +27,16 @@
 //!
 //! let emb = |v: f32| Embedding { shape: [77, 8], data: vec![v; 77 * 8] };
 //! let mut guidance = CascadedGuidance::new(
-//!     Box::new(Zero), Some(Box::new(Zero)), emb(1.0), emb(0.0), GuidanceConfig::default())?;
-//! let (views, h, w) = (2, 64, 64);
-//! let renders = vec![0.5f32; views * h * w * 3]; // (view, row, col, channel) in [0, 1]
+//!     Box::new(Zero), Some(Box::new(Zero)), emb(1.0), emb(0.0), GuidanceConfig::default())?
+//!     .with_stage2_weight(optim::Schedule::constant(0.2));
+//! // 2 views of 64×64, (view, row, col, channel) in [0, 1]
+//! let renders = Images::new(2, 64, 64, vec![0.5f32; 2 * 64 * 64 * 3])?;
 //! let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0);
-//! let out = guidance.evaluate(&renders, views, h, w, 0.2, &mut rng)?;
-//! assert_eq!(out.grad_images.len(), renders.len());
+//! let out = guidance.evaluate(&renders, 1, &mut rng)?;
+//! assert!(out.grad_images.same_shape(&renders));
 //! assert!(out.loss_stage1 > 0.0 && out.loss_stage2 > 0.0);
-//! # Ok::<(), GuidanceError>(())
+//! assert_eq!(out.stage2_weight, 0.2);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
 pub mod guidance;
@@ -43,8 +45,12 @@ pub mod schedule;
 pub mod sds;
 
 pub use guidance::{
-    CascadedGuidance, GuidanceConfig, GuidanceTrace, InjectedDraws, Stage1Trace, Stage2Trace,
+    CascadedGuidance, GuidanceConfig, GuidanceTrace, InjectedDraws, REFERENCE_STAGE2_WEIGHT,
+    ScoreTrace, Stage1Trace, Stage2Trace, reference_stage2_weight,
 };
+/// The image batch the renderer produces and the guidance consumes (`raster_diff::Images` is the
+/// same type).
+pub use image_batch::{Images, ImagesError};
 pub use resize::{Resize1d, Resize2d};
 pub use schedule::{NoiseSchedule, TimestepRange};
 
@@ -154,6 +160,24 @@ pub trait Denoiser: Send {
     ) -> Result<Tensor, GuidanceError>;
 }
 
+/// A borrowed denoiser is a denoiser: `Box::new(&mut unet)` lends one UNet session to a guidance
+/// that does not outlive it (a batch of prompts reuses one set of sessions, no lock needed).
+impl<D: Denoiser + ?Sized> Denoiser for &mut D {
+    fn describe(&self) -> String {
+        (**self).describe()
+    }
+
+    fn predict(
+        &mut self,
+        sample: &Tensor,
+        timesteps: &[i64],
+        embeddings: &[&Embedding],
+        class_labels: Option<&[i64]>,
+    ) -> Result<Tensor, GuidanceError> {
+        (**self).predict(sample, timesteps, embeddings, class_labels)
+    }
+}
+
 /// Text prompt → embedding.
 pub trait TextEmbedding {
     /// Encodes one prompt.
@@ -169,21 +193,22 @@ pub struct GuidanceOutput {
     pub loss_stage1: f64,
     /// Stage-II loss value (0 when skipped); [`CascadedGuidance`]: `S·w_II·L_II`, `L_II = ½‖grad_II‖²/B`.
     pub loss_stage2: f64,
-    /// dL/dimages, same layout and size as the input images: `(view, row, column, channel)`.
-    pub grad_images: Vec<f32>,
+    /// The stage-II weight w_II used for this evaluation (0 for a guidance without a second stage).
+    pub stage2_weight: f64,
+    /// dL/dimages, same sizes as the input images.
+    pub grad_images: Images,
 }
 
-/// The seam between the loop and the semantic loss: images in `[0, 1]`, `(view, row, col, channel)`.
+/// The seam between the loop and the semantic loss: renders in, dL/drenders out.
 pub trait Guidance: Send {
-    /// Evaluates the loss and its image gradient. `stage2_weight` is w_II for this iteration;
-    /// all randomness (timesteps, noise) comes from `rng`.
+    /// Evaluates the loss and its image gradient at optimization iteration `iteration` (1-based;
+    /// a guidance with iteration-dependent weights, like [`CascadedGuidance`]'s stage-II schedule,
+    /// reads them here). `images` hold values in `[0, 1]`; the returned `grad_images` has their
+    /// sizes. All randomness (timesteps, noise) comes from `rng`.
     fn evaluate(
         &mut self,
-        images: &[f32],
-        views: usize,
-        height: usize,
-        width: usize,
-        stage2_weight: f64,
+        images: &Images,
+        iteration: u64,
         rng: &mut dyn rand::RngCore,
     ) -> Result<GuidanceOutput, GuidanceError>;
 }

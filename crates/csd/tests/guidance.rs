@@ -3,7 +3,7 @@
 
 use csd::resize::Resize2d;
 use csd::{
-    CascadedGuidance, Denoiser, Embedding, Guidance, GuidanceConfig, GuidanceError, InjectedDraws,
+    CascadedGuidance, Denoiser, Embedding, GuidanceConfig, GuidanceError, Images, InjectedDraws,
     NoiseSchedule, Tensor,
 };
 use rand::SeedableRng;
@@ -182,24 +182,29 @@ fn denoiser_returning_the_true_noise_gives_zero_gradient() {
     let mut g = CascadedGuidance::new(stage1, Some(stage2), cond, uncond, cfg).expect("valid");
     let mut rng = ChaCha8Rng::seed_from_u64(11);
     let trace = g
-        .evaluate_traced(&img, views, h, w, 0.3, &mut rng, &InjectedDraws::default())
+        .evaluate_traced(
+            &imgs(&img, views, h, w),
+            0.3,
+            &mut rng,
+            &InjectedDraws::default(),
+        )
         .expect("runs");
     let stage2 = trace.stage2.as_ref().expect("stage II ran");
     assert!(
-        max_abs(&trace.stage1.grad.data) < 1e-5,
+        max_abs(&trace.stage1.score.grad.data) < 1e-5,
         "stage I {}",
-        max_abs(&trace.stage1.grad.data)
+        max_abs(&trace.stage1.score.grad.data)
     );
     assert!(
-        max_abs(&stage2.grad.data) < 1e-5,
+        max_abs(&stage2.score.grad.data) < 1e-5,
         "stage II {}",
-        max_abs(&stage2.grad.data)
+        max_abs(&stage2.score.grad.data)
     );
     // Compare with the scale of a wrong prediction (ε̂ = 0 gives |grad| ~ w·|ε| ~ 1).
     assert!(
-        max_abs(&trace.output.grad_images) < 1e-3,
+        max_abs(&trace.output.grad_images.rgb) < 1e-3,
         "{}",
-        max_abs(&trace.output.grad_images)
+        max_abs(&trace.output.grad_images.rgb)
     );
 }
 
@@ -221,10 +226,7 @@ fn zero_prediction_gives_minus_weighted_noise() {
     let mut rng = ChaCha8Rng::seed_from_u64(5);
     let trace = g
         .evaluate_traced(
-            &renders(views, h, w),
-            views,
-            h,
-            w,
+            &imgs(&renders(views, h, w), views, h, w),
             1.0,
             &mut rng,
             &InjectedDraws::default(),
@@ -234,11 +236,11 @@ fn zero_prediction_gives_minus_weighted_noise() {
     let st2 = trace.stage2.as_ref().expect("ran");
     for (grad, noise, t) in [
         (
-            &trace.stage1.grad,
-            &trace.stage1.noise,
-            &trace.stage1.timesteps,
+            &trace.stage1.score.grad,
+            &trace.stage1.score.noise,
+            &trace.stage1.score.timesteps,
         ),
-        (&st2.grad, &st2.noise, &st2.timesteps),
+        (&st2.score.grad, &st2.score.noise, &st2.score.timesteps),
     ] {
         let per = grad.data.len() / views;
         for (i, (&gv, &e)) in grad.data.iter().zip(&noise.data).enumerate() {
@@ -255,11 +257,11 @@ fn zero_prediction_gives_minus_weighted_noise() {
     let half_sq =
         |v: &[f32]| 0.5 * v.iter().map(|&x| (x as f64).powi(2)).sum::<f64>() / views as f64;
     assert!(
-        (trace.output.loss_stage1 - 100.0 * half_sq(&trace.stage1.grad.data)).abs()
+        (trace.output.loss_stage1 - 100.0 * half_sq(&trace.stage1.score.grad.data)).abs()
             < 1e-9 * trace.output.loss_stage1
     );
     assert!(
-        (trace.output.loss_stage2 - 100.0 * 1.0 * half_sq(&st2.grad.data)).abs()
+        (trace.output.loss_stage2 - 100.0 * 1.0 * half_sq(&st2.score.grad.data)).abs()
             < 1e-9 * trace.output.loss_stage2
     );
 }
@@ -287,10 +289,7 @@ fn distinct_cond_and_uncond_constants_give_the_cfg_combination() {
     let mut rng = ChaCha8Rng::seed_from_u64(9);
     let trace = g
         .evaluate_traced(
-            &renders(views, h, w),
-            views,
-            h,
-            w,
+            &imgs(&renders(views, h, w), views, h, w),
             0.5,
             &mut rng,
             &InjectedDraws::default(),
@@ -300,12 +299,17 @@ fn distinct_cond_and_uncond_constants_give_the_cfg_combination() {
     let st2 = trace.stage2.as_ref().expect("ran");
     for (guided, grad, noise, t) in [
         (
-            &trace.stage1.eps_guided,
-            &trace.stage1.grad,
-            &trace.stage1.noise,
-            &trace.stage1.timesteps,
+            &trace.stage1.score.eps_guided,
+            &trace.stage1.score.grad,
+            &trace.stage1.score.noise,
+            &trace.stage1.score.timesteps,
         ),
-        (&st2.eps_guided, &st2.grad, &st2.noise, &st2.timesteps),
+        (
+            &st2.score.eps_guided,
+            &st2.score.grad,
+            &st2.score.noise,
+            &st2.score.timesteps,
+        ),
     ] {
         assert!(guided.data.iter().all(|&v| v == 25.5));
         let per = grad.data.len() / views;
@@ -341,7 +345,12 @@ fn stage2_is_not_called_at_weight_zero() {
         .expect("valid");
         let mut rng = ChaCha8Rng::seed_from_u64(3);
         let trace = g
-            .evaluate_traced(&img, views, h, w, 0.0, &mut rng, &InjectedDraws::default())
+            .evaluate_traced(
+                &imgs(&img, views, h, w),
+                0.0,
+                &mut rng,
+                &InjectedDraws::default(),
+            )
             .expect("runs");
         let n_calls = calls2.lock().expect("not poisoned").len();
         (trace, n_calls)
@@ -352,7 +361,7 @@ fn stage2_is_not_called_at_weight_zero() {
     assert!(with.stage2.is_none());
     assert_eq!(with.output.loss_stage2, 0.0);
     assert_eq!(with.output.grad_images, without.output.grad_images);
-    assert!(max_abs(&with.output.grad_images) > 0.0);
+    assert!(max_abs(&with.output.grad_images.rgb) > 0.0);
 }
 
 #[test]
@@ -388,17 +397,14 @@ fn overflowing_guidance_gives_saturated_finite_gradients() {
     let mut rng = ChaCha8Rng::seed_from_u64(1);
     let trace = g
         .evaluate_traced(
-            &renders(views, h, w),
-            views,
-            h,
-            w,
+            &imgs(&renders(views, h, w), views, h, w),
             0.2,
             &mut rng,
             &InjectedDraws::default(),
         )
         .expect("runs");
     let st2 = trace.stage2.as_ref().expect("ran");
-    for grad in [&trace.stage1.grad, &st2.grad] {
+    for grad in [&trace.stage1.score.grad, &st2.score.grad] {
         for (p, &v) in grad.data.iter().enumerate() {
             match p % 4 {
                 0 => assert_eq!(v, f32::MAX, "pixel {p}"),
@@ -407,7 +413,7 @@ fn overflowing_guidance_gives_saturated_finite_gradients() {
             }
         }
     }
-    assert!(trace.output.grad_images.iter().all(|v| v.is_finite()));
+    assert!(trace.output.grad_images.rgb.iter().all(|v| v.is_finite()));
     assert!(trace.grad_x.data.iter().all(|v| v.is_finite()));
     assert!(trace.output.loss_stage1.is_finite() && trace.output.loss_stage2.is_finite());
 }
@@ -442,7 +448,7 @@ fn non_finite_error(stage1: Box<dyn Denoiser>, stage2: Box<dyn Denoiser>) -> Gui
     )
     .expect("valid");
     let mut rng = ChaCha8Rng::seed_from_u64(1);
-    match g.evaluate(&renders(2, 64, 64), 2, 64, 64, 0.2, &mut rng) {
+    match g.evaluate_with_weight(&imgs(&renders(2, 64, 64), 2, 64, 64), 0.2, &mut rng) {
         Ok(out) => panic!(
             "non-finite predictions were accepted (loss {})",
             out.loss_stage1 + out.loss_stage2
@@ -526,7 +532,7 @@ fn non_finite_embeddings_and_renders_are_refused() {
     img[7] = f32::NAN;
     let mut rng = ChaCha8Rng::seed_from_u64(0);
     let e = g
-        .evaluate(&img, 1, 16, 16, 0.0, &mut rng)
+        .evaluate_with_weight(&imgs(&img, 1, 16, 16), 0.0, &mut rng)
         .err()
         .map(|e| e.to_string())
         .unwrap_or_default();
@@ -577,7 +583,12 @@ fn check_total_gradient_by_hand(views: usize) {
     let w2 = 0.25;
     let mut rng = ChaCha8Rng::seed_from_u64(0);
     let out = g
-        .evaluate_traced(&renders(views, n, n), views, n, n, w2, &mut rng, &injected)
+        .evaluate_traced(
+            &imgs(&renders(views, n, n), views, n, n),
+            w2,
+            &mut rng,
+            &injected,
+        )
         .expect("runs")
         .output;
     let s = schedule();
@@ -591,7 +602,7 @@ fn check_total_gradient_by_hand(views: usize) {
                 );
                 let k = 2.0 * (100.0 / views as f64);
                 let expected = k * (term1 + term2);
-                let got = out.grad_images[(b * n * n + p) * 3 + c] as f64;
+                let got = out.grad_images.rgb[(b * n * n + p) * 3 + c] as f64;
                 let tol = 1e-5 * k * (term1.abs() + term2.abs());
                 assert!(
                     (got - expected).abs() < tol,
@@ -636,10 +647,7 @@ fn gradient_sum_is_preserved_through_every_resize_adjoint() {
     let w2 = 0.7;
     let trace = g
         .evaluate_traced(
-            &renders(views, n, n),
-            views,
-            n,
-            n,
+            &imgs(&renders(views, n, n), views, n, n),
             w2,
             &mut rng,
             &InjectedDraws::default(),
@@ -647,9 +655,10 @@ fn gradient_sum_is_preserved_through_every_resize_adjoint() {
         .expect("runs");
     let sum = |v: &[f32]| v.iter().map(|&x| x as f64).sum::<f64>();
     let st2 = trace.stage2.as_ref().expect("ran");
-    let expected =
-        2.0 * (100.0 / views as f64) * (sum(&trace.stage1.grad.data) + w2 * sum(&st2.grad.data));
-    let got = sum(&trace.output.grad_images);
+    let expected = 2.0
+        * (100.0 / views as f64)
+        * (sum(&trace.stage1.score.grad.data) + w2 * sum(&st2.score.grad.data));
+    let got = sum(&trace.output.grad_images.rgb);
     assert!(
         (got - expected).abs() < 1e-4 * expected.abs().max(1.0),
         "{got} vs {expected}"
@@ -683,7 +692,7 @@ fn model_inputs_have_the_specified_layout() {
     };
     let mut rng = ChaCha8Rng::seed_from_u64(77);
     let trace = g
-        .evaluate_traced(&img, views, h, w, 0.1, &mut rng, &injected)
+        .evaluate_traced(&imgs(&img, views, h, w), 0.1, &mut rng, &injected)
         .expect("runs");
     let s = schedule();
     let noised = |clean: &[f32], noise: &[f32], t: i64| -> Vec<f64> {
@@ -712,7 +721,7 @@ fn model_inputs_have_the_specified_layout() {
         let v = n % 3;
         let exp = noised(
             &z0[v * per1..(v + 1) * per1],
-            &trace.stage1.noise.data[v * per1..(v + 1) * per1],
+            &trace.stage1.score.noise.data[v * per1..(v + 1) * per1],
             c1.timesteps[n],
         );
         assert!(
@@ -737,7 +746,7 @@ fn model_inputs_have_the_specified_layout() {
         let v = n % 3;
         let x_t = noised(
             &x0[v * per..(v + 1) * per],
-            &st2.noise.data[v * per..(v + 1) * per],
+            &st2.score.noise.data[v * per..(v + 1) * per],
             [100, 600, 30][v],
         );
         let z_s = noised(
@@ -760,7 +769,7 @@ fn model_inputs_have_the_specified_layout() {
         );
     }
     // The noises of the two stage-II branches are independent draws.
-    assert_ne!(st2.noise.data, st2.noise_lowres.data);
+    assert_ne!(st2.score.noise.data, st2.noise_lowres.data);
 }
 
 #[test]
@@ -789,7 +798,7 @@ fn evaluate_is_deterministic_per_seed_and_matches_the_trace() {
     let eval = |seed: u64| {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         make()
-            .evaluate(&img, views, h, w, 0.2, &mut rng)
+            .evaluate_with_weight(&imgs(&img, views, h, w), 0.2, &mut rng)
             .expect("runs")
     };
     let (a, b, c) = (eval(4), eval(4), eval(5));
@@ -798,10 +807,15 @@ fn evaluate_is_deterministic_per_seed_and_matches_the_trace() {
     assert_ne!(a.grad_images, c.grad_images);
     let mut rng = ChaCha8Rng::seed_from_u64(4);
     let traced = make()
-        .evaluate_traced(&img, views, h, w, 0.2, &mut rng, &InjectedDraws::default())
+        .evaluate_traced(
+            &imgs(&img, views, h, w),
+            0.2,
+            &mut rng,
+            &InjectedDraws::default(),
+        )
         .expect("runs");
     assert_eq!(traced.output.grad_images, a.grad_images);
-    assert_eq!(a.grad_images.len(), img.len());
+    assert_eq!(a.grad_images.rgb.len(), img.len());
 }
 
 #[test]
@@ -824,32 +838,38 @@ fn bad_inputs_are_typed_errors() {
     let invalid = |r: Result<csd::GuidanceOutput, GuidanceError>| {
         matches!(r, Err(GuidanceError::InvalidInput(_)))
     };
-    assert!(invalid(make(true).evaluate(
-        &img[1..],
-        1,
-        8,
-        8,
+    assert!(invalid(make(true).evaluate_with_weight(
+        &imgs(&img[1..], 1, 8, 8),
         0.0,
         &mut rng
     )));
-    assert!(invalid(make(true).evaluate(&img, 0, 8, 8, 0.0, &mut rng)));
-    assert!(invalid(make(true).evaluate(&img, 1, 8, 8, -0.1, &mut rng)));
-    assert!(invalid(make(true).evaluate(
-        &img,
-        1,
-        8,
-        8,
+    assert!(invalid(make(true).evaluate_with_weight(
+        &imgs(&img, 0, 8, 8),
+        0.0,
+        &mut rng
+    )));
+    assert!(invalid(make(true).evaluate_with_weight(
+        &imgs(&img, 1, 8, 8),
+        -0.1,
+        &mut rng
+    )));
+    assert!(invalid(make(true).evaluate_with_weight(
+        &imgs(&img, 1, 8, 8),
         f64::NAN,
         &mut rng
     )));
-    assert!(invalid(make(false).evaluate(&img, 1, 8, 8, 0.5, &mut rng)));
+    assert!(invalid(make(false).evaluate_with_weight(
+        &imgs(&img, 1, 8, 8),
+        0.5,
+        &mut rng
+    )));
     let bad = InjectedDraws {
         stage1_timesteps: Some(vec![20, 30]),
         ..InjectedDraws::default()
     };
     assert!(
         make(true)
-            .evaluate_traced(&img, 1, 8, 8, 0.0, &mut rng, &bad)
+            .evaluate_traced(&imgs(&img, 1, 8, 8), 0.0, &mut rng, &bad)
             .is_err()
     );
     let out_of_range = InjectedDraws {
@@ -858,7 +878,7 @@ fn bad_inputs_are_typed_errors() {
     };
     assert!(
         make(true)
-            .evaluate_traced(&img, 1, 8, 8, 0.0, &mut rng, &out_of_range)
+            .evaluate_traced(&imgs(&img, 1, 8, 8), 0.0, &mut rng, &out_of_range)
             .is_err()
     );
 
@@ -877,7 +897,7 @@ fn bad_inputs_are_typed_errors() {
     )
     .expect("valid");
     assert!(matches!(
-        g.evaluate(&img, 1, 8, 8, 0.0, &mut rng),
+        g.evaluate_with_weight(&imgs(&img, 1, 8, 8), 0.0, &mut rng),
         Err(GuidanceError::Model(_))
     ));
 
@@ -938,23 +958,24 @@ fn timesteps_are_drawn_per_view_per_stage_and_within_the_configured_range() {
     let mut rng = ChaCha8Rng::seed_from_u64(123);
     let trace = g
         .evaluate_traced(
-            &renders(views, h, w),
-            views,
-            h,
-            w,
+            &imgs(&renders(views, h, w), views, h, w),
             0.5,
             &mut rng,
             &InjectedDraws::default(),
         )
         .expect("runs");
     let st2 = trace.stage2.as_ref().expect("ran");
-    for t in [&trace.stage1.timesteps, &st2.timesteps, &st2.noise_levels] {
+    for t in [
+        &trace.stage1.score.timesteps,
+        &st2.score.timesteps,
+        &st2.noise_levels,
+    ] {
         assert_eq!(t.len(), views);
         assert!(t.iter().all(|&x| (20..=980).contains(&x)));
         assert!(t.iter().any(|&x| x != t[0]), "{t:?}");
     }
-    assert_ne!(trace.stage1.timesteps, st2.timesteps);
-    assert_ne!(st2.timesteps, st2.noise_levels);
+    assert_ne!(trace.stage1.score.timesteps, st2.score.timesteps);
+    assert_ne!(st2.score.timesteps, st2.noise_levels);
 
     // A configured range is respected: [100, 100] gives t = s = 100 everywhere.
     let cfg = GuidanceConfig {
@@ -966,17 +987,127 @@ fn timesteps_are_drawn_per_view_per_stage_and_within_the_configured_range() {
     let mut g = CascadedGuidance::new(s1, Some(s2), cond, uncond, cfg).expect("valid");
     let trace = g
         .evaluate_traced(
-            &renders(views, h, w),
-            views,
-            h,
-            w,
+            &imgs(&renders(views, h, w), views, h, w),
             0.5,
             &mut rng,
             &InjectedDraws::default(),
         )
         .expect("runs");
     let st2 = trace.stage2.as_ref().expect("ran");
-    for t in [&trace.stage1.timesteps, &st2.timesteps, &st2.noise_levels] {
+    for t in [
+        &trace.stage1.score.timesteps,
+        &st2.score.timesteps,
+        &st2.noise_levels,
+    ] {
         assert!(t.iter().all(|&x| x == 100));
     }
+}
+
+/// The image batch for `views` renders of `h`×`w` (no length check: bad-input tests pass wrong sizes).
+fn imgs(data: &[f32], views: usize, h: usize, w: usize) -> Images {
+    Images {
+        count: views,
+        height: h,
+        width: w,
+        rgb: data.to_vec(),
+    }
+}
+
+/// A denoiser predicting ε = 0.1 on every value (IF-shaped output), counting its calls.
+struct Constant {
+    calls: usize,
+}
+
+impl Denoiser for Constant {
+    fn predict(
+        &mut self,
+        sample: &Tensor,
+        _t: &[i64],
+        _e: &[&Embedding],
+        _s: Option<&[i64]>,
+    ) -> Result<Tensor, GuidanceError> {
+        self.calls += 1;
+        Ok(output(sample, |_, _, _| 0.1))
+    }
+}
+
+#[test]
+fn the_trait_reads_the_stage2_weight_schedule_at_the_iteration() {
+    use csd::Guidance;
+    let (cond, uncond) = embeddings();
+    let (views, h, w) = (1, 32, 32);
+    let batch = imgs(&renders(views, h, w), views, h, w);
+    let make = || {
+        CascadedGuidance::new(
+            Box::new(Constant { calls: 0 }),
+            Some(Box::new(Constant { calls: 0 })),
+            cond.clone(),
+            uncond.clone(),
+            GuidanceConfig::default(),
+        )
+        .expect("valid")
+    };
+    // The default schedule with a stage-II model is the reference's: 0 at iteration 1, 0.3 from
+    // iteration 1750 on.
+    let mut g = make();
+    assert_eq!(g.stage2_weight().at(1), 0.0);
+    assert_eq!(g.stage2_weight().at(1750), 0.3);
+    let mut rng = ChaCha8Rng::seed_from_u64(9);
+    let first = g.evaluate(&batch, 1, &mut rng).expect("runs");
+    assert_eq!((first.stage2_weight, first.loss_stage2), (0.0, 0.0));
+    // evaluate(iteration) ≡ evaluate_with_weight(schedule(iteration)) for the same draws.
+    let schedule = optim::Schedule::parse("0.5>0.1:10").expect("valid");
+    let w5 = schedule.at(5);
+    let mut g = make().with_stage2_weight(schedule);
+    let via_trait = g
+        .evaluate(&batch, 5, &mut ChaCha8Rng::seed_from_u64(3))
+        .expect("runs");
+    let direct = make()
+        .evaluate_with_weight(&batch, w5, &mut ChaCha8Rng::seed_from_u64(3))
+        .expect("runs");
+    assert!(w5 > 0.0 && via_trait.stage2_weight == w5);
+    assert_eq!(via_trait.grad_images, direct.grad_images);
+    assert_eq!(via_trait.loss_stage2, direct.loss_stage2);
+    assert!(via_trait.grad_images.same_shape(&batch));
+}
+
+#[test]
+fn without_a_stage2_model_the_default_schedule_is_zero() {
+    use csd::Guidance;
+    let (cond, uncond) = embeddings();
+    let mut g = CascadedGuidance::new(
+        Box::new(Constant { calls: 0 }),
+        None,
+        cond,
+        uncond,
+        GuidanceConfig::default(),
+    )
+    .expect("valid");
+    let batch = imgs(&renders(1, 16, 16), 1, 16, 16);
+    let mut rng = ChaCha8Rng::seed_from_u64(0);
+    for iteration in [1, 500, 5000] {
+        let out = g.evaluate(&batch, iteration, &mut rng).expect("runs");
+        assert_eq!(out.stage2_weight, 0.0);
+    }
+}
+
+#[test]
+fn guidances_can_borrow_their_denoisers_one_after_another() {
+    // Two prompts, one pair of UNets: each guidance borrows them and gives them back.
+    let (mut unet1, mut unet2) = (Constant { calls: 0 }, Constant { calls: 0 });
+    let (cond, uncond) = embeddings();
+    let batch = imgs(&renders(1, 16, 16), 1, 16, 16);
+    for prompt in 0..2 {
+        let mut g = CascadedGuidance::new(
+            Box::new(&mut unet1),
+            Some(Box::new(&mut unet2)),
+            cond.clone(),
+            uncond.clone(),
+            GuidanceConfig::default(),
+        )
+        .expect("valid");
+        let mut rng = ChaCha8Rng::seed_from_u64(prompt);
+        g.evaluate_with_weight(&batch, 0.5, &mut rng).expect("runs");
+    }
+    assert_eq!((unet1.calls, unet2.calls), (2, 2));
 }

@@ -1,11 +1,11 @@
-//! `.npy` files for embeddings and reference tensors, on top of [`mesh_core::npy`] (the project's one
+//! `.npy` files for embeddings and reference tensors, on top of the [`npy`](::npy) crate (the project's one
 //! NumPy reader and writer: little-endian, C order, `<f2 <f4 <f8 <i8 …`). This module adds the file
 //! path to errors ([`OnnxError::Npy`]) and writes atomically.
 
 use std::io::Write;
 use std::path::Path;
 
-pub use mesh_core::npy::{NpyArray, NpyData};
+pub use ::npy::{NpyArray, NpyData};
 
 use crate::OnnxError;
 
@@ -18,7 +18,7 @@ fn bad(path: &Path, message: impl Into<String>) -> OnnxError {
 
 /// Parses a `.npy` file from bytes. `path` only names it in errors.
 pub fn parse_npy(bytes: &[u8], path: &Path) -> Result<NpyArray, OnnxError> {
-    mesh_core::npy::parse_npy(bytes).map_err(|m| bad(path, m))
+    ::npy::parse_npy(bytes).map_err(|m| bad(path, m))
 }
 
 /// Reads a `.npy` file.
@@ -30,7 +30,7 @@ pub fn read_npy(path: impl AsRef<Path>) -> Result<NpyArray, OnnxError> {
 
 /// Serializes an array as `.npy` version 1.0 bytes.
 pub fn npy_bytes(array: &NpyArray) -> Vec<u8> {
-    mesh_core::npy::write_npy(array)
+    ::npy::write_npy(array)
 }
 
 /// Writes a `.npy` file atomically (temporary file in the same directory, then rename).

@@ -46,16 +46,6 @@ pub enum MeshError {
         /// The file.
         path: PathBuf,
     },
-    /// An `.npy` array (inside an `.npz`) is malformed, missing, or has an unexpected type or shape.
-    #[error("{}: array `{key}`: {message}", path.display())]
-    Npy {
-        /// The `.npz` (or `.npy`) file.
-        path: PathBuf,
-        /// The array's key (its name in the zip without `.npy`).
-        key: String,
-        /// What was expected.
-        message: String,
-    },
     /// Two inputs that must agree in length do not.
     #[error("{what}: expected {expected} entries, got {got}")]
     LengthMismatch {

@@ -9,14 +9,13 @@
 //!
 //! Layers: plain slice functions ([`geometry`], [`normals`], [`normalize`], [`topology`],
 //! [`subdivide`], [`shapes`], [`region`]) work on `&[[f64; 3]]` / `&[[u32; 3]]`; [`validate`] checks and repairs a
-//! [`TriMesh`]; [`npy`] reads and writes NumPy `.npy` arrays; with the default feature `io`, [`io`] reads and writes OBJ, OFF, PLY and glTF/GLB
-//! and [`npz`] reads and writes `.npz` files (including the reference's saved-deformation format).
+//! [`TriMesh`]; with the default feature `io`, [`io`] reads and writes OBJ, OFF, PLY and glTF/GLB.
+//! NumPy files live in the `npy` crate, the reference's saved-deformation `.npz` in `stylize`.
 
 mod error;
 pub mod geometry;
 pub mod normalize;
 pub mod normals;
-pub mod npy;
 pub mod region;
 pub mod shapes;
 pub mod subdivide;
@@ -25,8 +24,6 @@ pub mod validate;
 
 #[cfg(feature = "io")]
 pub mod io;
-#[cfg(feature = "io")]
-pub mod npz;
 
 pub use error::MeshError;
 

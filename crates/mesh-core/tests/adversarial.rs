@@ -8,7 +8,6 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use mesh_core::io::{read_mesh, write_glb};
-use mesh_core::npz::{NpyArray, NpzReader, SavedDeformation};
 use mesh_core::validate::{IssueKind, RepairOptions, repair, validate};
 use mesh_core::{MeshError, TriMesh};
 
@@ -444,63 +443,6 @@ fn glb_header_lengths_below_the_header_or_beyond_the_file_are_refused() {
     assert!(e.contains("truncated"), "{e}");
 }
 
-// ---------------------------------------------------------------- npz / npy
-
-#[test]
-fn npz_reads_only_the_entries_it_needs() {
-    use std::io::Write;
-    let dir = tempfile::tempdir().expect("tempdir");
-    let path = dir.path().join("s.npz");
-    let tet = TriMesh::new(
-        vec![[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
-        vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]],
-    );
-    let saved = SavedDeformation {
-        verts: tet.positions.iter().map(|p| p.map(|c| c as f32)).collect(),
-        faces: tet.faces.clone(),
-        verts_normals: vec![[0.0, 0.0, 1.0]; 4],
-        deform_by_csd_cfg: "{}".into(),
-        dataset_cfg: "{}".into(),
-        extra: vec![("seed".into(), NpyArray::scalar_str("3"))],
-    };
-    saved.write(&path).expect("writes");
-    // Append a deflated extra entry that declares 32 MiB and whose stream is garbage: inflating
-    // it would fail (and, were it a real 3 GB stream, cost 3 GB).
-    {
-        let file = std::fs::OpenOptions::new()
-            .read(true)
-            .write(true)
-            .open(&path)
-            .expect("open");
-        let mut zip = zip::ZipWriter::new_append(file).expect("append");
-        let opts = zip::write::SimpleFileOptions::default()
-            .compression_method(zip::CompressionMethod::Deflated);
-        zip.start_file("junk.npy", opts).expect("start");
-        zip.write_all(&vec![0u8; 32 << 20]).expect("write");
-        zip.finish().expect("finish");
-    }
-    let back = SavedDeformation::read(&path).expect("reads without the junk");
-    assert_eq!(back.verts, saved.verts);
-    assert!(
-        back.extra("junk").is_none(),
-        "large extra entries are not loaded"
-    );
-    assert!(back.extra("seed").is_some());
-    let r = NpzReader::open(&path).expect("opens");
-    assert_eq!(r.declared_size("junk"), Some(32 << 20));
-    assert!(r.require("verts").is_ok());
-}
-
-#[test]
-fn npy_zero_width_strings_with_a_huge_shape_are_refused() {
-    let header = "{'descr': '<U0', 'fortran_order': False, 'shape': (1000000000000000,), }\n";
-    let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
-    bytes.extend_from_slice(&(header.len() as u16).to_le_bytes());
-    bytes.extend_from_slice(header.as_bytes());
-    let e = mesh_core::npy::parse_npy(&bytes).expect_err("refused");
-    assert!(e.contains("zero-width"), "{e}");
-}
-
 // ---------------------------------------------------------------- validation
 
 fn opts() -> RepairOptions {
@@ -642,7 +584,7 @@ fn paths_that_are_not_regular_files_are_refused_without_being_opened() {
     let e = within_hang_bound(move || err_of(read_mesh(&zero_obj)));
     assert!(e.contains("a device, not a regular file"), "{e}");
     let e = within_hang_bound(move || {
-        NpzReader::open(&zero_npz)
+        npy::npz::NpzReader::open(&zero_npz)
             .expect_err("a device is not an .npz")
             .to_string()
     });

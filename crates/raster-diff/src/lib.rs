@@ -34,62 +34,10 @@ pub struct View {
     pub light_pos: [f64; 3],
 }
 
-/// A batch of rendered RGB images, `(view, row, column, channel)` row-major.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct Images {
-    /// Number of views.
-    pub count: usize,
-    /// Image height in pixels.
-    pub height: usize,
-    /// Image width in pixels.
-    pub width: usize,
-    /// `count * height * width * 3` values.
-    pub rgb: Vec<f32>,
-}
-
-impl Images {
-    /// RGB images from grey values laid out `(view, row, column)`: each grey value fills all three
-    /// channels (the reference shading is grey: kd is the same in every channel).
-    pub fn from_grey(count: usize, height: usize, width: usize, grey: &[f64]) -> Self {
-        let mut rgb = Vec::with_capacity(grey.len() * 3);
-        for &g in grey {
-            rgb.extend_from_slice(&[g as f32; 3]);
-        }
-        Self {
-            count,
-            height,
-            width,
-            rgb,
-        }
-    }
-
-    /// dL/d(grey) from these dL/d(RGB) images, checked against the shape of the render they belong
-    /// to (`count` views of `height`×`width`). All three channels carry the same grey value, so
-    /// dL/d(grey) is the channel sum, summed in f64.
-    pub fn grey_gradient(
-        &self,
-        count: usize,
-        height: usize,
-        width: usize,
-    ) -> Result<Vec<f64>, RenderError> {
-        if (self.count, self.height, self.width) != (count, height, width) {
-            return Err(RenderError::InvalidInput(format!(
-                "gradient images are {}×{}×{}, the last render was {count}×{height}×{width}",
-                self.count, self.height, self.width
-            )));
-        }
-        if self.rgb.len() != count * height * width * 3 {
-            return Err(RenderError::InvalidInput(
-                "gradient images have the wrong number of values".into(),
-            ));
-        }
-        Ok(self
-            .rgb
-            .chunks_exact(3)
-            .map(|c| f64::from(c[0]) + f64::from(c[1]) + f64::from(c[2]))
-            .collect())
-    }
-}
+/// A batch of rendered RGB images, `(view, row, column, channel)` row-major: the type the guidance
+/// takes too (it lives in the dependency-free `image-batch` crate so that `csd` can name it without
+/// depending on the renderer).
+pub use image_batch::{Images, ImagesError};
 
 /// Errors from rendering.
 #[derive(Debug, thiserror::Error)]
@@ -113,6 +61,12 @@ pub enum RenderError {
         /// The device's limit.
         limit: u64,
     },
+}
+
+impl From<ImagesError> for RenderError {
+    fn from(e: ImagesError) -> Self {
+        RenderError::InvalidInput(e.to_string())
+    }
 }
 
 /// The seam between the optimization loop and a rendering backend.

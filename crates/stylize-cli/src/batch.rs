@@ -333,10 +333,14 @@ pub struct BatchOptions {
     pub inputs: Vec<(String, PathBuf)>,
 }
 
-/// Runs the rows of `manifest` that belong to the shard; returns `(row index, row, status)`.
+/// One row's result: its index in the manifest, the row, what happened, and the warnings of the run
+/// (mesh repairs, unsupported output formats; empty when the row failed).
+pub type RowResult = (usize, Row, RowStatus, Vec<String>);
+
+/// Runs the rows of `manifest` that belong to the shard; returns a [`RowResult`] per row.
 /// A row interrupted by SIGINT/SIGTERM is the last one (its status is `Failed` with the
 /// interruption; [`run_batch_until_interrupted`] also returns it).
-pub fn run_batch(rows: &[Row], options: &BatchOptions) -> Vec<(usize, Row, RowStatus)> {
+pub fn run_batch(rows: &[Row], options: &BatchOptions) -> Vec<RowResult> {
     run_batch_until_interrupted(rows, options).0
 }
 
@@ -344,7 +348,7 @@ pub fn run_batch(rows: &[Row], options: &BatchOptions) -> Vec<(usize, Row, RowSt
 pub fn run_batch_until_interrupted(
     rows: &[Row],
     options: &BatchOptions,
-) -> (Vec<(usize, Row, RowStatus)>, Option<Interrupted>) {
+) -> (Vec<RowResult>, Option<Interrupted>) {
     let mut models: Option<anyhow::Result<ModelSet>> = None;
     let mut out = Vec::new();
     for (i, row) in rows
@@ -352,18 +356,18 @@ pub fn run_batch_until_interrupted(
         .enumerate()
         .filter(|(i, _)| options.shard.takes(*i))
     {
-        let (status, stop) = match run_row(row, options, &mut models) {
-            Ok(s) => (s, None),
+        let (status, warnings, stop) = match run_row(row, options, &mut models) {
+            Ok((s, warnings)) => (s, warnings, None),
             Err(e) => {
                 let stop = e.downcast_ref::<Interrupted>().map(|i| Interrupted {
                     signal: i.signal,
                     dir: i.dir.clone(),
                     checkpoint_iteration: i.checkpoint_iteration,
                 });
-                (RowStatus::Failed(format!("{e:#}")), stop)
+                (RowStatus::Failed(format!("{e:#}")), Vec::new(), stop)
             }
         };
-        out.push((i, row.clone(), status));
+        out.push((i, row.clone(), status, warnings));
         if stop.is_some() {
             return (out, stop);
         }
@@ -385,7 +389,7 @@ fn run_row(
     row: &Row,
     options: &BatchOptions,
     models: &mut Option<anyhow::Result<ModelSet>>,
-) -> anyhow::Result<RowStatus> {
+) -> anyhow::Result<(RowStatus, Vec<String>)> {
     let dir = RunDir::new(&row.out);
     let resumed = !options.force && dir.has_checkpoint() && !dir.is_complete();
     let mut config = options.config.clone().with_overrides(&row.overrides)?;
@@ -440,15 +444,18 @@ fn run_row(
                 prompt: prompt.clone(),
                 model: None,
             };
+            let config = &config;
             execute_with(
                 &request,
                 objective,
-                || {
+                // `move`: the closure takes the `&mut` to the model set, so the guidance it builds
+                // may borrow the UNets for the whole run.
+                move || {
                     let set = models.get_or_insert_with(|| ModelSet::open(model, &options.config));
-                    let set = set.as_ref().map_err(|e| anyhow::anyhow!("{e:#}"))?;
+                    let set = set.as_mut().map_err(|e| anyhow::anyhow!("{e:#}"))?;
                     Ok(Task::Text {
                         prompt: prompt.clone(),
-                        guidance: set.guidance_for(prompt, &config)?,
+                        guidance: Box::new(set.guidance_for(prompt, config)?),
                     })
                 },
                 &run_options,
@@ -456,10 +463,12 @@ fn run_row(
         }
         (None, None) => bail!("row has neither prompt nor style"),
     };
-    if outcome.already_complete {
-        return Ok(RowStatus::Skipped);
-    }
-    Ok(RowStatus::Done { resumed })
+    let status = if outcome.already_complete {
+        RowStatus::Skipped
+    } else {
+        RowStatus::Done { resumed }
+    };
+    Ok((status, outcome.warnings))
 }
 
 #[cfg(test)]

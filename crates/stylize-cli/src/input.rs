@@ -37,7 +37,7 @@ mod tests {
             let config = made.then(|| {
                 format!(
                     "{:#}",
-                    crate::config::Config::load(&f2).expect_err("a FIFO is not a config")
+                    crate::config::load(&f2).expect_err("a FIFO is not a config")
                 )
             });
             let manifest = format!(

@@ -1,19 +1,14 @@
-//! Library side of the `stylize` command line: configuration, the loop, run directories, and
-//! one module per subcommand under [`cmd`].
+//! Library side of the `stylize` command line: config files, progress display, signals, batches,
+//! and one module per subcommand under [`cmd`]. The optimization itself is the `stylize` crate;
+//! its modules are re-exported here under their old paths so the commands read as before.
 
 pub mod batch;
-pub mod checkpoint;
 pub mod cmd;
 pub mod config;
-pub mod durable;
-pub mod eval;
-pub mod identity;
 pub mod input;
-pub mod lock;
-pub mod models;
-pub mod pipeline;
+pub mod progress;
 pub mod reference_config;
-pub mod rundir;
 pub mod runner;
 pub mod signals;
-pub mod style;
+
+pub use stylize::{checkpoint, durable, eval, identity, lock, models, pipeline, rundir, style};

@@ -25,14 +25,37 @@ enum Command {
     Run(cmd::run::Args),
     /// Stylize every row of a manifest (sharded across a job array).
     Batch(cmd::batch::Args),
-    /// Metrics of spec §9: per-face area ratio, volume ratio, and CLIP similarity with --clip DIR.
+    /// Identity metrics (per-face area ratio, volume ratio) and CLIP similarity with --clip DIR.
     Eval(cmd::eval::Args),
     /// Run one guidance evaluation with given noise/timesteps and dump every intermediate to .npz.
     #[command(hide = true, name = "debug-guidance")]
     DebugGuidance(cmd::debug_guidance::Args),
 }
 
+/// Mesa's Vulkan drivers (lavapipe) probe for a Wayland display when the GPU instance is created, and
+/// libwayland prints `error: XDG_RUNTIME_DIR is invalid or not set in the environment.` when the
+/// variable is unset (batch jobs, containers, ssh sessions). When it is unset or empty, the process
+/// gets a private, empty runtime directory instead (created 0700, removed at exit), so the probe
+/// finds no display and stays quiet; a set variable is left alone.
+fn private_runtime_dir() -> Option<tempfile::TempDir> {
+    if std::env::var_os("XDG_RUNTIME_DIR").is_some_and(|v| !v.is_empty()) {
+        return None;
+    }
+    let dir = tempfile::Builder::new()
+        .prefix("stylize-runtime-")
+        .tempdir()
+        .ok()?;
+    // SAFETY: called first thing in `main`, before any other thread exists, so nothing can read
+    // the environment concurrently.
+    #[allow(unsafe_code)]
+    unsafe {
+        std::env::set_var("XDG_RUNTIME_DIR", dir.path());
+    }
+    Some(dir)
+}
+
 fn main() -> std::process::ExitCode {
+    let _runtime_dir = private_runtime_dir();
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Apply(a) => cmd::apply::run(a),

@@ -31,7 +31,7 @@
 use anyhow::{Context, bail};
 use serde_json::Value;
 
-use crate::config::Config;
+use stylize::config::Config;
 
 fn num(v: &Value, key: &str) -> anyhow::Result<Option<f64>> {
     match v.get(key) {

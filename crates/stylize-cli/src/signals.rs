@@ -2,7 +2,7 @@
 //! only sets a flag; the loop finishes its current iteration, writes a checkpoint, and the command
 //! exits with 128 + the signal number (130 for SIGINT, 143 for SIGTERM) after printing how to
 //! resume. A second signal terminates at once with the same status (the run directory lock is
-//! then left behind; on the same host it is taken over at once, see [`crate::lock`]).
+//! then left behind; on the same host it is taken over at once, see [`stylize::lock`]).
 
 use std::path::PathBuf;
 use std::sync::Once;
@@ -31,6 +31,11 @@ pub fn install() -> anyhow::Result<()> {
         .map_err(|e| anyhow::anyhow!("cannot install the SIGINT/SIGTERM handlers: {e}"));
     });
     result
+}
+
+/// The flag the handlers set (the run's cancellation hook, [`stylize::runner::RunHooks::cancel`]).
+pub fn flag() -> &'static AtomicBool {
+    &RECEIVED
 }
 
 /// The signal received so far, if any.
@@ -96,8 +101,8 @@ pub fn exit_code(e: &anyhow::Error) -> u8 {
     }
     if e.chain().any(|c| {
         matches!(
-            c.downcast_ref::<crate::lock::LockError>(),
-            Some(crate::lock::LockError::Held { .. } | crate::lock::LockError::Busy { .. })
+            c.downcast_ref::<stylize::lock::LockError>(),
+            Some(stylize::lock::LockError::Held { .. } | stylize::lock::LockError::Busy { .. })
         )
     }) {
         return 75;

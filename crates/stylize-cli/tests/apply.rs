@@ -118,7 +118,7 @@ fn empty_mask_file_keeps_rest_shape() {
     })
     .unwrap();
     // R = I everywhere on a closed mesh: the rest shape, recentred (same bbox diagonal).
-    let saved = mesh_core::npz::SavedDeformation::read(golden("bunny_targets.npz")).unwrap();
+    let saved = stylize::saved::SavedDeformation::read(golden("bunny_targets.npz")).unwrap();
     let mut rest = saved.verts_f64();
     mesh_core::normalize::side2_cube(&mut rest);
     let n = rest.len() as f64;

@@ -59,7 +59,9 @@ fn failing_row_is_reported_others_complete_then_skip() {
         statuses[1]
     );
     assert_eq!(statuses[2], &RowStatus::Done { resumed: false });
-    let octa = ok(Config::load(&tmp.path().join("runs/octa/config.toml")));
+    let octa = ok(stylize_cli::config::load(
+        &tmp.path().join("runs/octa/config.toml"),
+    ));
     assert_eq!(
         (octa.run.seed, octa.darap.lambda),
         (4, 5.0),

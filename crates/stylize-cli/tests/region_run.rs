@@ -10,7 +10,8 @@ use std::process::Command;
 
 use darap::Darap;
 use darap::mat3::IDENTITY;
-use mesh_core::npz::{NpyData, SavedDeformation};
+use npy::NpyData;
+use stylize::saved::SavedDeformation;
 use stylize_cli::config::{Config, RegionSection};
 use stylize_cli::runner::{
     LogMode, RunOutcome, RunRequest, Task, darap_options, execute, prepare_mesh_with_region,
@@ -181,7 +182,7 @@ fn cube_style_on_half_the_bunny_leaves_the_other_half_rigid() {
     assert_eq!(summary["region"]["specs"][0], LEFT_HALF);
     assert_eq!(summary["region"]["vertices"], inside);
     assert_eq!(
-        ok(Config::load(&out.join("config.toml"))).region,
+        ok(stylize_cli::config::load(&out.join("config.toml"))).region,
         cfg.region
     );
 

@@ -6,7 +6,7 @@ use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
 use mesh_core::TriMesh;
-use mesh_core::npz::SavedDeformation;
+use stylize::saved::SavedDeformation;
 use stylize_cli::checkpoint::Checkpoint;
 
 fn ok<T, E: std::fmt::Debug>(r: Result<T, E>) -> T {

@@ -6,7 +6,7 @@
 use std::path::{Path, PathBuf};
 
 use mesh_core::TriMesh;
-use mesh_core::npz::SavedDeformation;
+use stylize::saved::SavedDeformation;
 use stylize_cli::config::Config;
 use stylize_cli::runner::{LogMode, RunOutcome, RunRequest, Task, execute};
 use stylize_cli::style::Style;
@@ -97,7 +97,7 @@ fn run_directory_is_complete_and_refuses_overwrite() {
     ] {
         assert!(out.join(f).is_file(), "{f} missing");
     }
-    assert_eq!(ok(Config::load(&out.join("config.toml"))), cfg);
+    assert_eq!(ok(stylize_cli::config::load(&out.join("config.toml"))), cfg);
     let metrics = ok(std::fs::read_to_string(out.join("metrics.jsonl")));
     let iterations: Vec<u64> = metrics
         .lines()

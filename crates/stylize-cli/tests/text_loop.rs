@@ -20,20 +20,19 @@ fn ok<T, E: std::fmt::Debug>(r: Result<T, E>) -> T {
 }
 
 /// Loss = mean pixel value (pushes pixels darker); its gradient is 1/N everywhere, scaled by a
-/// factor drawn from the RNG (so two sub-steps give different gradients, like fresh noise).
+/// factor drawn from the RNG (so two sub-steps give different gradients, like fresh noise). Its
+/// stage-II "loss" is the weight of its schedule at the iteration (as `CascadedGuidance` reads it).
 struct DarkerGuidance {
     calls: Arc<AtomicUsize>,
     random_scale: bool,
+    stage2_weight: Schedule,
 }
 
 impl Guidance for DarkerGuidance {
     fn evaluate(
         &mut self,
-        images: &[f32],
-        _views: usize,
-        _height: usize,
-        _width: usize,
-        stage2_weight: f64,
+        images: &Images,
+        iteration: u64,
         rng: &mut dyn RngCore,
     ) -> Result<GuidanceOutput, GuidanceError> {
         self.calls.fetch_add(1, Ordering::SeqCst);
@@ -42,12 +41,16 @@ impl Guidance for DarkerGuidance {
         } else {
             1.0
         };
-        let n = images.len() as f64;
-        let mean = images.iter().map(|&v| f64::from(v)).sum::<f64>() / n;
+        let n = images.rgb.len() as f64;
+        let mean = images.rgb.iter().map(|&v| f64::from(v)).sum::<f64>() / n;
+        let stage2_weight = self.stage2_weight.at(iteration);
+        let mut grad_images = images.zeros_like();
+        grad_images.rgb.fill((scale / n) as f32);
         Ok(GuidanceOutput {
             loss_stage1: scale * mean,
             loss_stage2: stage2_weight,
-            grad_images: vec![(scale / n) as f32; images.len()],
+            stage2_weight,
+            grad_images,
         })
     }
 }
@@ -116,7 +119,9 @@ fn views() -> ViewSettings {
     }
 }
 
-fn text_objective(random_scale: bool) -> (TextObjective, Arc<AtomicUsize>, Arc<AtomicUsize>) {
+fn text_objective(
+    random_scale: bool,
+) -> (TextObjective<'static>, Arc<AtomicUsize>, Arc<AtomicUsize>) {
     let renders = Arc::new(AtomicUsize::new(0));
     let calls = Arc::new(AtomicUsize::new(0));
     let obj = TextObjective::new(
@@ -127,10 +132,10 @@ fn text_objective(random_scale: bool) -> (TextObjective, Arc<AtomicUsize>, Arc<A
         Box::new(DarkerGuidance {
             calls: calls.clone(),
             random_scale,
+            stage2_weight: ok(Schedule::parse("0.0>0.2:1000; 0.2>0.3:750")),
         }),
         &faces(),
         views(),
-        ok(Schedule::parse("0.0>0.2:1000; 0.2>0.3:750")),
     );
     (obj, renders, calls)
 }
@@ -209,7 +214,7 @@ fn one_render_and_two_guidance_calls_per_iteration() {
     assert_eq!(calls.load(Ordering::SeqCst), 6);
     assert_eq!(state.adam.state().step, 6);
     assert_eq!(records.0.len(), 3);
-    // The stage-II weight is the schedule's value at each (1-indexed) iteration.
+    // The stage-II weight logged is the guidance schedule's value at each (1-indexed) iteration.
     let w: Vec<f64> = records
         .0
         .iter()
@@ -337,6 +342,7 @@ fn text_run_resumed_from_checkpoint_equals_uninterrupted_run() {
         guidance: Box::new(DarkerGuidance {
             calls: Arc::new(AtomicUsize::new(0)),
             random_scale: true,
+            stage2_weight: ok(config.stage2_schedule()),
         }),
     };
     let request = |out: &str, resume: bool, halt_after: Option<u64>| RunRequest {

@@ -9,8 +9,10 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use mesh_core::TriMesh;
 use mesh_core::io::{PlyEncoding, write_glb, write_obj, write_off, write_ply};
-use mesh_core::npz::{NpyArray, NpyData, NpzReader, SavedDeformation, parse_npy, write_npy};
 use mesh_core::validate::{RepairOptions, validate};
+use npy::npz::NpzReader;
+use npy::{NpyArray, NpyData, parse_npy, write_npy};
+use stylize::saved::SavedDeformation;
 
 /// One reader under test.
 pub struct Target {
@@ -57,12 +59,12 @@ fn manifest(path: &Path) {
 }
 
 fn checkpoint(path: &Path) {
-    let _ = stylize_cli::checkpoint::Checkpoint::load(path);
+    let _ = stylize::checkpoint::Checkpoint::load(path);
 }
 
 fn config(path: &Path) {
     if let Ok(text) = std::fs::read_to_string(path) {
-        let _ = stylize_cli::config::Config::from_toml_str(&text);
+        let _ = stylize::config::Config::from_toml_str(&text);
     }
 }
 
@@ -253,8 +255,12 @@ pub fn seeds(target: &str, root: &Path, scratch: &Path) -> anyhow::Result<Vec<Ve
                     NpyArray::new(vec![], NpyData::I64(vec![3])).map_err(anyhow::Error::msg)?,
                 )],
             };
+            let p = scratch.join("s.npz");
+            saved
+                .write(&p)
+                .with_context(|| format!("cannot write seed {}", p.display()))?;
             vec![
-                generate("s.npz", &|p| saved.write(p))?,
+                std::fs::read(&p).with_context(|| format!("cannot read seed {}", p.display()))?,
                 fx("fixtures/meshes/numpy_tet.npz")?,
                 fx("fixtures/meshes/bunny_targets.npz")?,
             ]
@@ -292,8 +298,8 @@ pub fn seeds(target: &str, root: &Path, scratch: &Path) -> anyhow::Result<Vec<Ve
 /// A valid checkpoint, written the way the CLI writes it.
 fn checkpoint_seed(scratch: &Path) -> anyhow::Result<Vec<u8>> {
     use rand::SeedableRng;
-    let c = stylize_cli::checkpoint::Checkpoint {
-        version: stylize_cli::checkpoint::CHECKPOINT_VERSION,
+    let c = stylize::checkpoint::Checkpoint {
+        version: stylize::checkpoint::CHECKPOINT_VERSION,
         iteration: 3,
         x: vec![[0.5, -0.25, 1.0], [1e-300, 2.0, -3.5]],
         adam: optim::AdamState {
@@ -303,7 +309,7 @@ fn checkpoint_seed(scratch: &Path) -> anyhow::Result<Vec<u8>> {
         },
         rng: rand_chacha::ChaCha8Rng::seed_from_u64(9),
         config_toml: "[run]\nseed = 9\n".into(),
-        identity: Some(stylize_cli::identity::TaskIdentity {
+        identity: Some(stylize::identity::TaskIdentity {
             fields: [
                 ("mesh_sha256", "00ff"),
                 ("objective", "style:cube"),

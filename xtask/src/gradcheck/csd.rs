@@ -13,7 +13,8 @@
 use super::{Report, Tolerance};
 use csd::resize::Resize2d;
 use csd::{
-    CascadedGuidance, Denoiser, Embedding, GuidanceConfig, GuidanceError, InjectedDraws, Tensor,
+    CascadedGuidance, Denoiser, Embedding, GuidanceConfig, GuidanceError, Images, InjectedDraws,
+    Tensor,
 };
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -63,11 +64,11 @@ impl Denoiser for PatternDenoiser {
     }
 }
 
-fn guidance(degenerate: bool) -> anyhow::Result<CascadedGuidance> {
+fn guidance(degenerate: bool) -> anyhow::Result<CascadedGuidance<'static>> {
     guidance_with(degenerate, false)
 }
 
-fn guidance_with(degenerate: bool, non_finite: bool) -> anyhow::Result<CascadedGuidance> {
+fn guidance_with(degenerate: bool, non_finite: bool) -> anyhow::Result<CascadedGuidance<'static>> {
     let cond = Embedding {
         shape: [2, 2],
         data: vec![1.0, 2.0, 3.0, 4.0],
@@ -147,25 +148,35 @@ fn check_guidance_chain(
     let img32: Vec<f32> = theta.iter().map(|&v| v as f32).collect();
     let mut rng = ChaCha8Rng::seed_from_u64(seed + 1);
     let trace = g.evaluate_traced(
-        &img32,
-        views,
-        h,
-        w,
+        &imgs(&img32, views, h, w),
         stage2_weight,
         &mut rng,
         &InjectedDraws::default(),
     )?;
-    let grad: Vec<f64> = trace.output.grad_images.iter().map(|&v| v as f64).collect();
+    let grad: Vec<f64> = trace
+        .output
+        .grad_images
+        .rgb
+        .iter()
+        .map(|&v| v as f64)
+        .collect();
 
     let (r, r1, r2) = (cfg.resolution, cfg.stage1_resolution, cfg.stage2_resolution);
     let resize = Resize2d::cubic_antialias((h, w), (r, r))?;
     let down = Resize2d::bilinear((r, r), (r1, r1))?;
     let up = Resize2d::bilinear((r, r), (r2, r2))?;
-    let grad1: Vec<f64> = trace.stage1.grad.data.iter().map(|&v| v as f64).collect();
+    let grad1: Vec<f64> = trace
+        .stage1
+        .score
+        .grad
+        .data
+        .iter()
+        .map(|&v| v as f64)
+        .collect();
     let grad2: Option<Vec<f64>> = trace
         .stage2
         .as_ref()
-        .map(|s| s.grad.data.iter().map(|&v| v as f64).collect());
+        .map(|s| s.score.grad.data.iter().map(|&v| v as f64).collect());
     let b = views as f64;
     let forward = |img: &[f64]| -> anyhow::Result<f64> {
         let x: Vec<f64> = resize
@@ -201,7 +212,12 @@ fn check_degenerate(report: &mut Report) -> anyhow::Result<()> {
     let mut refusing = guidance_with(false, true)?;
     let mut rng = ChaCha8Rng::seed_from_u64(98);
     let img = vec![0.5f32; 2 * 64 * 64 * 3];
-    match refusing.evaluate_traced(&img, 2, 64, 64, 1.0, &mut rng, &InjectedDraws::default()) {
+    match refusing.evaluate_traced(
+        &imgs(&img, 2, 64, 64),
+        1.0,
+        &mut rng,
+        &InjectedDraws::default(),
+    ) {
         Err(GuidanceError::NonFinite { .. }) => {}
         Err(e) => {
             report.fail(name, format!("NaN predictions: wrong error {e}"));
@@ -220,8 +236,13 @@ fn check_degenerate(report: &mut Report) -> anyhow::Result<()> {
         ("white", vec![1.0f32; views * h * w * 3]),
         ("out of range", vec![1e30f32; views * h * w * 3]),
     ] {
-        let out = g.evaluate_traced(&img, views, h, w, 1.0, &mut rng, &InjectedDraws::default())?;
-        let finite = out.output.grad_images.iter().all(|v| v.is_finite())
+        let out = g.evaluate_traced(
+            &imgs(&img, views, h, w),
+            1.0,
+            &mut rng,
+            &InjectedDraws::default(),
+        )?;
+        let finite = out.output.grad_images.rgb.iter().all(|v| v.is_finite())
             && out.output.loss_stage1.is_finite()
             && out.output.loss_stage2.is_finite();
         if !finite {
@@ -296,4 +317,14 @@ pub fn suite(report: &mut Report) -> anyhow::Result<()> {
         71,
     )?;
     check_degenerate(report)
+}
+
+/// The image batch for `views` renders of `h`×`w` (no length check: bad-input tests pass wrong sizes).
+fn imgs(data: &[f32], views: usize, h: usize, w: usize) -> Images {
+    Images {
+        count: views,
+        height: h,
+        width: w,
+        rgb: data.to_vec(),
+    }
 }

@@ -1,13 +1,8 @@
-//! Gradient checks of the model-free style objective (`stylize-cli`'s `style::alignment`):
+//! Gradient checks of the model-free style objective (`stylize::style::alignment`):
 //! ℓ(P) = Σ_f A_f (1 − n_f · t_f) with respect to the deformed positions P, the same loss through
 //! the dARAP layer with respect to the raw targets x, and finiteness on degenerate faces.
-//!
-//! The objective's source file depends on `std` only and is compiled here directly, so this check
-//! does not pull the CLI's model and GPU crates (or a mid-edit subcommand) into xtask.
 
-#[path = "../../../crates/stylize-cli/src/style/alignment.rs"]
-#[allow(dead_code)]
-mod alignment;
+use stylize::style::alignment;
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;

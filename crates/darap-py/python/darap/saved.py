@@ -143,7 +143,7 @@ def _string(path: str, key: str, a: np.ndarray) -> str:
 def load_saved(npz_path: PathLike) -> SavedDeformation:
     """Reads a saved deformation (``.npz`` in the reference's format, spec §8).
 
-    Checks what ``mesh_core::npz::SavedDeformation::read`` checks: the five standard keys exist,
+    Checks what ``stylize::saved::SavedDeformation::read`` checks: the five standard keys exist,
     ``verts``/``verts_normals`` are float (V, 3) with the same V, ``faces`` integer (F, 3) with
     indices in [0, V). Raises ``ValueError`` naming the file and key otherwise (and
     ``FileNotFoundError`` for a missing file). No pickled data is ever loaded.

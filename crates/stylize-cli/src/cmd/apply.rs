@@ -25,14 +25,15 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, bail, ensure};
 use darap::{Darap, DarapOptions, PostProcess, RotationRule};
 use mesh_core::TriMesh;
-use mesh_core::npz::{NpyData, SavedDeformation};
+use npy::NpyData;
+use stylize::saved::SavedDeformation;
 
 /// Rotation rule on the command line.
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
 pub enum RuleArg {
-    /// The reference rule (spec §3.3); what saved files and the paper's λ values assume.
+    /// The reference's rule; what saved files and the paper's λ values assume.
     Gis,
-    /// The textbook Kabsch rule with positive weights (spec §3.4); needs a larger λ.
+    /// The textbook Kabsch rule with positive weights; needs a larger λ.
     Procrustes,
 }
 
@@ -51,10 +52,10 @@ pub struct Args {
     /// Saved deformation (`.npz` in the reference's format).
     pub saved: PathBuf,
     /// Output mesh (`.obj`, `.ply` or `.glb`). With several λ: one file per λ, `OUT_lambda<λ>.ext`.
-    #[arg(short, long, visible_alias = "out")]
+    #[arg(short, long = "out", alias = "output", value_name = "FILE")]
     pub output: PathBuf,
-    /// Strength(s) λ, comma separated (default: the λ saved in the file).
-    #[arg(long, value_delimiter = ',')]
+    /// Strength(s) λ ≥ 0, comma separated (default: the λ saved in the file).
+    #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
     pub lambda: Vec<f64>,
     /// Rotation rule (default: the file's `rotation_rule` key if present, else `gis`).
     #[arg(long, value_enum)]
@@ -234,7 +235,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     for &l in &lambdas {
         ensure!(
             l.is_finite() && l >= 0.0,
-            "λ must be a finite non-negative number, got {l}"
+            "--lambda {l}: the strength λ must be a finite number ≥ 0"
         );
     }
     let rule = match args.rotation_rule {

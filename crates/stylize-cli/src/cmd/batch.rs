@@ -6,7 +6,7 @@ use anyhow::bail;
 
 use crate::batch::{BatchOptions, RowStatus, Shard, read_manifest, run_batch_until_interrupted};
 use crate::cmd::run::resolve_config;
-use crate::runner::LogMode;
+use crate::cmd::shared::{LogFormat, RunSettings, count_noun};
 use crate::signals::shell_quote;
 
 /// Arguments of `stylize batch`.
@@ -18,57 +18,47 @@ pub struct Args {
     /// when set, else every row.
     #[arg(long)]
     pub shard: Option<String>,
-    /// ONNX model directory for prompt rows (loaded once).
-    #[arg(long)]
-    pub model: Option<PathBuf>,
-    /// Base configuration file for every row.
-    #[arg(long)]
-    pub config: Option<PathBuf>,
-    /// Override a config key for every row (repeatable).
-    #[arg(long = "set", value_name = "KEY=VALUE")]
-    pub set: Vec<String>,
     /// Redo every row from scratch: complete rows, rows of a different task, partial rows
     /// (removes only the run directories' own files).
     #[arg(long)]
     pub force: bool,
-    /// One JSON line per iteration instead of a progress bar.
-    #[arg(long)]
+    // Model, configuration and progress options, shared with `stylize run` (the per-row summary is
+    // printed even with --quiet).
+    #[command(flatten)]
+    pub settings: RunSettings,
+    /// Same as `--log-format jsonl` (kept for existing scripts).
+    #[arg(long, hide = true)]
     pub jsonl: bool,
-    /// No progress output (the per-row summary is still printed).
-    #[arg(long, short)]
-    pub quiet: bool,
 }
 
 /// Runs `stylize batch`.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let config = resolve_config(args.config.as_deref(), &args.set, None, None)?;
+    let mut settings = args.settings.clone();
+    if args.jsonl {
+        settings.log_format = LogFormat::Jsonl;
+    }
+    let config = resolve_config(settings.config.as_deref(), &settings.set, None, None)?;
     let shard = match &args.shard {
         Some(s) => Shard::parse(s)?,
         None => Shard::from_env(|k| std::env::var(k).ok())?.unwrap_or(Shard::ALL),
     };
     let rows = read_manifest(&args.manifest)?;
-    let log = if args.quiet {
-        LogMode::Quiet
-    } else if args.jsonl {
-        LogMode::Jsonl
-    } else {
-        LogMode::Bar
-    };
+    let log = settings.log_mode();
     let mut inputs = vec![("manifest".to_string(), args.manifest.clone())];
-    if let Some(c) = &args.config {
+    if let Some(c) = &settings.config {
         inputs.push(("config file".into(), c.clone()));
     }
     let options = BatchOptions {
         config,
         shard,
-        model: args.model.clone(),
+        model: settings.model.clone(),
         log,
         force: args.force,
         inputs,
     };
     let (results, interrupted) = run_batch_until_interrupted(&rows, &options);
     let mut failed = 0;
-    for (i, row, status) in &results {
+    for (i, row, status, warnings) in &results {
         let what = match status {
             RowStatus::Skipped => "skipped (complete)".to_string(),
             RowStatus::Done { resumed: true } => "done (resumed)".to_string(),
@@ -83,12 +73,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             row.mesh.display(),
             row.out.display()
         );
+        for w in warnings {
+            eprintln!("  warning: {w}");
+        }
     }
     eprintln!(
-        "shard {}/{}: {} rows, {} failed",
+        "shard {}/{}: {}, {} failed",
         shard.index,
         shard.count,
-        results.len(),
+        count_noun(results.len(), "row", "rows"),
         failed
     );
     if let Some(i) = interrupted {
@@ -102,7 +95,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         return Err(i.into());
     }
     if failed > 0 {
-        bail!("{failed} of {} rows failed", results.len());
+        bail!(
+            "{failed} of {} failed",
+            count_noun(results.len(), "row", "rows")
+        );
     }
     Ok(())
 }

@@ -25,7 +25,8 @@ use csd::{CascadedGuidance, Denoiser, GuidanceConfig, InjectedDraws};
 use diffusion_onnx::{
     EmbeddingCache, ModelDir, OnnxDenoiser, SessionOptions, Stage, prompt_embeddings,
 };
-use mesh_core::npz::{NpyArray, NpyData, NpzWriter, parse_npy};
+use npy::npz::NpzWriter;
+use npy::{NpyArray, NpyData, parse_npy};
 use rand::SeedableRng;
 
 /// Arguments of `stylize debug-guidance`.
@@ -166,10 +167,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(args.seed);
     let trace = guidance
         .evaluate_traced(
-            &images,
-            views,
-            height,
-            width,
+            &csd::Images::new(views, height, width, images)?,
             args.stage2_weight,
             &mut rng,
             &InjectedDraws::default(),
@@ -183,38 +181,38 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let s1 = &trace.stage1;
     for (k, t) in [
         ("z0", &s1.z0),
-        ("noise", &s1.noise),
+        ("noise", &s1.score.noise),
         ("z_t", &s1.z_t),
-        ("eps_cond", &s1.eps_cond),
-        ("eps_uncond", &s1.eps_uncond),
-        ("eps_guided", &s1.eps_guided),
-        ("grad", &s1.grad),
+        ("eps_cond", &s1.score.eps_cond),
+        ("eps_uncond", &s1.score.eps_uncond),
+        ("eps_guided", &s1.score.eps_guided),
+        ("grad", &s1.score.grad),
     ] {
         tensor(&mut w, &format!("stage1_{k}"), t)?;
     }
-    ints(&mut w, "stage1_timesteps", &s1.timesteps)?;
+    ints(&mut w, "stage1_timesteps", &s1.score.timesteps)?;
     if let Some(s2) = &trace.stage2 {
         for (k, t) in [
             ("x0", &s2.x0),
             ("z_hat", &s2.z_hat),
-            ("noise", &s2.noise),
+            ("noise", &s2.score.noise),
             ("noise_lowres", &s2.noise_lowres),
             ("x_t", &s2.x_t),
             ("z_hat_s", &s2.z_hat_s),
-            ("eps_cond", &s2.eps_cond),
-            ("eps_uncond", &s2.eps_uncond),
-            ("eps_guided", &s2.eps_guided),
-            ("grad", &s2.grad),
+            ("eps_cond", &s2.score.eps_cond),
+            ("eps_uncond", &s2.score.eps_uncond),
+            ("eps_guided", &s2.score.eps_guided),
+            ("grad", &s2.score.grad),
         ] {
             tensor(&mut w, &format!("stage2_{k}"), t)?;
         }
-        ints(&mut w, "stage2_timesteps", &s2.timesteps)?;
+        ints(&mut w, "stage2_timesteps", &s2.score.timesteps)?;
         ints(&mut w, "stage2_noise_levels", &s2.noise_levels)?;
     }
     tensor(&mut w, "grad_x", &trace.grad_x)?;
     w.add(
         "grad_images",
-        &f32_array(&[views, height, width, 3], &trace.output.grad_images)?,
+        &f32_array(&[views, height, width, 3], &trace.output.grad_images.rgb)?,
     )
     .context("writing grad_images")?;
     scalar(&mut w, "loss_stage1", trace.output.loss_stage1)?;
@@ -237,6 +235,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         trace
             .output
             .grad_images
+            .rgb
             .iter()
             .fold(0.0f32, |m, v| m.max(v.abs()))
     );
@@ -246,7 +245,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use mesh_core::npz::NpzReader;
+    use npy::npz::NpzReader;
 
     fn tiny() -> PathBuf {
         PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/models/tiny-if")
@@ -257,7 +256,7 @@ mod tests {
         let data: Vec<f32> = (0..n).map(|i| ((i * 7919) % 1000) as f32 / 999.0).collect();
         let a = NpyArray::new(vec![views, side, side, 3], NpyData::F32(data))
             .map_err(|e| anyhow::anyhow!(e))?;
-        std::fs::write(path, mesh_core::npz::write_npy(&a))?;
+        std::fs::write(path, npy::write_npy(&a))?;
         Ok(())
     }
 
@@ -325,7 +324,7 @@ mod tests {
         let dir = tempfile::tempdir()?;
         let a = NpyArray::new(vec![1, 4, 4, 3], NpyData::F32(vec![2.0; 48]))
             .map_err(|e| anyhow::anyhow!(e))?;
-        std::fs::write(dir.path().join("imgs.npy"), mesh_core::npz::write_npy(&a))?;
+        std::fs::write(dir.path().join("imgs.npy"), npy::write_npy(&a))?;
         let msg = run(args(dir.path(), 0.0, 1, "d.npz"))
             .err()
             .map(|e| format!("{e:#}"))

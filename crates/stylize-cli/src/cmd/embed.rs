@@ -23,7 +23,7 @@ pub struct Args {
     #[arg(long)]
     pub force: bool,
     /// ONNX Runtime intra-op threads (default: one per core).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub threads: Option<usize>,
 }
 

@@ -28,10 +28,20 @@ pub struct Args {
     #[arg(long, value_name = "DIR")]
     pub clip: Option<PathBuf>,
     /// Orbit views rendered per mesh for CLIP.
-    #[arg(long, default_value_t = 16, requires = "clip")]
+    #[arg(
+        long,
+        default_value_t = 16,
+        requires = "clip",
+        allow_negative_numbers = true
+    )]
     pub clip_views: usize,
     /// Side in pixels of the CLIP renders (the CLIP model then resizes them to its own size).
-    #[arg(long, default_value_t = 512, requires = "clip")]
+    #[arg(
+        long,
+        default_value_t = 512,
+        requires = "clip",
+        allow_negative_numbers = true
+    )]
     pub clip_render_size: usize,
     /// Prompt for the `--pair` pairs' CLIP similarity (run directories use their own prompt).
     #[arg(long, requires = "clip")]

@@ -36,7 +36,7 @@ struct CheckArgs {
     #[arg(long)]
     drop_out_of_range: bool,
     /// A face is a needle when its smallest corner angle is below this (degrees).
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
     needle_angle: f64,
     /// List the parts the file offers for `--region` (OBJ groups/objects/materials, glTF
     /// nodes/meshes, PLY properties) with the vertices each selects, instead of the report.

@@ -8,3 +8,4 @@ pub mod eval;
 pub mod mesh;
 pub mod render;
 pub mod run;
+pub mod shared;

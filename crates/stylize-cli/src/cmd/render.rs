@@ -18,25 +18,25 @@ const BATCH: usize = 8;
 /// Arguments of `stylize render`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// Mesh file (OBJ; other formats as `mesh_core::io` supports them).
+    /// Mesh file (OBJ, OFF, PLY, glTF/GLB).
     pub mesh: PathBuf,
     /// Number of turntable frames.
-    #[arg(long, default_value_t = 8)]
+    #[arg(long, default_value_t = 8, allow_negative_numbers = true)]
     pub turntable: usize,
     /// Output folder (created if missing).
-    #[arg(short, long, visible_alias = "out")]
+    #[arg(short, long = "out", alias = "output", value_name = "DIR")]
     pub output: PathBuf,
     /// Image width and height in pixels.
-    #[arg(long, default_value_t = 512)]
+    #[arg(long, default_value_t = 512, allow_negative_numbers = true)]
     pub size: usize,
     /// Camera elevation in degrees.
-    #[arg(long, default_value_t = 20.0)]
+    #[arg(long, default_value_t = 20.0, allow_negative_numbers = true)]
     pub elevation: f64,
     /// Camera distance from the origin (the mesh fills the side-2 cube).
-    #[arg(long, default_value_t = 2.5)]
+    #[arg(long, default_value_t = 2.5, allow_negative_numbers = true)]
     pub distance: f64,
     /// Vertical field of view in degrees (90° is the reference's effective value).
-    #[arg(long, default_value_t = 90.0)]
+    #[arg(long, default_value_t = 90.0, allow_negative_numbers = true)]
     pub fov: f64,
     /// Columns of the contact sheet (default: ceil(sqrt(N))).
     #[arg(long)]
@@ -74,7 +74,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
     anyhow::ensure!(
         args.distance.is_finite() && args.distance > 0.0,
-        "--distance must be positive"
+        "--distance must be positive, got {}",
+        args.distance
+    );
+    anyhow::ensure!(
+        args.fov > 0.0 && args.fov < 180.0,
+        "--fov must be between 0 and 180 degrees, got {}",
+        args.fov
     );
     let mut mesh = mesh_core::io::read_mesh(&args.mesh)
         .with_context(|| format!("reading mesh {}", args.mesh.display()))?;

@@ -4,20 +4,12 @@ use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 
+use crate::cmd::shared::RunSettings;
 use crate::config::Config;
 use crate::identity::{ModelIdentity, ObjectiveIdentity};
-use crate::runner::{LogMode, RunOptions, RunRequest, Task, execute_with};
+use crate::runner::{RunOptions, RunRequest, Task, execute_with};
 use crate::signals::{Interrupted, shell_quote};
 use crate::style::Style;
-
-/// Progress output format.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum LogFormat {
-    /// A progress bar (iteration, loss, it/s, ETA).
-    Bar,
-    /// One JSON object per iteration on stdout.
-    Jsonl,
-}
 
 /// Arguments of `stylize run`.
 #[derive(clap::Args, Debug)]
@@ -25,34 +17,28 @@ pub struct Args {
     /// Input mesh (OBJ, OFF, PLY, glTF/GLB; see `stylize mesh check` for what is repaired).
     pub mesh: PathBuf,
     /// Run directory (created with its parents).
-    #[arg(short, long, visible_alias = "output")]
+    #[arg(short, long, alias = "output", value_name = "DIR")]
     pub out: PathBuf,
     /// Model-free style: `cube`, `octahedron` or `exemplar:MESH`.
-    #[arg(long, conflicts_with = "prompt", required_unless_present = "prompt")]
+    #[arg(long, value_name = "NAME", conflicts_with = "prompt")]
     pub style: Option<String>,
     /// Text prompt (needs --model).
-    #[arg(long)]
+    #[arg(long, value_name = "TEXT")]
     pub prompt: Option<String>,
     /// Negative prompt (overrides guidance.negative_prompt).
-    #[arg(long)]
+    #[arg(long, value_name = "TEXT", allow_hyphen_values = true)]
     pub negative_prompt: Option<String>,
-    /// ONNX model directory for the text path (docs/models.md).
-    #[arg(long)]
-    pub model: Option<PathBuf>,
-    /// Configuration file (TOML); defaults are the reference's.
-    #[arg(long)]
-    pub config: Option<PathBuf>,
-    /// Override a config key, e.g. `--set darap.lambda=5` (repeatable).
-    #[arg(long = "set", value_name = "KEY=VALUE")]
-    pub set: Vec<String>,
+    // Model, configuration and progress options, shared with `stylize batch`.
+    #[command(flatten)]
+    pub settings: RunSettings,
     /// Seed (same as `--set run.seed=N`).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub seed: Option<u64>,
     /// Stylize only this region (repeatable: the union). `box:x0,y0,z0,x1,y1,z1` or
     /// `sphere:cx,cy,cz,r` in the normalized side-2 frame, `vertices:FILE`, `part:NAME` (OBJ
     /// group/object/material, glTF node/mesh), `property:NAME OP VALUE` (PLY), `not:SPEC`.
     /// Replaces `region.specs` of the configuration. See `stylize mesh check --regions FILE`.
-    #[arg(long, value_name = "SPEC")]
+    #[arg(long, value_name = "SPEC", allow_hyphen_values = true)]
     pub region: Vec<String>,
     /// Rings inside the region's boundary over which λ fades to zero (replaces `region.feather`).
     #[arg(long, value_name = "K")]
@@ -69,12 +55,6 @@ pub struct Args {
     /// run directory. Removes only the run's own files; never replaces an input.
     #[arg(long)]
     pub force: bool,
-    /// No progress output.
-    #[arg(long, short)]
-    pub quiet: bool,
-    /// Progress format.
-    #[arg(long, value_enum, default_value = "bar")]
-    pub log_format: LogFormat,
     /// Stop after this iteration without writing outputs (to test --resume).
     #[arg(long, hide = true)]
     pub stop_after: Option<u64>,
@@ -88,7 +68,7 @@ pub fn resolve_config(
     negative_prompt: Option<&str>,
 ) -> anyhow::Result<Config> {
     let base = match file {
-        Some(p) => Config::load(p)?,
+        Some(p) => crate::config::load(p)?,
         None => Config::default(),
     };
     let mut config = base.with_overrides(set)?;
@@ -116,7 +96,7 @@ pub fn resume_command(args: &Args) -> String {
     if let Some(p) = &args.prompt {
         parts.extend(["--prompt".into(), p.clone()]);
     }
-    if let Some(m) = &args.model {
+    if let Some(m) = &args.settings.model {
         parts.extend(["--model".into(), m.display().to_string()]);
     }
     parts.push("--resume".into());
@@ -129,20 +109,26 @@ pub fn resume_command(args: &Args) -> String {
 
 /// Runs `stylize run`.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    if args.style.is_none() && args.prompt.is_none() {
+        bail!(
+            "give --style NAME (model-free: cube, octahedron, exemplar:MESH) or --prompt TEXT \
+             (with --model DIR)"
+        );
+    }
     let saved = args.out.join("config.toml");
-    let no_config_flags = args.config.is_none()
-        && args.set.is_empty()
+    let no_config_flags = args.settings.config.is_none()
+        && args.settings.set.is_empty()
         && args.seed.is_none()
         && args.negative_prompt.is_none();
     // `--resume` alone continues with the run's own resolved configuration.
     let config_file = if args.resume && no_config_flags && saved.is_file() {
         Some(saved)
     } else {
-        args.config.clone()
+        args.settings.config.clone()
     };
     let config = resolve_config(
         config_file.as_deref(),
-        &args.set,
+        &args.settings.set,
         args.seed,
         args.negative_prompt.as_deref(),
     )?;
@@ -156,14 +142,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             options.inputs.push(("region vertex file".into(), file));
         }
     }
-    let log = if args.quiet {
-        LogMode::Quiet
-    } else {
-        match args.log_format {
-            LogFormat::Bar => LogMode::Bar,
-            LogFormat::Jsonl => LogMode::Jsonl,
-        }
-    };
+    let log = args.settings.log_mode();
     let request = RunRequest {
         mesh: args.mesh.clone(),
         out: args.out.clone(),
@@ -183,7 +162,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             execute_with(&request, objective, || Ok(Task::Style(style)), &options)
         }
         (None, Some(prompt)) => {
-            let Some(model) = &args.model else {
+            let Some(model) = &args.settings.model else {
                 bail!(
                     "--prompt needs --model DIR: an ONNX export of DeepFloyd IF (see docs/models.md for how to export it). \
                      Without models, try a model-free style: --style cube"
@@ -203,13 +182,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 || {
                     Ok(Task::Text {
                         prompt: prompt.clone(),
-                        guidance: crate::models::load_guidance(model, prompt, &config)?,
+                        guidance: Box::new(crate::models::load_guidance(model, prompt, &config)?),
                     })
                 },
                 &options,
             )
         }
-        _ => bail!("give exactly one of --style or --prompt"),
+        _ => bail!("give --style NAME or --prompt TEXT, not both"),
     };
     let outcome = match result {
         Ok(o) => o,
@@ -223,7 +202,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             return Err(e).with_context(|| format!("run on {}", args.mesh.display()));
         }
     };
-    if !args.quiet {
+    if !args.settings.quiet {
         for w in &outcome.warnings {
             eprintln!("warning: {w}");
         }

@@ -1,10 +1,21 @@
-//! NPZ reading/writing against the golden saved-deformation file and by round trips.
-#![cfg(feature = "io")]
+//! The saved-deformation `.npz` against the golden file and by round trips (moved from mesh-core
+//! with the format).
 
-mod common;
+use mesh_core::{TriMesh, io::read_mesh, normalize::side2_cube};
+use npy::npz::{NpzReader, NpzWriter};
+use npy::{NpyArray, NpyData, NpyError};
+use stylize::saved::{SavedDeformation, SavedError};
 
-use mesh_core::npz::{NpyArray, NpyData, NpzReader, NpzWriter, SavedDeformation};
-use mesh_core::{MeshError, io::read_mesh, normalize::side2_cube};
+mod common {
+    use std::path::PathBuf;
+
+    /// A file of `fixtures/meshes/`.
+    pub fn fixture(name: &str) -> PathBuf {
+        PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+            .join("../../fixtures/meshes")
+            .join(name)
+    }
+}
 
 #[test]
 fn golden_saved_deformation_reads_with_reference_keys_and_config() {
@@ -145,7 +156,7 @@ fn missing_keys_wrong_shapes_and_garbage_are_clear_errors() {
     w.finish().expect("finish");
     let e = SavedDeformation::read(&p).expect_err("bad input must be rejected");
     assert!(
-        matches!(&e, MeshError::Npy { key, .. } if key == "faces"),
+        matches!(&e, SavedError::Npy(NpyError::Array { key, .. }) if key == "faces"),
         "{e}"
     );
     assert!(e.to_string().contains("(N, 3)"), "{e}");
@@ -163,7 +174,7 @@ fn missing_keys_wrong_shapes_and_garbage_are_clear_errors() {
 
     let e = SavedDeformation::read(dir.path().join("absent.npz"))
         .expect_err("bad input must be rejected");
-    assert!(matches!(e, MeshError::Io { .. }));
+    assert!(matches!(e, SavedError::Npy(NpyError::Io { .. })));
 }
 
 #[test]
@@ -211,4 +222,49 @@ fn numpy_savez_compressed_file_with_other_dtypes_reads() {
         (extra("seed").shape.len(), extra("seed").data),
         (0, NpyData::U32(vec![42]))
     );
+}
+
+#[test]
+fn npz_reads_only_the_entries_it_needs() {
+    use std::io::Write;
+    let dir = tempfile::tempdir().expect("tempdir");
+    let path = dir.path().join("s.npz");
+    let tet = TriMesh::new(
+        vec![[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+        vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]],
+    );
+    let saved = SavedDeformation {
+        verts: tet.positions.iter().map(|p| p.map(|c| c as f32)).collect(),
+        faces: tet.faces.clone(),
+        verts_normals: vec![[0.0, 0.0, 1.0]; 4],
+        deform_by_csd_cfg: "{}".into(),
+        dataset_cfg: "{}".into(),
+        extra: vec![("seed".into(), NpyArray::scalar_str("3"))],
+    };
+    saved.write(&path).expect("writes");
+    // Append a deflated extra entry that declares 32 MiB and whose stream is garbage: inflating
+    // it would fail (and, were it a real 3 GB stream, cost 3 GB).
+    {
+        let file = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .open(&path)
+            .expect("open");
+        let mut zip = zip::ZipWriter::new_append(file).expect("append");
+        let opts = zip::write::SimpleFileOptions::default()
+            .compression_method(zip::CompressionMethod::Deflated);
+        zip.start_file("junk.npy", opts).expect("start");
+        zip.write_all(&vec![0u8; 32 << 20]).expect("write");
+        zip.finish().expect("finish");
+    }
+    let back = SavedDeformation::read(&path).expect("reads without the junk");
+    assert_eq!(back.verts, saved.verts);
+    assert!(
+        back.extra("junk").is_none(),
+        "large extra entries are not loaded"
+    );
+    assert!(back.extra("seed").is_some());
+    let r = NpzReader::open(&path).expect("opens");
+    assert_eq!(r.declared_size("junk"), Some(32 << 20));
+    assert!(r.require("verts").is_ok());
 }

@@ -1,3 +1,7 @@
+//! NumPy arrays on disk: the `.npy` format (this module) and, with the default feature `npz`, the
+//! `.npz` archive ([`npz`]). Nothing here knows about meshes; mesh-core, diffusion-onnx and stylize
+//! build their files on it.
+//!
 //! The `.npy` array format (NumPy format versions 1.0, 2.0 and 3.0), little-endian, C order.
 //!
 //! Layout: magic `\x93NUMPY`, two version bytes, a header length (`u16` LE in 1.0, `u32` LE in 2.0
@@ -8,8 +12,14 @@
 //! `n` UTF-32LE code units, padded with NUL at the end; `<f2` is IEEE half precision (DeepFloyd IF
 //! ships its empty-prompt embedding in it).
 //!
-//! This module needs no zip support and is available without the `io` feature; [`crate::npz`]
-//! builds `.npz` archives on it.
+//! [`parse_npy`] and [`write_npy`] work on bytes and need no zip support; [`npz`] (feature `npz`,
+//! on by default, the only user of the `zip` dependency) builds `.npz` archives on them.
+
+mod error;
+#[cfg(feature = "npz")]
+pub mod npz;
+
+pub use error::{NpyError, ensure_regular_file};
 
 /// The elements of an array, by dtype.
 #[derive(Clone, Debug, PartialEq)]

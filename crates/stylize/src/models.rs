@@ -2,16 +2,13 @@
 //! model directory (`docs/models.md`), the prompt embeddings (cached), and the guidance.
 //!
 //! [`ModelSet`] opens the UNet sessions once; [`ModelSet::guidance_for`] builds a guidance for
-//! one prompt that shares those sessions, so a batch loads the models a single time.
+//! one prompt that borrows those sessions (no lock: one run at a time holds them), so a batch loads
+//! the models a single time; [`ModelSet::into_guidance`] hands them to a single run.
 
 use std::path::Path;
-use std::sync::{Arc, Mutex};
 
 use anyhow::Context;
-use csd::{
-    CascadedGuidance, Denoiser, Embedding, Guidance, GuidanceConfig, GuidanceError, Tensor,
-    TimestepRange,
-};
+use csd::{CascadedGuidance, Denoiser, Embedding, GuidanceConfig, TimestepRange};
 use diffusion_onnx::{EmbeddingCache, ModelDir, OnnxDenoiser, SessionOptions, Stage};
 
 use crate::config::Config;
@@ -32,40 +29,13 @@ pub fn guidance_config(config: &Config) -> GuidanceConfig {
     }
 }
 
-/// A denoiser shared between guidances (one run at a time uses it).
-#[derive(Clone)]
-struct Shared(Arc<Mutex<OnnxDenoiser>>);
-
-impl Denoiser for Shared {
-    fn describe(&self) -> String {
-        self.0.lock().map_or_else(
-            |_| "a UNet whose last run panicked".into(),
-            |d| d.describe(),
-        )
-    }
-
-    fn predict(
-        &mut self,
-        sample: &Tensor,
-        timesteps: &[i64],
-        embeddings: &[&Embedding],
-        class_labels: Option<&[i64]>,
-    ) -> Result<Tensor, GuidanceError> {
-        let mut d = self
-            .0
-            .lock()
-            .map_err(|_| GuidanceError::Model("a previous run panicked inside the UNet".into()))?;
-        d.predict(sample, timesteps, embeddings, class_labels)
-    }
-}
-
 /// Opened model sessions, reusable across prompts.
 pub struct ModelSet {
     dir: ModelDir,
     options: SessionOptions,
     cache: Option<EmbeddingCache>,
-    stage1: Shared,
-    stage2: Option<Shared>,
+    stage1: OnnxDenoiser,
+    stage2: Option<OnnxDenoiser>,
 }
 
 impl std::fmt::Debug for ModelSet {
@@ -90,23 +60,25 @@ impl ModelSet {
         let cache = EmbeddingCache::at_default().ok();
         let stage1 = OnnxDenoiser::open(&dir, Stage::One, &options).context("IF stage I")?;
         let stage2 = match dir.stage(Stage::Two) {
-            Some(_) => Some(Shared(Arc::new(Mutex::new(
-                OnnxDenoiser::open(&dir, Stage::Two, &options).context("IF stage II")?,
-            )))),
+            Some(_) => Some(OnnxDenoiser::open(&dir, Stage::Two, &options).context("IF stage II")?),
             None => None,
         };
         Ok(Self {
             dir,
             options,
             cache,
-            stage1: Shared(Arc::new(Mutex::new(stage1))),
+            stage1,
             stage2,
         })
     }
 
-    /// A guidance for `prompt` (negative prompt and settings from `config`). Without a stage-II
-    /// model the stage-II weight schedule must stay at 0 (the guidance errors otherwise).
-    pub fn guidance_for(&self, prompt: &str, config: &Config) -> anyhow::Result<Box<dyn Guidance>> {
+    /// The prompt embeddings for `prompt` (negative prompt from `config`), after checking that the
+    /// stage-II weight schedule only uses stage II when the model directory has it.
+    fn embeddings_for(
+        &self,
+        prompt: &str,
+        config: &Config,
+    ) -> anyhow::Result<(Embedding, Embedding)> {
         let stage2_used = config.stage2_schedule()?.phases().iter().any(|p| match *p {
             optim::Phase::Constant { value, .. } => value != 0.0,
             optim::Phase::Ramp { from, to, .. } => from != 0.0 || to != 0.0,
@@ -119,27 +91,59 @@ impl ModelSet {
                 config.guidance.stage2_weight
             );
         }
-        let (cond, uncond) = diffusion_onnx::prompt_embeddings(
+        diffusion_onnx::prompt_embeddings(
             &self.dir,
             prompt,
             &config.guidance.negative_prompt,
             self.cache.as_ref(),
             &self.options,
         )
-        .context("prompt embeddings")?;
+        .context("prompt embeddings")
+    }
+
+    /// A guidance for `prompt` (negative prompt, settings and stage-II weight schedule from
+    /// `config`) that borrows this set's UNets until it is dropped. Without a stage-II model the
+    /// stage-II weight schedule must stay at 0.
+    pub fn guidance_for(
+        &mut self,
+        prompt: &str,
+        config: &Config,
+    ) -> anyhow::Result<CascadedGuidance<'_>> {
+        let (cond, uncond) = self.embeddings_for(prompt, config)?;
         let stage2 = self
             .stage2
-            .clone()
-            .map(|s| Box::new(s) as Box<dyn Denoiser>);
+            .as_mut()
+            .map(|s| Box::new(s) as Box<dyn Denoiser + '_>);
         let guidance = CascadedGuidance::new(
-            Box::new(self.stage1.clone()),
+            Box::new(&mut self.stage1),
             stage2,
             cond,
             uncond,
             guidance_config(config),
         )
-        .context("guidance")?;
-        Ok(Box::new(guidance))
+        .context("guidance")?
+        .with_stage2_weight(config.stage2_schedule()?);
+        Ok(guidance)
+    }
+
+    /// Like [`Self::guidance_for`], handing the UNets over to the guidance.
+    pub fn into_guidance(
+        self,
+        prompt: &str,
+        config: &Config,
+    ) -> anyhow::Result<CascadedGuidance<'static>> {
+        let (cond, uncond) = self.embeddings_for(prompt, config)?;
+        let stage2 = self.stage2.map(|s| Box::new(s) as Box<dyn Denoiser>);
+        let guidance = CascadedGuidance::new(
+            Box::new(self.stage1),
+            stage2,
+            cond,
+            uncond,
+            guidance_config(config),
+        )
+        .context("guidance")?
+        .with_stage2_weight(config.stage2_schedule()?);
+        Ok(guidance)
     }
 }
 
@@ -148,6 +152,6 @@ pub fn load_guidance(
     model: &Path,
     prompt: &str,
     config: &Config,
-) -> anyhow::Result<Box<dyn Guidance>> {
-    ModelSet::open(model, config)?.guidance_for(prompt, config)
+) -> anyhow::Result<CascadedGuidance<'static>> {
+    ModelSet::open(model, config)?.into_guidance(prompt, config)
 }

@@ -1,11 +1,32 @@
-//! The reference's saved-deformation `.npz` (spec §8).
+//! The reference's saved-deformation `.npz` (spec §8), read and written with the `npy` crate.
 
 use std::path::Path;
 
 use serde_json::Value;
 
-use super::{NpyArray, NpzReader, NpzWriter};
-use crate::MeshError;
+use npy::npz::{NpzReader, NpzWriter};
+use npy::{NpyArray, NpyError};
+
+/// Why a saved deformation cannot be read or written.
+#[derive(Debug, thiserror::Error)]
+pub enum SavedError {
+    /// The file, the archive or one of its arrays (the message names the file and the key).
+    #[error(transparent)]
+    Npy(#[from] NpyError),
+    /// Two arrays that must agree in length do not.
+    #[error("{what}: expected {expected} entries, got {got}")]
+    LengthMismatch {
+        /// Which array.
+        what: &'static str,
+        /// The expected length.
+        expected: usize,
+        /// The actual length.
+        got: usize,
+    },
+    /// [`SavedDeformation::set_extra`] was asked to set one of the five standard keys.
+    #[error("`{0}` is a standard key of the saved-deformation format, not an extra")]
+    StandardKey(String),
+}
 
 /// Value of the extra key `format_version` that we add to files we write.
 pub const FORMAT_VERSION: i64 = 1;
@@ -56,40 +77,40 @@ impl SavedDeformation {
     /// Reads a saved deformation. `verts`/`verts_normals` may be f32 or f64 (converted to f32),
     /// `faces` any integer dtype; shapes must be (V, 3), (F, 3), (V, 3), and face indices must be
     /// below V.
-    pub fn read(path: impl AsRef<Path>) -> Result<Self, MeshError> {
+    pub fn read(path: impl AsRef<Path>) -> Result<Self, SavedError> {
         let r = NpzReader::open(path)?;
         let verts = r.rows3_f32("verts")?;
         let faces = r.rows3_u32("faces")?;
         let verts_normals = r.rows3_f32("verts_normals")?;
         let deform_by_csd_cfg = r.string("deform_by_csd_cfg")?;
         let dataset_cfg = r.string("dataset_cfg")?;
-        let npy_err = |key: &str, message: String| MeshError::Npy {
+        let npy_err = |key: &str, message: String| NpyError::Array {
             path: r.path().to_path_buf(),
             key: key.into(),
             message,
         };
         if verts_normals.len() != verts.len() {
-            return Err(npy_err(
+            return Err(SavedError::from(npy_err(
                 "verts_normals",
                 format!(
                     "has {} rows but `verts` has {}",
                     verts_normals.len(),
                     verts.len()
                 ),
-            ));
+            )));
         }
         if let Some((fi, f)) = faces
             .iter()
             .enumerate()
             .find(|(_, f)| f.iter().any(|&v| v as usize >= verts.len()))
         {
-            return Err(npy_err(
+            return Err(SavedError::from(npy_err(
                 "faces",
                 format!(
                     "face {fi} = {f:?} refers to a vertex beyond the {} in `verts`",
                     verts.len()
                 ),
-            ));
+            )));
         }
         // Extra keys are metadata (ours are a few bytes); large ones are not loaded at all, so an
         // unrelated big entry cannot make reading cost memory.
@@ -113,9 +134,9 @@ impl SavedDeformation {
     }
 
     /// Writes the five standard keys (in the order above), then [`Self::extra`].
-    pub fn write(&self, path: impl AsRef<Path>) -> Result<(), MeshError> {
+    pub fn write(&self, path: impl AsRef<Path>) -> Result<(), SavedError> {
         if self.verts_normals.len() != self.verts.len() {
-            return Err(MeshError::LengthMismatch {
+            return Err(SavedError::LengthMismatch {
                 what: "verts_normals (one per vertex)",
                 expected: self.verts.len(),
                 got: self.verts_normals.len(),
@@ -133,7 +154,7 @@ impl SavedDeformation {
         for (k, a) in &self.extra {
             w.add(k, a)?;
         }
-        w.finish()
+        Ok(w.finish()?)
     }
 
     /// The extra array under `key`.
@@ -142,11 +163,9 @@ impl SavedDeformation {
     }
 
     /// Sets (replacing) the extra array under `key`. Standard keys cannot be set this way.
-    pub fn set_extra(&mut self, key: &str, array: NpyArray) -> Result<(), MeshError> {
+    pub fn set_extra(&mut self, key: &str, array: NpyArray) -> Result<(), SavedError> {
         if STANDARD_KEYS.contains(&key) {
-            return Err(MeshError::Invalid(format!(
-                "`{key}` is a standard key of the saved-deformation format, not an extra"
-            )));
+            return Err(SavedError::StandardKey(key.to_string()));
         }
         match self.extra.iter_mut().find(|(k, _)| k == key) {
             Some(slot) => slot.1 = array,

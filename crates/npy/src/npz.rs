@@ -1,20 +1,15 @@
-//! `.npz` files (a zip of `.npy` arrays, as NumPy's `np.savez` / `np.savez_compressed` write them)
-//! and the reference's saved-deformation layout (spec §8), [`SavedDeformation`].
+//! `.npz` files (a zip of `.npy` arrays, as NumPy's `np.savez` / `np.savez_compressed` write them).
 //!
-//! The entries are parsed and written by [`crate::npy`] (re-exported here). Zip entries may be
-//! stored or deflated; we write stored entries (like `np.savez`).
-
-mod saved;
-
-pub use crate::npy::{NpyArray, NpyData, parse_npy, write_npy};
-pub use saved::{FORMAT_VERSION, MAX_EXTRA_BYTES, SavedDeformation};
+//! The entries are parsed and written by [`crate::parse_npy`] / [`crate::write_npy`]. Zip entries
+//! may be stored or deflated; we write stored entries (like `np.savez`). Reading is bounded: only
+//! the directory is read on open, and an entry is inflated to at most its declared size.
 
 use std::cell::{OnceCell, RefCell};
 use std::fs::File;
 use std::io::{BufWriter, Read, Write};
 use std::path::{Path, PathBuf};
 
-use crate::MeshError;
+use crate::{NpyArray, NpyData, NpyError, ensure_regular_file, parse_npy, write_npy};
 
 /// The most bytes one entry may declare (uncompressed) before it is refused unread.
 pub const MAX_ENTRY_BYTES: u64 = 1 << 32;
@@ -51,17 +46,18 @@ impl std::fmt::Debug for NpzReader {
 impl NpzReader {
     /// Opens the zip and lists its `*.npy` entries (entries with other names are ignored);
     /// nothing is inflated yet. The key of `verts.npy` is `verts`.
-    pub fn open(path: impl AsRef<Path>) -> Result<Self, MeshError> {
+    pub fn open(path: impl AsRef<Path>) -> Result<Self, NpyError> {
         let path = path.as_ref().to_path_buf();
-        let file = crate::io::open_regular(&path)?;
+        ensure_regular_file(&path).map_err(|e| NpyError::io(&path, e))?;
+        let file = File::open(&path).map_err(|e| NpyError::io(&path, e))?;
         let mut zip =
-            zip::ZipArchive::new(std::io::BufReader::new(file)).map_err(|e| MeshError::Parse {
+            zip::ZipArchive::new(std::io::BufReader::new(file)).map_err(|e| NpyError::Archive {
                 path: path.clone(),
                 message: format!("not a readable .npz (zip) archive: {e}"),
             })?;
         let mut entries: Vec<Entry> = Vec::new();
         for i in 0..zip.len() {
-            let entry = zip.by_index_raw(i).map_err(|e| MeshError::Parse {
+            let entry = zip.by_index_raw(i).map_err(|e| NpyError::Archive {
                 path: path.clone(),
                 message: format!("zip entry {i} is unreadable: {e}"),
             })?;
@@ -69,7 +65,7 @@ impl NpzReader {
                 continue;
             };
             if entries.iter().any(|e| e.key == key) {
-                return Err(MeshError::Npy {
+                return Err(NpyError::Array {
                     path: path.clone(),
                     key: key.to_string(),
                     message: "stored twice in the archive".into(),
@@ -112,13 +108,13 @@ impl NpzReader {
     }
 
     /// The array under `key`, or an error naming the missing or malformed key.
-    pub fn require(&self, key: &str) -> Result<&NpyArray, MeshError> {
+    pub fn require(&self, key: &str) -> Result<&NpyArray, NpyError> {
         self.load(key)?
             .ok_or_else(|| self.err(key, "missing from the file".into()))
     }
 
     /// Inflates and parses `key` on first use (`Ok(None)` when there is no such entry).
-    fn load(&self, key: &str) -> Result<Option<&NpyArray>, MeshError> {
+    fn load(&self, key: &str) -> Result<Option<&NpyArray>, NpyError> {
         let Some(k) = self.entries.iter().position(|e| e.key == key) else {
             return Ok(None);
         };
@@ -151,7 +147,7 @@ impl NpzReader {
     }
 
     /// Reads every array and returns `(key, array)` pairs in file order.
-    pub fn into_arrays(self) -> Result<Vec<(String, NpyArray)>, MeshError> {
+    pub fn into_arrays(self) -> Result<Vec<(String, NpyArray)>, NpyError> {
         for e in &self.entries {
             self.load(&e.key)?;
         }
@@ -164,7 +160,7 @@ impl NpzReader {
     }
 
     /// An `(n, 3)` float array (`<f2`, `<f4` or `<f8`, converted) as `f32` rows.
-    pub fn rows3_f32(&self, key: &str) -> Result<Vec<[f32; 3]>, MeshError> {
+    pub fn rows3_f32(&self, key: &str) -> Result<Vec<[f32; 3]>, NpyError> {
         let a = self.require(key)?;
         let Some(flat) = a.to_f32() else {
             return Err(self.err(
@@ -177,7 +173,7 @@ impl NpzReader {
     }
 
     /// An `(n, 3)` float array as `f64` rows.
-    pub fn rows3_f64(&self, key: &str) -> Result<Vec<[f64; 3]>, MeshError> {
+    pub fn rows3_f64(&self, key: &str) -> Result<Vec<[f64; 3]>, NpyError> {
         let a = self.require(key)?;
         let flat = match &a.data {
             NpyData::F16(_) | NpyData::F32(_) | NpyData::F64(_) => {
@@ -196,7 +192,7 @@ impl NpzReader {
 
     /// An `(n, 3)` integer array (any integer dtype) as `u32` index rows; negative or too large
     /// values are an error naming the first bad row.
-    pub fn rows3_u32(&self, key: &str) -> Result<Vec<[u32; 3]>, MeshError> {
+    pub fn rows3_u32(&self, key: &str) -> Result<Vec<[u32; 3]>, NpyError> {
         let a = self.require(key)?;
         let flat = a.to_i64_vec().ok_or_else(|| {
             self.err(
@@ -222,7 +218,7 @@ impl NpzReader {
     }
 
     /// The string of a 0-d unicode array.
-    pub fn string(&self, key: &str) -> Result<String, MeshError> {
+    pub fn string(&self, key: &str) -> Result<String, NpyError> {
         let a = self.require(key)?;
         a.as_str().map(str::to_owned).ok_or_else(|| {
             self.err(
@@ -236,7 +232,7 @@ impl NpzReader {
         })
     }
 
-    fn check_rows3(&self, key: &str, a: &NpyArray) -> Result<(), MeshError> {
+    fn check_rows3(&self, key: &str, a: &NpyArray) -> Result<(), NpyError> {
         if a.shape.len() == 2 && a.shape[1] == 3 {
             Ok(())
         } else {
@@ -244,8 +240,8 @@ impl NpzReader {
         }
     }
 
-    fn err(&self, key: &str, message: String) -> MeshError {
-        MeshError::Npy {
+    fn err(&self, key: &str, message: String) -> NpyError {
+        NpyError::Array {
             path: self.path.clone(),
             key: key.to_string(),
             message,
@@ -274,10 +270,14 @@ impl std::fmt::Debug for NpzWriter {
 
 impl NpzWriter {
     /// Creates (or truncates) the file.
-    pub fn create(path: impl AsRef<Path>) -> Result<Self, MeshError> {
+    pub fn create(path: impl AsRef<Path>) -> Result<Self, NpyError> {
         let path = path.as_ref().to_path_buf();
-        crate::io::create_parent_dirs(&path)?;
-        let file = File::create(&path).map_err(|error| MeshError::Io {
+        if let Some(parent) = path.parent()
+            && !parent.as_os_str().is_empty()
+        {
+            std::fs::create_dir_all(parent).map_err(|e| NpyError::io(parent, e))?;
+        }
+        let file = File::create(&path).map_err(|error| NpyError::Io {
             path: path.clone(),
             error,
         })?;
@@ -289,9 +289,9 @@ impl NpzWriter {
     }
 
     /// Adds one array under `key` (written as `<key>.npy`). Keys must be unique.
-    pub fn add(&mut self, key: &str, array: &NpyArray) -> Result<(), MeshError> {
+    pub fn add(&mut self, key: &str, array: &NpyArray) -> Result<(), NpyError> {
         if self.keys.iter().any(|k| k == key) {
-            return Err(MeshError::Npy {
+            return Err(NpyError::Array {
                 path: self.path.clone(),
                 key: key.into(),
                 message: "written twice".into(),
@@ -312,23 +312,23 @@ impl NpzWriter {
     }
 
     /// Completes the zip and flushes the file.
-    pub fn finish(self) -> Result<(), MeshError> {
+    pub fn finish(self) -> Result<(), NpyError> {
         let path = self.path.clone();
-        let w = self.zip.finish().map_err(|e| MeshError::Io {
+        let w = self.zip.finish().map_err(|e| NpyError::Io {
             path: path.clone(),
             error: std::io::Error::other(e.to_string()),
         })?;
         w.into_inner()
-            .map_err(|e| MeshError::Io {
+            .map_err(|e| NpyError::Io {
                 path: path.clone(),
                 error: e.into_error(),
             })?
             .sync_all()
-            .map_err(|error| MeshError::Io { path, error })
+            .map_err(|error| NpyError::Io { path, error })
     }
 
-    fn io_err(&self, msg: String) -> MeshError {
-        MeshError::Io {
+    fn io_err(&self, msg: String) -> NpyError {
+        NpyError::Io {
             path: self.path.clone(),
             error: std::io::Error::other(msg),
         }
@@ -339,10 +339,56 @@ impl NpzWriter {
 pub fn write_npz<'a>(
     path: impl AsRef<Path>,
     arrays: impl IntoIterator<Item = (&'a str, &'a NpyArray)>,
-) -> Result<(), MeshError> {
+) -> Result<(), NpyError> {
     let mut w = NpzWriter::create(path)?;
     for (k, a) in arrays {
         w.add(k, a)?;
     }
     w.finish()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn archives_round_trip_in_order_and_errors_name_file_and_key() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("sub/a.npz");
+        let x = NpyArray::f64_rows3(&[[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]]);
+        let s = NpyArray::scalar_str("hello");
+        write_npz(&path, [("x", &x), ("s", &s)]).expect("write");
+        let r = NpzReader::open(&path).expect("open");
+        assert_eq!(r.keys().collect::<Vec<_>>(), ["x", "s"]);
+        assert_eq!(
+            r.rows3_f64("x").expect("x"),
+            [[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]]
+        );
+        assert_eq!(r.string("s").expect("s"), "hello");
+        let e = r.rows3_u32("s").expect_err("a string is no index array");
+        assert!(
+            matches!(&e, NpyError::Array { key, .. } if key == "s"),
+            "{e}"
+        );
+        let e = r.require("nope").expect_err("missing");
+        assert!(
+            e.to_string().contains("a.npz: array `nope`: missing"),
+            "{e}"
+        );
+
+        let mut w = NpzWriter::create(dir.path().join("b.npz")).expect("create");
+        w.add("x", &x).expect("first");
+        assert!(matches!(w.add("x", &x), Err(NpyError::Array { .. })));
+
+        let junk = dir.path().join("junk.npz");
+        std::fs::write(&junk, b"not a zip").expect("write junk");
+        assert!(matches!(
+            NpzReader::open(&junk),
+            Err(NpyError::Archive { .. })
+        ));
+        assert!(matches!(
+            NpzReader::open(dir.path()),
+            Err(NpyError::Io { .. })
+        ));
+    }
 }

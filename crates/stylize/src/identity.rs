@@ -57,8 +57,9 @@ impl ModelIdentity {
     /// Reads `DIR/manifest.toml` of a model directory.
     pub fn of_dir(dir: &Path) -> anyhow::Result<Self> {
         let path = dir.join("manifest.toml");
-        let bytes =
-            crate::input::read(&path).with_context(|| format!("cannot read {}", path.display()))?;
+        let bytes = mesh_core::io::ensure_regular_file(&path)
+            .and_then(|()| std::fs::read(&path))
+            .with_context(|| format!("cannot read {}", path.display()))?;
         let name = std::str::from_utf8(&bytes)
             .ok()
             .and_then(|t| toml::from_str::<toml::Table>(t).ok())

@@ -386,7 +386,7 @@ pub fn load_run_pair(dir: &Path) -> anyhow::Result<(TriMesh, TriMesh)> {
 
 /// [`load_run_pair`] plus the run's prompt ([`prompt_of_dataset_cfg`]).
 pub fn load_run(dir: &Path) -> anyhow::Result<(TriMesh, TriMesh, Prompt)> {
-    let saved = mesh_core::npz::SavedDeformation::read(dir.join("deformation.npz"))
+    let saved = crate::saved::SavedDeformation::read(dir.join("deformation.npz"))
         .with_context(|| format!("{} is not a complete run directory", dir.display()))?;
     let source = TriMesh::new(saved.verts_f64(), saved.faces.clone());
     let result = mesh_core::io::read_mesh(dir.join("mesh.obj"))

@@ -15,7 +15,7 @@ use std::time::Instant;
 use anyhow::{Context, bail};
 use csd::Guidance;
 use darap::Darap;
-use optim::{Adam, Schedule};
+use optim::Adam;
 use rand_chacha::ChaCha8Rng;
 use raster_diff::{CameraConfig, Images, Renderer};
 
@@ -106,6 +106,9 @@ pub trait Observer {
         deformed: &[[f64; 3]],
         images: Option<&Images>,
     ) -> anyhow::Result<()>;
+    /// Something the user should know that does not stop the loop (e.g. a streak of zero
+    /// gradients). The default drops it; the command line prints it.
+    fn warning(&mut self, _message: &str) {}
 }
 
 fn add_term(terms: &mut Vec<(&'static str, f64)>, name: &'static str, value: f64, sum: bool) {
@@ -216,7 +219,7 @@ pub fn run_loop(
             .sum::<f64>()
             .sqrt();
         if let Some(warning) = zero_watch.observe(iteration, record.grad_norm) {
-            eprintln!("{warning}");
+            observer.warning(&warning);
         }
         if zero_watch.streak() > 0 {
             record
@@ -316,46 +319,43 @@ pub struct ViewSettings {
 /// Sub-step 0 of an iteration samples views (distance × [`raster_diff::adapt_multiplier`] of the
 /// deformed mesh from iteration 2 on) and renders; every sub-step evaluates the guidance on those
 /// renders with fresh randomness and maps dL/dimage back through the renderer.
-pub struct TextObjective {
+pub struct TextObjective<'g> {
     renderer: Box<dyn Renderer>,
-    guidance: Box<dyn Guidance>,
+    guidance: Box<dyn Guidance + 'g>,
     faces: Vec<[u32; 3]>,
     views: ViewSettings,
-    stage2_weight: Schedule,
     images: Option<Images>,
 }
 
-impl std::fmt::Debug for TextObjective {
+impl std::fmt::Debug for TextObjective<'_> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("TextObjective")
             .field("renderer", &self.renderer.name())
             .field("views", &self.views)
-            .field("stage2_weight", &self.stage2_weight)
             .finish_non_exhaustive()
     }
 }
 
-impl TextObjective {
-    /// Joins a renderer and a guidance.
+impl<'g> TextObjective<'g> {
+    /// Joins a renderer and a guidance (which owns any iteration-dependent weights, such as
+    /// the stage-II weight schedule of `csd::CascadedGuidance`).
     pub fn new(
         renderer: Box<dyn Renderer>,
-        guidance: Box<dyn Guidance>,
+        guidance: Box<dyn Guidance + 'g>,
         faces: &[[u32; 3]],
         views: ViewSettings,
-        stage2_weight: Schedule,
     ) -> Self {
         Self {
             renderer,
             guidance,
             faces: faces.to_vec(),
             views,
-            stage2_weight,
             images: None,
         }
     }
 }
 
-impl Objective for TextObjective {
+impl Objective for TextObjective<'_> {
     fn describe(&self) -> String {
         format!(
             "score distillation, {} views rendered with {}",
@@ -391,37 +391,23 @@ impl Objective for TextObjective {
         let Some(images) = &self.images else {
             bail!("no renders")
         };
-        let w2 = self.stage2_weight.at(iteration);
         let t = Instant::now();
         let out = self
             .guidance
-            .evaluate(
-                &images.rgb,
-                images.count,
-                images.height,
-                images.width,
-                w2,
-                rng,
-            )
+            .evaluate(images, iteration, rng)
             .context("guidance")?;
         timings.push(("guidance", t.elapsed().as_secs_f64()));
-        if out.grad_images.len() != images.rgb.len() {
+        if !out.grad_images.same_shape(images) {
             bail!(
                 "guidance returned {} gradient values for {} image values",
-                out.grad_images.len(),
+                out.grad_images.rgb.len(),
                 images.rgb.len()
             );
         }
-        let d_images = Images {
-            count: images.count,
-            height: images.height,
-            width: images.width,
-            rgb: out.grad_images,
-        };
         let t = Instant::now();
         let grad_positions = self
             .renderer
-            .backward(&d_images)
+            .backward(&out.grad_images)
             .context("renderer backward")?;
         timings.push(("render_backward", t.elapsed().as_secs_f64()));
         Ok(StepEval {
@@ -429,7 +415,7 @@ impl Objective for TextObjective {
                 ("loss", out.loss_stage1 + out.loss_stage2),
                 ("loss_stage1", out.loss_stage1),
                 ("loss_stage2", out.loss_stage2),
-                ("stage2_weight", w2),
+                ("stage2_weight", out.stage2_weight),
             ],
             timings,
             grad_positions,

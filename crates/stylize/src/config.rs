@@ -1,0 +1,589 @@
+//! The run configuration: a TOML file whose sections mirror the crates, every default the
+//! reference's (spec §5–§7), plus typed `section.key=value` overrides. Reading files (TOML or the reference's JSON) is the
+//! command line's job (`stylize_cli::config::load`).
+//!
+//! ```toml
+//! [darap]    lambda = 8.0, rotation_rule = "gis", post_process = "recenter_rescale"
+//! [optim]    lr = 0.002, iterations = 2500, steps_per_batch = 2, beta1, beta2, eps
+//! [camera]   preset, views = 8, elevation_deg, azimuth_deg, distance, fov_deg = 90, adapt_distance
+//! [render]   width = 512, height = 512, backend = "auto"
+//! [guidance] scale = 100, t_min = 20, t_max = 980, loss_scale = 100, stage1_weight = 1,
+//!            stage2_weight = "0.0>0.2:1000; 0.2>0.3:750", negative_prompt = "", grad_clip = 0 (off),
+//!            onnx_memory_arena = true
+//! [style]    iterations, lr, objective   (the model-free path, see `crate::style`)
+//! [run]      seed, checkpoint_every, preview_every, turntable_views, turntable_size
+//! ```
+//! `docs/cli.md` lists every key with its meaning.
+
+use anyhow::{Context, bail};
+use serde::{Deserialize, Serialize};
+
+/// dARAP rotation rule (spec §3.3 / §3.4).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RotationRule {
+    /// The reference rule (default); the published λ values mean what they mean under it.
+    Gis,
+    /// Textbook Kabsch rule with positive weights.
+    Procrustes,
+}
+
+impl RotationRule {
+    /// The name used in config files and saved deformations.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Gis => "gis",
+            Self::Procrustes => "procrustes",
+        }
+    }
+}
+
+/// dARAP post-processing (spec §4.3).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PostProcess {
+    /// Subtract the centroid, rescale to the rest bbox diagonal (default).
+    RecenterRescale,
+    /// Subtract the centroid only.
+    RecenterOnly,
+    /// Raw global-step solution.
+    None,
+}
+
+/// Rendering backend choice.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Backend {
+    /// GPU when available, else CPU.
+    Auto,
+    /// The CPU reference renderer.
+    Cpu,
+    /// Prefer the wgpu backend.
+    Gpu,
+}
+
+/// The model-free objective's variant (see `crate::style`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum StyleObjective {
+    /// ℓ = Σ_f A_f (1 − n_f · t_f), t_f the style target of face f's rest normal.
+    Face,
+}
+
+/// `[darap]`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct DarapSection {
+    /// Strength λ of the normal term (reference weights, spec §2): 8.
+    pub lambda: f64,
+    /// `gis` (reference) or `procrustes`.
+    pub rotation_rule: RotationRule,
+    /// `recenter_rescale`, `recenter_only` or `none`.
+    pub post_process: PostProcess,
+}
+
+impl Default for DarapSection {
+    fn default() -> Self {
+        Self {
+            lambda: 8.0,
+            rotation_rule: RotationRule::Gis,
+            post_process: PostProcess::RecenterRescale,
+        }
+    }
+}
+
+/// `[optim]` (the text path).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct OptimSection {
+    /// Adam learning rate: 0.002.
+    pub lr: f64,
+    /// Outer iterations (render batches): 2500.
+    pub iterations: u64,
+    /// Adam steps per render batch with accumulated gradients (spec §5): 2.
+    pub steps_per_batch: u32,
+    /// Adam β1: 0.9.
+    pub beta1: f64,
+    /// Adam β2: 0.999.
+    pub beta2: f64,
+    /// Adam ε: 1e-8.
+    pub eps: f64,
+}
+
+impl Default for OptimSection {
+    fn default() -> Self {
+        Self {
+            lr: 0.002,
+            iterations: 2500,
+            steps_per_batch: 2,
+            beta1: 0.9,
+            beta2: 0.999,
+            eps: 1e-8,
+        }
+    }
+}
+
+/// `[camera]`: the per-iteration view sampler (spec §6).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct CameraSection {
+    /// Views per iteration: 8.
+    pub views: usize,
+    /// Elevation range in degrees: [0, 60].
+    pub elevation_deg: [f64; 2],
+    /// Azimuth range in degrees: [0, 361].
+    pub azimuth_deg: [f64; 2],
+    /// Camera distance range (before the adaptive multiplier): [2.5, 3.0].
+    pub distance: [f64; 2],
+    /// Vertical field of view in degrees: 90 (focal length 1, the reference's effective value).
+    pub fov_deg: f64,
+    /// Scale the distance by the deformed mesh's extent from iteration 2 on (spec §5): true.
+    pub adapt_distance: bool,
+}
+
+impl Default for CameraSection {
+    fn default() -> Self {
+        Self {
+            views: 8,
+            elevation_deg: [0.0, 60.0],
+            azimuth_deg: [0.0, 361.0],
+            distance: [2.5, 3.0],
+            fov_deg: 90.0,
+            adapt_distance: true,
+        }
+    }
+}
+
+/// `[render]`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RenderSection {
+    /// Render width in pixels: 512.
+    pub width: usize,
+    /// Render height in pixels: 512.
+    pub height: usize,
+    /// `auto`, `cpu` or `gpu`.
+    pub backend: Backend,
+}
+
+impl Default for RenderSection {
+    fn default() -> Self {
+        Self {
+            width: 512,
+            height: 512,
+            backend: Backend::Auto,
+        }
+    }
+}
+
+/// `[guidance]` (spec §7).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct GuidanceSection {
+    /// CFG scale g in ε̂ = ε_c + g(ε_c − ε_u): 100.
+    pub scale: f64,
+    /// Smallest diffusion timestep drawn: 20.
+    pub t_min: i64,
+    /// Largest diffusion timestep drawn: 980.
+    pub t_max: i64,
+    /// Overall loss scale: 100.
+    pub loss_scale: f64,
+    /// Stage-I weight: 1.
+    pub stage1_weight: f64,
+    /// Stage-II weight schedule (spec §5 grammar, 1-indexed iterations).
+    pub stage2_weight: String,
+    /// Negative prompt ("" = unconditional).
+    pub negative_prompt: String,
+    /// Clamp of each stage's gradient to ±c; 0 turns it off (reference default).
+    pub grad_clip: f64,
+    /// ONNX Runtime's CPU memory arena: true (its default, faster); false lowers peak memory
+    /// (3.5 → 1.4 GB with the tiny fixtures, guidance 15–25 % slower). Process-wide: a batch opens
+    /// its models once, so rows cannot override it.
+    pub onnx_memory_arena: bool,
+}
+
+impl Default for GuidanceSection {
+    fn default() -> Self {
+        Self {
+            scale: 100.0,
+            t_min: 20,
+            t_max: 980,
+            loss_scale: 100.0,
+            stage1_weight: 1.0,
+            stage2_weight: "0.0>0.2:1000; 0.2>0.3:750".to_string(),
+            negative_prompt: String::new(),
+            grad_clip: 0.0,
+            onnx_memory_arena: true,
+        }
+    }
+}
+
+/// `[style]`: the model-free path (normal-alignment objective, `crate::style`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct StyleSection {
+    /// Adam steps: 200.
+    pub iterations: u64,
+    /// Adam learning rate: 0.02 (x lives on the unit sphere initially; this moves it ~1° per step).
+    pub lr: f64,
+    /// Objective variant: `face`.
+    pub objective: StyleObjective,
+}
+
+impl Default for StyleSection {
+    fn default() -> Self {
+        Self {
+            iterations: 200,
+            lr: 0.02,
+            objective: StyleObjective::Face,
+        }
+    }
+}
+
+/// `[run]`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RunSection {
+    /// Seed of the run's `ChaCha8Rng`: 0.
+    pub seed: u64,
+    /// Write a checkpoint every N iterations (0: only at the end): 100.
+    pub checkpoint_every: u64,
+    /// Write a PNG grid of the current views every N iterations (0: never): 250.
+    pub preview_every: u64,
+    /// Frames of the final turntable contact sheet: 8.
+    pub turntable_views: usize,
+    /// Side in pixels of preview and turntable frames: 256.
+    pub turntable_size: usize,
+}
+
+impl Default for RunSection {
+    fn default() -> Self {
+        Self {
+            seed: 0,
+            checkpoint_every: 100,
+            preview_every: 250,
+            turntable_views: 8,
+            turntable_size: 256,
+        }
+    }
+}
+
+/// `[region]`: localized stylization (`docs/cli.md`, `mesh_core::region`).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RegionSection {
+    /// Region specs whose union may rotate (empty: the whole mesh): `box:…`, `sphere:…`,
+    /// `vertices:FILE`, `part:NAME`, `property:NAME OP VALUE`, `not:SPEC`.
+    pub specs: Vec<String>,
+    /// Rings inside the region's boundary over which λ fades from full to zero: 0.
+    pub feather: u32,
+    /// Tint the region in the turntable and previews: false.
+    pub tint: bool,
+}
+
+/// The whole configuration. `Config::default()` is the reference setup.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Config {
+    /// `[darap]`.
+    pub darap: DarapSection,
+    /// `[optim]`.
+    pub optim: OptimSection,
+    /// `[camera]`.
+    pub camera: CameraSection,
+    /// `[render]`.
+    pub render: RenderSection,
+    /// `[guidance]`.
+    pub guidance: GuidanceSection,
+    /// `[style]`.
+    pub style: StyleSection,
+    /// `[run]`.
+    pub run: RunSection,
+    /// `[region]`.
+    pub region: RegionSection,
+}
+
+impl Config {
+    /// Parses a TOML document (missing keys take their defaults; unknown keys are errors).
+    pub fn from_toml_str(text: &str) -> anyhow::Result<Self> {
+        let config: Self = toml::from_str(text).context("invalid configuration")?;
+        config.validate()?;
+        Ok(config)
+    }
+
+    /// The resolved configuration as TOML (what a run directory's `config.toml` holds).
+    pub fn to_toml_string(&self) -> anyhow::Result<String> {
+        toml::to_string_pretty(self).context("cannot serialize the configuration")
+    }
+
+    /// Applies `section.key=value` overrides in order. The value is parsed with the type of the
+    /// key's current value (number, integer, boolean, string, or a TOML array such as `[0, 30]`).
+    pub fn with_overrides<S: AsRef<str>>(self, overrides: &[S]) -> anyhow::Result<Self> {
+        let mut table =
+            toml::Table::try_from(&self).context("cannot serialize the configuration")?;
+        for o in overrides {
+            apply_override(&mut table, o.as_ref())?;
+        }
+        let config: Self = toml::Value::Table(table)
+            .try_into()
+            .context("configuration after overrides is invalid")?;
+        config.validate()?;
+        Ok(config)
+    }
+
+    /// `--region` specs, `--region-feather` and `--tint-region` on top of the configuration:
+    /// given specs and rings replace `region.specs` / `region.feather` (nothing given: unchanged).
+    pub fn with_region_flags(
+        mut self,
+        specs: &[String],
+        feather: Option<u32>,
+        tint: bool,
+    ) -> anyhow::Result<Self> {
+        if !specs.is_empty() {
+            self.region.specs = specs.to_vec();
+        }
+        if let Some(k) = feather {
+            self.region.feather = k;
+        }
+        self.region.tint |= tint;
+        self.validate()?;
+        Ok(self)
+    }
+
+    /// Checks ranges that the types alone do not (positive sizes, a parsable schedule, …).
+    pub fn validate(&self) -> anyhow::Result<()> {
+        let finite_pos = |name: &str, v: f64| -> anyhow::Result<()> {
+            if !(v.is_finite() && v > 0.0) {
+                bail!("{name} must be a finite positive number, got {v}");
+            }
+            Ok(())
+        };
+        if !(self.darap.lambda.is_finite() && self.darap.lambda >= 0.0) {
+            bail!(
+                "darap.lambda must be finite and >= 0, got {}",
+                self.darap.lambda
+            );
+        }
+        finite_pos("optim.lr", self.optim.lr)?;
+        finite_pos("style.lr", self.style.lr)?;
+        finite_pos("optim.eps", self.optim.eps)?;
+        for (name, b) in [
+            ("optim.beta1", self.optim.beta1),
+            ("optim.beta2", self.optim.beta2),
+        ] {
+            if !(0.0..1.0).contains(&b) {
+                bail!("{name} must be in [0, 1), got {b}");
+            }
+        }
+        if self.optim.steps_per_batch == 0 {
+            bail!("optim.steps_per_batch must be at least 1");
+        }
+        if self.camera.views == 0 {
+            bail!("camera.views must be at least 1");
+        }
+        for (name, r) in [
+            ("camera.elevation_deg", self.camera.elevation_deg),
+            ("camera.azimuth_deg", self.camera.azimuth_deg),
+            ("camera.distance", self.camera.distance),
+        ] {
+            if !(r[0].is_finite() && r[1].is_finite() && r[0] <= r[1]) {
+                bail!("{name} must be a finite range [low, high] with low <= high, got {r:?}");
+            }
+        }
+        if self.camera.distance[0] <= 0.0 {
+            bail!(
+                "camera.distance must be positive, got {:?}",
+                self.camera.distance
+            );
+        }
+        if !(self.camera.fov_deg > 0.0 && self.camera.fov_deg < 180.0) {
+            bail!(
+                "camera.fov_deg must be in (0, 180), got {}",
+                self.camera.fov_deg
+            );
+        }
+        if self.render.width == 0 || self.render.height == 0 {
+            bail!("render.width and render.height must be positive");
+        }
+        if self.run.turntable_size == 0 {
+            bail!("run.turntable_size must be positive");
+        }
+        if !(self.guidance.t_min >= 1
+            && self.guidance.t_min <= self.guidance.t_max
+            && self.guidance.t_max < 1000)
+        {
+            bail!(
+                "guidance timesteps must satisfy 1 <= t_min <= t_max <= 999, got [{}, {}]",
+                self.guidance.t_min,
+                self.guidance.t_max
+            );
+        }
+        if !(self.guidance.grad_clip.is_finite() && self.guidance.grad_clip >= 0.0) {
+            bail!(
+                "guidance.grad_clip must be >= 0 (0 = off), got {}",
+                self.guidance.grad_clip
+            );
+        }
+        self.stage2_schedule()?;
+        for spec in &self.region.specs {
+            mesh_core::region::RegionSpec::parse(spec).context("region.specs")?;
+        }
+        Ok(())
+    }
+
+    /// The parsed stage-II weight schedule.
+    pub fn stage2_schedule(&self) -> anyhow::Result<optim::Schedule> {
+        optim::Schedule::parse(&self.guidance.stage2_weight).context("guidance.stage2_weight")
+    }
+}
+
+/// Applies one `section.key=value` override to a serialized config table.
+fn apply_override(table: &mut toml::Table, assignment: &str) -> anyhow::Result<()> {
+    let Some((path, raw)) = assignment.split_once('=') else {
+        bail!("override {assignment:?} is not of the form section.key=value");
+    };
+    let path = path.trim();
+    let raw = raw.trim();
+    let mut parts = path.split('.');
+    let (Some(section), Some(key), None) = (parts.next(), parts.next(), parts.next()) else {
+        bail!("override key {path:?} must be section.key (e.g. optim.lr)");
+    };
+    let sections: Vec<&str> = table.keys().map(String::as_str).collect();
+    let known_sections = sections.join(", ");
+    let Some(toml::Value::Table(sec)) = table.get_mut(section) else {
+        bail!("unknown config section {section:?} in override {path:?} (known: {known_sections})");
+    };
+    let known_keys = sec
+        .keys()
+        .map(String::as_str)
+        .collect::<Vec<_>>()
+        .join(", ");
+    let Some(current) = sec.get_mut(key) else {
+        bail!("unknown config key {path:?} (keys of [{section}]: {known_keys})");
+    };
+    let bad = |what: &str| anyhow::anyhow!("override {path}={raw}: expected {what}");
+    let new = match current {
+        toml::Value::Float(_) => {
+            toml::Value::Float(raw.parse::<f64>().map_err(|_| bad("a number"))?)
+        }
+        toml::Value::Integer(_) => {
+            toml::Value::Integer(raw.parse::<i64>().map_err(|_| bad("an integer"))?)
+        }
+        toml::Value::Boolean(_) => {
+            toml::Value::Boolean(raw.parse::<bool>().map_err(|_| bad("true or false"))?)
+        }
+        toml::Value::String(_) => {
+            let unquoted = raw
+                .strip_prefix('"')
+                .and_then(|r| r.strip_suffix('"'))
+                .unwrap_or(raw);
+            toml::Value::String(unquoted.to_string())
+        }
+        toml::Value::Array(_) => {
+            let doc: toml::Table = toml::from_str(&format!("v = {raw}"))
+                .map_err(|_| bad("a TOML array such as [0.0, 30.0]"))?;
+            match doc.get("v") {
+                Some(v @ toml::Value::Array(_)) => v.clone(),
+                _ => return Err(bad("a TOML array such as [0.0, 30.0]")),
+            }
+        }
+        other => bail!(
+            "override {path}: cannot override a value of type {}",
+            other.type_str()
+        ),
+    };
+    *current = new;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ok<T>(r: anyhow::Result<T>) -> T {
+        r.unwrap_or_else(|e| panic!("{e:#}"))
+    }
+
+    #[test]
+    fn defaults_are_the_reference_values() {
+        let c = Config::default();
+        assert_eq!(c.darap.lambda, 8.0);
+        assert_eq!(c.darap.rotation_rule, RotationRule::Gis);
+        assert_eq!(c.optim.lr, 0.002);
+        assert_eq!(c.optim.iterations, 2500);
+        assert_eq!(c.optim.steps_per_batch, 2);
+        assert_eq!(c.camera.views, 8);
+        assert_eq!((c.render.width, c.render.height), (512, 512));
+        assert_eq!(c.guidance.scale, 100.0);
+        assert_eq!((c.guidance.t_min, c.guidance.t_max), (20, 980));
+        let w = ok(c.stage2_schedule());
+        assert!((w.at(1500) - 0.26662).abs() < 5e-6);
+        ok(c.validate());
+    }
+
+    #[test]
+    fn resolved_config_round_trips_through_toml() {
+        let c =
+            ok(Config::default()
+                .with_overrides(&["darap.lambda=5", "camera.elevation_deg=[0, 30]"]));
+        let text = ok(c.to_toml_string());
+        assert_eq!(ok(Config::from_toml_str(&text)), c);
+    }
+
+    #[test]
+    fn partial_file_keeps_other_defaults() {
+        let c = ok(Config::from_toml_str(
+            "[darap]\nlambda = 10.0\n[run]\nseed = 7\n",
+        ));
+        assert_eq!(c.darap.lambda, 10.0);
+        assert_eq!(c.run.seed, 7);
+        assert_eq!(c.optim, OptimSection::default());
+    }
+
+    #[test]
+    fn overrides_are_typed() {
+        let c = ok(Config::default().with_overrides(&[
+            "optim.lr=0.01",
+            "optim.iterations=10",
+            "darap.rotation_rule=procrustes",
+            "camera.adapt_distance=false",
+            "guidance.stage2_weight=\"0.1\"",
+            "darap.lambda=5",
+        ]));
+        assert_eq!(c.optim.lr, 0.01);
+        assert_eq!(c.optim.iterations, 10);
+        assert_eq!(c.darap.rotation_rule, RotationRule::Procrustes);
+        assert!(!c.camera.adapt_distance);
+        assert_eq!(c.guidance.stage2_weight, "0.1");
+        assert_eq!(c.darap.lambda, 5.0);
+    }
+
+    #[test]
+    fn bad_overrides_and_files_give_clear_errors() {
+        let cases: &[(&str, &str)] = &[
+            ("optim.lrr=0.1", "unknown config key \"optim.lrr\""),
+            ("optimm.lr=0.1", "unknown config section \"optimm\""),
+            ("optim.lr", "section.key=value"),
+            ("lr=0.1", "must be section.key"),
+            ("optim.iterations=1.5", "expected an integer"),
+            ("optim.lr=fast", "expected a number"),
+            ("camera.adapt_distance=yes", "true or false"),
+            ("darap.rotation_rule=kabsch", "invalid"),
+            ("guidance.stage2_weight=0>1", "stage2_weight"),
+            ("camera.views=0", "camera.views"),
+        ];
+        for &(o, needle) in cases {
+            match Config::default().with_overrides(&[o]) {
+                Ok(_) => panic!("{o:?} accepted"),
+                Err(e) => {
+                    let msg = format!("{e:#}");
+                    assert!(msg.contains(needle), "{o:?}: {msg}");
+                }
+            }
+        }
+        let e = Config::from_toml_str("[darap]\nlamda = 3.0\n")
+            .err()
+            .map(|e| format!("{e:#}"));
+        assert!(e.is_some_and(|m| m.contains("lamda")));
+    }
+}

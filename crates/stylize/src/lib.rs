@@ -1,0 +1,29 @@
+//! Geometry in Style as a library: everything a stylization needs except a command line.
+//!
+//! - [`pipeline`]: the loop ([`pipeline::run_loop`]) over an [`pipeline::Objective`] (the
+//!   model-free [`pipeline::StyleObjective`], the text-guided [`pipeline::TextObjective`]);
+//! - [`style`]: the model-free styles (cube, octahedron, exemplar) and their alignment loss;
+//! - [`config`]: every setting of a run, with the reference's defaults;
+//! - [`runner`]: one run from mesh file to complete run directory, with a [`runner::Progress`]
+//!   observer and a cancellation flag ([`runner::RunHooks`]);
+//! - [`rundir`], [`lock`], [`durable`], [`checkpoint`], [`identity`]: the run directory (locked,
+//!   every file replaced atomically and durably), checkpoints and the task identity that guards a
+//!   resume;
+//! - [`saved`]: the reference's saved-deformation `.npz`;
+//! - [`models`]: DeepFloyd IF guidance from a model directory; [`eval`]: metrics of finished runs.
+//!
+//! The command line (`stylize-cli`) adds argument parsing, config files, progress display and
+//! batches; this crate depends on nothing of that kind (`cargo xtask check-deps`).
+
+pub mod checkpoint;
+pub mod config;
+pub mod durable;
+pub mod eval;
+pub mod identity;
+pub mod lock;
+pub mod models;
+pub mod pipeline;
+pub mod rundir;
+pub mod runner;
+pub mod saved;
+pub mod style;

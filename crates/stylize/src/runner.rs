@@ -1,0 +1,870 @@
+//! One run from mesh file to complete run directory: prepare the mesh, build dARAP, run the loop
+//! ([`crate::pipeline`]) with checkpoints, previews and metrics, then write the outputs.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
+
+use anyhow::{Context, bail};
+use csd::Guidance;
+use darap::Darap;
+use mesh_core::TriMesh;
+use mesh_core::region::{RegionInput, RegionSpec};
+use npy::{NpyArray, NpyData};
+use optim::{Adam, AdamConfig};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use raster_diff::{CameraConfig, Images, Renderer};
+
+use crate::checkpoint::{CHECKPOINT_VERSION, Checkpoint};
+use crate::config::{Backend, Config, PostProcess, RotationRule};
+use crate::identity::{ObjectiveIdentity, TaskIdentity};
+use crate::lock::RunLock;
+use crate::pipeline::{
+    IterationRecord, LoopSpec, LoopState, Objective, Observer, StyleObjective, TextObjective,
+    ViewSettings, run_loop,
+};
+use crate::rundir::{Claim, ResumeMode, RunDir, Start};
+use crate::saved::SavedDeformation;
+use crate::style::Style;
+
+/// Format version of our extra keys in `deformation.npz`.
+pub const NPZ_FORMAT_VERSION: i64 = crate::saved::FORMAT_VERSION;
+
+/// Receives a run's progress. Every method has a default that does nothing; the command line
+/// draws a progress bar, prints plain lines or JSON.
+pub trait Progress {
+    /// The loop is about to run iterations `at + 1 ..= total`; `headline` describes the run (what
+    /// is optimized on which mesh, the renderer chosen).
+    fn start(&mut self, _total: u64, _at: u64, _headline: &[String]) {}
+    /// An iteration finished; `json` is its `metrics.jsonl` line.
+    fn iteration(&mut self, _record: &IterationRecord, _json: &str) {}
+    /// A warning that does not stop the run.
+    fn warning(&mut self, _message: &str) {}
+    /// The loop ended (finished, halted, stopped or failed).
+    fn finish(&mut self) {}
+}
+
+/// A [`Progress`] that reports nothing.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct NoProgress;
+
+impl Progress for NoProgress {}
+
+/// What a caller plugs into [`execute_with`]: where progress goes, and a cancellation flag.
+pub struct RunHooks<'a> {
+    /// Progress reporting.
+    pub progress: &'a mut dyn Progress,
+    /// Set it (from a signal handler, another thread, a UI) to stop the run: the loop finishes the
+    /// current iteration, writes a checkpoint and returns [`Stopped`]. Polled after every iteration
+    /// and before expensive loading.
+    pub cancel: &'a AtomicBool,
+}
+
+impl std::fmt::Debug for RunHooks<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("RunHooks")
+            .field("cancel", &self.cancel)
+            .finish_non_exhaustive()
+    }
+}
+
+/// A run stopped through [`RunHooks::cancel`] (the error [`execute_with`] returns; the command line
+/// turns it into its signal message and exit status).
+#[derive(Debug, thiserror::Error)]
+#[error("{}", match .checkpoint_iteration {
+    Some(i) => format!("stopped after iteration {i}, checkpoint written to {}", .dir.join("checkpoint.json").display()),
+    None => format!("stopped before the first iteration; nothing to resume in {}", .dir.display()),
+})]
+pub struct Stopped {
+    /// The run directory.
+    pub dir: PathBuf,
+    /// The iteration the checkpoint holds (`None`: stopped before any checkpoint was written).
+    pub checkpoint_iteration: Option<u64>,
+}
+
+/// What to optimize.
+pub enum Task<'g> {
+    /// The model-free path.
+    Style(Style),
+    /// The text path: a prompt and a ready guidance (models loaded by the caller).
+    Text {
+        /// The prompt (recorded).
+        prompt: String,
+        /// The guidance (it may borrow models that outlive the run, `'g`).
+        guidance: Box<dyn Guidance + 'g>,
+    },
+}
+
+impl std::fmt::Debug for Task<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Task::Style(s) => write!(f, "Style({})", s.name()),
+            Task::Text { prompt, .. } => write!(f, "Text({prompt:?})"),
+        }
+    }
+}
+
+/// A run request.
+#[derive(Clone, Debug)]
+pub struct RunRequest {
+    /// Input mesh file.
+    pub mesh: PathBuf,
+    /// Run directory.
+    pub out: PathBuf,
+    /// Resolved configuration.
+    pub config: Config,
+    /// Overwrite a complete or partial run.
+    pub force: bool,
+    /// Continue from a checkpoint if there is one.
+    pub resume: bool,
+    /// Stop after this iteration without final outputs (tests of `--resume`).
+    pub halt_after: Option<u64>,
+}
+
+/// What a run did.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RunOutcome {
+    /// Last finished iteration.
+    pub iteration: u64,
+    /// Whether the outputs were written (false when halted early).
+    pub complete: bool,
+    /// For the style path: area-weighted mean alignment before and after.
+    pub alignment: Option<(f64, f64)>,
+    /// Warnings (e.g. an output format the mesh writer does not support).
+    pub warnings: Vec<String>,
+    /// Nothing was done: the directory already held a complete run of the same task (only with
+    /// [`RunOptions::skip_complete`]).
+    pub already_complete: bool,
+}
+
+/// A mesh prepared as the reference does: repaired, side-2 cube normalized, rounded to the f32
+/// values `deformation.npz` stores and normalized again in f64 — so `stylize apply` on the saved
+/// file rebuilds exactly this rest mesh.
+pub fn prepare_mesh(path: &Path) -> anyhow::Result<(TriMesh, Vec<String>)> {
+    prepare_mesh_with_region(path, &crate::config::RegionSection::default()).map(|(m, w, _)| (m, w))
+}
+
+/// A resolved region of a prepared mesh.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ResolvedRegion {
+    /// Vertices that may rotate (prepared mesh's numbering).
+    pub free: Vec<bool>,
+    /// Per-vertex weights for `Darap::set_region_weights` (feathered).
+    pub weights: Vec<f64>,
+}
+
+/// Region specs parsed, with vertex files read (relative paths as given: from the working
+/// directory; a batch manifest rebases them on its folder).
+pub fn parse_region_specs(specs: &[String]) -> anyhow::Result<Vec<RegionSpec>> {
+    specs
+        .iter()
+        .map(|s| {
+            RegionSpec::parse(s)?.with_indices(&mut |path: &Path| -> anyhow::Result<Vec<usize>> {
+                use std::io::Read;
+                let mut text = String::new();
+                mesh_core::io::open_regular(path)
+                    .map_err(anyhow::Error::from)
+                    .and_then(|mut f| f.read_to_string(&mut text).map_err(anyhow::Error::from))
+                    .with_context(|| format!("cannot read vertex file {}", path.display()))?;
+                mesh_core::region::parse_index_list(&text)
+                    .map_err(|e| anyhow::anyhow!("vertex file {}: {e}", path.display()))
+            })
+        })
+        .collect()
+}
+
+/// Resolves `section` on a prepared mesh (`Ok(None)` when no spec is given). Warnings (a spec
+/// that selects nothing, a region covering everything) are appended to `warnings`.
+pub fn resolve_region(
+    section: &crate::config::RegionSection,
+    input: &RegionInput<'_>,
+    warnings: &mut Vec<String>,
+) -> anyhow::Result<Option<ResolvedRegion>> {
+    if section.specs.is_empty() {
+        return Ok(None);
+    }
+    let specs = parse_region_specs(&section.specs)?;
+    let region = mesh_core::region::select(&specs, input)?;
+    warnings.extend(region.warnings.iter().cloned());
+    let weights =
+        mesh_core::region::feather_weights(&region.free, input.faces, section.feather as usize);
+    Ok(Some(ResolvedRegion {
+        free: region.free,
+        weights,
+    }))
+}
+
+/// [`prepare_mesh`] and the region of `section` on it (parts of the file and repair maps
+/// followed; boxes and spheres evaluated on the prepared, normalized positions).
+pub fn prepare_mesh_with_region(
+    path: &Path,
+    section: &crate::config::RegionSection,
+) -> anyhow::Result<(TriMesh, Vec<String>, Option<ResolvedRegion>)> {
+    let (mesh, parts) = mesh_core::io::read_mesh_with_parts(path)
+        .with_context(|| format!("cannot read mesh {}", path.display()))?;
+    let repaired =
+        mesh_core::validate::repair(&mesh, &mesh_core::validate::RepairOptions::default())
+            .with_context(|| format!("mesh {} cannot be used", path.display()))?;
+    let warnings: Vec<String> = repaired
+        .report
+        .issues
+        .iter()
+        .map(|i| i.message.clone())
+        .collect();
+    let mut m = repaired.mesh.clone();
+    mesh_core::normalize::side2_cube(&mut m.positions);
+    for p in &mut m.positions {
+        *p = p.map(|c| f64::from(c as f32));
+    }
+    mesh_core::normalize::side2_cube(&mut m.positions);
+    let mut warnings = warnings;
+    let input = RegionInput {
+        positions: &m.positions,
+        faces: &m.faces,
+        vertex_map: &repaired.vertex_map,
+        face_map: &repaired.face_map,
+        parts: &parts,
+    };
+    let region = resolve_region(section, &input, &mut warnings)
+        .with_context(|| format!("region of {}", path.display()))?;
+    Ok((m, warnings, region))
+}
+
+/// dARAP options from the configuration.
+pub fn darap_options(config: &Config) -> darap::DarapOptions {
+    darap::DarapOptions {
+        lambda: config.darap.lambda,
+        rotation_rule: match config.darap.rotation_rule {
+            RotationRule::Gis => darap::RotationRule::Gis,
+            RotationRule::Procrustes => darap::RotationRule::Procrustes,
+        },
+        post_process: match config.darap.post_process {
+            PostProcess::RecenterRescale => darap::PostProcess::RecenterRescale,
+            PostProcess::RecenterOnly => darap::PostProcess::RecenterOnly,
+            PostProcess::None => darap::PostProcess::None,
+        },
+    }
+}
+
+/// A renderer for the configured backend: `cpu` forces the CPU renderer; `auto` and `gpu` ask for
+/// the GPU backend, which falls back to the CPU when there is no hardware adapter. The string says
+/// what was chosen and why.
+pub fn renderer(config: &Config) -> (Box<dyn Renderer>, String) {
+    raster_diff::select_renderer(config.render.backend != Backend::Cpu)
+}
+
+/// The loop was asked to stop (returned by the observer after a full iteration).
+#[derive(Debug, thiserror::Error)]
+#[error("stop requested")]
+struct StopRequested;
+
+struct RunObserver<'a> {
+    dir: &'a RunDir,
+    lock: &'a RunLock,
+    identity: TaskIdentity,
+    metrics: std::fs::File,
+    progress: &'a mut dyn Progress,
+    cancel: &'a AtomicBool,
+    config_toml: String,
+    preview_size: usize,
+    fov: f64,
+    faces: Vec<[u32; 3]>,
+    preview_renderer: raster_diff::CpuRenderer,
+    /// Region to tint in model-free previews (`region.tint`).
+    tint: Option<Vec<bool>>,
+}
+
+fn record_json(r: &IterationRecord) -> serde_json::Value {
+    let mut obj = serde_json::Map::new();
+    obj.insert("iteration".into(), r.iteration.into());
+    for &(k, v) in &r.terms {
+        obj.insert(k.into(), v.into());
+    }
+    obj.insert("grad_norm".into(), r.grad_norm.into());
+    let timings: serde_json::Map<String, serde_json::Value> = r
+        .timings
+        .iter()
+        .map(|&(k, v)| (k.to_string(), v.into()))
+        .collect();
+    obj.insert("seconds".into(), timings.into());
+    obj.into()
+}
+
+/// Writes a grid of images as one PNG.
+pub fn write_grid(path: &Path, images: &Images) -> anyhow::Result<()> {
+    if let Some(parent) = path.parent() {
+        std::fs::create_dir_all(parent)
+            .with_context(|| format!("cannot create {}", parent.display()))?;
+    }
+    let columns = images.count.clamp(1, 4);
+    let sheet = raster_diff::image::contact_sheet(images, columns.max(1));
+    crate::durable::replace_with(path, |tmp| {
+        let file = std::fs::File::create(tmp)
+            .with_context(|| format!("cannot create {}", tmp.display()))?;
+        raster_diff::image::write_png(
+            std::io::BufWriter::new(file),
+            &sheet,
+            0,
+            raster_diff::image::Encoding::Direct,
+        )
+        .with_context(|| format!("cannot write {}", path.display()))
+    })
+}
+
+/// Tint of [`tint_region`] (a warm orange, multiplied into the shading).
+pub const REGION_TINT: [f32; 3] = [1.0, 0.62, 0.3];
+
+/// Tints, in place, the pixels whose visible triangle (`ids`, one per pixel as
+/// `CpuRenderer::triangle_ids` returns them) has a corner in the region `free`.
+pub fn tint_region(images: &mut Images, ids: &[u32], faces: &[[u32; 3]], free: &[bool]) {
+    for (pixel, &t) in images.rgb.chunks_exact_mut(3).zip(ids) {
+        let inside = faces.get(t as usize).is_some_and(|f| {
+            f.iter()
+                .any(|&v| free.get(v as usize).copied().unwrap_or(false))
+        });
+        if inside {
+            for (c, k) in pixel.iter_mut().zip(REGION_TINT) {
+                *c *= k;
+            }
+        }
+    }
+}
+
+/// Renders `n` turntable views of a mesh (CPU renderer, elevation 20°, looking at the origin).
+///
+/// The camera distance makes the whole mesh visible: with r the largest distance of a vertex from
+/// the origin, a sphere of radius r subtends the field of view at distance r / sin(fov/2); 10 %
+/// margin is added.
+pub fn turntable(
+    renderer: &mut raster_diff::CpuRenderer,
+    positions: &[[f64; 3]],
+    faces: &[[u32; 3]],
+    n: usize,
+    size: usize,
+    fov: f64,
+) -> anyhow::Result<Images> {
+    let radius = positions
+        .iter()
+        .map(|p| (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt())
+        .filter(|r| r.is_finite())
+        .fold(0.0_f64, f64::max)
+        .max(1e-3);
+    let half_fov = (fov.clamp(1.0, 179.0) * 0.5).to_radians();
+    let distance = 1.1 * radius / half_fov.sin();
+    let views = raster_diff::orbit_views(n.max(1), 20.0, distance, fov);
+    renderer
+        .render(positions, faces, &views, size, size)
+        .context("turntable render")
+}
+
+impl Observer for RunObserver<'_> {
+    fn iteration(&mut self, record: &IterationRecord) -> anyhow::Result<()> {
+        let line = record_json(record).to_string();
+        writeln!(self.metrics, "{line}").context("cannot write metrics.jsonl")?;
+        self.progress.iteration(record, &line);
+        if self.cancel.load(Ordering::SeqCst) {
+            return Err(StopRequested.into());
+        }
+        Ok(())
+    }
+
+    fn warning(&mut self, message: &str) {
+        self.progress.warning(message);
+    }
+
+    fn checkpoint(&mut self, state: &LoopState) -> anyhow::Result<()> {
+        self.lock.ensure_held()?;
+        self.metrics.flush().context("cannot flush metrics.jsonl")?;
+        // The checkpoint must not be durable before the metrics lines it accounts for.
+        self.metrics
+            .sync_data()
+            .context("cannot sync metrics.jsonl")?;
+        Checkpoint {
+            version: CHECKPOINT_VERSION,
+            iteration: state.iteration,
+            x: state.x.clone(),
+            adam: state.adam.state().clone(),
+            rng: state.rng.clone(),
+            config_toml: self.config_toml.clone(),
+            identity: Some(self.identity.clone()),
+        }
+        .save_atomic(&self.dir.checkpoint())
+    }
+
+    fn preview(
+        &mut self,
+        iteration: u64,
+        deformed: &[[f64; 3]],
+        images: Option<&Images>,
+    ) -> anyhow::Result<()> {
+        let path = self.dir.previews().join(format!("iter_{iteration:06}.png"));
+        match images {
+            Some(images) => write_grid(&path, images),
+            None => {
+                let mut images = turntable(
+                    &mut self.preview_renderer,
+                    deformed,
+                    &self.faces,
+                    8,
+                    self.preview_size,
+                    self.fov,
+                )?;
+                if let (Some(free), Some(ids)) = (&self.tint, self.preview_renderer.triangle_ids())
+                {
+                    tint_region(&mut images, &ids, &self.faces, free);
+                }
+                write_grid(&path, &images)
+            }
+        }
+    }
+}
+
+/// Options of [`execute_with`] beyond the request (what the commands know and the library
+/// entry point [`execute`] does not).
+#[derive(Clone, Debug, Default)]
+pub struct RunOptions {
+    /// Continue from a checkpoint when there is one, start fresh otherwise (batch rows; overrides
+    /// `RunRequest::resume`).
+    pub resume_if_checkpoint: bool,
+    /// A complete run of the same task is an [`RunOutcome::already_complete`] success instead of
+    /// an error (batch rows).
+    pub skip_complete: bool,
+    /// Further files the run reads, with their role (config file, manifest, model manifest); the
+    /// input mesh and an exemplar are added by the runner. No output may replace any of them.
+    pub inputs: Vec<(String, PathBuf)>,
+    /// The model of a text run (part of the task identity).
+    pub model: Option<crate::identity::ModelIdentity>,
+}
+
+/// The identity of a ready task's objective (without model).
+pub fn objective_identity(task: &Task<'_>) -> ObjectiveIdentity {
+    match task {
+        Task::Style(s) => ObjectiveIdentity::of_style(s),
+        Task::Text { prompt, .. } => ObjectiveIdentity::Prompt {
+            prompt: prompt.clone(),
+            model: None,
+        },
+    }
+}
+
+/// Runs one request to completion (or to `halt_after`), reporting nothing and never cancelled.
+pub fn execute(request: &RunRequest, task: Task<'_>) -> anyhow::Result<RunOutcome> {
+    let objective = objective_identity(&task);
+    let mut options = RunOptions::default();
+    if let Task::Style(Style::Exemplar { path, .. }) = &task {
+        options.inputs.push(("exemplar mesh".into(), path.clone()));
+    }
+    let never = AtomicBool::new(false);
+    let hooks = RunHooks {
+        progress: &mut NoProgress,
+        cancel: &never,
+    };
+    execute_with(request, objective, || Ok(task), &options, hooks)
+}
+
+/// Runs one request: `objective` is the task's identity, `make_task` builds the task (e.g. loads
+/// the models) — called only once the run directory is claimed, so refusals come before any
+/// expensive loading.
+pub fn execute_with<'g>(
+    request: &RunRequest,
+    mut objective: ObjectiveIdentity,
+    make_task: impl FnOnce() -> anyhow::Result<Task<'g>>,
+    options: &RunOptions,
+    hooks: RunHooks<'_>,
+) -> anyhow::Result<RunOutcome> {
+    let RunHooks { progress, cancel } = hooks;
+    let cancelled = || cancel.load(Ordering::SeqCst);
+    let config = &request.config;
+    config.validate()?;
+    let config_toml = config.to_toml_string()?;
+    let (mesh, mut warnings, region) = prepare_mesh_with_region(&request.mesh, &config.region)?;
+    if let (ObjectiveIdentity::Prompt { model, .. }, Some(m)) = (&mut objective, &options.model) {
+        *model = Some(m.clone());
+    }
+    let mut identity = TaskIdentity::new(&mesh.positions, &mesh.faces, &objective, config)?;
+    if let Some(r) = &region {
+        identity = identity.with_region(&config.region.specs, config.region.feather, &r.weights);
+    }
+    let setup = Instant::now();
+    let mut darap = Darap::new(&mesh.positions, &mesh.faces, darap_options(config))
+        .context("dARAP precomputation")?;
+    if let Some(r) = &region {
+        darap
+            .set_region_weights(Some(r.weights.clone()))
+            .context("region weights")?;
+    }
+    let setup_seconds = setup.elapsed().as_secs_f64();
+    // Everything that can fail on bad input happens before the run directory is touched.
+    let dir = RunDir::new(&request.out);
+    let mut inputs = vec![("input mesh".to_string(), request.mesh.clone())];
+    inputs.extend(options.inputs.iter().cloned());
+    let resume = if options.resume_if_checkpoint {
+        ResumeMode::IfCheckpoint
+    } else if request.resume {
+        ResumeMode::Required
+    } else {
+        ResumeMode::Never
+    };
+    let (lock, start) = dir.claim(&Claim {
+        force: request.force,
+        resume,
+        skip_complete: options.skip_complete,
+        identity: &identity,
+        inputs: &inputs,
+    })?;
+    if matches!(start, Start::Complete) {
+        return Ok(RunOutcome {
+            iteration: 0,
+            complete: true,
+            alignment: None,
+            warnings,
+            already_complete: true,
+        });
+    }
+    let interrupted_before = |start: &Start| {
+        cancelled().then(|| Stopped {
+            dir: request.out.clone(),
+            checkpoint_iteration: match start {
+                Start::Resume(c) => Some(c.iteration),
+                _ => None,
+            },
+        })
+    };
+    if let Some(i) = interrupted_before(&start) {
+        return Err(i.into());
+    }
+    let task = make_task()?;
+    if let Some(i) = interrupted_before(&start) {
+        return Err(i.into());
+    }
+    if let Task::Style(Style::Exemplar { path, .. }) = &task {
+        inputs.push(("exemplar mesh".into(), path.clone()));
+        crate::rundir::refuse_overwriting_inputs(
+            &crate::rundir::RUN_FILES
+                .iter()
+                .map(|n| dir.file(n))
+                .collect::<Vec<_>>(),
+            &[dir.previews()],
+            &inputs,
+        )?;
+    }
+    let task_label = match &task {
+        Task::Style(s) => ("style", s.name()),
+        Task::Text { prompt, .. } => ("prompt", prompt.clone()),
+    };
+
+    let mut renderer_choice: Option<String> = None;
+    let (mut objective, spec, lr, style_objective): (
+        Box<dyn Objective + 'g>,
+        LoopSpec,
+        f64,
+        Option<StyleObjective>,
+    ) = match task {
+        Task::Style(style) => {
+            let obj = StyleObjective::new(&style, &mesh.positions, &mesh.faces);
+            let spec = LoopSpec {
+                iterations: config.style.iterations,
+                steps_per_batch: 1,
+                checkpoint_every: config.run.checkpoint_every,
+                preview_every: config.run.preview_every,
+                halt_after: request.halt_after,
+            };
+            (Box::new(obj.clone()), spec, config.style.lr, Some(obj))
+        }
+        Task::Text { guidance, .. } => {
+            let (renderer, why) = renderer(config);
+            renderer_choice = Some(why);
+            let camera = CameraConfig {
+                elevation_deg: config.camera.elevation_deg,
+                azimuth_deg: config.camera.azimuth_deg,
+                distance: config.camera.distance,
+                fov_y_deg: config.camera.fov_deg,
+            };
+            let views = ViewSettings {
+                camera,
+                views: config.camera.views,
+                width: config.render.width,
+                height: config.render.height,
+                adapt_distance: config.camera.adapt_distance,
+            };
+            let obj = TextObjective::new(renderer, guidance, &mesh.faces, views);
+            let spec = LoopSpec {
+                iterations: config.optim.iterations,
+                steps_per_batch: config.optim.steps_per_batch,
+                checkpoint_every: config.run.checkpoint_every,
+                preview_every: config.run.preview_every,
+                halt_after: request.halt_after,
+            };
+            (Box::new(obj), spec, config.optim.lr, None)
+        }
+    };
+    let adam_config = AdamConfig {
+        lr,
+        beta1: config.optim.beta1,
+        beta2: config.optim.beta2,
+        eps: config.optim.eps,
+    };
+
+    let mut state = match start {
+        Start::Fresh | Start::Complete => {
+            dir.write_task(&identity)?;
+            crate::durable::replace_bytes(&dir.config(), config_toml.as_bytes())?;
+            crate::durable::replace_bytes(&dir.metrics(), b"")?;
+            LoopState {
+                iteration: 0,
+                x: darap.rest_normals().to_vec(),
+                adam: Adam::new(3 * mesh.positions.len(), adam_config)?,
+                rng: ChaCha8Rng::seed_from_u64(config.run.seed),
+            }
+        }
+        Start::Resume(c) => {
+            if c.x.len() != mesh.positions.len() {
+                bail!(
+                    "the checkpoint has {} vertices, the mesh {}: not the same mesh",
+                    c.x.len(),
+                    mesh.positions.len()
+                );
+            }
+            dir.truncate_metrics(c.iteration)?;
+            LoopState {
+                iteration: c.iteration,
+                x: c.x,
+                adam: Adam::from_state(adam_config, c.adam)?,
+                rng: c.rng,
+            }
+        }
+    };
+
+    let alignment_before = style_objective
+        .as_ref()
+        .map(|o| o.mean_alignment(&mesh.positions));
+    let metrics = std::fs::OpenOptions::new()
+        .append(true)
+        .create(true)
+        .open(dir.metrics())
+        .context("cannot open metrics.jsonl")?;
+    let mut headline = vec![format!(
+        "{} on {} ({} vertices)",
+        objective.describe(),
+        request.mesh.display(),
+        mesh.positions.len()
+    )];
+    if let Some(why) = &renderer_choice {
+        headline.push(format!("renderer: {why}"));
+    }
+    progress.start(spec.iterations, state.iteration, &headline);
+    let mut observer = RunObserver {
+        dir: &dir,
+        lock: &lock,
+        identity: identity.clone(),
+        metrics,
+        progress,
+        cancel,
+        config_toml: config_toml.clone(),
+        preview_size: config.run.turntable_size,
+        fov: config.camera.fov_deg,
+        faces: mesh.faces.clone(),
+        preview_renderer: raster_diff::CpuRenderer::default(),
+        tint: region
+            .as_ref()
+            .filter(|_| config.region.tint)
+            .map(|r| r.free.clone()),
+    };
+    let loop_start = Instant::now();
+    let looped = run_loop(&darap, &spec, &mut state, objective.as_mut(), &mut observer);
+    observer.progress.finish();
+    match looped {
+        Ok(()) => {}
+        Err(e) if e.is::<StopRequested>() => {
+            // The iteration is complete (state is consistent): keep it.
+            observer.checkpoint(&state)?;
+            return Err(Stopped {
+                dir: request.out.clone(),
+                checkpoint_iteration: Some(state.iteration),
+            }
+            .into());
+        }
+        Err(e) => return Err(e),
+    }
+    let loop_seconds = loop_start.elapsed().as_secs_f64();
+    if state.iteration < spec.iterations {
+        return Ok(RunOutcome {
+            iteration: state.iteration,
+            complete: false,
+            alignment: None,
+            warnings,
+            already_complete: false,
+        });
+    }
+    if cancelled() {
+        // The final checkpoint is written; the outputs are left to the resume.
+        return Err(Stopped {
+            dir: request.out.clone(),
+            checkpoint_iteration: Some(state.iteration),
+        }
+        .into());
+    }
+
+    // Outputs.
+    // The outputs are the deformation of x as saved (f32), so re-applying deformation.npz
+    // reproduces mesh.* exactly.
+    let x_saved: Vec<[f64; 3]> = state
+        .x
+        .iter()
+        .map(|p| p.map(|c| f64::from(c as f32)))
+        .collect();
+    let result = darap.forward(&x_saved).context("final dARAP forward")?;
+    let deformed = TriMesh::new(result.positions.clone(), mesh.faces.clone());
+    let normals =
+        mesh_core::normals::vertex_normals_area_weighted(&deformed.positions, &deformed.faces);
+    lock.ensure_held()?;
+    for ext in ["obj", "ply", "glb"] {
+        let path = dir.file(&format!("mesh.{ext}"));
+        let written = crate::durable::replace_with(&path, |tmp| {
+            mesh_core::io::write_mesh(tmp, &deformed, Some(&normals)).map_err(anyhow::Error::from)
+        });
+        match written {
+            Ok(()) => {}
+            Err(e)
+                if matches!(
+                    e.downcast_ref::<mesh_core::MeshError>(),
+                    Some(mesh_core::MeshError::UnsupportedFormat { .. })
+                ) =>
+            {
+                warnings.push(format!(
+                    "mesh.{ext} not written: this build's mesh writer does not support .{ext}"
+                ));
+            }
+            Err(e) => return Err(e).with_context(|| format!("cannot write {}", path.display())),
+        }
+    }
+    write_deformation(
+        &dir,
+        &mesh,
+        &state.x,
+        config,
+        &request.mesh,
+        task_label.0,
+        &task_label.1,
+        region.as_ref(),
+    )?;
+    let mut tt_renderer = raster_diff::CpuRenderer::default();
+    let mut tt = turntable(
+        &mut tt_renderer,
+        &deformed.positions,
+        &deformed.faces,
+        config.run.turntable_views,
+        config.run.turntable_size,
+        config.camera.fov_deg,
+    )?;
+    if let (Some(r), true, Some(ids)) = (&region, config.region.tint, tt_renderer.triangle_ids()) {
+        tint_region(&mut tt, &ids, &deformed.faces, &r.free);
+    }
+    write_grid(&dir.file("turntable.png"), &tt)?;
+    let alignment = match (&style_objective, alignment_before) {
+        (Some(o), Some(before)) => Some((before, o.mean_alignment(&deformed.positions))),
+        _ => None,
+    };
+    let summary = serde_json::json!({
+        "status": "complete",
+        "mesh": request.mesh.display().to_string(),
+        "objective": objective.describe(),
+        "iterations": state.iteration,
+        "adam_steps": state.adam.state().step,
+        "seed": config.run.seed,
+        "lambda": config.darap.lambda,
+        "rotation_rule": config.darap.rotation_rule.name(),
+        "vertices": mesh.positions.len(),
+        "faces": mesh.faces.len(),
+        "alignment_before": alignment.map(|a| a.0),
+        "alignment_after": alignment.map(|a| a.1),
+        "renderer": renderer_choice,
+        "seconds": { "setup": setup_seconds, "loop": loop_seconds },
+        "warnings": warnings,
+        "region": region.as_ref().map(|r| serde_json::json!({
+            "specs": config.region.specs,
+            "feather": config.region.feather,
+            "vertices": r.free.iter().filter(|&&f| f).count(),
+        })),
+        "task": identity.fields,
+    });
+    lock.ensure_held()?;
+    crate::durable::replace_bytes(
+        &dir.summary(),
+        serde_json::to_string_pretty(&summary)
+            .context("summary")?
+            .as_bytes(),
+    )
+    .context("cannot write run.json")?;
+    drop(lock);
+    Ok(RunOutcome {
+        iteration: state.iteration,
+        complete: true,
+        alignment,
+        warnings,
+        already_complete: false,
+    })
+}
+
+/// Writes `deformation.npz` in the reference format plus our keys (for a localized run:
+/// `region_weights`, one f64 per vertex, `region_specs`, newline separated, and `region_feather`).
+#[allow(clippy::too_many_arguments)]
+fn write_deformation(
+    dir: &RunDir,
+    mesh: &TriMesh,
+    x: &[[f64; 3]],
+    config: &Config,
+    source: &Path,
+    task_key: &str,
+    task_value: &str,
+    region: Option<&ResolvedRegion>,
+) -> anyhow::Result<()> {
+    let csd_cfg = serde_json::json!({
+        "local_step_procrustes": { "lamb": config.darap.lambda, "normalize_target_normals": true },
+        "arap_energy_type": "spokes_and_rims_mine",
+        "solve_method": "arap",
+        "pin_first_vertex": true,
+        "lr": config.optim.lr,
+        "n_iters": config.optim.iterations,
+    });
+    let dataset_cfg =
+        serde_json::json!({ "mesh": source.display().to_string(), task_key: task_value });
+    let mut saved = SavedDeformation {
+        verts: mesh.positions.iter().map(|p| p.map(|c| c as f32)).collect(),
+        faces: mesh.faces.clone(),
+        verts_normals: x.iter().map(|p| p.map(|c| c as f32)).collect(),
+        deform_by_csd_cfg: csd_cfg.to_string(),
+        dataset_cfg: dataset_cfg.to_string(),
+        extra: Vec::new(),
+    };
+    let scalar_i64 =
+        |v: i64| NpyArray::new(vec![], NpyData::I64(vec![v])).map_err(anyhow::Error::msg);
+    saved.set_extra("format_version", scalar_i64(NPZ_FORMAT_VERSION)?)?;
+    // The seed as i64 bits (NumPy has no portable u64 scalar in our reader).
+    saved.set_extra("seed", scalar_i64(config.run.seed as i64)?)?;
+    saved.set_extra(
+        "rotation_rule",
+        NpyArray::scalar_str(config.darap.rotation_rule.name()),
+    )?;
+    if let Some(r) = region {
+        saved.set_extra(
+            "region_weights",
+            NpyArray::new(vec![r.weights.len()], NpyData::F64(r.weights.clone()))
+                .map_err(anyhow::Error::msg)?,
+        )?;
+        saved.set_extra(
+            "region_specs",
+            NpyArray::scalar_str(&config.region.specs.join("\n")),
+        )?;
+        saved.set_extra(
+            "region_feather",
+            scalar_i64(i64::from(config.region.feather))?,
+        )?;
+    }
+    crate::durable::replace_with(&dir.deformation(), |tmp| {
+        saved.write(tmp).map_err(anyhow::Error::from)
+    })
+    .with_context(|| format!("cannot write {}", dir.deformation().display()))
+}

@@ -1,0 +1,134 @@
+"""Helpers shared by the ONNX exporters (export_if_onnx.py, export_clip_onnx.py).
+
+Everything here is plain Python + NumPy at import time; torch, onnx and onnxruntime are imported inside
+the functions that need them, so ``--help`` works without them.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib
+import sys
+from pathlib import Path
+
+import numpy as np
+
+SCRIPT_DIR = Path(__file__).resolve().parent
+REPO_ROOT = SCRIPT_DIR.parent
+ASSETS = REPO_ROOT / "crates" / "diffusion-onnx" / "assets"
+
+
+def external_files(onnx_path: Path) -> list[str]:
+    """The external-data files an ONNX model references (sorted, without duplicates)."""
+    import onnx
+
+    model = onnx.load(str(onnx_path), load_external_data=False)
+    files: set[str] = set()
+    for t in model.graph.initializer:
+        if t.data_location == onnx.TensorProto.EXTERNAL:
+            for kv in t.external_data:
+                if kv.key == "location":
+                    files.add(kv.value)
+    return sorted(files)
+
+
+def strip_debug_info(path: Path):
+    """Drop the exporter's per-node stack traces and metadata (more than half of a tiny model's bytes).
+    Weights are untouched; external-data references are kept as they are."""
+    import onnx
+
+    model = onnx.load(str(path), load_external_data=False)
+
+    def strip_graph(g):
+        g.doc_string = ""
+        for node in g.node:
+            node.doc_string = ""
+            del node.metadata_props[:]
+            for attr in node.attribute:
+                if attr.type == onnx.AttributeProto.GRAPH:
+                    strip_graph(attr.g)
+                elif attr.type == onnx.AttributeProto.GRAPHS:
+                    for sub in attr.graphs:
+                        strip_graph(sub)
+        for vi in list(g.value_info):
+            del vi.metadata_props[:]
+        for t in g.initializer:
+            del t.metadata_props[:]
+
+    strip_graph(model.graph)
+    del model.metadata_props[:]
+    onnx.save(model, str(path))
+
+
+def export_module(module, args: tuple, names_in: list[str], name_out: str, path: Path, dynamic: dict, big: bool):
+    """torch.onnx.export (dynamo, opset 18) of ``module`` on ``args``; ``dynamic`` maps an input name to
+    its dynamic axes. ``big`` keeps the weights in an external-data file next to the model; otherwise
+    the empty external-data file the dynamo exporter may leave is removed (and a small model that does
+    reference external data is an error). The debug info is stripped."""
+    import torch
+
+    dyn = {}
+    for name, axes in dynamic.items():
+        dyn[name] = {ax: torch.export.Dim.DYNAMIC for ax in axes}
+    with torch.no_grad():
+        torch.onnx.export(
+            module,
+            args,
+            str(path),
+            input_names=names_in,
+            output_names=[name_out],
+            dynamic_shapes=dyn,
+            dynamo=True,
+            external_data=big,
+            opset_version=18,
+        )
+    strip_debug_info(path)
+    # The dynamo exporter may leave an empty external-data file next to a small model: drop it.
+    data = path.with_name(path.name + ".data")
+    if not big and data.exists():
+        if external_files(path):
+            raise RuntimeError(f"{path} references external data although it is small")
+        data.unlink()
+
+
+def check_close(got: np.ndarray, ref: np.ndarray, atol: float, rtol: float, label: str):
+    """Prints the comparison and exits with an error when ``got`` is not finite or differs from ``ref``
+    by more than ``atol + rtol * max|ref|`` anywhere."""
+    got = np.asarray(got, dtype=np.float32)
+    err = float(np.max(np.abs(got - ref)))
+    scale = float(np.max(np.abs(ref)))
+    tol = atol + rtol * scale
+    print(f"[verify] {label}: max |onnx - torch| = {err:.3e} (max |torch| = {scale:.3e}, tolerance {tol:.3e})")
+    if not np.isfinite(got).all() or err > tol:
+        raise SystemExit(f"error: {label} disagrees with PyTorch beyond tolerance")
+
+
+def verify(path: Path, module, feeds: dict[str, np.ndarray], atol: float, rtol: float, label: str) -> np.ndarray:
+    """Runs the ONNX model at ``path`` (ONNX Runtime, CPU) and ``module`` (PyTorch) on ``feeds`` (in the
+    module's argument order), checks them with :func:`check_close` and returns the PyTorch output."""
+    import onnxruntime as ort
+    import torch
+
+    sess = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    got = sess.run(None, feeds)[0]
+    with torch.no_grad():
+        ref = module(*[torch.from_numpy(v) for v in feeds.values()]).float().numpy()
+    check_close(got, ref, atol, rtol, label)
+    return ref
+
+
+def sha256(path: Path) -> str:
+    """Lower-case hex SHA-256 of a file."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def versions(modules: dict[str, str]) -> dict:
+    """``{label: version}`` for each ``label: import name`` in ``modules``, plus the Python version (the
+    ``versions.json`` an export writes)."""
+    out = {label: importlib.import_module(name).__version__ for label, name in modules.items()}
+    out["python"] = sys.version.split()[0]
+    return out
