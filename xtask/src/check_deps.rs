@@ -52,7 +52,8 @@ const RULES: &[(&str, &[&str])] = &[
         ],
     ),
     ("optim", &["wgpu", "ort", "faer", "tokenizers"]),
-    ("raster-diff", &["ort", "tokenizers"]),
+    // mesh-core without `io` (geometry helpers only: bbox for the camera distance).
+    ("raster-diff", &["ort", "tokenizers", "gltf", "zip", "tobj"]),
     // `.npy` only from the npy crate: no zip, and no mesh code.
     ("diffusion-onnx", &["wgpu", "mesh-core", "zip"]),
     // The optimization as a library: no command line, no terminal UI, no signal handling.

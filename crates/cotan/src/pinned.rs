@@ -6,7 +6,7 @@ use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt::factor::LltError;
 use faer::linalg::cholesky::llt::factor::LltRegularization;
 use faer::sparse::linalg::cholesky::{
-    CholeskySymbolicParams, SymmetricOrdering, factorize_symbolic_cholesky,
+    CholeskySymbolicParams, SymbolicCholesky, SymmetricOrdering, factorize_symbolic_cholesky,
 };
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use faer::{Par, Side};
@@ -22,23 +22,6 @@ pub fn component_pins(num_vertices: usize, faces: &[[u32; 3]]) -> Vec<usize> {
         .collect();
     pins.sort_unstable();
     pins
-}
-
-/// Union–find whose root is always the lowest index of its set.
-fn find(parent: &mut [usize], mut v: usize) -> usize {
-    while parent[v] != v {
-        parent[v] = parent[parent[v]];
-        v = parent[v];
-    }
-    v
-}
-
-fn union(parent: &mut [usize], a: usize, b: usize) {
-    let (ra, rb) = (find(parent, a), find(parent, b));
-    if ra != rb {
-        let (lo, hi) = if ra < rb { (ra, rb) } else { (rb, ra) };
-        parent[hi] = lo;
-    }
 }
 
 /// Cholesky factorization `L_pin = G Gᵀ` of a symmetric positive semi-definite matrix `L` with the
@@ -80,142 +63,30 @@ impl PinnedCholesky {
     /// row is empty (an unreferenced vertex); a connected component of `L`'s graph without a pin;
     /// a non-positive pivot (degenerate faces).
     pub fn new(l: &SymmetricCsr, pins: &[usize]) -> Result<Self, CotanError> {
-        let n = l.size();
-        let mut pins_sorted = pins.to_vec();
-        pins_sorted.sort_unstable();
-        for w in pins_sorted.windows(2) {
-            if w[0] == w[1] {
-                return Err(CotanError::InvalidPin {
-                    pin: w[0],
-                    why: "repeated",
-                });
-            }
-        }
-        if let Some(&p) = pins_sorted.iter().find(|&&p| p >= n) {
-            return Err(CotanError::InvalidPin {
-                pin: p,
-                why: "out of range",
-            });
-        }
-        if let Some(index) = l.values().iter().position(|v| !v.is_finite()) {
-            return Err(CotanError::NonFinite {
-                what: "matrix entry",
-                index,
-            });
-        }
-        let mut reduced_of = vec![usize::MAX; n];
-        let mut pin_slot = vec![usize::MAX; n];
-        for (k, &p) in pins_sorted.iter().enumerate() {
-            pin_slot[p] = k;
-        }
-        let free: Vec<usize> = (0..n).filter(|&v| pin_slot[v] == usize::MAX).collect();
-        for (r, &v) in free.iter().enumerate() {
-            reduced_of[v] = r;
-        }
-
-        // Diagnostics that explain a failure better than a pivot index would.
-        let mut parent: Vec<usize> = (0..n).collect();
-        for &v in &free {
-            let (cols, vals) = l.row(v);
-            let has_offdiag = cols.iter().any(|&j| j != v);
-            if !has_offdiag && l.get(v, v) == 0.0 {
-                return Err(CotanError::UnreferencedVertex { vertex: v });
-            }
-            for (&j, _) in cols.iter().zip(vals) {
-                union(&mut parent, v, j);
-            }
-        }
-        let mut component_pinned = vec![false; n];
-        for &p in &pins_sorted {
-            let (cols, _) = l.row(p);
-            for &j in cols {
-                union(&mut parent, p, j);
-            }
-        }
-        for &p in &pins_sorted {
-            let root = find(&mut parent, p);
-            component_pinned[root] = true;
-        }
-        for &v in &free {
-            let root = find(&mut parent, v);
-            if !component_pinned[root] {
-                return Err(CotanError::ComponentWithoutPin { vertex: root });
-            }
-        }
-
-        // Reduced matrix (full symmetric storage; faer reads the lower triangle) and couplings.
-        let m = free.len();
-        let mut col_ptr = Vec::with_capacity(m + 1);
-        let mut row_idx = Vec::new();
-        let mut vals = Vec::new();
-        let mut coupling_ptr = Vec::with_capacity(m + 1);
-        let mut coupling = Vec::new();
-        col_ptr.push(0);
-        coupling_ptr.push(0);
-        for &v in &free {
-            let (cols, values) = l.row(v);
-            for (&j, &x) in cols.iter().zip(values) {
-                if reduced_of[j] != usize::MAX {
-                    row_idx.push(reduced_of[j]);
-                    vals.push(x);
-                } else {
-                    coupling.push((pin_slot[j], x));
-                }
-            }
-            col_ptr.push(row_idx.len());
-            coupling_ptr.push(coupling.len());
-        }
-
+        let pins = validate(l, pins)?;
+        let split = PinSplit::new(l.size(), &pins);
+        diagnose(l, &pins, &split.free)?;
+        let reduced = reduce(l, &split);
         let mut out = Self {
-            n,
-            pins: pins_sorted,
-            reduced_of,
-            free,
-            coupling_ptr,
-            coupling,
+            n: l.size(),
+            pins,
+            reduced_of: split.reduced_of,
+            free: split.free,
+            coupling_ptr: reduced.coupling_ptr,
+            coupling: reduced.coupling,
             perm_fwd: Vec::new(),
             perm_inv: Vec::new(),
             order: Vec::new(),
             factor: CscFactor::default(),
         };
+        let m = out.free.len();
         if m == 0 {
             return Ok(out);
         }
-        let sym = SymbolicSparseColMatRef::new_checked(m, m, &col_ptr, None, &row_idx);
-        let symbolic = factorize_symbolic_cholesky(
-            sym,
-            Side::Lower,
-            SymmetricOrdering::Amd,
-            CholeskySymbolicParams::default(),
-        )
-        .map_err(|e| CotanError::Factorization(format!("{e:?}")))?;
-        let mut factor = vec![0.0; symbolic.len_val()];
-        let par = Par::Seq;
-        let req = symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default());
-        let mut buf = MemBuffer::try_new(req)
-            .map_err(|_| CotanError::Factorization("out of memory".into()))?;
-        let a = SparseColMatRef::new(sym, &vals);
-        let result = symbolic.factorize_numeric_llt::<f64>(
-            &mut factor,
-            a,
-            Side::Lower,
-            LltRegularization::default(),
-            par,
-            MemStack::new(&mut buf),
-            Default::default(),
-        );
-        match result {
-            Ok(_) => {}
-            Err(LltError::NonPositivePivot { index }) => {
-                return Err(CotanError::NotPositiveDefinite {
-                    pivot: index,
-                    size: m,
-                });
-            }
-        }
-        if factor.iter().any(|x| !x.is_finite()) {
-            return Err(CotanError::NotPositiveDefinite { pivot: 0, size: m });
-        }
+        let pattern =
+            SymbolicSparseColMatRef::new_checked(m, m, &reduced.col_ptr, None, &reduced.row_idx);
+        let symbolic = symbolic(pattern)?;
+        let factor = numeric(&symbolic, SparseColMatRef::new(pattern, &reduced.vals))?;
         let (perm_fwd, perm_inv) = match symbolic.perm() {
             Some(p) => {
                 let (fwd, inv) = p.arrays();
@@ -388,6 +259,181 @@ impl PinnedCholesky {
         }
         g
     }
+}
+
+// The stages of `PinnedCholesky::new`, in order: validate → diagnose → reduce → symbolic → numeric.
+
+/// Stage 1: the pins sorted, each once and in range, and every matrix entry finite.
+fn validate(l: &SymmetricCsr, pins: &[usize]) -> Result<Vec<usize>, CotanError> {
+    let n = l.size();
+    let mut pins_sorted = pins.to_vec();
+    pins_sorted.sort_unstable();
+    for w in pins_sorted.windows(2) {
+        if w[0] == w[1] {
+            return Err(CotanError::InvalidPin {
+                pin: w[0],
+                why: "repeated",
+            });
+        }
+    }
+    if let Some(&p) = pins_sorted.iter().find(|&&p| p >= n) {
+        return Err(CotanError::InvalidPin {
+            pin: p,
+            why: "out of range",
+        });
+    }
+    if let Some(index) = l.values().iter().position(|v| !v.is_finite()) {
+        return Err(CotanError::NonFinite {
+            what: "matrix entry",
+            index,
+        });
+    }
+    Ok(pins_sorted)
+}
+
+/// The free/pinned partition of the `n` indices.
+struct PinSplit {
+    /// Reduced index → full index (the free vertices, ascending).
+    free: Vec<usize>,
+    /// Full index → reduced index (`usize::MAX` for pins).
+    reduced_of: Vec<usize>,
+    /// Full index → position in the sorted pins (`usize::MAX` for free vertices).
+    pin_slot: Vec<usize>,
+}
+
+impl PinSplit {
+    fn new(n: usize, pins_sorted: &[usize]) -> Self {
+        let mut reduced_of = vec![usize::MAX; n];
+        let mut pin_slot = vec![usize::MAX; n];
+        for (k, &p) in pins_sorted.iter().enumerate() {
+            pin_slot[p] = k;
+        }
+        let free: Vec<usize> = (0..n).filter(|&v| pin_slot[v] == usize::MAX).collect();
+        for (r, &v) in free.iter().enumerate() {
+            reduced_of[v] = r;
+        }
+        Self {
+            free,
+            reduced_of,
+            pin_slot,
+        }
+    }
+}
+
+/// Stage 2: diagnostics that explain a failure better than a pivot index would — a free vertex
+/// with an empty row (unreferenced; the first in index order), then a connected component of `L`'s
+/// graph (its sparsity pattern, [`mesh_core::topology::graph_components`]) without a pin, named by
+/// its smallest vertex.
+fn diagnose(l: &SymmetricCsr, pins_sorted: &[usize], free: &[usize]) -> Result<(), CotanError> {
+    for &v in free {
+        let (cols, _) = l.row(v);
+        let has_offdiag = cols.iter().any(|&j| j != v);
+        if !has_offdiag && l.get(v, v) == 0.0 {
+            return Err(CotanError::UnreferencedVertex { vertex: v });
+        }
+    }
+    let n = l.size();
+    let edges = (0..n).flat_map(|i| l.row(i).0.iter().map(move |&j| [i as u32, j as u32]));
+    let (labels, count) = mesh_core::topology::graph_components(n, edges);
+    let mut component_pinned = vec![false; count];
+    for &p in pins_sorted {
+        component_pinned[labels[p] as usize] = true;
+    }
+    if let Some(&v) = free
+        .iter()
+        .find(|&&v| !component_pinned[labels[v] as usize])
+    {
+        let smallest = labels.iter().position(|&c| c == labels[v]).unwrap_or(v);
+        return Err(CotanError::ComponentWithoutPin { vertex: smallest });
+    }
+    Ok(())
+}
+
+/// The reduced matrix `L[free, free]` in compressed columns (full symmetric storage; faer reads
+/// the lower triangle) and, per free row, its couplings `L[row, pin]` as (pin slot, value).
+struct Reduced {
+    col_ptr: Vec<usize>,
+    row_idx: Vec<usize>,
+    vals: Vec<f64>,
+    coupling_ptr: Vec<usize>,
+    coupling: Vec<(usize, f64)>,
+}
+
+/// Stage 3: removes the pinned rows and columns.
+fn reduce(l: &SymmetricCsr, split: &PinSplit) -> Reduced {
+    let m = split.free.len();
+    let mut r = Reduced {
+        col_ptr: Vec::with_capacity(m + 1),
+        row_idx: Vec::new(),
+        vals: Vec::new(),
+        coupling_ptr: Vec::with_capacity(m + 1),
+        coupling: Vec::new(),
+    };
+    r.col_ptr.push(0);
+    r.coupling_ptr.push(0);
+    for &v in &split.free {
+        let (cols, values) = l.row(v);
+        for (&j, &x) in cols.iter().zip(values) {
+            if split.reduced_of[j] != usize::MAX {
+                r.row_idx.push(split.reduced_of[j]);
+                r.vals.push(x);
+            } else {
+                r.coupling.push((split.pin_slot[j], x));
+            }
+        }
+        r.col_ptr.push(r.row_idx.len());
+        r.coupling_ptr.push(r.coupling.len());
+    }
+    r
+}
+
+/// Stage 4: fill-reducing ordering (AMD) and symbolic analysis of the reduced pattern.
+fn symbolic(
+    pattern: SymbolicSparseColMatRef<'_, usize>,
+) -> Result<SymbolicCholesky<usize>, CotanError> {
+    factorize_symbolic_cholesky(
+        pattern,
+        Side::Lower,
+        SymmetricOrdering::Amd,
+        CholeskySymbolicParams::default(),
+    )
+    .map_err(|e| CotanError::Factorization(format!("{e:?}")))
+}
+
+/// Stage 5: the numeric `L L^T` factorization (sequential), as faer's factor values; a
+/// non-positive pivot or a non-finite factor entry is [`CotanError::NotPositiveDefinite`].
+fn numeric(
+    symbolic: &SymbolicCholesky<usize>,
+    a: SparseColMatRef<'_, usize, f64>,
+) -> Result<Vec<f64>, CotanError> {
+    let m = symbolic.nrows();
+    let mut factor = vec![0.0; symbolic.len_val()];
+    let par = Par::Seq;
+    let req = symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default());
+    let mut buf =
+        MemBuffer::try_new(req).map_err(|_| CotanError::Factorization("out of memory".into()))?;
+    let result = symbolic.factorize_numeric_llt::<f64>(
+        &mut factor,
+        a,
+        Side::Lower,
+        LltRegularization::default(),
+        par,
+        MemStack::new(&mut buf),
+        Default::default(),
+    );
+    match result {
+        Ok(_) => {}
+        Err(LltError::NonPositivePivot { index }) => {
+            return Err(CotanError::NotPositiveDefinite {
+                pivot: index,
+                size: m,
+            });
+        }
+    }
+    if factor.iter().any(|x| !x.is_finite()) {
+        return Err(CotanError::NotPositiveDefinite { pivot: 0, size: m });
+    }
+    Ok(factor)
 }
 
 #[cfg(test)]

@@ -545,7 +545,7 @@ fn icosphere<'py>(py: Python<'py>, level: u32) -> PyResult<Bound<'py, PyTuple>> 
             "icosphere level must be at most {MAX_ICOSPHERE_LEVEL}, got {level}"
         )));
     }
-    let mesh = darap::procedural::icosphere(level);
+    let mesh = mesh_core::shapes::icosphere(level);
     let flat: Vec<i64> = mesh
         .faces
         .iter()

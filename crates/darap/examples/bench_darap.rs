@@ -72,7 +72,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     for level in [5, 6, 7] {
         meshes.push((
             format!("icosphere/{level}"),
-            darap::procedural::icosphere(level),
+            mesh_core::shapes::icosphere(level),
         ));
     }
     for path in extra {

@@ -5,7 +5,7 @@
 use darap::{Darap, DarapOptions};
 
 fn main() -> Result<(), darap::DarapError> {
-    let mesh = darap::procedural::icosphere(3); // any positions normalized to the side-2 cube
+    let mesh = mesh_core::shapes::icosphere(3); // any positions normalized to the side-2 cube
     let layer = Darap::new(&mesh.positions, &mesh.faces, DarapOptions::default())?; // λ = 8, gis rule
     // Targets: rest normals tilted toward +x (only directions matter).
     let x: Vec<[f64; 3]> = layer

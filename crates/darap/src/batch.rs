@@ -1,6 +1,6 @@
 //! The local step's per-vertex kernels on [`W`](crate::lanes::W) vertices at once: the 3×3 SVD
-//! ([`crate::svd3::svd3`]), the rotation rules ([`crate::rotation_rule`]) and their adjoint
-//! ([`crate::rotation_rule::rotation_vjp`]).
+//! ([`crate::stages::svd3`]), the rotation rules ([`crate::stages`]) and their adjoint
+//! ([`crate::stages::rotation_vjp`]).
 //!
 //! Each lane evaluates **the same sequence of IEEE operations** as the scalar functions, so its
 //! results are bit for bit the scalar ones (tested against them on random, rank-deficient and
@@ -17,7 +17,7 @@ use crate::lanes::{
     sub, transpose,
 };
 
-/// `S = U·diag(σ)·Vᵀ` for every lane (see [`crate::svd3::Svd3`]).
+/// `S = U·diag(σ)·Vᵀ` for every lane (see [`crate::stages::Svd3`]).
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct SvdLanes {
     pub u: M3,
@@ -51,7 +51,7 @@ fn any_orthogonal(u: V3) -> V3 {
     select3(ok, y, [zero, zero, one])
 }
 
-/// The one-sided Jacobi SVD of [`crate::svd3::svd3`], lane by lane.
+/// The one-sided Jacobi SVD of [`crate::stages::svd3`], lane by lane.
 #[inline(always)]
 pub(crate) fn svd3_lanes(s: &M3) -> SvdLanes {
     let mut magnitude = splat(0.0);
@@ -192,7 +192,7 @@ pub(crate) fn d01(rule: RotationRule) -> f64 {
     }
 }
 
-/// `R` of a rotation rule ([`crate::rotation_rule::gis`], [`crate::rotation_rule::procrustes`])
+/// `R` of a rotation rule ([`crate::stages::gis`], [`crate::stages::procrustes`])
 /// from the lanes' SVD, and the per-lane last sign `d2` of the pattern.
 #[inline(always)]
 pub(crate) fn rule_lanes(svd: &SvdLanes, rule: RotationRule) -> (M3, F) {
@@ -214,7 +214,7 @@ pub(crate) fn rule_lanes(svd: &SvdLanes, rule: RotationRule) -> (M3, F) {
     }
 }
 
-/// [`crate::rotation_rule::rotation_vjp`] lane by lane: `∂ℓ/∂S` from `G = ∂ℓ/∂R`.
+/// [`crate::stages::rotation_vjp`] lane by lane: `∂ℓ/∂S` from `G = ∂ℓ/∂R`.
 #[inline(always)]
 pub(crate) fn rotation_vjp_lanes(svd: &SvdLanes, d2: F, rule: RotationRule, grad_r: &M3) -> M3 {
     let g = match rule {

@@ -5,7 +5,8 @@
 //! `x` (raw targets, V×3) → `t̂ = x / max(|x|, 1e-12)` → local step (one rotation `R_v` per vertex
 //! from `S_v = K_v + λ a_v n0_v t̂_vᵀ`, see [`RotationRule`]) → right-hand side `b` (spec §4.1) →
 //! pinned solve `L x = b` (vertex 0, or the lowest vertex of each component, kept at rest) →
-//! post-processing ([`PostProcess`]).
+//! post-processing ([`PostProcess`]). The root holds the layer ([`Darap`], its options, the
+//! [`Deformation`] tape); each stage and its VJP is public under [`stages`].
 //!
 //! - Laplacian: `L = diag(Σ_j c_ij) − C`, positive semi-definite, `c_ij = cot α + cot β` (**twice**
 //!   libigl's weights); λ is defined with respect to these weights.
@@ -28,22 +29,49 @@ mod batch;
 mod global;
 mod lanes;
 mod local;
-pub mod mat3;
+mod mat3;
 mod post;
-pub mod procedural;
 pub mod region;
-pub mod rotation_rule;
-pub mod svd3;
+mod rotation_rule;
+mod svd3;
 
 pub use cotan::CotanError;
-pub use global::{RhsPrecompute, rhs, rhs_vjp};
-use local::normalize_target;
-pub use local::{
-    LocalTape, covariance, local_step, local_step_vjp, normalize_targets, normalize_targets_vjp,
+pub use mat3::Mat3;
+
+use global::{RhsPrecompute, rhs_vjp};
+use local::{
+    LocalTape, local_step, local_step_vjp, normalize_target, normalize_targets_vjp,
     rest_covariances,
 };
-pub use mat3::Mat3;
-pub use post::{PostTape, post_process, post_process_vjp};
+use post::{PostTape, post_process, post_process_vjp};
+
+pub mod stages {
+    //! The stages of the layer and their vector–Jacobian products, each callable alone (the gradient
+    //! checks of `cargo xtask gradcheck` test them one by one; [`crate::Darap`] composes them):
+    //!
+    //! | stage | forward | VJP |
+    //! |---|---|---|
+    //! | target normalization `t̂ = x / max(‖x‖, 1e-12)` | [`normalize_targets`] | [`normalize_targets_vjp`] |
+    //! | rest covariances `K_v` | [`rest_covariances`] | (constant) |
+    //! | covariance `S_v = ±K_v + λ a_v n0_v t̂_vᵀ` | [`covariance`] | (inside [`local_step_vjp`]) |
+    //! | rotation rule `S → R` | [`gis`], [`procrustes`] (via [`svd3`]) | [`rotation_vjp`] |
+    //! | local step (all vertices, tape [`LocalTape`]) | [`local_step`] | [`local_step_vjp`] |
+    //! | right-hand side `b` (spec §4.1) | [`rhs`] ([`RhsPrecompute`]) | [`rhs_vjp`] |
+    //! | post-processing (tape [`PostTape`]) | [`post_process`] | [`post_process_vjp`] |
+    //!
+    //! The pinned solve between `rhs` and `post_process` is `cotan::PinnedCholesky` (self-adjoint).
+
+    pub use crate::global::{RhsPrecompute, rhs, rhs_vjp};
+    pub use crate::local::{
+        LocalTape, covariance, local_step, local_step_vjp, normalize_targets,
+        normalize_targets_vjp, rest_covariances,
+    };
+    pub use crate::post::{PostTape, post_process, post_process_vjp};
+    pub use crate::rotation_rule::{
+        RotationSvd, SINGULAR_GAP_GUARD, gis, procrustes, rotation_vjp,
+    };
+    pub use crate::svd3::{Svd3, svd3};
+}
 
 use cotan::PinnedCholesky;
 

@@ -110,7 +110,8 @@ pub fn covariance(
 }
 
 /// What [`local_step_vjp`] needs: per vertex the SVD of `S_v`, the rule's sign pattern and
-/// whether the vertex was free, stored by batches of [`W`] vertices (structure of arrays).
+/// whether the vertex was free, stored by batches of 8 vertices (the lane width; structure of
+/// arrays).
 #[derive(Clone, Debug)]
 pub struct LocalTape {
     rule: RotationRule,
@@ -141,8 +142,8 @@ impl LocalTape {
         self.rule
     }
 
-    /// Vertex `v`'s record (as the scalar [`crate::rotation_rule::gis`] /
-    /// [`crate::rotation_rule::procrustes`] return it); `None` where the mask forced `R = I` or
+    /// Vertex `v`'s record (as the scalar [`crate::stages::gis`] /
+    /// [`crate::stages::procrustes`] return it); `None` where the mask forced `R = I` or
     /// `v` is out of range.
     pub fn get(&self, v: usize) -> Option<RotationSvd> {
         if v >= self.len {
@@ -171,9 +172,9 @@ impl LocalTape {
 /// The local step: `R_v = rule(S_v)` with `S_v` from [`covariance`] and normal weight
 /// `λ·mass[v]`; vertices with `free[v] == false` get `R_v = I`.
 ///
-/// `targets_unit` are unit target normals (see [`normalize_targets`]). Runs [`W`] vertices per
-/// SIMD batch; each vertex's result is bit for bit that of the scalar rule
-/// ([`crate::rotation_rule::gis`], [`crate::rotation_rule::procrustes`]). Deterministic for any
+/// `targets_unit` are unit target normals (see [`normalize_targets`]). Runs 8 vertices (the lane
+/// width) per SIMD batch; each vertex's result is bit for bit that of the scalar rule
+/// ([`crate::stages::gis`], [`crate::stages::procrustes`]). Deterministic for any
 /// number of rayon threads (each vertex is independent).
 ///
 /// # Panics
@@ -274,7 +275,7 @@ fn local_chunk(
 
 /// Adjoint of [`local_step`] with respect to the unit targets:
 /// `∂ℓ/∂t̂_v = λ a_v · (∂ℓ/∂S_v)ᵀ n0_v`, zero at masked vertices. Each vertex's `∂ℓ/∂S_v` is bit
-/// for bit [`crate::rotation_rule::rotation_vjp`].
+/// for bit [`crate::stages::rotation_vjp`].
 ///
 /// # Panics
 /// If the slices differ in length from the tape (a programming error).

@@ -1,5 +1,5 @@
 //! Small dense 3×3 helpers. `Mat3` is row-major: `m[i][j]` is row `i`, column `j`; vectors are
-//! columns, so `mul_vec(m, x)` is `m·x`.
+//! columns (a rotation acts as `R·x`). Crate-internal; the public type is [`crate::Mat3`].
 
 /// A 3×3 matrix, row-major (`m[row][col]`).
 pub type Mat3 = [[f64; 3]; 3];
@@ -42,16 +42,6 @@ pub fn mul_tn(a: &Mat3, b: &Mat3) -> Mat3 {
 #[inline]
 pub fn mul_nt(a: &Mat3, b: &Mat3) -> Mat3 {
     mul(a, &transpose(b))
-}
-
-/// `m·x`.
-#[inline]
-pub fn mul_vec(m: &Mat3, x: [f64; 3]) -> [f64; 3] {
-    [
-        m[0][0] * x[0] + m[0][1] * x[1] + m[0][2] * x[2],
-        m[1][0] * x[0] + m[1][1] * x[1] + m[1][2] * x[2],
-        m[2][0] * x[0] + m[2][1] * x[1] + m[2][2] * x[2],
-    ]
 }
 
 /// `mᵀ·x`.

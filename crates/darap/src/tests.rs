@@ -2,7 +2,8 @@
 
 use super::*;
 use crate::mat3::IDENTITY;
-use crate::procedural::{icosphere, obtuse_wavy_grid};
+use crate::stages::{normalize_targets, rhs};
+use mesh_core::shapes::{icosphere, obtuse_wavy_grid};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -486,7 +487,7 @@ fn feathered_region_fades_lambda_and_its_vjp_matches_the_chain() {
         let expected = if w[v] == 0.0 {
             IDENTITY
         } else {
-            let s = covariance(
+            let s = crate::stages::covariance(
                 opts.rotation_rule,
                 &k[v],
                 opts.lambda * w[v] * layer.mass()[v],

@@ -115,17 +115,10 @@ pub fn vertex_centroid(positions: &[[f64; 3]]) -> [f64; 3] {
 mod tests {
     use super::*;
 
-    /// Unit tetrahedron with outward CCW faces.
+    /// The unit corner tetrahedron of [`crate::shapes::tetrahedron`] (outward CCW faces).
     fn tet() -> (Vec<[f64; 3]>, Vec<[u32; 3]>) {
-        (
-            vec![
-                [0.0, 0.0, 0.0],
-                [1.0, 0.0, 0.0],
-                [0.0, 1.0, 0.0],
-                [0.0, 0.0, 1.0],
-            ],
-            vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]],
-        )
+        let m = crate::shapes::tetrahedron();
+        (m.positions, m.faces)
     }
 
     #[test]

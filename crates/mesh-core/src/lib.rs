@@ -42,6 +42,11 @@ impl TriMesh {
         Self { positions, faces }
     }
 
+    /// The `(positions, faces)` pair, for the slice APIs (`cotan`, `darap`, `raster-diff`).
+    pub fn into_parts(self) -> (Vec<[f64; 3]>, Vec<[u32; 3]>) {
+        (self.positions, self.faces)
+    }
+
     /// Number of vertices.
     pub fn num_vertices(&self) -> usize {
         self.positions.len()

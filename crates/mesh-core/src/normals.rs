@@ -52,14 +52,8 @@ mod tests {
     fn closed_form_weights_on_a_tetrahedron_corner() {
         // Corner at the origin of the unit tetrahedron: three faces with normals −x, −y, −z,
         // each of area 1/2, so the area-weighted sum is −(1,1,1) and the normal −(1,1,1)/√3.
-        let p = vec![
-            [0.0, 0.0, 0.0],
-            [1.0, 0.0, 0.0],
-            [0.0, 1.0, 0.0],
-            [0.0, 0.0, 1.0],
-        ];
-        let f = vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]];
-        let n = vertex_normals_area_weighted(&p, &f);
+        let tet = crate::shapes::tetrahedron();
+        let n = vertex_normals_area_weighted(&tet.positions, &tet.faces);
         let s = -1.0 / 3f64.sqrt();
         for k in 0..3 {
             assert!((n[0][k] - s).abs() < 1e-15);

@@ -46,15 +46,7 @@ mod tests {
     use crate::topology::EdgeFaces;
 
     fn tet() -> TriMesh {
-        TriMesh::new(
-            vec![
-                [0.0, 0.0, 0.0],
-                [1.0, 0.0, 0.0],
-                [0.0, 1.0, 0.0],
-                [0.0, 0.0, 1.0],
-            ],
-            vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]],
-        )
+        crate::shapes::tetrahedron()
     }
 
     #[test]

@@ -11,6 +11,21 @@
 /// vertex 0 is label 0 and "the first vertex of each component" is the one to pin. A vertex used by
 /// no face is a component of its own. Face indices ≥ `num_vertices` are ignored.
 pub fn connected_components(num_vertices: usize, faces: &[[u32; 3]]) -> (Vec<u32>, usize) {
+    let edges = faces
+        .iter()
+        .filter(|f| f.iter().all(|&v| (v as usize) < num_vertices))
+        .flat_map(|f| [[f[0], f[1]], [f[1], f[2]], [f[2], f[0]]]);
+    graph_components(num_vertices, edges)
+}
+
+/// [`connected_components`] of a graph given by its edges (each `[a, b]` joins `a` and `b`; any
+/// order, repeats and self-loops allowed), e.g. the sparsity pattern of a matrix. Same labels:
+/// numbered in order of each component's smallest vertex, an isolated vertex is a component of
+/// its own. Edges with an endpoint ≥ `num_vertices` are ignored.
+pub fn graph_components(
+    num_vertices: usize,
+    edges: impl IntoIterator<Item = [u32; 2]>,
+) -> (Vec<u32>, usize) {
     let mut parent: Vec<u32> = (0..num_vertices as u32).collect();
     fn find(parent: &mut [u32], mut x: u32) -> u32 {
         while parent[x as usize] != x {
@@ -20,18 +35,16 @@ pub fn connected_components(num_vertices: usize, faces: &[[u32; 3]]) -> (Vec<u32
         }
         x
     }
-    for f in faces {
-        if f.iter().any(|&v| v as usize >= num_vertices) {
+    for [a, b] in edges {
+        if a as usize >= num_vertices || b as usize >= num_vertices {
             continue;
         }
-        for k in 0..3 {
-            let a = find(&mut parent, f[k]);
-            let b = find(&mut parent, f[(k + 1) % 3]);
-            if a != b {
-                // Keep the smaller index as the root so roots are each component's minimum.
-                let (lo, hi) = if a < b { (a, b) } else { (b, a) };
-                parent[hi as usize] = lo;
-            }
+        let a = find(&mut parent, a);
+        let b = find(&mut parent, b);
+        if a != b {
+            // Keep the smaller index as the root so roots are each component's minimum.
+            let (lo, hi) = if a < b { (a, b) } else { (b, a) };
+            parent[hi as usize] = lo;
         }
     }
     let mut label = vec![u32::MAX; num_vertices];
@@ -307,7 +320,7 @@ mod tests {
     use super::*;
 
     fn tet_faces() -> Vec<[u32; 3]> {
-        vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]
+        crate::shapes::tetrahedron().faces
     }
 
     #[test]
@@ -319,6 +332,13 @@ mod tests {
         assert!(ef.inconsistently_oriented_edges().is_empty());
         // Euler characteristic of a sphere: V − E + F = 2.
         assert_eq!(4 - ef.len() as i64 + 4, 2);
+    }
+
+    #[test]
+    fn graph_components_join_edge_endpoints_and_ignore_out_of_range_edges() {
+        let (labels, n) = graph_components(5, [[4, 2], [2, 2], [1, 9]]);
+        assert_eq!(n, 4, "{{2, 4}}, {{0}}, {{1}}, {{3}}");
+        assert_eq!(labels, vec![0, 1, 2, 3, 2]);
     }
 
     #[test]

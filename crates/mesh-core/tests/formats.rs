@@ -273,15 +273,7 @@ fn garbage_and_empty_files_are_errors_naming_the_file() {
 
 #[test]
 fn every_truncation_of_every_written_format_is_an_error_not_a_panic() {
-    let m = TriMesh::new(
-        vec![
-            [0.0, 0.0, 0.0],
-            [1.0, 0.0, 0.0],
-            [0.0, 1.0, 0.0],
-            [0.0, 0.0, 1.0],
-        ],
-        vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]],
-    );
+    let m = mesh_core::shapes::tetrahedron();
     let n = vertex_normals_area_weighted(&m.positions, &m.faces);
     let dir = tempfile::tempdir().expect("tempdir");
     let mut written = Vec::new();

@@ -5,15 +5,7 @@ use mesh_core::geometry::signed_volume;
 use mesh_core::validate::{Action, IssueKind, Locations, RepairOptions, repair, validate};
 
 fn tet() -> TriMesh {
-    TriMesh::new(
-        vec![
-            [0.0, 0.0, 0.0],
-            [1.0, 0.0, 0.0],
-            [0.0, 1.0, 0.0],
-            [0.0, 0.0, 1.0],
-        ],
-        vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]],
-    )
+    mesh_core::shapes::tetrahedron()
 }
 
 fn opts() -> RepairOptions {

@@ -11,7 +11,7 @@ use std::time::Instant;
 
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use raster_diff::{CameraConfig, CpuRenderer, Images, Renderer, sample_views, shapes};
+use raster_diff::{CameraConfig, CpuRenderer, Images, Renderer, sample_views};
 
 fn median(mut xs: Vec<f64>) -> f64 {
     xs.sort_by(f64::total_cmp);
@@ -54,7 +54,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!("| backend | faces | vertices | forward (ms) | forward+backward (ms) |");
     println!("|---|---:|---:|---:|---:|");
     for subdivisions in [4, 5, 6] {
-        let (v, f) = shapes::icosphere(subdivisions);
+        let (v, f) = mesh_core::shapes::icosphere(subdivisions).into_parts();
         for r in backends.iter_mut() {
             let img = r.render(&v, &f, &views, w, h)?;
             let d = Images {

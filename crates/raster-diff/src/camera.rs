@@ -149,14 +149,7 @@ pub fn adapt_multiplier(positions: &[[f64; 3]]) -> f64 {
     if positions.iter().flatten().any(|c| !c.is_finite()) {
         return 1.0;
     }
-    let mut lo = [f64::INFINITY; 3];
-    let mut hi = [f64::NEG_INFINITY; 3];
-    for p in positions {
-        for k in 0..3 {
-            lo[k] = lo[k].min(p[k]);
-            hi[k] = hi[k].max(p[k]);
-        }
-    }
+    let (lo, hi) = mesh_core::geometry::bbox(positions);
     let m = (0..3)
         .map(|k| 0.5 * (hi[k] - lo[k]))
         .fold(f64::NEG_INFINITY, f64::max);

@@ -14,7 +14,6 @@ pub mod cpu;
 #[cfg(feature = "gpu")]
 pub mod gpu;
 pub mod image;
-pub mod shapes;
 
 pub use camera::{CameraConfig, adapt_multiplier, orbit_views, sample_views};
 pub use cpu::{CpuRenderer, RenderSettings};

@@ -3,7 +3,7 @@
 use glam::DVec3;
 use raster_diff::cpu::raster::NO_TRIANGLE;
 use raster_diff::cpu::shading::RADIANCE_SCALE;
-use raster_diff::{CpuRenderer, Images, RenderError, RenderSettings, Renderer, View, shapes};
+use raster_diff::{CpuRenderer, Images, RenderError, RenderSettings, Renderer, View};
 
 fn front_view(eye_z: f64, light: [f64; 3]) -> View {
     View {
@@ -204,7 +204,7 @@ fn silhouette_gradient_moves_the_edge_towards_darker_target() {
 /// Directional finite difference of ⟨G, image⟩ through shading, normals and antialiasing.
 #[test]
 fn sphere_gradient_matches_central_differences() {
-    let (v, f) = shapes::icosphere(2);
+    let (v, f) = mesh_core::shapes::icosphere(2).into_parts();
     let views = [
         View {
             eye: [2.2, 0.9, 1.1],
@@ -307,7 +307,7 @@ fn bad_inputs_give_typed_errors() {
 
 #[test]
 fn render_and_backward_are_deterministic_and_repeatable() {
-    let (v, f) = shapes::icosphere(3);
+    let (v, f) = mesh_core::shapes::icosphere(3).into_parts();
     let views = raster_diff::orbit_views(3, 25.0, 2.6, 90.0);
     let mut r = CpuRenderer::default();
     let a = r.render(&v, &f, &views, 48, 48).expect("render");
@@ -373,4 +373,31 @@ fn antialiasing_makes_the_image_continuous_as_an_edge_crosses_a_pixel_centre() {
         (plain_before - plain_after).abs() > 0.1,
         "without AA the pixel jumps: {plain_before} → {plain_after}"
     );
+}
+
+#[test]
+fn backward_state_bytes_counts_ids_colour_and_mesh_and_clears_on_a_failed_render() {
+    let (v, f) = quad(0.5);
+    let view = front_view(2.0, [0.0, 0.0, 2.0]);
+    let mut r = no_aa();
+    assert_eq!(r.backward_state_bytes(), 0, "nothing kept before a render");
+    let (w, h) = (16, 8);
+    r.render(&v, &f, &[view.clone(), view.clone()], w, h)
+        .expect("render");
+    // At least 12 bytes per pixel per view (u32 id + f64 colour) plus the vertex and face copies.
+    let floor = 2 * w * h * 12 + v.len() * 24 + f.len() * 12;
+    let kept = r.backward_state_bytes();
+    assert!(kept >= floor, "{kept} < {floor}");
+    // Twice the views: the per-pixel part doubles.
+    r.render(
+        &v,
+        &f,
+        &[view.clone(), view.clone(), view.clone(), view.clone()],
+        w,
+        h,
+    )
+    .expect("render");
+    assert!(r.backward_state_bytes() >= kept + 2 * w * h * 12);
+    assert!(r.render(&v, &[[0, 1, 9]], &[view], w, h).is_err());
+    assert_eq!(r.backward_state_bytes(), 0, "a failed render keeps nothing");
 }

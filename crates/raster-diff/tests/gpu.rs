@@ -5,9 +5,7 @@
 
 use raster_diff::cpu::raster::NO_TRIANGLE;
 use raster_diff::gpu::{SHADERS, WgpuRenderer};
-use raster_diff::{
-    CpuRenderer, Images, RenderError, RenderSettings, Renderer, View, orbit_views, shapes,
-};
+use raster_diff::{CpuRenderer, Images, RenderError, RenderSettings, Renderer, View, orbit_views};
 
 #[test]
 fn wgsl_shaders_validate_with_naga() {
@@ -106,7 +104,7 @@ fn wgpu_images_and_gradients_match_cpu() {
             return;
         };
         println!("{}", g.name());
-        let (v, f) = shapes::icosphere(3);
+        let (v, f) = mesh_core::shapes::icosphere(3).into_parts();
         let views = orbit_views(4, 25.0, 2.6, 90.0);
         let (w, h) = (96, 96);
         let mut c = CpuRenderer::new(settings);
@@ -150,7 +148,7 @@ fn wgpu_repeated_calls_and_shape_changes() {
     let Some(mut g) = gpu(RenderSettings::default()) else {
         return;
     };
-    let (v, f) = shapes::icosphere(2);
+    let (v, f) = mesh_core::shapes::icosphere(2).into_parts();
     let views = orbit_views(3, 25.0, 2.6, 90.0);
     let a = g.render(&v, &f, &views, 48, 40).expect("render");
     let d = Images {
@@ -161,7 +159,7 @@ fn wgpu_repeated_calls_and_shape_changes() {
     let g2 = g.backward(&d).expect("backward again");
     assert!(rel_l2(&g1, &g2) < 1e-5, "repeat: {}", rel_l2(&g1, &g2));
     // Another shape in between (more views, other size, other mesh), then the first again.
-    let (v2, f2) = shapes::icosphere(1);
+    let (v2, f2) = mesh_core::shapes::icosphere(1).into_parts();
     let views2 = orbit_views(5, 10.0, 3.0, 60.0);
     let other = g.render(&v2, &f2, &views2, 33, 17).expect("render other");
     assert_eq!((other.count, other.height, other.width), (5, 17, 33));
@@ -267,8 +265,8 @@ fn wgpu_matches_cpu_on_a_non_square_scene_with_occlusion() {
     let Some(mut g) = gpu(RenderSettings::default()) else {
         return;
     };
-    let (mut v, mut f) = shapes::icosphere(3);
-    let (v2, f2) = shapes::icosphere(2);
+    let (mut v, mut f) = mesh_core::shapes::icosphere(3).into_parts();
+    let (v2, f2) = mesh_core::shapes::icosphere(2).into_parts();
     let n = v.len() as u32;
     v.extend(
         v2.iter()

@@ -14,7 +14,7 @@ fn ok<T, E: std::fmt::Debug>(r: Result<T, E>) -> T {
 }
 
 fn setup(dir: &Path) -> Config {
-    let (p, f) = raster_diff::shapes::icosphere(1);
+    let (p, f) = mesh_core::shapes::icosphere(1).into_parts();
     let p: Vec<[f64; 3]> = p.iter().map(|v| [1.3 * v[0], v[1], v[2]]).collect();
     ok(mesh_core::io::write_mesh(
         dir.join("m.obj"),

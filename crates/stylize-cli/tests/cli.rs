@@ -27,7 +27,7 @@ fn must(out: &Output) {
 }
 
 fn small_mesh(dir: &Path) -> PathBuf {
-    let (p, f) = raster_diff::shapes::icosphere(2);
+    let (p, f) = mesh_core::shapes::icosphere(2).into_parts();
     let p: Vec<[f64; 3]> = p.iter().map(|v| [1.4 * v[0], v[1], 0.7 * v[2]]).collect();
     let path = dir.join("blob.obj");
     ok(mesh_core::io::write_mesh(&path, &TriMesh::new(p, f), None));

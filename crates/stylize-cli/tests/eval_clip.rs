@@ -63,7 +63,7 @@ struct Setup {
 fn setup() -> Setup {
     let tmp = ok(tempfile::tempdir());
     let root = tmp.path().to_path_buf();
-    let (p, f) = raster_diff::shapes::icosphere(2);
+    let (p, f) = mesh_core::shapes::icosphere(2).into_parts();
     let src: Vec<[f64; 3]> = p.iter().map(|v| [v[0], 0.8 * v[1], 0.9 * v[2]]).collect();
     let res: Vec<[f64; 3]> = src
         .iter()

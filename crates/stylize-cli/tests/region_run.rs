@@ -9,7 +9,8 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use darap::Darap;
-use darap::mat3::IDENTITY;
+/// The 3×3 identity (row-major, as `darap::Mat3`).
+const IDENTITY: darap::Mat3 = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
 use npy::NpyData;
 use stylize::saved::SavedDeformation;
 use stylize_cli::config::{Config, RegionSection};

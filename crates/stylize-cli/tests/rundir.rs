@@ -43,7 +43,7 @@ fn must(o: &Output) {
 }
 
 fn mesh(dir: &Path, name: &str, subdivisions: u32, squash: f64) -> PathBuf {
-    let (p, f) = raster_diff::shapes::icosphere(subdivisions);
+    let (p, f) = mesh_core::shapes::icosphere(subdivisions).into_parts();
     let p: Vec<[f64; 3]> = p
         .iter()
         .map(|v| [1.4 * v[0], v[1], squash * v[2]])

@@ -17,7 +17,7 @@ fn ok<T, E: std::fmt::Debug>(r: Result<T, E>) -> T {
 
 /// An icosphere (2 subdivisions, 162 vertices) stretched into an ellipsoid, as an OBJ file.
 fn small_mesh(dir: &Path) -> PathBuf {
-    let (p, f) = raster_diff::shapes::icosphere(2);
+    let (p, f) = mesh_core::shapes::icosphere(2).into_parts();
     let p: Vec<[f64; 3]> = p.iter().map(|v| [1.5 * v[0], v[1], 0.8 * v[2]]).collect();
     let path = dir.join("ellipsoid.obj");
     ok(mesh_core::io::write_mesh(&path, &TriMesh::new(p, f), None));

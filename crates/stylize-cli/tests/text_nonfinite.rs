@@ -54,7 +54,7 @@ fn nan_embedding(path: &Path) {
 
 /// `stylize run` of 2 iterations on a small mesh; returns (output, run directory).
 fn run_text(tmp: &Path, model: &Path, cache: &Path) -> (Output, PathBuf) {
-    let (p, f) = raster_diff::shapes::icosphere(2);
+    let (p, f) = mesh_core::shapes::icosphere(2).into_parts();
     let mesh = tmp.join("blob.obj");
     ok(mesh_core::io::write_mesh(&mesh, &TriMesh::new(p, f), None));
     let run = tmp.join("text");

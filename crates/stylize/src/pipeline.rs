@@ -494,7 +494,7 @@ mod tests {
 
     #[test]
     fn zero_gradient_streak_is_recorded_in_the_iteration_records() -> anyhow::Result<()> {
-        let (p, f) = raster_diff::shapes::icosphere(1);
+        let (p, f) = mesh_core::shapes::icosphere(1).into_parts();
         let darap = Darap::new(&p, &f, darap::DarapOptions::default())?;
         let mut state = LoopState {
             iteration: 0,

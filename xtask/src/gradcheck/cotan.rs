@@ -21,8 +21,8 @@ fn dot(a: &[[f64; 3]], b: &[[f64; 3]]) -> f64 {
 
 pub fn suite(report: &mut Report) -> anyhow::Result<()> {
     let meshes = [
-        ("icosphere2", darap::procedural::icosphere(2)),
-        ("obtuse_grid8", darap::procedural::obtuse_wavy_grid(8)),
+        ("icosphere2", mesh_core::shapes::icosphere(2)),
+        ("obtuse_grid8", mesh_core::shapes::obtuse_wavy_grid(8)),
     ];
     for (name, mesh) in meshes {
         let l = cotan::laplacian(&mesh.positions, &mesh.faces)?;

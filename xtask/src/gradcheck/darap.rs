@@ -3,7 +3,8 @@
 //! close to a flip there).
 
 use super::{Report, Tolerance};
-use darap::mat3::Mat3;
+use darap::Mat3;
+use darap::stages;
 use darap::{Darap, DarapOptions, PostProcess, RotationRule};
 use mesh_core::TriMesh;
 use rand::{Rng, SeedableRng};
@@ -65,8 +66,8 @@ fn meshes() -> anyhow::Result<Vec<(&'static str, TriMesh)>> {
     let mut bunny = mesh_core::io::read_mesh(path)?;
     mesh_core::normalize::side2_cube(&mut bunny.positions);
     Ok(vec![
-        ("icosphere2", darap::procedural::icosphere(2)),
-        ("obtuse_grid8", darap::procedural::obtuse_wavy_grid(8)),
+        ("icosphere2", mesh_core::shapes::icosphere(2)),
+        ("obtuse_grid8", mesh_core::shapes::obtuse_wavy_grid(8)),
         ("bunny", bunny),
     ])
 }
@@ -81,14 +82,14 @@ pub fn suite(report: &mut Report) -> anyhow::Result<()> {
     for (rule_name, rule) in [
         (
             "gis",
-            darap::rotation_rule::gis as fn(&Mat3) -> (Mat3, darap::rotation_rule::RotationSvd),
+            stages::gis as fn(&Mat3) -> (Mat3, stages::RotationSvd),
         ),
-        ("procrustes", darap::rotation_rule::procrustes),
+        ("procrustes", stages::procrustes),
     ] {
         let grad: Vec<Mat3> = s
             .iter()
             .zip(&g)
-            .map(|(s, g)| darap::rotation_rule::rotation_vjp(&rule(s).1, g))
+            .map(|(s, g)| stages::rotation_vjp(&rule(s).1, g))
             .collect();
         report.check(
             &format!("darap/rotation_rule/{rule_name}/random"),
@@ -110,20 +111,20 @@ pub fn suite(report: &mut Report) -> anyhow::Result<()> {
         let weights = cotan::cot_weights(p, f)?;
         let mass = cotan::voronoi_mass(p, f)?;
         let n0 = mesh_core::normals::vertex_normals_area_weighted(p, f);
-        let k = darap::rest_covariances(p, f, &weights);
+        let k = stages::rest_covariances(p, f, &weights);
         let x = targets(&mut rng, &n0, 0.5);
-        let unit = darap::normalize_targets(&x);
+        let unit = stages::normalize_targets(&x);
 
         // Normalization.
         let g3 = random_rows(&mut rng, n);
-        let grad = darap::normalize_targets_vjp(&x, &g3);
+        let grad = stages::normalize_targets_vjp(&x, &g3);
         report.check(
             &format!("darap/normalize_targets/{name}"),
             &flat(&x),
             &flat(&grad),
             tol,
             3,
-            |theta| dot(&g3, &darap::normalize_targets(&rows(theta))),
+            |theta| dot(&g3, &stages::normalize_targets(&rows(theta))),
         );
 
         // Rotation rules on this mesh's covariances.
@@ -132,17 +133,17 @@ pub fn suite(report: &mut Report) -> anyhow::Result<()> {
             ("procrustes", RotationRule::Procrustes, 40.0),
         ] {
             let sv: Vec<Mat3> = (0..n)
-                .map(|v| darap::covariance(rule, &k[v], lambda * mass[v], n0[v], unit[v]))
+                .map(|v| stages::covariance(rule, &k[v], lambda * mass[v], n0[v], unit[v]))
                 .collect();
             let gm = random_mats(&mut rng, n);
             let apply = |s: &Mat3| match rule {
-                RotationRule::Gis => darap::rotation_rule::gis(s),
-                RotationRule::Procrustes => darap::rotation_rule::procrustes(s),
+                RotationRule::Gis => stages::gis(s),
+                RotationRule::Procrustes => stages::procrustes(s),
             };
             let grad: Vec<Mat3> = sv
                 .iter()
                 .zip(&gm)
-                .map(|(s, g)| darap::rotation_rule::rotation_vjp(&apply(s).1, g))
+                .map(|(s, g)| stages::rotation_vjp(&apply(s).1, g))
                 .collect();
             report.check(
                 &format!("darap/rotation_rule/{rule_name}/{name}"),
@@ -162,8 +163,8 @@ pub fn suite(report: &mut Report) -> anyhow::Result<()> {
             for masked in [false, true] {
                 let mask: Option<Vec<bool>> = masked.then(|| (0..n).map(|v| v % 3 != 0).collect());
                 let (_, tape) =
-                    darap::local_step(&k, &mass, lambda, &n0, &unit, rule, mask.as_deref());
-                let grad = darap::local_step_vjp(&tape, &mass, lambda, &n0, &gm);
+                    stages::local_step(&k, &mass, lambda, &n0, &unit, rule, mask.as_deref());
+                let grad = stages::local_step_vjp(&tape, &mass, lambda, &n0, &gm);
                 let label = if masked { "masked/" } else { "" };
                 report.check(
                     &format!("darap/local_step/{rule_name}/{label}{name}"),
@@ -172,7 +173,7 @@ pub fn suite(report: &mut Report) -> anyhow::Result<()> {
                     Tolerance { step: 1e-5, ..tol },
                     5,
                     |theta| {
-                        let (r, _) = darap::local_step(
+                        let (r, _) = stages::local_step(
                             &k,
                             &mass,
                             lambda,
@@ -188,17 +189,17 @@ pub fn suite(report: &mut Report) -> anyhow::Result<()> {
         }
 
         // Right-hand side with respect to the rotations.
-        let pre = darap::RhsPrecompute::new(p, f, &weights);
+        let pre = stages::RhsPrecompute::new(p, f, &weights);
         let rot = random_mats(&mut rng, n);
         let gb = random_rows(&mut rng, n);
-        let grad = darap::rhs_vjp(&pre, &gb);
+        let grad = stages::rhs_vjp(&pre, &gb);
         report.check(
             &format!("darap/rhs/{name}"),
             &flat_m(&rot),
             &flat_m(&grad),
             tol,
             6,
-            |theta| dot(&gb, &darap::rhs(&pre, &mats(theta))),
+            |theta| dot(&gb, &stages::rhs(&pre, &mats(theta))),
         );
 
         // Pinned solve (the layer's solver) with respect to b.
@@ -228,15 +229,15 @@ pub fn suite(report: &mut Report) -> anyhow::Result<()> {
             ("recenter_only", PostProcess::RecenterOnly),
             ("none", PostProcess::None),
         ] {
-            let (_, tape) = darap::post_process(&solved, rest_diag, mode);
-            let grad = darap::post_process_vjp(&tape, &g3);
+            let (_, tape) = stages::post_process(&solved, rest_diag, mode);
+            let grad = stages::post_process_vjp(&tape, &g3);
             report.check(
                 &format!("darap/post_process/{mode_name}/{name}"),
                 &flat(&solved),
                 &flat(&grad),
                 tol,
                 8,
-                |theta| dot(&g3, &darap::post_process(&rows(theta), rest_diag, mode).0),
+                |theta| dot(&g3, &stages::post_process(&rows(theta), rest_diag, mode).0),
             );
         }
 

@@ -15,7 +15,7 @@ use rand_chacha::ChaCha8Rng;
 use raster_diff::cpu::math::DVec3;
 use raster_diff::cpu::normals;
 use raster_diff::cpu::raster::NO_TRIANGLE;
-use raster_diff::{CameraConfig, CpuRenderer, RenderSettings, View, sample_views, shapes};
+use raster_diff::{CameraConfig, CpuRenderer, RenderSettings, View, sample_views};
 
 use super::{CheckResult, Report, Tolerance};
 
@@ -24,7 +24,7 @@ const H: usize = 40;
 
 /// A bumpy icosphere (random radial noise) so silhouettes are not all convex.
 fn bumpy_sphere(seed: u64) -> (Vec<[f64; 3]>, Vec<[u32; 3]>) {
-    let (mut v, f) = shapes::icosphere(3);
+    let (mut v, f) = mesh_core::shapes::icosphere(3).into_parts();
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     for p in v.iter_mut() {
         let r = 0.85 + 0.25 * rng.random::<f64>();

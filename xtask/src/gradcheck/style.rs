@@ -20,7 +20,7 @@ type Fixture = (Vec<[f64; 3]>, Vec<[u32; 3]>, Vec<[f64; 3]>);
 /// A small closed test mesh (icosphere, 1 subdivision) with jittered vertices and random unit
 /// per-face targets.
 fn fixture(seed: u64) -> Fixture {
-    let (mut p, f) = raster_diff::shapes::icosphere(1);
+    let (mut p, f) = mesh_core::shapes::icosphere(1).into_parts();
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     for v in &mut p {
         for c in v.iter_mut() {
@@ -60,7 +60,7 @@ pub fn suite(report: &mut Report) -> anyhow::Result<()> {
     );
 
     // 2. ℓ(dARAP(x)) with respect to x (the chain the model-free loop differentiates).
-    let (rest, faces) = raster_diff::shapes::icosphere(1);
+    let (rest, faces) = mesh_core::shapes::icosphere(1).into_parts();
     let layer = darap::Darap::new(
         &rest,
         &faces,

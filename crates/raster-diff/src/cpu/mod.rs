@@ -275,6 +275,32 @@ impl CpuRenderer {
         Ok(dx.into_iter().map(Into::into).collect())
     }
 
+    /// Bytes of the state kept from the most recent render for `backward` (0 when there is none):
+    /// the vertex and face copies, smooth normals and their unnormalized sums, and per view the
+    /// triangle ids (4 B per pixel), the colour before antialiasing (8 B per pixel) and the
+    /// antialiasing blends. Measured for the "Renderer backward state" decision in
+    /// `docs/architecture.md`.
+    pub fn backward_state_bytes(&self) -> usize {
+        use std::mem::size_of;
+        self.state.as_ref().map_or(0, |s| {
+            let per_view: usize = s
+                .views
+                .iter()
+                .map(|v| {
+                    size_of::<ViewState>()
+                        + v.ids.len() * size_of::<u32>()
+                        + v.colour.len() * size_of::<f64>()
+                        + v.blends.len() * size_of::<antialias::Blend>()
+                })
+                .sum();
+            size_of::<ForwardState>()
+                + s.vertices.len() * size_of::<[f64; 3]>()
+                + s.faces.len() * size_of::<[u32; 3]>()
+                + (s.normals.len() + s.normal_sums.len()) * size_of::<DVec3>()
+                + per_view
+        })
+    }
+
     /// Visible triangle per pixel of the most recent render, `(view, row, column)`
     /// ([`raster::NO_TRIANGLE`] for background).
     pub fn triangle_ids(&self) -> Option<Vec<u32>> {
