@@ -250,7 +250,7 @@ fn resume_with_another_region_is_refused_and_an_empty_region_is_an_error() {
 
 /// An icosphere OBJ with groups `top` (faces whose centroid has z > 0) and `bottom`.
 fn grouped_sphere(dir: &Path) -> PathBuf {
-    let (p, f) = raster_diff::shapes::icosphere(2);
+    let (p, f) = mesh_core::shapes::icosphere(2).into_parts();
     let mut text = String::new();
     for q in &p {
         text.push_str(&format!("v {} {} {}\n", q[0], 1.2 * q[1], q[2]));
