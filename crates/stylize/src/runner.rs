@@ -464,24 +464,39 @@ pub fn execute(request: &RunRequest, task: Task<'_>) -> anyhow::Result<RunOutcom
     execute_with(request, objective, || Ok(task), &options, hooks)
 }
 
-/// Runs one request: `objective` is the task's identity, `make_task` builds the task (e.g. loads
-/// the models) — called only once the run directory is claimed, so refusals come before any
-/// expensive loading.
-pub fn execute_with<'g>(
+/// Stage 1 of a run: what [`prepare`] checked and computed before the run directory is touched.
+#[derive(Debug)]
+pub struct Prepared {
+    /// The mesh as optimized ([`prepare_mesh`]).
+    pub mesh: TriMesh,
+    /// Repairs made to the input mesh, and later output warnings.
+    pub warnings: Vec<String>,
+    /// The task's identity (what a resume must match).
+    pub identity: TaskIdentity,
+    /// The dARAP layer on the prepared mesh.
+    pub darap: Darap,
+    /// The resolved configuration as written to `config.toml`.
+    pub config_toml: String,
+    /// Seconds spent in the dARAP precomputation.
+    pub setup_seconds: f64,
+    /// The region of a localized run (`[region]`), already set on `darap`.
+    pub region: Option<ResolvedRegion>,
+}
+
+/// Stage 1: validates the configuration, prepares the mesh, computes the task identity (with the
+/// model of `model`, for text runs) and precomputes dARAP — everything that can fail on bad input,
+/// before anything is written.
+pub fn prepare(
     request: &RunRequest,
     mut objective: ObjectiveIdentity,
-    make_task: impl FnOnce() -> anyhow::Result<Task<'g>>,
-    options: &RunOptions,
-    hooks: RunHooks<'_>,
-) -> anyhow::Result<RunOutcome> {
-    let RunHooks { progress, cancel } = hooks;
-    let cancelled = || cancel.load(Ordering::SeqCst);
+    model: Option<&crate::identity::ModelIdentity>,
+) -> anyhow::Result<Prepared> {
     let config = &request.config;
     config.validate()?;
     let config_toml = config.to_toml_string()?;
-    let (mesh, mut warnings, region) = prepare_mesh_with_region(&request.mesh, &config.region)?;
-    if let (ObjectiveIdentity::Prompt { model, .. }, Some(m)) = (&mut objective, &options.model) {
-        *model = Some(m.clone());
+    let (mesh, warnings, region) = prepare_mesh_with_region(&request.mesh, &config.region)?;
+    if let (ObjectiveIdentity::Prompt { model: slot, .. }, Some(m)) = (&mut objective, model) {
+        *slot = Some(m.clone());
     }
     let mut identity = TaskIdentity::new(&mesh.positions, &mesh.faces, &objective, config)?;
     if let Some(r) = &region {
@@ -495,87 +510,82 @@ pub fn execute_with<'g>(
             .set_region_weights(Some(r.weights.clone()))
             .context("region weights")?;
     }
-    let setup_seconds = setup.elapsed().as_secs_f64();
-    // Everything that can fail on bad input happens before the run directory is touched.
-    let dir = RunDir::new(&request.out);
-    let mut inputs = vec![("input mesh".to_string(), request.mesh.clone())];
-    inputs.extend(options.inputs.iter().cloned());
-    let resume = if options.resume_if_checkpoint {
-        ResumeMode::IfCheckpoint
-    } else if request.resume {
-        ResumeMode::Required
-    } else {
-        ResumeMode::Never
-    };
-    let (lock, start) = dir.claim(&Claim {
-        force: request.force,
-        resume,
-        skip_complete: options.skip_complete,
-        identity: &identity,
-        inputs: &inputs,
-    })?;
-    if matches!(start, Start::Complete) {
-        return Ok(RunOutcome {
-            iteration: 0,
-            complete: true,
-            alignment: None,
-            warnings,
-            already_complete: true,
-        });
+    Ok(Prepared {
+        region,
+        mesh,
+        warnings,
+        identity,
+        darap,
+        config_toml,
+        setup_seconds: setup.elapsed().as_secs_f64(),
+    })
+}
+
+/// Stage 2: the objective a task optimizes, with its loop and Adam settings.
+pub struct BuiltObjective<'g> {
+    /// The objective the loop evaluates.
+    pub objective: Box<dyn Objective + 'g>,
+    /// Iterations, sub-steps, checkpoint and preview cadence.
+    pub spec: LoopSpec,
+    /// Adam's settings (the style path has its own learning rate).
+    pub adam: AdamConfig,
+    /// The style path's objective again, for the alignment the run reports.
+    pub style: Option<StyleObjective>,
+    /// The renderer chosen for a text run, and why.
+    pub renderer_choice: Option<String>,
+    /// `("style", name)` or `("prompt", text)`, as recorded in `deformation.npz`.
+    pub label: (&'static str, String),
+}
+
+impl std::fmt::Debug for BuiltObjective<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("BuiltObjective")
+            .field("objective", &self.objective.describe())
+            .field("spec", &self.spec)
+            .field("label", &self.label)
+            .finish_non_exhaustive()
     }
-    let interrupted_before = |start: &Start| {
-        cancelled().then(|| Stopped {
-            dir: request.out.clone(),
-            checkpoint_iteration: match start {
-                Start::Resume(c) => Some(c.iteration),
-                _ => None,
-            },
-        })
-    };
-    if let Some(i) = interrupted_before(&start) {
-        return Err(i.into());
-    }
-    let task = make_task()?;
-    if let Some(i) = interrupted_before(&start) {
-        return Err(i.into());
-    }
-    if let Task::Style(Style::Exemplar { path, .. }) = &task {
-        inputs.push(("exemplar mesh".into(), path.clone()));
-        crate::rundir::refuse_overwriting_inputs(
-            &crate::rundir::RUN_FILES
-                .iter()
-                .map(|n| dir.file(n))
-                .collect::<Vec<_>>(),
-            &[dir.previews()],
-            &inputs,
-        )?;
-    }
-    let task_label = match &task {
+}
+
+/// Stage 2: builds the objective of `task` on the prepared mesh (the text path picks its renderer
+/// here).
+pub fn build_objective<'g>(
+    task: Task<'g>,
+    mesh: &TriMesh,
+    config: &Config,
+    halt_after: Option<u64>,
+) -> anyhow::Result<BuiltObjective<'g>> {
+    let label = match &task {
         Task::Style(s) => ("style", s.name()),
         Task::Text { prompt, .. } => ("prompt", prompt.clone()),
     };
-
-    let mut renderer_choice: Option<String> = None;
-    let (mut objective, spec, lr, style_objective): (
-        Box<dyn Objective + 'g>,
-        LoopSpec,
-        f64,
-        Option<StyleObjective>,
-    ) = match task {
+    let spec = |iterations, steps_per_batch| LoopSpec {
+        iterations,
+        steps_per_batch,
+        checkpoint_every: config.run.checkpoint_every,
+        preview_every: config.run.preview_every,
+        halt_after,
+    };
+    let adam = |lr| AdamConfig {
+        lr,
+        beta1: config.optim.beta1,
+        beta2: config.optim.beta2,
+        eps: config.optim.eps,
+    };
+    Ok(match task {
         Task::Style(style) => {
             let obj = StyleObjective::new(&style, &mesh.positions, &mesh.faces);
-            let spec = LoopSpec {
-                iterations: config.style.iterations,
-                steps_per_batch: 1,
-                checkpoint_every: config.run.checkpoint_every,
-                preview_every: config.run.preview_every,
-                halt_after: request.halt_after,
-            };
-            (Box::new(obj.clone()), spec, config.style.lr, Some(obj))
+            BuiltObjective {
+                objective: Box::new(obj.clone()),
+                spec: spec(config.style.iterations, 1),
+                adam: adam(config.style.lr),
+                style: Some(obj),
+                renderer_choice: None,
+                label,
+            }
         }
         Task::Text { guidance, .. } => {
             let (renderer, why) = renderer(config);
-            renderer_choice = Some(why);
             let camera = CameraConfig {
                 elevation_deg: config.camera.elevation_deg,
                 azimuth_deg: config.camera.azimuth_deg,
@@ -590,53 +600,206 @@ pub fn execute_with<'g>(
                 adapt_distance: config.camera.adapt_distance,
             };
             let obj = TextObjective::new(renderer, guidance, &mesh.faces, views);
-            let spec = LoopSpec {
-                iterations: config.optim.iterations,
-                steps_per_batch: config.optim.steps_per_batch,
-                checkpoint_every: config.run.checkpoint_every,
-                preview_every: config.run.preview_every,
-                halt_after: request.halt_after,
-            };
-            (Box::new(obj), spec, config.optim.lr, None)
+            BuiltObjective {
+                objective: Box::new(obj),
+                spec: spec(config.optim.iterations, config.optim.steps_per_batch),
+                adam: adam(config.optim.lr),
+                style: None,
+                renderer_choice: Some(why),
+                label,
+            }
         }
-    };
-    let adam_config = AdamConfig {
-        lr,
-        beta1: config.optim.beta1,
-        beta2: config.optim.beta2,
-        eps: config.optim.eps,
-    };
+    })
+}
 
-    let mut state = match start {
+/// Stage 3: the loop's initial state. A fresh start writes `task.json`, `config.toml` and an empty
+/// `metrics.jsonl` and starts at the rest normals; a resume checks the checkpoint against the mesh
+/// and cuts `metrics.jsonl` back to its iteration.
+pub fn initial_state(
+    start: Start,
+    dir: &RunDir,
+    prepared: &Prepared,
+    config: &Config,
+    adam: AdamConfig,
+) -> anyhow::Result<LoopState> {
+    let n = prepared.mesh.positions.len();
+    Ok(match start {
         Start::Fresh | Start::Complete => {
-            dir.write_task(&identity)?;
-            crate::durable::replace_bytes(&dir.config(), config_toml.as_bytes())?;
+            dir.write_task(&prepared.identity)?;
+            crate::durable::replace_bytes(&dir.config(), prepared.config_toml.as_bytes())?;
             crate::durable::replace_bytes(&dir.metrics(), b"")?;
             LoopState {
                 iteration: 0,
-                x: darap.rest_normals().to_vec(),
-                adam: Adam::new(3 * mesh.positions.len(), adam_config)?,
+                x: prepared.darap.rest_normals().to_vec(),
+                adam: Adam::new(3 * n, adam)?,
                 rng: ChaCha8Rng::seed_from_u64(config.run.seed),
             }
         }
         Start::Resume(c) => {
-            if c.x.len() != mesh.positions.len() {
+            if c.x.len() != n {
                 bail!(
-                    "the checkpoint has {} vertices, the mesh {}: not the same mesh",
-                    c.x.len(),
-                    mesh.positions.len()
+                    "the checkpoint has {} vertices, the mesh {n}: not the same mesh",
+                    c.x.len()
                 );
             }
             dir.truncate_metrics(c.iteration)?;
             LoopState {
                 iteration: c.iteration,
                 x: c.x,
-                adam: Adam::from_state(adam_config, c.adam)?,
+                adam: Adam::from_state(adam, c.adam)?,
                 rng: c.rng,
             }
         }
-    };
+    })
+}
 
+/// Stage 5: the final outputs of a finished loop — `mesh.obj/.ply/.glb` (formats this build cannot
+/// write become warnings), `deformation.npz` and `turntable.png`. Returns the deformed mesh.
+///
+/// The outputs are the deformation of x as saved (f32), so re-applying `deformation.npz`
+/// reproduces `mesh.*` exactly.
+pub fn write_outputs(
+    dir: &RunDir,
+    lock: &RunLock,
+    prepared: &mut Prepared,
+    x: &[[f64; 3]],
+    config: &Config,
+    source: &Path,
+    label: &(&'static str, String),
+) -> anyhow::Result<TriMesh> {
+    let mesh = &prepared.mesh;
+    let x_saved: Vec<[f64; 3]> = x.iter().map(|p| p.map(|c| f64::from(c as f32))).collect();
+    let result = prepared
+        .darap
+        .forward(&x_saved)
+        .context("final dARAP forward")?;
+    let deformed = TriMesh::new(result.positions.clone(), mesh.faces.clone());
+    let normals =
+        mesh_core::normals::vertex_normals_area_weighted(&deformed.positions, &deformed.faces);
+    lock.ensure_held()?;
+    for ext in ["obj", "ply", "glb"] {
+        let path = dir.file(&format!("mesh.{ext}"));
+        let written = crate::durable::replace_with(&path, |tmp| {
+            mesh_core::io::write_mesh(tmp, &deformed, Some(&normals)).map_err(anyhow::Error::from)
+        });
+        match written {
+            Ok(()) => {}
+            Err(e)
+                if matches!(
+                    e.downcast_ref::<mesh_core::MeshError>(),
+                    Some(mesh_core::MeshError::UnsupportedFormat { .. })
+                ) =>
+            {
+                prepared.warnings.push(format!(
+                    "mesh.{ext} not written: this build's mesh writer does not support .{ext}"
+                ));
+            }
+            Err(e) => return Err(e).with_context(|| format!("cannot write {}", path.display())),
+        }
+    }
+    let region = prepared.region.as_ref();
+    write_deformation(dir, mesh, x, config, source, label.0, &label.1, region)?;
+    let mut tt_renderer = raster_diff::CpuRenderer::default();
+    let mut tt = turntable(
+        &mut tt_renderer,
+        &deformed.positions,
+        &deformed.faces,
+        config.run.turntable_views,
+        config.run.turntable_size,
+        config.camera.fov_deg,
+    )?;
+    if let (Some(r), true, Some(ids)) = (region, config.region.tint, tt_renderer.triangle_ids()) {
+        tint_region(&mut tt, &ids, &deformed.faces, &r.free);
+    }
+    write_grid(&dir.file("turntable.png"), &tt)?;
+    Ok(deformed)
+}
+
+/// Runs one request: `objective` is the task's identity, `make_task` builds the task (e.g. loads
+/// the models) — called only once the run directory is claimed, so refusals come before any
+/// expensive loading.
+///
+/// The stages: [`prepare`] (nothing written yet), claim the run directory, [`build_objective`],
+/// [`initial_state`], the loop ([`run_loop`] with checkpoints, previews and metrics), then
+/// [`write_outputs`] and `run.json`.
+pub fn execute_with<'g>(
+    request: &RunRequest,
+    objective: ObjectiveIdentity,
+    make_task: impl FnOnce() -> anyhow::Result<Task<'g>>,
+    options: &RunOptions,
+    hooks: RunHooks<'_>,
+) -> anyhow::Result<RunOutcome> {
+    let RunHooks { progress, cancel } = hooks;
+    let cancelled = || cancel.load(Ordering::SeqCst);
+    let config = &request.config;
+    let mut prepared = prepare(request, objective, options.model.as_ref())?;
+
+    let dir = RunDir::new(&request.out);
+    let mut inputs = vec![("input mesh".to_string(), request.mesh.clone())];
+    inputs.extend(options.inputs.iter().cloned());
+    let resume = if options.resume_if_checkpoint {
+        ResumeMode::IfCheckpoint
+    } else if request.resume {
+        ResumeMode::Required
+    } else {
+        ResumeMode::Never
+    };
+    let (lock, start) = dir.claim(&Claim {
+        force: request.force,
+        resume,
+        skip_complete: options.skip_complete,
+        identity: &prepared.identity,
+        inputs: &inputs,
+    })?;
+    if matches!(start, Start::Complete) {
+        return Ok(RunOutcome {
+            iteration: 0,
+            complete: true,
+            alignment: None,
+            warnings: prepared.warnings,
+            already_complete: true,
+        });
+    }
+    let stopped_before = |start: &Start| {
+        cancelled().then(|| Stopped {
+            dir: request.out.clone(),
+            checkpoint_iteration: match start {
+                Start::Resume(c) => Some(c.iteration),
+                _ => None,
+            },
+        })
+    };
+    if let Some(s) = stopped_before(&start) {
+        return Err(s.into());
+    }
+    let task = make_task()?;
+    if let Some(s) = stopped_before(&start) {
+        return Err(s.into());
+    }
+    if let Task::Style(Style::Exemplar { path, .. }) = &task {
+        inputs.push(("exemplar mesh".into(), path.clone()));
+        crate::rundir::refuse_overwriting_inputs(
+            &crate::rundir::RUN_FILES
+                .iter()
+                .map(|n| dir.file(n))
+                .collect::<Vec<_>>(),
+            &[dir.previews()],
+            &inputs,
+        )?;
+    }
+
+    let BuiltObjective {
+        mut objective,
+        spec,
+        adam,
+        style: style_objective,
+        renderer_choice,
+        label,
+    } = build_objective(task, &prepared.mesh, config, request.halt_after)?;
+    let mut state = initial_state(start, &dir, &prepared, config, adam)?;
+
+    // The loop.
+    let mesh = &prepared.mesh;
     let alignment_before = style_objective
         .as_ref()
         .map(|o| o.mean_alignment(&mesh.positions));
@@ -658,22 +821,29 @@ pub fn execute_with<'g>(
     let mut observer = RunObserver {
         dir: &dir,
         lock: &lock,
-        identity: identity.clone(),
+        identity: prepared.identity.clone(),
         metrics,
         progress,
         cancel,
-        config_toml: config_toml.clone(),
+        config_toml: prepared.config_toml.clone(),
         preview_size: config.run.turntable_size,
         fov: config.camera.fov_deg,
         faces: mesh.faces.clone(),
         preview_renderer: raster_diff::CpuRenderer::default(),
-        tint: region
+        tint: prepared
+            .region
             .as_ref()
             .filter(|_| config.region.tint)
             .map(|r| r.free.clone()),
     };
     let loop_start = Instant::now();
-    let looped = run_loop(&darap, &spec, &mut state, objective.as_mut(), &mut observer);
+    let looped = run_loop(
+        &prepared.darap,
+        &spec,
+        &mut state,
+        objective.as_mut(),
+        &mut observer,
+    );
     observer.progress.finish();
     match looped {
         Ok(()) => {}
@@ -694,7 +864,7 @@ pub fn execute_with<'g>(
             iteration: state.iteration,
             complete: false,
             alignment: None,
-            warnings,
+            warnings: prepared.warnings,
             already_complete: false,
         });
     }
@@ -707,66 +877,20 @@ pub fn execute_with<'g>(
         .into());
     }
 
-    // Outputs.
-    // The outputs are the deformation of x as saved (f32), so re-applying deformation.npz
-    // reproduces mesh.* exactly.
-    let x_saved: Vec<[f64; 3]> = state
-        .x
-        .iter()
-        .map(|p| p.map(|c| f64::from(c as f32)))
-        .collect();
-    let result = darap.forward(&x_saved).context("final dARAP forward")?;
-    let deformed = TriMesh::new(result.positions.clone(), mesh.faces.clone());
-    let normals =
-        mesh_core::normals::vertex_normals_area_weighted(&deformed.positions, &deformed.faces);
-    lock.ensure_held()?;
-    for ext in ["obj", "ply", "glb"] {
-        let path = dir.file(&format!("mesh.{ext}"));
-        let written = crate::durable::replace_with(&path, |tmp| {
-            mesh_core::io::write_mesh(tmp, &deformed, Some(&normals)).map_err(anyhow::Error::from)
-        });
-        match written {
-            Ok(()) => {}
-            Err(e)
-                if matches!(
-                    e.downcast_ref::<mesh_core::MeshError>(),
-                    Some(mesh_core::MeshError::UnsupportedFormat { .. })
-                ) =>
-            {
-                warnings.push(format!(
-                    "mesh.{ext} not written: this build's mesh writer does not support .{ext}"
-                ));
-            }
-            Err(e) => return Err(e).with_context(|| format!("cannot write {}", path.display())),
-        }
-    }
-    write_deformation(
+    let deformed = write_outputs(
         &dir,
-        &mesh,
+        &lock,
+        &mut prepared,
         &state.x,
         config,
         &request.mesh,
-        task_label.0,
-        &task_label.1,
-        region.as_ref(),
+        &label,
     )?;
-    let mut tt_renderer = raster_diff::CpuRenderer::default();
-    let mut tt = turntable(
-        &mut tt_renderer,
-        &deformed.positions,
-        &deformed.faces,
-        config.run.turntable_views,
-        config.run.turntable_size,
-        config.camera.fov_deg,
-    )?;
-    if let (Some(r), true, Some(ids)) = (&region, config.region.tint, tt_renderer.triangle_ids()) {
-        tint_region(&mut tt, &ids, &deformed.faces, &r.free);
-    }
-    write_grid(&dir.file("turntable.png"), &tt)?;
     let alignment = match (&style_objective, alignment_before) {
         (Some(o), Some(before)) => Some((before, o.mean_alignment(&deformed.positions))),
         _ => None,
     };
+    let mesh = &prepared.mesh;
     let summary = serde_json::json!({
         "status": "complete",
         "mesh": request.mesh.display().to_string(),
@@ -781,14 +905,14 @@ pub fn execute_with<'g>(
         "alignment_before": alignment.map(|a| a.0),
         "alignment_after": alignment.map(|a| a.1),
         "renderer": renderer_choice,
-        "seconds": { "setup": setup_seconds, "loop": loop_seconds },
-        "warnings": warnings,
-        "region": region.as_ref().map(|r| serde_json::json!({
+        "seconds": { "setup": prepared.setup_seconds, "loop": loop_seconds },
+        "warnings": prepared.warnings,
+        "region": prepared.region.as_ref().map(|r| serde_json::json!({
             "specs": config.region.specs,
             "feather": config.region.feather,
             "vertices": r.free.iter().filter(|&&f| f).count(),
         })),
-        "task": identity.fields,
+        "task": prepared.identity.fields,
     });
     lock.ensure_held()?;
     crate::durable::replace_bytes(
@@ -803,7 +927,7 @@ pub fn execute_with<'g>(
         iteration: state.iteration,
         complete: true,
         alignment,
-        warnings,
+        warnings: prepared.warnings,
         already_complete: false,
     })
 }
