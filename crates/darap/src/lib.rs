@@ -31,6 +31,7 @@ mod lanes;
 mod local;
 mod mat3;
 mod post;
+pub mod region;
 mod rotation_rule;
 mod svd3;
 
@@ -139,6 +140,14 @@ pub enum DarapError {
         /// Actual length.
         got: usize,
     },
+    /// An input lies outside its allowed range.
+    #[error("{what}: entry {index} is out of range")]
+    OutOfRange {
+        /// Which input.
+        what: &'static str,
+        /// Where.
+        index: usize,
+    },
     /// An input is NaN or infinite.
     #[error("{what} {index} is not finite")]
     NonFinite {
@@ -170,6 +179,10 @@ pub struct Darap {
     mass_int: Vec<f64>,
     normals_int: Vec<[f64; 3]>,
     free_int: Option<Vec<bool>>,
+    /// Feather weights in internal order (`None` when every weight is 0 or 1).
+    weights_int: Option<Vec<f64>>,
+    /// `w_v·a_v` in internal order, the local step's masses when feathered.
+    feathered_mass_int: Option<Vec<f64>>,
     /// Rows: free vertices in solver order; columns: internal order.
     rhs: RhsPrecompute,
     /// `−L[free, pins]·x_pins` in solver order (the pins stay at rest).
@@ -193,6 +206,8 @@ pub struct Deformation {
     local: LocalTape,
     post: PostTape,
     lambda: f64,
+    /// The local step's masses (internal order) when the forward pass was feathered.
+    feathered_mass_int: Option<Vec<f64>>,
 }
 
 impl Darap {
@@ -248,6 +263,8 @@ impl Darap {
             mass_int: order.iter().map(|&v| mass[v]).collect(),
             normals_int: order.iter().map(|&v| rest_normals[v]).collect(),
             free_int: None,
+            weights_int: None,
+            feathered_mass_int: None,
             order,
             rest_positions: rest_positions.to_vec(),
             rest_normals,
@@ -285,7 +302,8 @@ impl Darap {
     }
 
     /// Sets a region mask: `free[v] == false` forces `R_v = I` at vertex `v` (it keeps its rest
-    /// one-ring shape and receives no gradient). `None` lets every vertex rotate.
+    /// one-ring shape and receives no gradient). `None` lets every vertex rotate. Clears any
+    /// feather weights ([`Darap::set_region_weights`]).
     pub fn set_mask(&mut self, free: Option<Vec<bool>>) -> Result<(), DarapError> {
         if let Some(m) = &free
             && m.len() != self.num_vertices()
@@ -300,7 +318,52 @@ impl Darap {
             .as_ref()
             .map(|m| self.order.iter().map(|&v| m[v]).collect());
         self.free = free;
+        self.weights_int = None;
+        self.feathered_mass_int = None;
         Ok(())
+    }
+
+    /// Sets a feathered region: per vertex a weight `w_v ∈ [0, 1]` that scales the strength of
+    /// the normal term, `λ·w_v·a_v` (see [`region`]). `w = 0` is the hard mask of
+    /// [`Darap::set_mask`] (`R = I`, exactly zero gradient), `w = 1` a free vertex. `None` lets
+    /// every vertex rotate.
+    pub fn set_region_weights(&mut self, weights: Option<Vec<f64>>) -> Result<(), DarapError> {
+        let Some(w) = weights else {
+            return self.set_mask(None);
+        };
+        if w.len() != self.num_vertices() {
+            return Err(DarapError::LengthMismatch {
+                what: "region weights",
+                expected: self.num_vertices(),
+                got: w.len(),
+            });
+        }
+        if let Some(index) = w.iter().position(|x| !(0.0..=1.0).contains(x)) {
+            return Err(DarapError::OutOfRange {
+                what: "region weight (must lie in [0, 1])",
+                index,
+            });
+        }
+        self.set_mask(Some(w.iter().map(|&x| x > 0.0).collect()))?;
+        if w.iter().any(|&x| x > 0.0 && x < 1.0) {
+            let wi: Vec<f64> = self.order.iter().map(|&v| w[v]).collect();
+            self.feathered_mass_int = Some(region::feathered_mass(&self.mass_int, &wi));
+            self.weights_int = Some(wi);
+        }
+        Ok(())
+    }
+
+    /// The region's per-vertex weights (vertex order): `None` when every vertex is free, else 1
+    /// for free vertices, 0 for masked ones and the feather weight in between.
+    pub fn region_weights(&self) -> Option<Vec<f64>> {
+        let free = self.free.as_ref()?;
+        let mut w: Vec<f64> = free.iter().map(|&f| if f { 1.0 } else { 0.0 }).collect();
+        if let Some(wi) = &self.weights_int {
+            for (&x, &v) in wi.iter().zip(&self.order) {
+                w[v] = x;
+            }
+        }
+        Some(w)
     }
 
     /// The current options.
@@ -363,9 +426,10 @@ impl Darap {
         }
         // Targets gathered into the internal order and normalized in one pass.
         let unit: Vec<[f64; 3]> = self.order.iter().map(|&v| normalize_target(x[v])).collect();
+        let mass_int = self.feathered_mass_int.as_ref().unwrap_or(&self.mass_int);
         let (rotations_int, local) = local_step(
             &self.covariance_int,
-            &self.mass_int,
+            mass_int,
             self.options.lambda,
             &self.normals_int,
             &unit,
@@ -385,6 +449,7 @@ impl Darap {
             local,
             post,
             lambda: self.options.lambda,
+            feathered_mass_int: self.feathered_mass_int.clone(),
         })
     }
 
@@ -462,7 +527,7 @@ impl Darap {
         let grad_r = rhs_vjp(&self.rhs, &grad_b);
         let grad_unit_int = local_step_vjp(
             &state.local,
-            &self.mass_int,
+            state.feathered_mass_int.as_ref().unwrap_or(&self.mass_int),
             state.lambda,
             &self.normals_int,
             &grad_r,

@@ -456,3 +456,134 @@ fn layer_matches_the_stage_functions_chained_in_vertex_order() {
         }
     }
 }
+
+/// Feather weights on an icosphere: 0 for `x < −0.3`, a ramp for `−0.3 ≤ x < 0.2`, 1 beyond.
+fn feather(mesh: &mesh_core::TriMesh) -> Vec<f64> {
+    mesh.positions
+        .iter()
+        .map(|p| ((p[0] + 0.3) / 0.5).clamp(0.0, 1.0))
+        .collect()
+}
+
+#[test]
+fn feathered_region_fades_lambda_and_its_vjp_matches_the_chain() {
+    let mesh = icosphere(2);
+    let n = mesh.positions.len();
+    let mut layer = Darap::new(&mesh.positions, &mesh.faces, DarapOptions::default()).unwrap();
+    let x = random_targets(layer.rest_normals(), 0.6, 31);
+    let g = random_targets(layer.rest_normals(), 1.0, 32);
+    let w = feather(&mesh);
+    assert!(w.contains(&0.0) && w.iter().any(|&v| v > 0.0 && v < 1.0));
+    layer.set_region_weights(Some(w.clone())).unwrap();
+    assert_eq!(layer.region_weights().unwrap(), w);
+    let out = layer.forward(&x).unwrap();
+    // Each rotation is the rule applied to S = K + λ·w·a·n0 t̂ᵀ (identity where w = 0), and
+    // stays a rotation.
+    let opts = DarapOptions::default();
+    let w_ = cotan::cot_weights(&mesh.positions, &mesh.faces).unwrap();
+    let k = rest_covariances(&mesh.positions, &mesh.faces, &w_);
+    let unit = normalize_targets(&x);
+    for v in 0..n {
+        let expected = if w[v] == 0.0 {
+            IDENTITY
+        } else {
+            let s = crate::stages::covariance(
+                opts.rotation_rule,
+                &k[v],
+                opts.lambda * w[v] * layer.mass()[v],
+                layer.rest_normals()[v],
+                unit[v],
+            );
+            crate::rotation_rule::gis(&s).0
+        };
+        for i in 0..3 {
+            for j in 0..3 {
+                assert!(
+                    (out.rotations[v][i][j] - expected[i][j]).abs() < 1e-12,
+                    "vertex {v}"
+                );
+            }
+        }
+        let r = out.rotations[v];
+        let rtr: Mat3 = std::array::from_fn(|i| {
+            std::array::from_fn(|j| (0..3).map(|c| r[c][i] * r[c][j]).sum::<f64>())
+        });
+        for i in 0..3 {
+            for j in 0..3 {
+                assert!(
+                    (rtr[i][j] - IDENTITY[i][j]).abs() < 1e-12,
+                    "vertex {v} not a rotation"
+                );
+            }
+        }
+    }
+    // The gradient is exactly zero where w = 0, and matches a central difference.
+    let grad = layer.backward(&out, &g);
+    for v in (0..n).filter(|&v| w[v] == 0.0) {
+        assert_eq!(grad[v], [0.0; 3], "vertex {v} outside the region");
+    }
+    let loss = |x: &[[f64; 3]]| -> f64 {
+        let p = layer.forward(x).unwrap().positions;
+        p.iter()
+            .zip(&g)
+            .map(|(a, b)| a[0] * b[0] + a[1] * b[1] + a[2] * b[2])
+            .sum()
+    };
+    let dir = random_targets(layer.rest_normals(), 1.0, 33);
+    let h = 1e-6;
+    let xp: Vec<[f64; 3]> = x
+        .iter()
+        .zip(&dir)
+        .map(|(a, d)| std::array::from_fn(|c| a[c] + h * d[c]))
+        .collect();
+    let xm: Vec<[f64; 3]> = x
+        .iter()
+        .zip(&dir)
+        .map(|(a, d)| std::array::from_fn(|c| a[c] - h * d[c]))
+        .collect();
+    let fd = (loss(&xp) - loss(&xm)) / (2.0 * h);
+    let an: f64 = grad
+        .iter()
+        .zip(&dir)
+        .map(|(a, d)| a[0] * d[0] + a[1] * d[1] + a[2] * d[2])
+        .sum();
+    assert!(
+        (fd - an).abs() < 1e-6 * (1.0 + an.abs()),
+        "fd {fd} vs adjoint {an}"
+    );
+}
+
+#[test]
+fn region_weights_of_zero_and_one_are_the_hard_mask() {
+    let mesh = squashed_sphere();
+    let n = mesh.positions.len();
+    let free: Vec<bool> = (0..n).map(|v| v % 4 != 1).collect();
+    let mut masked = Darap::new(&mesh.positions, &mesh.faces, DarapOptions::default()).unwrap();
+    masked.set_mask(Some(free.clone())).unwrap();
+    let mut weighted = Darap::new(&mesh.positions, &mesh.faces, DarapOptions::default()).unwrap();
+    weighted
+        .set_region_weights(Some(
+            free.iter().map(|&f| if f { 1.0 } else { 0.0 }).collect(),
+        ))
+        .unwrap();
+    let x = random_targets(masked.rest_normals(), 0.7, 41);
+    let a = masked.forward(&x).unwrap();
+    let b = weighted.forward(&x).unwrap();
+    assert_eq!(a.positions, b.positions);
+    assert_eq!(masked.backward(&a, &x), weighted.backward(&b, &x));
+    // Out-of-range and wrong-length weights are errors; None clears the region.
+    assert!(matches!(
+        weighted.set_region_weights(Some(vec![1.5; n])),
+        Err(DarapError::OutOfRange { index: 0, .. })
+    ));
+    assert!(matches!(
+        weighted.set_region_weights(Some(vec![f64::NAN; n])),
+        Err(DarapError::OutOfRange { .. })
+    ));
+    assert!(matches!(
+        weighted.set_region_weights(Some(vec![0.5; 2])),
+        Err(DarapError::LengthMismatch { .. })
+    ));
+    weighted.set_region_weights(None).unwrap();
+    assert!(weighted.region_weights().is_none());
+}

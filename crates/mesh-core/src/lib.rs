@@ -8,7 +8,7 @@
 //! - vectors are column vectors in the math of the docs; arrays are row-major (`Vec<[f64; 3]>`).
 //!
 //! Layers: plain slice functions ([`geometry`], [`normals`], [`normalize`], [`topology`],
-//! [`subdivide`], [`shapes`]) work on `&[[f64; 3]]` / `&[[u32; 3]]`; [`validate`] checks and repairs a
+//! [`subdivide`], [`shapes`], [`region`]) work on `&[[f64; 3]]` / `&[[u32; 3]]`; [`validate`] checks and repairs a
 //! [`TriMesh`]; with the default feature `io`, [`io`] reads and writes OBJ, OFF, PLY and glTF/GLB.
 //! NumPy files live in the `npy` crate, the reference's saved-deformation `.npz` in `stylize`.
 
@@ -16,6 +16,7 @@ mod error;
 pub mod geometry;
 pub mod normalize;
 pub mod normals;
+pub mod region;
 pub mod shapes;
 pub mod subdivide;
 pub mod topology;

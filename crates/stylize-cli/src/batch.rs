@@ -11,6 +11,8 @@
 //! | `negative_prompt` | string, optional | overrides `guidance.negative_prompt` |
 //! | `seed` | integer, optional | overrides `run.seed` |
 //! | `overrides` | list of `"section.key=value"`, optional | applied after the base config |
+//! | `region` | list of region specs, optional | replaces `region.specs` (`vertices:FILE` relative to the manifest's folder) |
+//! | `region_feather` | integer, optional | replaces `region.feather` |
 //!
 //! Rows are numbered from 0 in file order; shard `i` of `n` takes the rows with `index % n == i`.
 //! At load time, an empty `out` and two rows writing the same run directory (after path
@@ -60,12 +62,31 @@ pub struct Row {
     /// `section.key=value` overrides.
     #[serde(default)]
     pub overrides: Vec<String>,
+    /// Region specs (replace `region.specs`).
+    #[serde(default)]
+    pub region: Vec<String>,
+    /// Feather rings (replace `region.feather`).
+    #[serde(default)]
+    pub region_feather: Option<u32>,
 }
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct TomlManifest {
     run: Vec<Row>,
+}
+
+/// A region spec with a relative `vertices:FILE` (also under `not:`) resolved against `base`.
+fn rebase_vertex_file(spec: &str, base: &Path) -> anyhow::Result<String> {
+    use mesh_core::region::RegionSpec;
+    fn rebase(s: RegionSpec, base: &Path) -> RegionSpec {
+        match s {
+            RegionSpec::VertexFile(p) if p.is_relative() => RegionSpec::VertexFile(base.join(p)),
+            RegionSpec::Not(inner) => RegionSpec::Not(Box::new(rebase(*inner, base))),
+            other => other,
+        }
+    }
+    Ok(rebase(RegionSpec::parse(spec)?, base).to_string())
 }
 
 /// Reads a manifest; relative paths are resolved against its folder.
@@ -119,6 +140,10 @@ pub fn read_manifest(path: &Path) -> anyhow::Result<Vec<Row>> {
         }
         if r.out.is_relative() {
             r.out = base.join(&r.out);
+        }
+        for spec in &mut r.region {
+            *spec = rebase_vertex_file(spec, base)
+                .with_context(|| format!("manifest {} row {i}: region", path.display()))?;
         }
         let key = normalized_dir(&r.out);
         if let Some((j, other)) = seen.get(&key) {
@@ -374,7 +399,7 @@ fn run_row(
     if let Some(n) = &row.negative_prompt {
         config.guidance.negative_prompt = n.clone();
     }
-    config.validate()?;
+    let config = config.with_region_flags(&row.region, row.region_feather, false)?;
     let request = RunRequest {
         mesh: row.mesh.clone(),
         out: row.out.clone(),
@@ -489,6 +514,42 @@ mod tests {
             ]))
             .is_err()
         );
+    }
+
+    #[test]
+    fn region_columns_are_read_and_vertex_files_rebased_on_the_manifest_folder() {
+        let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+        let path = dir.path().join("m.toml");
+        std::fs::write(
+            &path,
+            "[[run]]\nmesh = \"a.obj\"\nstyle = \"cube\"\nout = \"a\"\nregion = [\"box:-1,-1,-1,0,1,1\", \"not:vertices:head.txt\", \"vertices:/abs/v.txt\"]\nregion_feather = 2\n",
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        let rows = read_manifest(&path).unwrap_or_else(|e| panic!("{e:#}"));
+        assert_eq!(rows[0].region_feather, Some(2));
+        assert_eq!(rows[0].region[0], "box:-1,-1,-1,0,1,1");
+        assert_eq!(
+            rows[0].region[1],
+            format!("not:vertices:{}", dir.path().join("head.txt").display())
+        );
+        assert_eq!(rows[0].region[2], "vertices:/abs/v.txt");
+        std::fs::write(
+            &path,
+            "[[run]]\nmesh = \"a.obj\"\nstyle = \"cube\"\nout = \"a\"\nregion = [\"cube:1\"]\n",
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        let e = read_manifest(&path).map(|_| ()).expect_err("an error");
+        assert!(
+            format!("{e:#}").contains("row 0") && format!("{e:#}").contains("cube:1"),
+            "{e:#}"
+        );
+        let config = Config::default()
+            .with_region_flags(&rows[0].region[..1], rows[0].region_feather, false)
+            .unwrap_or_else(|e| panic!("{e:#}"));
+        assert_eq!(config.region.specs, ["box:-1,-1,-1,0,1,1"]);
+        assert_eq!(config.region.feather, 2);
+        let e = Config::default().with_region_flags(&["box:1".to_string()], None, false);
+        assert!(format!("{:#}", e.expect_err("an error")).contains("region.specs"));
     }
 
     #[test]

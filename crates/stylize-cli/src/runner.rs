@@ -6,8 +6,9 @@ use std::path::PathBuf;
 use stylize::config::Config;
 use stylize::identity::ObjectiveIdentity;
 pub use stylize::runner::{
-    NPZ_FORMAT_VERSION, NoProgress, Progress, RunHooks, RunOptions, RunOutcome, Stopped, Task,
-    darap_options, objective_identity, prepare_mesh, renderer, turntable, write_grid,
+    NPZ_FORMAT_VERSION, NoProgress, Progress, REGION_TINT, ResolvedRegion, RunHooks, RunOptions,
+    RunOutcome, Stopped, Task, darap_options, objective_identity, parse_region_specs, prepare_mesh,
+    prepare_mesh_with_region, renderer, resolve_region, tint_region, turntable, write_grid,
 };
 
 use crate::signals::Interrupted;

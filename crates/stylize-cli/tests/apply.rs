@@ -30,6 +30,9 @@ fn args(out: PathBuf) -> Args {
         lambda: vec![],
         rotation_rule: None,
         mask: None,
+        region: vec![],
+        region_feather: None,
+        no_region: false,
         force: false,
     }
 }

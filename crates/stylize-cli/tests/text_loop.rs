@@ -368,3 +368,53 @@ fn text_run_resumed_from_checkpoint_equals_uninterrupted_run() {
     assert!(a.x == b.x, "x differs after resume");
     assert!(a.adam == b.adam, "Adam state differs after resume");
 }
+
+#[test]
+fn text_path_honours_a_feathered_region_adam_leaves_outside_targets_at_rest() {
+    let mut darap = layer();
+    let faces = faces();
+    // Region: the upper half (y > 0) of the ellipsoid, feathered over 2 rings.
+    let p = darap.rest_positions().to_vec();
+    let free: Vec<bool> = p.iter().map(|q| q[1] > 0.0).collect();
+    let weights = mesh_core::region::feather_weights(&free, &faces, 2);
+    ok(darap.set_region_weights(Some(weights.clone())));
+    let (mut obj, _, _) = text_objective(true);
+    let mut state = LoopState {
+        iteration: 0,
+        x: darap.rest_normals().to_vec(),
+        adam: ok(Adam::new(3 * darap.num_vertices(), AdamConfig::default())),
+        rng: ChaCha8Rng::seed_from_u64(2),
+    };
+    let spec = LoopSpec {
+        iterations: 4,
+        steps_per_batch: 2,
+        checkpoint_every: 0,
+        preview_every: 0,
+        halt_after: None,
+    };
+    ok(run_loop(
+        &darap,
+        &spec,
+        &mut state,
+        &mut obj,
+        &mut Records::default(),
+    ));
+    let rest = darap.rest_normals();
+    for v in 0..p.len() {
+        if !free[v] {
+            assert_eq!(state.x[v], rest[v], "target {v} outside the region moved");
+        }
+    }
+    let moved = (0..p.len())
+        .filter(|&v| weights[v] > 0.0 && state.x[v] != rest[v])
+        .count();
+    assert!(moved > 0, "no target inside the region moved");
+    let def = ok(darap.forward(&state.x));
+    for v in (0..p.len()).filter(|&v| !free[v]) {
+        assert_eq!(
+            def.rotations[v],
+            [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+            "vertex {v}"
+        );
+    }
+}

@@ -268,6 +268,19 @@ impl Default for RunSection {
     }
 }
 
+/// `[region]`: localized stylization (`docs/cli.md`, `mesh_core::region`).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RegionSection {
+    /// Region specs whose union may rotate (empty: the whole mesh): `box:…`, `sphere:…`,
+    /// `vertices:FILE`, `part:NAME`, `property:NAME OP VALUE`, `not:SPEC`.
+    pub specs: Vec<String>,
+    /// Rings inside the region's boundary over which λ fades from full to zero: 0.
+    pub feather: u32,
+    /// Tint the region in the turntable and previews: false.
+    pub tint: bool,
+}
+
 /// The whole configuration. `Config::default()` is the reference setup.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -286,6 +299,8 @@ pub struct Config {
     pub style: StyleSection,
     /// `[run]`.
     pub run: RunSection,
+    /// `[region]`.
+    pub region: RegionSection,
 }
 
 impl Config {
@@ -314,6 +329,25 @@ impl Config {
             .context("configuration after overrides is invalid")?;
         config.validate()?;
         Ok(config)
+    }
+
+    /// `--region` specs, `--region-feather` and `--tint-region` on top of the configuration:
+    /// given specs and rings replace `region.specs` / `region.feather` (nothing given: unchanged).
+    pub fn with_region_flags(
+        mut self,
+        specs: &[String],
+        feather: Option<u32>,
+        tint: bool,
+    ) -> anyhow::Result<Self> {
+        if !specs.is_empty() {
+            self.region.specs = specs.to_vec();
+        }
+        if let Some(k) = feather {
+            self.region.feather = k;
+        }
+        self.region.tint |= tint;
+        self.validate()?;
+        Ok(self)
     }
 
     /// Checks ranges that the types alone do not (positive sizes, a parsable schedule, …).
@@ -391,6 +425,9 @@ impl Config {
             );
         }
         self.stage2_schedule()?;
+        for spec in &self.region.specs {
+            mesh_core::region::RegionSpec::parse(spec).context("region.specs")?;
+        }
         Ok(())
     }
 

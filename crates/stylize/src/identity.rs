@@ -14,6 +14,10 @@
 //!   reads `[darap]`, `[style]`, `run.seed` and Adam's `optim.beta1/beta2/eps`; the text path reads
 //!   everything except `[style]`.
 //!
+//! - `region.*` (only for a localized run, so that unlocalized identities are unchanged): the
+//!   specs, the feather rings and `region.weights_sha256`, the SHA-256 of the resolved per-vertex
+//!   weights (f64 LE) — a vertex file edited between a run and its resume changes it.
+//!
 //! [`TaskIdentity::differences`] names each differing field with its old and new value.
 
 use std::collections::BTreeMap;
@@ -34,6 +38,7 @@ pub const PRESENTATION_KEYS: &[&str] = &[
     "run.turntable_views",
     "run.turntable_size",
     "guidance.onnx_memory_arena",
+    "region.tint",
 ];
 
 /// Keys of the text path's sections that the model-free path reads as well.
@@ -189,6 +194,10 @@ impl TaskIdentity {
             let Some(keys) = keys.as_table() else {
                 continue;
             };
+            if section == "region" {
+                // Recorded by `with_region`, only for localized runs.
+                continue;
+            }
             for (key, value) in keys {
                 let name = format!("{section}.{key}");
                 if PRESENTATION_KEYS.contains(&name.as_str()) {
@@ -207,6 +216,24 @@ impl TaskIdentity {
             }
         }
         Ok(Self { fields })
+    }
+
+    /// Adds a localized run's region: its specs, feather rings and resolved weights.
+    pub fn with_region(mut self, specs: &[String], feather: u32, weights: &[f64]) -> Self {
+        let mut h = Sha256::new();
+        h.update((weights.len() as u64).to_le_bytes());
+        for w in weights {
+            h.update(w.to_le_bytes());
+        }
+        self.fields.insert(
+            "region.specs".into(),
+            serde_json::Value::from(specs.to_vec()).to_string(),
+        );
+        self.fields
+            .insert("region.feather".into(), feather.to_string());
+        self.fields
+            .insert("region.weights_sha256".into(), hex(&h.finalize()));
+        self
     }
 
     /// Every field that differs, as `field: checkpoint OLD, now NEW` (empty when equal).

@@ -10,6 +10,7 @@ use anyhow::{Context, bail};
 use csd::Guidance;
 use darap::Darap;
 use mesh_core::TriMesh;
+use mesh_core::region::{RegionInput, RegionSpec};
 use npy::{NpyArray, NpyData};
 use optim::{Adam, AdamConfig};
 use rand::SeedableRng;
@@ -142,7 +143,66 @@ pub struct RunOutcome {
 /// values `deformation.npz` stores and normalized again in f64 — so `stylize apply` on the saved
 /// file rebuilds exactly this rest mesh.
 pub fn prepare_mesh(path: &Path) -> anyhow::Result<(TriMesh, Vec<String>)> {
-    let mesh = mesh_core::io::read_mesh(path)
+    prepare_mesh_with_region(path, &crate::config::RegionSection::default()).map(|(m, w, _)| (m, w))
+}
+
+/// A resolved region of a prepared mesh.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ResolvedRegion {
+    /// Vertices that may rotate (prepared mesh's numbering).
+    pub free: Vec<bool>,
+    /// Per-vertex weights for `Darap::set_region_weights` (feathered).
+    pub weights: Vec<f64>,
+}
+
+/// Region specs parsed, with vertex files read (relative paths as given: from the working
+/// directory; a batch manifest rebases them on its folder).
+pub fn parse_region_specs(specs: &[String]) -> anyhow::Result<Vec<RegionSpec>> {
+    specs
+        .iter()
+        .map(|s| {
+            RegionSpec::parse(s)?.with_indices(&mut |path: &Path| -> anyhow::Result<Vec<usize>> {
+                use std::io::Read;
+                let mut text = String::new();
+                mesh_core::io::open_regular(path)
+                    .map_err(anyhow::Error::from)
+                    .and_then(|mut f| f.read_to_string(&mut text).map_err(anyhow::Error::from))
+                    .with_context(|| format!("cannot read vertex file {}", path.display()))?;
+                mesh_core::region::parse_index_list(&text)
+                    .map_err(|e| anyhow::anyhow!("vertex file {}: {e}", path.display()))
+            })
+        })
+        .collect()
+}
+
+/// Resolves `section` on a prepared mesh (`Ok(None)` when no spec is given). Warnings (a spec
+/// that selects nothing, a region covering everything) are appended to `warnings`.
+pub fn resolve_region(
+    section: &crate::config::RegionSection,
+    input: &RegionInput<'_>,
+    warnings: &mut Vec<String>,
+) -> anyhow::Result<Option<ResolvedRegion>> {
+    if section.specs.is_empty() {
+        return Ok(None);
+    }
+    let specs = parse_region_specs(&section.specs)?;
+    let region = mesh_core::region::select(&specs, input)?;
+    warnings.extend(region.warnings.iter().cloned());
+    let weights =
+        mesh_core::region::feather_weights(&region.free, input.faces, section.feather as usize);
+    Ok(Some(ResolvedRegion {
+        free: region.free,
+        weights,
+    }))
+}
+
+/// [`prepare_mesh`] and the region of `section` on it (parts of the file and repair maps
+/// followed; boxes and spheres evaluated on the prepared, normalized positions).
+pub fn prepare_mesh_with_region(
+    path: &Path,
+    section: &crate::config::RegionSection,
+) -> anyhow::Result<(TriMesh, Vec<String>, Option<ResolvedRegion>)> {
+    let (mesh, parts) = mesh_core::io::read_mesh_with_parts(path)
         .with_context(|| format!("cannot read mesh {}", path.display()))?;
     let repaired =
         mesh_core::validate::repair(&mesh, &mesh_core::validate::RepairOptions::default())
@@ -153,13 +213,23 @@ pub fn prepare_mesh(path: &Path) -> anyhow::Result<(TriMesh, Vec<String>)> {
         .iter()
         .map(|i| i.message.clone())
         .collect();
-    let mut m = repaired.mesh;
+    let mut m = repaired.mesh.clone();
     mesh_core::normalize::side2_cube(&mut m.positions);
     for p in &mut m.positions {
         *p = p.map(|c| f64::from(c as f32));
     }
     mesh_core::normalize::side2_cube(&mut m.positions);
-    Ok((m, warnings))
+    let mut warnings = warnings;
+    let input = RegionInput {
+        positions: &m.positions,
+        faces: &m.faces,
+        vertex_map: &repaired.vertex_map,
+        face_map: &repaired.face_map,
+        parts: &parts,
+    };
+    let region = resolve_region(section, &input, &mut warnings)
+        .with_context(|| format!("region of {}", path.display()))?;
+    Ok((m, warnings, region))
 }
 
 /// dARAP options from the configuration.
@@ -202,6 +272,8 @@ struct RunObserver<'a> {
     fov: f64,
     faces: Vec<[u32; 3]>,
     preview_renderer: raster_diff::CpuRenderer,
+    /// Region to tint in model-free previews (`region.tint`).
+    tint: Option<Vec<bool>>,
 }
 
 fn record_json(r: &IterationRecord) -> serde_json::Value {
@@ -239,6 +311,25 @@ pub fn write_grid(path: &Path, images: &Images) -> anyhow::Result<()> {
         )
         .with_context(|| format!("cannot write {}", path.display()))
     })
+}
+
+/// Tint of [`tint_region`] (a warm orange, multiplied into the shading).
+pub const REGION_TINT: [f32; 3] = [1.0, 0.62, 0.3];
+
+/// Tints, in place, the pixels whose visible triangle (`ids`, one per pixel as
+/// `CpuRenderer::triangle_ids` returns them) has a corner in the region `free`.
+pub fn tint_region(images: &mut Images, ids: &[u32], faces: &[[u32; 3]], free: &[bool]) {
+    for (pixel, &t) in images.rgb.chunks_exact_mut(3).zip(ids) {
+        let inside = faces.get(t as usize).is_some_and(|f| {
+            f.iter()
+                .any(|&v| free.get(v as usize).copied().unwrap_or(false))
+        });
+        if inside {
+            for (c, k) in pixel.iter_mut().zip(REGION_TINT) {
+                *c *= k;
+            }
+        }
+    }
 }
 
 /// Renders `n` turntable views of a mesh (CPU renderer, elevation 20°, looking at the origin).
@@ -312,7 +403,7 @@ impl Observer for RunObserver<'_> {
         match images {
             Some(images) => write_grid(&path, images),
             None => {
-                let images = turntable(
+                let mut images = turntable(
                     &mut self.preview_renderer,
                     deformed,
                     &self.faces,
@@ -320,6 +411,10 @@ impl Observer for RunObserver<'_> {
                     self.preview_size,
                     self.fov,
                 )?;
+                if let (Some(free), Some(ids)) = (&self.tint, self.preview_renderer.triangle_ids())
+                {
+                    tint_region(&mut images, &ids, &self.faces, free);
+                }
                 write_grid(&path, &images)
             }
         }
@@ -384,6 +479,8 @@ pub struct Prepared {
     pub config_toml: String,
     /// Seconds spent in the dARAP precomputation.
     pub setup_seconds: f64,
+    /// The region of a localized run (`[region]`), already set on `darap`.
+    pub region: Option<ResolvedRegion>,
 }
 
 /// Stage 1: validates the configuration, prepares the mesh, computes the task identity (with the
@@ -397,15 +494,24 @@ pub fn prepare(
     let config = &request.config;
     config.validate()?;
     let config_toml = config.to_toml_string()?;
-    let (mesh, warnings) = prepare_mesh(&request.mesh)?;
+    let (mesh, warnings, region) = prepare_mesh_with_region(&request.mesh, &config.region)?;
     if let (ObjectiveIdentity::Prompt { model: slot, .. }, Some(m)) = (&mut objective, model) {
         *slot = Some(m.clone());
     }
-    let identity = TaskIdentity::new(&mesh.positions, &mesh.faces, &objective, config)?;
+    let mut identity = TaskIdentity::new(&mesh.positions, &mesh.faces, &objective, config)?;
+    if let Some(r) = &region {
+        identity = identity.with_region(&config.region.specs, config.region.feather, &r.weights);
+    }
     let setup = Instant::now();
-    let darap = Darap::new(&mesh.positions, &mesh.faces, darap_options(config))
+    let mut darap = Darap::new(&mesh.positions, &mesh.faces, darap_options(config))
         .context("dARAP precomputation")?;
+    if let Some(r) = &region {
+        darap
+            .set_region_weights(Some(r.weights.clone()))
+            .context("region weights")?;
+    }
     Ok(Prepared {
+        region,
         mesh,
         warnings,
         identity,
@@ -591,9 +697,10 @@ pub fn write_outputs(
             Err(e) => return Err(e).with_context(|| format!("cannot write {}", path.display())),
         }
     }
-    write_deformation(dir, mesh, x, config, source, label.0, &label.1)?;
+    let region = prepared.region.as_ref();
+    write_deformation(dir, mesh, x, config, source, label.0, &label.1, region)?;
     let mut tt_renderer = raster_diff::CpuRenderer::default();
-    let tt = turntable(
+    let mut tt = turntable(
         &mut tt_renderer,
         &deformed.positions,
         &deformed.faces,
@@ -601,6 +708,9 @@ pub fn write_outputs(
         config.run.turntable_size,
         config.camera.fov_deg,
     )?;
+    if let (Some(r), true, Some(ids)) = (region, config.region.tint, tt_renderer.triangle_ids()) {
+        tint_region(&mut tt, &ids, &deformed.faces, &r.free);
+    }
     write_grid(&dir.file("turntable.png"), &tt)?;
     crate::run_pictures::write_before_after(
         &dir.file("before_after.png"),
@@ -729,6 +839,11 @@ pub fn execute_with<'g>(
         fov: config.camera.fov_deg,
         faces: mesh.faces.clone(),
         preview_renderer: raster_diff::CpuRenderer::default(),
+        tint: prepared
+            .region
+            .as_ref()
+            .filter(|_| config.region.tint)
+            .map(|r| r.free.clone()),
     };
     let loop_start = Instant::now();
     let looped = run_loop(
@@ -801,6 +916,11 @@ pub fn execute_with<'g>(
         "renderer": renderer_choice,
         "seconds": { "setup": prepared.setup_seconds, "loop": loop_seconds },
         "warnings": prepared.warnings,
+        "region": prepared.region.as_ref().map(|r| serde_json::json!({
+            "specs": config.region.specs,
+            "feather": config.region.feather,
+            "vertices": r.free.iter().filter(|&&f| f).count(),
+        })),
         "task": prepared.identity.fields,
     });
     lock.ensure_held()?;
@@ -821,7 +941,9 @@ pub fn execute_with<'g>(
     })
 }
 
-/// Writes `deformation.npz` in the reference format plus our keys.
+/// Writes `deformation.npz` in the reference format plus our keys (for a localized run:
+/// `region_weights`, one f64 per vertex, `region_specs`, newline separated, and `region_feather`).
+#[allow(clippy::too_many_arguments)]
 fn write_deformation(
     dir: &RunDir,
     mesh: &TriMesh,
@@ -830,6 +952,7 @@ fn write_deformation(
     source: &Path,
     task_key: &str,
     task_value: &str,
+    region: Option<&ResolvedRegion>,
 ) -> anyhow::Result<()> {
     let csd_cfg = serde_json::json!({
         "local_step_procrustes": { "lamb": config.darap.lambda, "normalize_target_normals": true },
@@ -858,6 +981,21 @@ fn write_deformation(
         "rotation_rule",
         NpyArray::scalar_str(config.darap.rotation_rule.name()),
     )?;
+    if let Some(r) = region {
+        saved.set_extra(
+            "region_weights",
+            NpyArray::new(vec![r.weights.len()], NpyData::F64(r.weights.clone()))
+                .map_err(anyhow::Error::msg)?,
+        )?;
+        saved.set_extra(
+            "region_specs",
+            NpyArray::scalar_str(&config.region.specs.join("\n")),
+        )?;
+        saved.set_extra(
+            "region_feather",
+            scalar_i64(i64::from(config.region.feather))?,
+        )?;
+    }
     crate::durable::replace_with(&dir.deformation(), |tmp| {
         saved.write(tmp).map_err(anyhow::Error::from)
     })

@@ -271,6 +271,45 @@ pub fn suite(report: &mut Report) -> anyhow::Result<()> {
             );
         }
 
+        // Feathered region (λ faded per vertex): weights 0 on a third of the vertices, 0.4 on
+        // another third, through the whole chain.
+        let feather: Vec<f64> = (0..n).map(|v| [0.0, 0.4, 1.0][v % 3]).collect();
+        for (rule_name, rule, lambda) in [
+            ("gis", RotationRule::Gis, 8.0),
+            ("procrustes", RotationRule::Procrustes, 40.0),
+        ] {
+            let mut layer = Darap::new(
+                p,
+                f,
+                DarapOptions {
+                    lambda,
+                    rotation_rule: rule,
+                    ..Default::default()
+                },
+            )?;
+            layer.set_region_weights(Some(feather.clone()))?;
+            let state = layer.forward(&x)?;
+            let grad = layer.backward(&state, &g3);
+            if let Some(v) = (0..n).find(|&v| feather[v] == 0.0 && grad[v] != [0.0; 3]) {
+                report.fail(
+                    &format!("darap/chain_feathered/{rule_name}/{name}"),
+                    format!("vertex {v} has weight 0 but gradient {:?}", grad[v]),
+                );
+            }
+            report.check(
+                &format!("darap/chain_feathered/{rule_name}/{name}"),
+                &flat(&x),
+                &flat(&grad),
+                tol,
+                11,
+                |theta| {
+                    layer
+                        .forward(&rows(theta))
+                        .map_or(f64::NAN, |s| dot(&g3, &s.positions))
+                },
+            );
+        }
+
         // Degenerate inputs stay finite: zero targets, identical targets, huge λ.
         for lambda in [0.0, 8.0, 1e8] {
             let layer = Darap::new(

@@ -5,7 +5,9 @@
 //! vectors; faces are flipped where a transform mirrors, so they stay CCW). Meshes no node uses
 //! are read with the identity transform. Primitives are appended one after another, without
 //! welding (repair welds exact duplicates). Normals, when every primitive has them, are
-//! transformed by the inverse transpose and renormalized.
+//! transformed by the inverse transpose and renormalized. [`read_gltf_with_parts`] also returns
+//! the triangles of each named node (its own mesh instance, not its children) and each named mesh
+//! (all its instances) as region parts.
 //! Write (`.glb`): one mesh, one node, positions (and normals) as `f32` VEC3 with `min`/`max`,
 //! `u32` indices.
 
@@ -14,6 +16,7 @@ use std::path::Path;
 use gltf::mesh::Mode;
 
 use super::{MeshWithNormals, io_err, parse_err};
+use crate::region::{NamedPart, PartKind, Parts};
 use crate::{MeshError, TriMesh};
 
 type Mat4 = [[f64; 4]; 4]; // column-major: m[col][row]
@@ -252,6 +255,8 @@ struct Collector<'a> {
     faces: Vec<[u32; 3]>,
     normals: Vec<[f64; 3]>,
     all_normals: bool,
+    /// Named nodes and meshes with their triangles.
+    parts: Parts,
     /// Elements (accessor components) still allowed to be read.
     budget: usize,
 }
@@ -542,6 +547,23 @@ impl<'a> Collector<'a> {
         Ok(())
     }
 
+    /// Appends the triangles `range` to the part `(kind, name)` (created on first use).
+    fn add_part(&mut self, kind: PartKind, name: &str, range: std::ops::Range<usize>) {
+        let named = &mut self.parts.named;
+        let index = match named.iter().position(|p| p.kind == kind && p.name == name) {
+            Some(i) => i,
+            None => {
+                named.push(NamedPart {
+                    kind,
+                    name: name.to_string(),
+                    faces: Vec::new(),
+                });
+                named.len() - 1
+            }
+        };
+        named[index].faces.extend(range.map(|f| f as u32));
+    }
+
     /// Adds `node` and its subtree. `visited` makes the walk linear in the number of nodes: glTF
     /// requires the node hierarchy to be a forest (each node at most one parent, no cycles), and
     /// a node reached twice (shared child, cycle, or listed twice as a root) is refused.
@@ -572,7 +594,16 @@ impl<'a> Collector<'a> {
         }
         let world = mat_mul(parent, &to_f64(node.transform().matrix()));
         if let Some(m) = node.mesh() {
+            let first = self.faces.len();
+            let mesh_name = m.name().map(str::to_string);
             self.add_mesh(m, &world, path)?;
+            let range = first..self.faces.len();
+            if let Some(name) = node.name() {
+                self.add_part(PartKind::Node, name, range.clone());
+            }
+            if let Some(name) = mesh_name {
+                self.add_part(PartKind::Mesh, &name, range);
+            }
         }
         for child in node.children() {
             self.add_node(child, &world, depth + 1, visited, path)?;
@@ -589,6 +620,11 @@ impl<'a> Collector<'a> {
 /// limited to 16 per byte of input (file plus buffers) plus 4 Mi, so instancing cannot multiply
 /// a small file into gigabytes.
 pub fn read_gltf(path: &Path) -> Result<MeshWithNormals, MeshError> {
+    read_gltf_with_parts(path).map(|(m, _)| m)
+}
+
+/// Like [`read_gltf`], also returning named nodes and meshes as region parts.
+pub fn read_gltf_with_parts(path: &Path) -> Result<(MeshWithNormals, Parts), MeshError> {
     let bytes = super::read_bytes(path)?;
     if bytes.starts_with(b"glTF") {
         // The GLB header's total length, checked here: the `gltf` crate subtracts 12 from it
@@ -644,6 +680,7 @@ pub fn read_gltf(path: &Path) -> Result<MeshWithNormals, MeshError> {
         faces: Vec::new(),
         normals: Vec::new(),
         all_normals: true,
+        parts: Parts::default(),
         budget: input_bytes
             .saturating_mul(EXPANSION_PER_BYTE)
             .saturating_add(EXPANSION_FLOOR),
@@ -681,18 +718,26 @@ pub fn read_gltf(path: &Path) -> Result<MeshWithNormals, MeshError> {
     }
     for m in doc.meshes() {
         if !used_mesh[m.index()] {
+            let first = c.faces.len();
+            let name = m.name().map(str::to_string);
             c.add_mesh(m, &IDENTITY, path)?;
+            if let Some(name) = name {
+                c.add_part(PartKind::Mesh, &name, first..c.faces.len());
+            }
         }
     }
     let normals =
         (c.all_normals && c.normals.len() == c.positions.len() && !c.positions.is_empty())
             .then_some(c.normals);
     Ok((
-        TriMesh {
-            positions: c.positions,
-            faces: c.faces,
-        },
-        normals,
+        (
+            TriMesh {
+                positions: c.positions,
+                faces: c.faces,
+            },
+            normals,
+        ),
+        c.parts,
     ))
 }
 

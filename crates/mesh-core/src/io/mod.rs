@@ -15,10 +15,12 @@ use std::path::Path;
 
 use crate::{MeshError, TriMesh};
 
-pub use gltf::{read_gltf, write_glb};
-pub use obj::{read_obj, write_obj};
+pub use gltf::{read_gltf, read_gltf_with_parts, write_glb};
+pub use obj::{read_obj, read_obj_with_parts, write_obj};
 pub use off::{read_off, write_off};
-pub use ply::{PlyEncoding, read_ply, write_ply};
+pub use ply::{PlyEncoding, read_ply, read_ply_with_parts, write_ply};
+
+use crate::region::Parts;
 
 /// A mesh and, when the file stores one per vertex, its vertex normals.
 pub type MeshWithNormals = (TriMesh, Option<Vec<[f64; 3]>>);
@@ -64,6 +66,26 @@ pub fn read_mesh_with_normals(path: impl AsRef<Path>) -> Result<MeshWithNormals,
         });
     }
     Ok(out)
+}
+
+/// Like [`read_mesh`], also returning the parts the file offers for regions
+/// ([`crate::region`]): OBJ `o`/`g`/`usemtl`, glTF named nodes and meshes, PLY scalar vertex and
+/// face properties (OFF offers none). Indices are in the file's numbering, as the mesh's.
+pub fn read_mesh_with_parts(path: impl AsRef<Path>) -> Result<(TriMesh, Parts), MeshError> {
+    let path = path.as_ref();
+    let ext = extension(path);
+    let ((mesh, _), parts) = match ext.as_str() {
+        "obj" => read_obj_with_parts(path)?,
+        "ply" => read_ply_with_parts(path)?,
+        "gltf" | "glb" => read_gltf_with_parts(path)?,
+        _ => (read_mesh_with_normals(path)?, Parts::default()),
+    };
+    if mesh.faces.is_empty() {
+        return Err(MeshError::Empty {
+            path: path.to_path_buf(),
+        });
+    }
+    Ok((mesh, parts))
 }
 
 /// Writes a mesh, choosing the format by extension, with optional per-vertex normals (one per

@@ -1,4 +1,5 @@
-//! Wavefront OBJ: `v` and `f` records (plus `vn` for normals); everything else is ignored.
+//! Wavefront OBJ: `v` and `f` records (plus `vn` for normals, and `o`/`g`/`usemtl` as named parts
+//! for regions); everything else is ignored.
 //!
 //! We parse OBJ ourselves rather than with `tobj`: `tobj` renumbers vertices in order of first use
 //! and drops unreferenced ones, which would break "vertex 0 is pinned" compatibility with the
@@ -8,7 +9,10 @@ use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::Path;
 
+use std::collections::HashMap;
+
 use super::{io_err, parse_err, read_bytes, truncation_hint};
+use crate::region::{NamedPart, PartKind, Parts};
 use crate::{MeshError, TriMesh};
 
 /// Reads an OBJ file: vertices in file order (all of them), faces fan-triangulated
@@ -16,17 +20,43 @@ use crate::{MeshError, TriMesh};
 /// groups, materials, lines and points are ignored. Returns per-vertex normals when every vertex
 /// referenced by a face uses a single `vn` and all vertices have one.
 pub fn read_obj(path: &Path) -> Result<super::MeshWithNormals, MeshError> {
+    read_obj_with_parts(path).map(|(m, _)| m)
+}
+
+/// Like [`read_obj`], also returning the named parts: each `o` object, `g` group (a `g` line
+/// with several names puts the following faces in each) and `usemtl` material, with the
+/// triangles (file order, after fan triangulation) that follow it.
+pub fn read_obj_with_parts(path: &Path) -> Result<(super::MeshWithNormals, Parts), MeshError> {
     let bytes = read_bytes(path)?;
     read_obj_bytes(path, &bytes).map_err(|e| truncation_hint(e, &bytes))
 }
 
-fn read_obj_bytes(path: &Path, bytes: &[u8]) -> Result<super::MeshWithNormals, MeshError> {
+fn read_obj_bytes(path: &Path, bytes: &[u8]) -> Result<(super::MeshWithNormals, Parts), MeshError> {
     let text = String::from_utf8_lossy(super::strip_bom(bytes));
     let mut positions: Vec<[f64; 3]> = Vec::new();
     let mut vn: Vec<[f64; 3]> = Vec::new();
     // Per polygon: (line number, corners as 0-based (position, normal) indices).
     type Corner = (i64, Option<i64>);
     let mut polys: Vec<(usize, Vec<Corner>)> = Vec::new();
+    // Named parts: `(kind, name)` → index into `named`; the parts the current faces belong to,
+    // and per polygon an index into `tag_sets`.
+    let mut named: Vec<NamedPart> = Vec::new();
+    let mut part_index: HashMap<(PartKind, String), usize> = HashMap::new();
+    let mut current: [Vec<usize>; 3] = Default::default(); // object, groups, material
+    let mut tag_sets: Vec<Vec<usize>> = vec![Vec::new()];
+    let mut poly_tags: Vec<usize> = Vec::new();
+    let mut part = |kind: PartKind, name: &str| -> usize {
+        *part_index
+            .entry((kind, name.to_string()))
+            .or_insert_with(|| {
+                named.push(NamedPart {
+                    kind,
+                    name: name.to_string(),
+                    faces: Vec::new(),
+                });
+                named.len() - 1
+            })
+    };
     for (lineno, line) in text.lines().enumerate() {
         let lineno = lineno + 1;
         let line = line.split('#').next().unwrap_or("");
@@ -82,6 +112,28 @@ fn read_obj_bytes(path: &Path, bytes: &[u8]) -> Result<super::MeshWithNormals, M
                     ));
                 }
                 polys.push((lineno, corners));
+                let tags: Vec<usize> = current.iter().flatten().copied().collect();
+                if tag_sets.last() != Some(&tags) {
+                    tag_sets.push(tags);
+                }
+                poly_tags.push(tag_sets.len() - 1);
+            }
+            "o" | "g" | "usemtl" => {
+                let (kind, slot) = match kind {
+                    "o" => (PartKind::Object, 0),
+                    "g" => (PartKind::Group, 1),
+                    _ => (PartKind::Material, 2),
+                };
+                // `g` alone (or `g default`) leaves every group; `o`/`usemtl` take one name.
+                current[slot] = tok
+                    .filter(|name| !(kind == PartKind::Group && *name == "default"))
+                    .take(if kind == PartKind::Group {
+                        usize::MAX
+                    } else {
+                        1
+                    })
+                    .map(|name| part(kind, name))
+                    .collect();
             }
             _ => {}
         }
@@ -89,7 +141,7 @@ fn read_obj_bytes(path: &Path, bytes: &[u8]) -> Result<super::MeshWithNormals, M
     let mut faces = Vec::with_capacity(polys.len());
     let mut normal_of: Vec<Option<i64>> = vec![None; positions.len()];
     let mut normals_consistent = !vn.is_empty();
-    for (lineno, corners) in &polys {
+    for ((lineno, corners), &tags) in polys.iter().zip(&poly_tags) {
         let mut idx = Vec::with_capacity(corners.len());
         for &(v, n) in corners {
             let v0 = u32::try_from(v).map_err(|_| {
@@ -111,6 +163,9 @@ fn read_obj_bytes(path: &Path, bytes: &[u8]) -> Result<super::MeshWithNormals, M
             }
         }
         for i in 1..idx.len() - 1 {
+            for &t in &tag_sets[tags] {
+                named[t].faces.push(faces.len() as u32);
+            }
             faces.push([idx[0], idx[i], idx[i + 1]]);
         }
     }
@@ -124,7 +179,11 @@ fn read_obj_bytes(path: &Path, bytes: &[u8]) -> Result<super::MeshWithNormals, M
     } else {
         None
     };
-    Ok((TriMesh { positions, faces }, normals))
+    let parts = Parts {
+        named,
+        ..Parts::default()
+    };
+    Ok(((TriMesh { positions, faces }, normals), parts))
 }
 
 /// Resolves an OBJ index (1-based, or negative = relative to the count so far) to 0-based.

@@ -2,8 +2,10 @@
 //!
 //! Read: element `vertex` with scalar properties `x y z` (any numeric type; `nx ny nz` read as
 //! normals when present), element `face` with a list property `vertex_indices` or `vertex_index`
-//! (any integer count and index types), polygons fan-triangulated. Every other element and
-//! property is skipped, with its size, in all three encodings.
+//! (any integer count and index types), polygons fan-triangulated. Other scalar properties of
+//! `vertex` and `face` are returned as region properties by [`read_ply_with_parts`] (a face's
+//! value repeated on each of its triangles). Every other element and property is skipped, with
+//! its size, in all three encodings.
 //! Write: `x y z` (and `nx ny nz`) as `double`, faces as `list uchar int vertex_indices`.
 
 use std::fs::File;
@@ -11,6 +13,7 @@ use std::io::{BufWriter, Write};
 use std::path::Path;
 
 use super::{MeshWithNormals, io_err, parse_err, read_bytes};
+use crate::region::{Parts, ScalarProperty};
 use crate::{MeshError, TriMesh};
 
 /// The body encoding of a PLY file.
@@ -143,6 +146,12 @@ impl Body<'_> {
 
 /// Reads a PLY file (vertices in file order). See the module docs.
 pub fn read_ply(path: &Path) -> Result<MeshWithNormals, MeshError> {
+    read_ply_with_parts(path).map(|(m, _)| m)
+}
+
+/// Like [`read_ply`], also returning the scalar properties of `vertex` (other than `x y z nx ny
+/// nz`) and `face` as region properties (per triangle).
+pub fn read_ply_with_parts(path: &Path) -> Result<(MeshWithNormals, Parts), MeshError> {
     let all = read_bytes(path)?;
     let bytes = super::strip_bom(&all);
     if !bytes.starts_with(b"ply") {
@@ -239,6 +248,7 @@ pub fn read_ply(path: &Path) -> Result<MeshWithNormals, MeshError> {
     let mut normals: Vec<[f64; 3]> = Vec::new();
     let mut faces: Vec<[u32; 3]> = Vec::new();
     let mut saw_vertex = false;
+    let mut parts = Parts::default();
     for el in &elements {
         let is_vertex = el.name == "vertex";
         let is_face = el.name == "face";
@@ -277,7 +287,42 @@ pub fn read_ply(path: &Path) -> Result<MeshWithNormals, MeshError> {
         }
         let mut values = vec![0.0f64; el.properties.len()];
         let mut poly: Vec<u32> = Vec::new();
+        // Scalar properties kept for regions: (slot, index into the parts' list).
+        let kept: Vec<usize> = if is_vertex || is_face {
+            el.properties
+                .iter()
+                .enumerate()
+                .filter(|(_, p)| match p {
+                    Property::Scalar { name, .. } => {
+                        !is_vertex || !["x", "y", "z", "nx", "ny", "nz"].contains(&name.as_str())
+                    }
+                    Property::List { .. } => false,
+                })
+                .map(|(k, _)| k)
+                .collect()
+        } else {
+            Vec::new()
+        };
+        let first_kept = if is_vertex {
+            parts.vertex_properties.len()
+        } else {
+            parts.face_properties.len()
+        };
+        for &k in &kept {
+            if let Property::Scalar { name, .. } = &el.properties[k] {
+                let list = if is_vertex {
+                    &mut parts.vertex_properties
+                } else {
+                    &mut parts.face_properties
+                };
+                list.push(ScalarProperty {
+                    name: name.clone(),
+                    values: Vec::new(),
+                });
+            }
+        }
         for i in 0..el.count {
+            let triangles_before = faces.len();
             for (k, p) in el.properties.iter().enumerate() {
                 let pname = match p {
                     Property::Scalar { name, .. } | Property::List { name, .. } => name.as_str(),
@@ -330,6 +375,19 @@ pub fn read_ply(path: &Path) -> Result<MeshWithNormals, MeshError> {
                 if has_normals {
                     normals.push([g(nxyz[0]), g(nxyz[1]), g(nxyz[2])]);
                 }
+                for (j, &k) in kept.iter().enumerate() {
+                    parts.vertex_properties[first_kept + j]
+                        .values
+                        .push(values[k]);
+                }
+            } else if is_face {
+                for (j, &k) in kept.iter().enumerate() {
+                    let list = &mut parts.face_properties[first_kept + j].values;
+                    list.extend(std::iter::repeat_n(
+                        values[k],
+                        faces.len() - triangles_before,
+                    ));
+                }
             }
         }
     }
@@ -337,7 +395,7 @@ pub fn read_ply(path: &Path) -> Result<MeshWithNormals, MeshError> {
         return Err(parse_err(path, "the header declares no `vertex` element"));
     }
     let normals = (!normals.is_empty() && normals.len() == positions.len()).then_some(normals);
-    Ok((TriMesh { positions, faces }, normals))
+    Ok(((TriMesh { positions, faces }, normals), parts))
 }
 
 /// Writes a PLY file: vertices `double x y z` (plus `double nx ny nz` with normals), faces

@@ -13,6 +13,11 @@
 //! vertex order) of the vertices that **may rotate**; every other vertex keeps `R = I`. Blank
 //! lines and lines starting with `#` are ignored.
 //!
+//! **Region.** A saved localized run (`region_weights` in the `.npz`) is re-applied with its
+//! region by default. `--mask FILE` or `--region SPEC` (repeatable; boxes and spheres in the
+//! normalized frame, `vertices:FILE` in the saved file's vertex order, `not:`) replace it, with
+//! `--region-feather K` rings; `--no-region` applies to the whole mesh.
+//!
 //! **Several λ** (`--lambda 5,8,11`) write one file per λ next to `-o OUT.ext`:
 //! `OUT_lambda5.ext`, `OUT_lambda8.ext`, … . Parent folders are created; existing outputs are
 //! refused unless `--force` (all outputs are checked before any is written). An output that is
@@ -60,8 +65,17 @@ pub struct Args {
     #[arg(long, value_enum)]
     pub rotation_rule: Option<RuleArg>,
     /// Text file of vertex indices that may rotate, one per line (all others keep R = I).
-    #[arg(long)]
+    #[arg(long, conflicts_with = "region")]
     pub mask: Option<PathBuf>,
+    /// Region specs (repeatable, union; see `stylize run --region`), instead of the saved region.
+    #[arg(long, value_name = "SPEC")]
+    pub region: Vec<String>,
+    /// Feather rings for `--region` / `--mask` (default: the saved run's, else 0).
+    #[arg(long, value_name = "K")]
+    pub region_feather: Option<u32>,
+    /// Ignore the saved region: every vertex may rotate.
+    #[arg(long, conflicts_with_all = ["mask", "region"])]
+    pub no_region: bool,
     /// Overwrite existing output files.
     #[arg(long)]
     pub force: bool,
@@ -121,6 +135,68 @@ pub fn read_mask(path: &Path, num_vertices: usize) -> anyhow::Result<Vec<bool>> 
         free[v] = true;
     }
     Ok(free)
+}
+
+/// The region to apply: `--mask` / `--region` (feathered by `--region-feather`, else the saved
+/// rings), else the saved `region_weights`, else none (also with `--no-region`).
+fn region_weights(
+    args: &Args,
+    saved: &SavedDeformation,
+    rest: &[[f64; 3]],
+) -> anyhow::Result<Option<Vec<f64>>> {
+    if args.no_region {
+        return Ok(None);
+    }
+    let saved_feather = match saved.extra("region_feather").map(|a| &a.data) {
+        Some(NpyData::I64(v)) => v.first().map(|&k| u32::try_from(k).unwrap_or(0)),
+        _ => None,
+    };
+    let feather = args.region_feather.or(saved_feather).unwrap_or(0) as usize;
+    let free = if let Some(mask_path) = &args.mask {
+        read_mask(mask_path, rest.len())?
+    } else if !args.region.is_empty() {
+        let specs = crate::runner::parse_region_specs(&args.region)?;
+        let vertex_map: Vec<Option<u32>> = (0..rest.len() as u32).map(Some).collect();
+        let face_map: Vec<Option<u32>> = (0..saved.faces.len() as u32).map(Some).collect();
+        let parts = mesh_core::region::Parts::default();
+        let input = mesh_core::region::RegionInput {
+            positions: rest,
+            faces: &saved.faces,
+            vertex_map: &vertex_map,
+            face_map: &face_map,
+            parts: &parts,
+        };
+        let region = mesh_core::region::select(&specs, &input)
+            .context("--region (a saved file has no named parts: use box, sphere, vertices)")?;
+        for w in &region.warnings {
+            eprintln!("warning: {w}");
+        }
+        region.free
+    } else {
+        return saved_region_weights(saved, &args.saved);
+    };
+    Ok(Some(mesh_core::region::feather_weights(
+        &free,
+        &saved.faces,
+        feather,
+    )))
+}
+
+/// The region a localized run saved (`region_weights`: one f64 per vertex, 1 free … 0 held at the
+/// identity), if any; `path` names the file in errors.
+pub fn saved_region_weights(
+    saved: &SavedDeformation,
+    path: &Path,
+) -> anyhow::Result<Option<Vec<f64>>> {
+    let n = saved.verts.len() / 3;
+    match saved.extra("region_weights").map(|a| &a.data) {
+        None => Ok(None),
+        Some(NpyData::F64(w)) if w.len() == n => Ok(Some(w.clone())),
+        Some(_) => bail!(
+            "{}: `region_weights` must hold one f64 per vertex ({n})",
+            path.display()
+        ),
+    }
 }
 
 /// The rotation rule a saved file records (`rotation_rule` key), if any.
@@ -219,8 +295,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     let mut layer = Darap::new(&rest, &saved.faces, options)
         .with_context(|| format!("cannot build the dARAP layer for {}", args.saved.display()))?;
-    if let Some(mask_path) = &args.mask {
-        layer.set_mask(Some(read_mask(mask_path, rest.len())?))?;
+    if let Some(weights) = region_weights(&args, &saved, &rest)? {
+        layer.set_region_weights(Some(weights))?;
     }
 
     for (&lambda, out) in lambdas.iter().zip(&outputs) {

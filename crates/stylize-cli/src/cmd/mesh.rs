@@ -1,5 +1,7 @@
 //! `stylize mesh`: mesh utilities. `stylize mesh check FILE [--json]` reads a mesh, runs the
 //! validation of `mesh_core::validate` and prints what repair finds and would do.
+//! `--regions` lists instead the parts the file offers for `stylize run --region` (named parts
+//! and scalar properties, with the vertex counts they select on the repaired mesh).
 
 use std::path::PathBuf;
 
@@ -36,6 +38,10 @@ struct CheckArgs {
     /// A face is a needle when its smallest corner angle is below this (degrees).
     #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
     needle_angle: f64,
+    /// List the parts the file offers for `--region` (OBJ groups/objects/materials, glTF
+    /// nodes/meshes, PLY properties) with the vertices each selects, instead of the report.
+    #[arg(long)]
+    regions: bool,
 }
 
 /// Runs `stylize mesh`.
@@ -50,6 +56,9 @@ fn check(a: CheckArgs) -> anyhow::Result<()> {
         a.needle_angle.is_finite() && a.needle_angle >= 0.0,
         "--needle-angle must be a non-negative number of degrees"
     );
+    if a.regions {
+        return list_regions(&a);
+    }
     let mesh = mesh_core::io::read_mesh(&a.file).context("cannot load the mesh")?;
     let options = RepairOptions {
         drop_nonfinite_vertices: a.drop_nonfinite,
@@ -73,6 +82,118 @@ fn check(a: CheckArgs) -> anyhow::Result<()> {
             a.file.display(),
             report.refusal_message()
         );
+    }
+    Ok(())
+}
+
+/// One row of `--regions`: spec, kind, vertices it selects on the repaired mesh, a note.
+fn region_rows(file: &std::path::Path) -> anyhow::Result<Vec<(String, String, usize, String)>> {
+    use mesh_core::region::{Comparison, RegionInput, RegionSpec, select_vertices};
+    let (mesh, parts) =
+        mesh_core::io::read_mesh_with_parts(file).context("cannot load the mesh")?;
+    let repaired = mesh_core::validate::repair(&mesh, &RepairOptions::default())
+        .with_context(|| format!("{} cannot be used", file.display()))?;
+    let input = RegionInput {
+        positions: &repaired.mesh.positions,
+        faces: &repaired.mesh.faces,
+        vertex_map: &repaired.vertex_map,
+        face_map: &repaired.face_map,
+        parts: &parts,
+    };
+    let count = |spec: &RegionSpec| -> anyhow::Result<usize> {
+        Ok(select_vertices(spec, &input)?
+            .iter()
+            .filter(|&&b| b)
+            .count())
+    };
+    let mut rows = Vec::new();
+    let mut seen = std::collections::HashSet::new();
+    for p in &parts.named {
+        if !seen.insert(p.name.clone()) {
+            continue; // `part:NAME` selects every part of that name at once
+        }
+        let kinds: Vec<&str> = parts
+            .named
+            .iter()
+            .filter(|q| q.name == p.name)
+            .map(|q| q.kind.name())
+            .collect();
+        let spec = RegionSpec::Part(p.name.clone());
+        rows.push((
+            spec.to_string(),
+            kinds.join("+"),
+            count(&spec)?,
+            String::new(),
+        ));
+    }
+    for (per, list) in [
+        ("vertex property", &parts.vertex_properties),
+        ("face property", &parts.face_properties),
+    ] {
+        for p in list {
+            let mut distinct: Vec<f64> = p.values.iter().copied().filter(|x| !x.is_nan()).collect();
+            distinct.sort_by(f64::total_cmp);
+            distinct.dedup();
+            let (lo, hi) = (
+                distinct.first().copied().unwrap_or(f64::NAN),
+                distinct.last().copied().unwrap_or(f64::NAN),
+            );
+            if distinct.len() <= 8 {
+                for &v in &distinct {
+                    let spec = RegionSpec::Property {
+                        name: p.name.clone(),
+                        op: Comparison::Eq,
+                        value: v,
+                    };
+                    rows.push((
+                        spec.to_string(),
+                        per.to_string(),
+                        count(&spec)?,
+                        String::new(),
+                    ));
+                }
+            } else {
+                rows.push((
+                    format!("property:{} OP VALUE", p.name),
+                    per.to_string(),
+                    repaired.mesh.positions.len(),
+                    format!("{} distinct values in [{lo}, {hi}]", distinct.len()),
+                ));
+            }
+        }
+    }
+    Ok(rows)
+}
+
+fn list_regions(a: &CheckArgs) -> anyhow::Result<()> {
+    let rows = region_rows(&a.file)?;
+    if a.json {
+        let json: Vec<serde_json::Value> = rows
+            .iter()
+            .map(|(spec, kind, n, note)| {
+                serde_json::json!({ "spec": spec, "kind": kind, "vertices": n, "note": note })
+            })
+            .collect();
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&json).context("cannot format the parts as JSON")?
+        );
+        return Ok(());
+    }
+    if rows.is_empty() {
+        println!(
+            "{}: no named parts or properties (use box:, sphere: or vertices: regions)",
+            a.file.display()
+        );
+        return Ok(());
+    }
+    println!(
+        "{}: regions on offer (vertices on the repaired mesh)",
+        a.file.display()
+    );
+    let width = rows.iter().map(|r| r.0.chars().count()).max().unwrap_or(0);
+    for (spec, kind, n, note) in &rows {
+        println!("  {spec:<width$}  {kind:<16} {n:>8} vertices  {note}");
     }
     Ok(())
 }
@@ -222,7 +343,36 @@ mod tests {
             drop_nonfinite: false,
             drop_out_of_range: false,
             needle_angle: 1.0,
+            regions: false,
         }
+    }
+
+    #[test]
+    fn regions_list_parts_with_the_vertices_they_select_or_say_there_are_none() {
+        let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+        let path = dir.path().join("two.obj");
+        std::fs::write(
+            &path,
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nusemtl red\nf 1 2 3\nusemtl blue\nf 2 4 3\n",
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        let rows = region_rows(&path).unwrap_or_else(|e| panic!("{e:#}"));
+        let got: Vec<(&str, &str, usize)> = rows
+            .iter()
+            .map(|r| (r.0.as_str(), r.1.as_str(), r.2))
+            .collect();
+        assert_eq!(
+            got,
+            [("part:red", "material", 3), ("part:blue", "material", 3)]
+        );
+        assert!(
+            region_rows(&fixture("cow.off"))
+                .unwrap_or_else(|e| panic!("{e:#}"))
+                .is_empty()
+        );
+        let mut a = args("cow.off", false);
+        a.regions = true;
+        assert!(check(a).is_ok());
     }
 
     #[test]

@@ -34,6 +34,18 @@ pub struct Args {
     /// Seed (same as `--set run.seed=N`).
     #[arg(long, allow_negative_numbers = true)]
     pub seed: Option<u64>,
+    /// Stylize only this region (repeatable: the union). `box:x0,y0,z0,x1,y1,z1` or
+    /// `sphere:cx,cy,cz,r` in the normalized side-2 frame, `vertices:FILE`, `part:NAME` (OBJ
+    /// group/object/material, glTF node/mesh), `property:NAME OP VALUE` (PLY), `not:SPEC`.
+    /// Replaces `region.specs` of the configuration. See `stylize mesh check --regions FILE`.
+    #[arg(long, value_name = "SPEC", allow_hyphen_values = true)]
+    pub region: Vec<String>,
+    /// Rings inside the region's boundary over which λ fades to zero (replaces `region.feather`).
+    #[arg(long, value_name = "K")]
+    pub region_feather: Option<u32>,
+    /// Tint the region in the turntable and previews (same as `--set region.tint=true`).
+    #[arg(long)]
+    pub tint_region: bool,
     /// Continue an interrupted run from its checkpoint (an error when there is none). Without
     /// --config/--set/--seed/--negative-prompt, the run's own `config.toml` is used. The task
     /// (mesh, style/prompt, model, result-changing settings) must be the checkpoint's.
@@ -120,9 +132,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         args.seed,
         args.negative_prompt.as_deref(),
     )?;
+    let config = config.with_region_flags(&args.region, args.region_feather, args.tint_region)?;
     let mut options = RunOptions::default();
     if let Some(c) = &config_file {
         options.inputs.push(("config file".into(), c.clone()));
+    }
+    for spec in &config.region.specs {
+        for file in mesh_core::region::RegionSpec::parse(spec)?.files() {
+            options.inputs.push(("region vertex file".into(), file));
+        }
     }
     let log = args.settings.log_mode();
     let request = RunRequest {

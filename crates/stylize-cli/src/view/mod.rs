@@ -287,8 +287,14 @@ fn load_run(npz: &Path, stamp: (SystemTime, u64)) -> anyhow::Result<LoadedRun> {
         rotation_rule: rule.into(),
         post_process: PostProcess::RecenterRescale,
     };
-    let layer = Darap::new(&rest, &saved.faces, options)
+    let mut layer = Darap::new(&rest, &saved.faces, options)
         .with_context(|| format!("cannot build the dARAP layer for {}", npz.display()))?;
+    // A localized run is shown with its saved region, as `apply` re-applies it.
+    if let Some(weights) = crate::cmd::apply::saved_region_weights(&saved, npz)? {
+        layer
+            .set_region_weights(Some(weights))
+            .with_context(|| format!("{}: invalid region_weights", npz.display()))?;
+    }
     Ok(LoadedRun {
         stamp,
         rest: TriMesh::new(rest, saved.faces.clone()),
