@@ -17,7 +17,7 @@ step "cargo xtask gradcheck";      cargo xtask gradcheck
 # --- Python bindings (crates/darap-py): build into .venv (dev profile, shared target/), pytest ---
 step "darap-py: maturin develop";  VIRTUAL_ENV="$PWD/.venv" PATH="$PWD/.venv/bin:$PATH" \
                                    maturin develop --locked --manifest-path crates/darap-py/Cargo.toml
-step "darap-py: pytest";           .venv/bin/python -m pytest crates/darap-py/tests
+step "pytest (darap-py, scripts)"; .venv/bin/python -m pytest crates/darap-py/tests scripts/tests
 # --- end Python bindings ---
 step "cargo xtask fuzz";           cargo xtask fuzz --seconds 60
 echo; echo "test.sh: all checks passed"
