@@ -162,3 +162,18 @@ fn bad_inputs_give_clear_errors() {
     .unwrap_err();
     assert!(format!("{neg:#}").contains("λ"));
 }
+
+#[test]
+fn a_region_vertex_file_is_never_overwritten_even_with_force() {
+    let dir = tempfile::tempdir().unwrap();
+    let verts = dir.path().join("region.obj");
+    std::fs::write(&verts, "0\n1\n2\n").unwrap();
+    let e = run(Args {
+        region: vec![format!("vertices:{}", verts.display())],
+        force: true,
+        ..args(verts.clone())
+    })
+    .unwrap_err();
+    assert!(format!("{e:#}").contains("region vertex file"), "{e:#}");
+    assert_eq!(std::fs::read_to_string(&verts).unwrap(), "0\n1\n2\n");
+}

@@ -26,14 +26,20 @@ pub struct InputPass<'a> {
 }
 
 impl<'a> InputPass<'a> {
-    /// Everything alive, nothing welded, no issues.
+    /// Every vertex alive, nothing welded, no issues; every face alive except those with a vertex
+    /// index out of range (reported by [`drop_out_of_range_faces`], but never alive, so that any
+    /// pass can be called alone on any mesh without indexing out of bounds).
     pub fn new(mesh: &'a TriMesh) -> Self {
         let nv = mesh.positions.len();
         Self {
             mesh,
             vertex_alive: vec![true; nv],
             rep: (0..nv as u32).collect(),
-            face_alive: vec![true; mesh.faces.len()],
+            face_alive: mesh
+                .faces
+                .iter()
+                .map(|f| f.iter().all(|&v| (v as usize) < nv))
+                .collect(),
             issues: Vec::new(),
         }
     }
@@ -805,6 +811,38 @@ mod tests {
             s.issues[0].message
         );
         assert_eq!(s.face_alive, [true, true, false, true]);
+    }
+
+    #[test]
+    fn every_pass_alone_survives_out_of_range_faces() {
+        // Each pass called on its own, without pass 2 first: no panic, and the damaged face
+        // never reaches the output.
+        let mut m = tetrahedron();
+        m.faces[1] = [0, 9, 2];
+        m.faces.push([7, 8, 9]);
+        let input_passes: [fn(&mut InputPass, &RepairOptions); 6] = [
+            drop_nonfinite_vertices,
+            weld_duplicate_vertices,
+            drop_repeated_vertex_faces,
+            drop_zero_area_faces,
+            drop_duplicate_faces,
+            report_unreferenced_vertices,
+        ];
+        for pass in input_passes {
+            let mut s = InputPass::new(&m);
+            pass(&mut s, &opts());
+            let out = compact(s, &opts());
+            assert!(
+                out.mesh
+                    .faces
+                    .iter()
+                    .flatten()
+                    .all(|&v| (v as usize) < out.mesh.positions.len())
+            );
+            assert_eq!(out.face_map[1], None);
+            assert_eq!(out.face_map[4], None);
+        }
+        assert!(!InputPass::new(&m).face_alive[1]);
     }
 
     #[test]

@@ -188,7 +188,7 @@ pub fn saved_region_weights(
     saved: &SavedDeformation,
     path: &Path,
 ) -> anyhow::Result<Option<Vec<f64>>> {
-    let n = saved.verts.len() / 3;
+    let n = saved.verts.len();
     match saved.extra("region_weights").map(|a| &a.data) {
         None => Ok(None),
         Some(NpyData::F64(w)) if w.len() == n => Ok(Some(w.clone())),
@@ -261,6 +261,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut inputs = vec![("saved deformation".to_string(), args.saved.clone())];
     if let Some(m) = &args.mask {
         inputs.push(("mask file".into(), m.clone()));
+    }
+    for spec in &args.region {
+        for file in mesh_core::region::RegionSpec::parse(spec)?.files() {
+            inputs.push(("region vertex file".into(), file));
+        }
     }
     crate::rundir::refuse_overwriting_inputs(&outputs, &[], &inputs)?;
     for (i, a) in outputs.iter().enumerate() {
