@@ -75,8 +75,15 @@ pub mod stages {
 
 use cotan::PinnedCholesky;
 
-/// Which rotation the local step computes from the covariance.
+/// Which rotation the local step computes from the covariance. Named `gis` / `procrustes` in
+/// config files, saved deformations and on the command line ([`std::str::FromStr`],
+/// [`std::fmt::Display`], and serde under feature `serde`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize),
+    serde(rename_all = "snake_case")
+)]
 pub enum RotationRule {
     /// The reference rule (spec §3.3, the default): full weights `w = −c` (negative for
     /// well-shaped meshes), `S = K + λ a n0 t̂ᵀ`, `R = −U·diag(1, 1, −s)·Vᵀ`. The paper's λ values
@@ -88,8 +95,15 @@ pub enum RotationRule {
     Procrustes,
 }
 
-/// Post-processing of the solved positions (spec §4.3).
+/// Post-processing of the solved positions (spec §4.3). Named `recenter_rescale` /
+/// `recenter_only` / `none` ([`std::str::FromStr`], [`std::fmt::Display`], serde under feature
+/// `serde`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize),
+    serde(rename_all = "snake_case")
+)]
 pub enum PostProcess {
     /// Subtract the centroid, then rescale so the bounding-box diagonal equals the rest mesh's.
     #[default]
@@ -100,8 +114,15 @@ pub enum PostProcess {
     None,
 }
 
-/// Options of a [`Darap`] layer.
+/// Options of a [`Darap`] layer. Under feature `serde` this is also the `[darap]` section of a
+/// config file (keys `lambda`, `rotation_rule`, `post_process`; missing keys take the defaults,
+/// unknown keys are refused).
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize),
+    serde(default, deny_unknown_fields)
+)]
 pub struct DarapOptions {
     /// Strength λ of the normal term (default 8, in the reference weight convention).
     pub lambda: f64,
@@ -118,6 +139,89 @@ impl Default for DarapOptions {
             rotation_rule: RotationRule::Gis,
             post_process: PostProcess::RecenterRescale,
         }
+    }
+}
+
+/// An option name that is not one of the known ones (parsing [`RotationRule`] or [`PostProcess`]).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("unknown {what} `{got}` (expected {expected})")]
+pub struct UnknownName {
+    /// What was being parsed.
+    pub what: &'static str,
+    /// The name given.
+    pub got: String,
+    /// The names accepted.
+    pub expected: &'static str,
+}
+
+impl RotationRule {
+    /// Every rule.
+    pub const ALL: [RotationRule; 2] = [RotationRule::Gis, RotationRule::Procrustes];
+
+    /// The rule's name: `gis` or `procrustes`.
+    pub fn name(self) -> &'static str {
+        match self {
+            RotationRule::Gis => "gis",
+            RotationRule::Procrustes => "procrustes",
+        }
+    }
+}
+
+impl std::fmt::Display for RotationRule {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for RotationRule {
+    type Err = UnknownName;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Self::ALL
+            .into_iter()
+            .find(|r| r.name() == s)
+            .ok_or_else(|| UnknownName {
+                what: "rotation rule",
+                got: s.to_string(),
+                expected: "gis or procrustes",
+            })
+    }
+}
+
+impl PostProcess {
+    /// Every post-process.
+    pub const ALL: [PostProcess; 3] = [
+        PostProcess::RecenterRescale,
+        PostProcess::RecenterOnly,
+        PostProcess::None,
+    ];
+
+    /// The post-process's name: `recenter_rescale`, `recenter_only` or `none`.
+    pub fn name(self) -> &'static str {
+        match self {
+            PostProcess::RecenterRescale => "recenter_rescale",
+            PostProcess::RecenterOnly => "recenter_only",
+            PostProcess::None => "none",
+        }
+    }
+}
+
+impl std::fmt::Display for PostProcess {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for PostProcess {
+    type Err = UnknownName;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Self::ALL
+            .into_iter()
+            .find(|p| p.name() == s)
+            .ok_or_else(|| UnknownName {
+                what: "post-process",
+                got: s.to_string(),
+                expected: "recenter_rescale, recenter_only or none",
+            })
     }
 }
 
@@ -542,3 +646,26 @@ impl Darap {
 
 #[cfg(test)]
 mod tests;
+
+#[cfg(test)]
+mod option_names {
+    use super::{PostProcess, RotationRule};
+
+    #[test]
+    fn names_round_trip_and_unknown_names_say_what_is_accepted() {
+        for r in RotationRule::ALL {
+            assert_eq!(r.to_string().parse::<RotationRule>(), Ok(r));
+        }
+        for p in PostProcess::ALL {
+            assert_eq!(p.to_string().parse::<PostProcess>(), Ok(p));
+        }
+        assert_eq!(RotationRule::Gis.to_string(), "gis");
+        assert_eq!(PostProcess::RecenterRescale.to_string(), "recenter_rescale");
+        let e = "kabsch".parse::<RotationRule>().unwrap_err().to_string();
+        assert!(
+            e.contains("kabsch") && e.contains("gis or procrustes"),
+            "{e}"
+        );
+        assert!("Gis".parse::<RotationRule>().is_err());
+    }
+}

@@ -4,7 +4,8 @@
 
 use std::path::PathBuf;
 
-use stylize_cli::cmd::apply::{Args, RuleArg, run};
+use darap::RotationRule;
+use stylize_cli::cmd::apply::{Args, run};
 
 fn golden(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -66,7 +67,7 @@ fn procrustes_rule_matches_golden() {
     let out = dir.path().join("bunny.obj");
     run(Args {
         lambda: vec![40.0],
-        rotation_rule: Some(RuleArg::Procrustes),
+        rotation_rule: Some(RotationRule::Procrustes),
         ..args(out.clone())
     })
     .unwrap();

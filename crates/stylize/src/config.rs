@@ -18,37 +18,9 @@
 use anyhow::{Context, bail};
 use serde::{Deserialize, Serialize};
 
-/// dARAP rotation rule (spec §3.3 / §3.4).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum RotationRule {
-    /// The reference rule (default); the published λ values mean what they mean under it.
-    Gis,
-    /// Textbook Kabsch rule with positive weights.
-    Procrustes,
-}
-
-impl RotationRule {
-    /// The name used in config files and saved deformations.
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Gis => "gis",
-            Self::Procrustes => "procrustes",
-        }
-    }
-}
-
-/// dARAP post-processing (spec §4.3).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum PostProcess {
-    /// Subtract the centroid, rescale to the rest bbox diagonal (default).
-    RecenterRescale,
-    /// Subtract the centroid only.
-    RecenterOnly,
-    /// Raw global-step solution.
-    None,
-}
+/// The dARAP enums are darap's own (names `gis` / `procrustes`, `recenter_rescale` /
+/// `recenter_only` / `none`, through darap's `serde` feature): one definition, one name table.
+pub use darap::{PostProcess, RotationRule};
 
 /// Rendering backend choice.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -70,27 +42,9 @@ pub enum StyleObjective {
     Face,
 }
 
-/// `[darap]`.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct DarapSection {
-    /// Strength λ of the normal term (reference weights, spec §2): 8.
-    pub lambda: f64,
-    /// `gis` (reference) or `procrustes`.
-    pub rotation_rule: RotationRule,
-    /// `recenter_rescale`, `recenter_only` or `none`.
-    pub post_process: PostProcess,
-}
-
-impl Default for DarapSection {
-    fn default() -> Self {
-        Self {
-            lambda: 8.0,
-            rotation_rule: RotationRule::Gis,
-            post_process: PostProcess::RecenterRescale,
-        }
-    }
-}
+/// `[darap]` is darap's own [`darap::DarapOptions`] (keys `lambda` = 8, `rotation_rule` = `gis`,
+/// `post_process` = `recenter_rescale`; defaults and names live in darap only).
+pub type DarapSection = darap::DarapOptions;
 
 /// `[optim]` (the text path).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

@@ -18,7 +18,7 @@ use rand_chacha::ChaCha8Rng;
 use raster_diff::{CameraConfig, Images, Renderer};
 
 use crate::checkpoint::{CHECKPOINT_VERSION, Checkpoint};
-use crate::config::{Backend, Config, PostProcess, RotationRule};
+use crate::config::{Backend, Config};
 use crate::identity::{ObjectiveIdentity, TaskIdentity};
 use crate::lock::RunLock;
 use crate::pipeline::{
@@ -232,20 +232,9 @@ pub fn prepare_mesh_with_region(
     Ok((m, warnings, region))
 }
 
-/// dARAP options from the configuration.
+/// dARAP options from the configuration (the `[darap]` section is darap's own options).
 pub fn darap_options(config: &Config) -> darap::DarapOptions {
-    darap::DarapOptions {
-        lambda: config.darap.lambda,
-        rotation_rule: match config.darap.rotation_rule {
-            RotationRule::Gis => darap::RotationRule::Gis,
-            RotationRule::Procrustes => darap::RotationRule::Procrustes,
-        },
-        post_process: match config.darap.post_process {
-            PostProcess::RecenterRescale => darap::PostProcess::RecenterRescale,
-            PostProcess::RecenterOnly => darap::PostProcess::RecenterOnly,
-            PostProcess::None => darap::PostProcess::None,
-        },
-    }
+    config.darap
 }
 
 /// A renderer for the configured backend: `cpu` forces the CPU renderer; `auto` and `gpu` ask for

@@ -32,24 +32,6 @@ use mesh_core::TriMesh;
 use npy::NpyData;
 use stylize::saved::SavedDeformation;
 
-/// Rotation rule on the command line.
-#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
-pub enum RuleArg {
-    /// The reference's rule; what saved files and the paper's λ values assume.
-    Gis,
-    /// The textbook Kabsch rule with positive weights; needs a larger λ.
-    Procrustes,
-}
-
-impl From<RuleArg> for RotationRule {
-    fn from(r: RuleArg) -> Self {
-        match r {
-            RuleArg::Gis => RotationRule::Gis,
-            RuleArg::Procrustes => RotationRule::Procrustes,
-        }
-    }
-}
-
 /// Arguments of `stylize apply`.
 #[derive(clap::Args, Debug, Clone)]
 pub struct Args {
@@ -61,9 +43,11 @@ pub struct Args {
     /// Strength(s) λ ≥ 0, comma separated (default: the λ saved in the file).
     #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
     pub lambda: Vec<f64>,
-    /// Rotation rule (default: the file's `rotation_rule` key if present, else `gis`).
-    #[arg(long, value_enum)]
-    pub rotation_rule: Option<RuleArg>,
+    /// Rotation rule: `gis` (the reference's; what saved files and the paper's λ values assume) or
+    /// `procrustes` (textbook Kabsch, needs a larger λ). Default: the file's `rotation_rule` key
+    /// if present, else `gis`.
+    #[arg(long, value_name = "gis|procrustes")]
+    pub rotation_rule: Option<RotationRule>,
     /// Text file of vertex indices that may rotate, one per line (all others keep R = I).
     #[arg(long, conflicts_with = "region")]
     pub mask: Option<PathBuf>,
@@ -200,17 +184,19 @@ pub fn saved_region_weights(
 }
 
 /// The rotation rule a saved file records (`rotation_rule` key), if any.
-pub fn saved_rotation_rule(saved: &SavedDeformation) -> anyhow::Result<Option<RuleArg>> {
+pub fn saved_rotation_rule(saved: &SavedDeformation) -> anyhow::Result<Option<RotationRule>> {
     let Some(array) = saved.extra("rotation_rule") else {
         return Ok(None);
     };
     let NpyData::Unicode(v) = &array.data else {
         bail!("key `rotation_rule` is not a string")
     };
-    match v.first().map(|s| s.trim().to_ascii_lowercase()).as_deref() {
-        Some("gis") => Ok(Some(RuleArg::Gis)),
-        Some("procrustes") => Ok(Some(RuleArg::Procrustes)),
-        other => bail!("unknown rotation rule {other:?} in the saved file"),
+    match v.first().map(|s| s.trim().to_ascii_lowercase()) {
+        Some(name) => name
+            .parse()
+            .map(Some)
+            .context("key `rotation_rule` of the saved file"),
+        None => bail!("key `rotation_rule` of the saved file is empty"),
     }
 }
 
@@ -254,7 +240,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let rule = match args.rotation_rule {
         Some(r) => r,
-        None => saved_rotation_rule(&saved)?.unwrap_or(RuleArg::Gis),
+        None => saved_rotation_rule(&saved)?.unwrap_or_default(),
     };
 
     let outputs = output_paths(&args.output, &lambdas)?;
@@ -295,7 +281,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let rest_mesh = TriMesh::new(rest.clone(), saved.faces.clone());
     let options = DarapOptions {
         lambda: lambdas[0],
-        rotation_rule: rule.into(),
+        rotation_rule: rule,
         post_process: PostProcess::RecenterRescale,
     };
     let mut layer = Darap::new(&rest, &saved.faces, options)

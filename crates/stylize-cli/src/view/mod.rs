@@ -24,7 +24,6 @@ use mesh_core::TriMesh;
 use serde::Serialize;
 use stylize::saved::SavedDeformation;
 
-use crate::cmd::apply::RuleArg;
 use crate::sanity::LambdaSanity;
 
 /// The largest λ the server computes (the slider goes to ~20; the reference's values are 5–10).
@@ -277,14 +276,14 @@ fn load_run(npz: &Path, stamp: (SystemTime, u64)) -> anyhow::Result<LoadedRun> {
         "{}: `normalize_target_normals` is false; only normalized target normals are supported",
         npz.display()
     );
-    let rule = crate::cmd::apply::saved_rotation_rule(&saved)?.unwrap_or(RuleArg::Gis);
+    let rule = crate::cmd::apply::saved_rotation_rule(&saved)?.unwrap_or_default();
     let lambda = saved.lambda();
     let mut rest = saved.verts_f64();
     mesh_core::normalize::side2_cube(&mut rest);
     let targets = saved.verts_normals_f64();
     let options = DarapOptions {
         lambda: lambda.unwrap_or(0.0),
-        rotation_rule: rule.into(),
+        rotation_rule: rule,
         post_process: PostProcess::RecenterRescale,
     };
     let mut layer = Darap::new(&rest, &saved.faces, options)
