@@ -2,8 +2,10 @@
 //! viewer's router (dARAP re-solve at λ with the prefactored layer, λ diagnostics, f32 framing) —
 //! everything the server does for one slider move; the browser's upload and draw come on top.
 //!
-//! Meshes: the golden bunny and its midpoint subdivisions; targets are the cube style's (each rest
-//! normal snapped to the nearest axis), saved as a run's `deformation.npz` at λ = 8.
+//! Meshes: the golden bunny (1 839 vertices) and the cow fixture midpoint-subdivided once and twice
+//! (11 610 and 46 434 vertices: the ~2k/10k/40k of issue 12), then the bunny subdivided once,
+//! twice and three times; targets are the cube style's (each rest normal snapped to the nearest
+//! axis), saved as a run's `deformation.npz` at λ = 8.
 //!
 //! `cargo run --release -p stylize-cli --example view_latency [REPEATS]`
 
@@ -36,16 +38,36 @@ fn main() {
     let golden = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
         .join("../../fixtures/golden/bunny_targets.npz");
     let base = SavedDeformation::read(&golden).unwrap();
-    let mut mesh = TriMesh::new(
+    let bunny = TriMesh::new(
         base.verts.iter().map(|v| v.map(f64::from)).collect(),
         base.faces.clone(),
     );
+    let mut cow = mesh_core::io::read_mesh(
+        std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/meshes/cow.off"),
+    )
+    .unwrap();
+    mesh_core::normalize::side2_cube(&mut cow.positions);
+    let subdivided = |m: &TriMesh, levels: usize| {
+        let mut m = m.clone();
+        for _ in 0..levels {
+            m = mesh_core::subdivide::midpoint(&m);
+        }
+        m
+    };
+    let meshes = [
+        ("bunny", bunny.clone()),
+        ("cow ×1", subdivided(&cow, 1)),
+        ("cow ×2", subdivided(&cow, 2)),
+        ("bunny ×1", subdivided(&bunny, 1)),
+        ("bunny ×2", subdivided(&bunny, 2)),
+        ("bunny ×3", subdivided(&bunny, 3)),
+    ];
     let rt = tokio::runtime::Builder::new_current_thread()
         .build()
         .unwrap();
-    println!("| vertices | faces | median ms | p90 ms |");
-    println!("|---:|---:|---:|---:|");
-    for _ in 0..4 {
+    println!("| mesh | vertices | faces | median ms | p90 ms |");
+    println!("|---|---:|---:|---:|---:|");
+    for (label, mesh) in &meshes {
         let dir = tempfile::tempdir().unwrap();
         let run = dir.path().join("run");
         std::fs::create_dir_all(&run).unwrap();
@@ -85,12 +107,11 @@ fn main() {
         });
         ms.sort_by(f64::total_cmp);
         println!(
-            "| {} | {} | {:.1} | {:.1} |",
+            "| {label} | {} | {} | {:.1} | {:.1} |",
             mesh.positions.len(),
             mesh.faces.len(),
             ms[ms.len() / 2],
             ms[(ms.len() * 9) / 10]
         );
-        mesh = mesh_core::subdivide::midpoint(&mesh);
     }
 }

@@ -478,3 +478,392 @@ fn binary_prints_a_loopback_url_with_a_token_and_serves_it() {
     assert!(bad.starts_with("HTTP/1.1 403"), "{bad}");
     assert!(traversal.starts_with("HTTP/1.1 400"), "{traversal}");
 }
+
+// ---------- replay (snapshots.npz) ----------
+
+/// The golden bunny's rest vertices (side-2 cube frame) and faces.
+fn golden_bunny() -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
+    let saved = stylize::saved::SavedDeformation::read(golden("bunny_targets.npz")).unwrap();
+    (saved.verts, saved.faces)
+}
+
+/// `k` snapshots of `rest`, the k-th scaled by `1 + 0.1·k` (so every snapshot differs).
+fn snapshot_positions(rest: &[[f32; 3]], k: usize) -> Vec<f32> {
+    (0..k)
+        .flat_map(|s| {
+            rest.iter()
+                .flatten()
+                .map(move |&c| c * (1.0 + 0.1 * s as f32))
+        })
+        .collect()
+}
+
+/// Writes a `snapshots.npz` as a run does: `iterations` [K] int64, `x` [K, V, 3] float32 and
+/// optionally `faces`.
+fn write_snapshots(path: &Path, iterations: &[i64], x: Vec<f32>, faces: Option<&[[u32; 3]]>) {
+    use npy::{NpyArray, NpyData};
+    let v = x.len() / 3 / iterations.len().max(1);
+    let it = NpyArray::new(vec![iterations.len()], NpyData::I64(iterations.to_vec())).unwrap();
+    let xa = NpyArray::new(vec![iterations.len(), v, 3], NpyData::F32(x)).unwrap();
+    let fa = faces.map(NpyArray::i64_rows3);
+    let mut arrays = vec![("iterations", &it), ("x", &xa)];
+    if let Some(f) = &fa {
+        arrays.push(("faces", f));
+    }
+    npy::npz::write_npz(path, arrays).unwrap();
+}
+
+async fn json(app: &axum::Router, uri: &str) -> serde_json::Value {
+    let r = get(app, uri).await;
+    assert_eq!(r.status, StatusCode::OK, "{uri}: {}", r.text());
+    assert!(
+        r.headers["content-type"]
+            .to_str()
+            .unwrap()
+            .starts_with("application/json")
+    );
+    serde_json::from_slice(&r.body).unwrap()
+}
+
+#[test]
+fn replay_index_and_snapshots_are_served_as_binary() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = complete_run(dir.path(), "run");
+    let (rest, faces) = golden_bunny();
+    let x = snapshot_positions(&rest, 3);
+    write_snapshots(&run.join("snapshots.npz"), &[0, 50, 100], x.clone(), None);
+    let app = app(&[run]);
+    rt().block_on(async {
+        let index = json(&app, &format!("/{TOKEN}/api/items/0/replay")).await;
+        assert_eq!(index["available"], true, "{index}");
+        assert_eq!(index["iterations"], serde_json::json!([0, 50, 100]));
+        assert_eq!(index["vertices"], rest.len());
+        assert_eq!(index["faces_from"], "deformation.npz");
+        for (k, iteration) in [0, 50, 100].into_iter().enumerate() {
+            let r = get(&app, &format!("/{TOKEN}/api/items/0/replay/{iteration}")).await;
+            assert_eq!(r.status, StatusCode::OK, "{}", r.text());
+            assert_eq!(r.headers["content-type"], "application/octet-stream");
+            let (head, payload) = unframe(&r.body);
+            assert_eq!(head["iteration"], iteration);
+            assert_eq!(head["vertices"], rest.len());
+            assert_eq!(head["faces"], 0);
+            let n = 3 * rest.len();
+            assert_eq!(f32s(payload), x[k * n..(k + 1) * n].to_vec());
+        }
+        // With the faces (the deformation's, whose vertex count matches).
+        let r = get(&app, &format!("/{TOKEN}/api/items/0/replay/50?faces=1")).await;
+        let (head, payload) = unframe(&r.body);
+        assert_eq!(head["faces"], faces.len());
+        assert_eq!(payload.len(), 12 * rest.len() + 12 * faces.len());
+        let got: Vec<u32> = payload[12 * rest.len()..]
+            .chunks_exact(4)
+            .map(|c| u32::from_le_bytes(c.try_into().unwrap()))
+            .collect();
+        assert_eq!(got, faces.iter().flatten().copied().collect::<Vec<_>>());
+    });
+}
+
+#[test]
+fn bad_replay_iterations_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = complete_run(dir.path(), "run");
+    let (rest, _) = golden_bunny();
+    write_snapshots(
+        &run.join("snapshots.npz"),
+        &[0, 50],
+        snapshot_positions(&rest, 2),
+        None,
+    );
+    let app = app(&[run]);
+    rt().block_on(async {
+        for (it, status) in [
+            ("7", StatusCode::NOT_FOUND),
+            ("-1", StatusCode::NOT_FOUND),
+            ("100", StatusCode::NOT_FOUND),
+            ("abc", StatusCode::BAD_REQUEST),
+            ("1.5", StatusCode::BAD_REQUEST),
+            ("99999999999999999999999", StatusCode::BAD_REQUEST),
+        ] {
+            let r = get(&app, &format!("/{TOKEN}/api/items/0/replay/{it}")).await;
+            assert_eq!(r.status, status, "{it}: {}", r.text());
+        }
+        let r = get(&app, &format!("/{TOKEN}/api/items/0/replay/7")).await;
+        assert!(r.text().contains("iteration 7"), "{}", r.text());
+        assert!(r.text().contains("0…50"), "{}", r.text());
+        let r = get(&app, &format!("/{TOKEN}/api/items/5/replay")).await;
+        assert_eq!(r.status, StatusCode::NOT_FOUND);
+    });
+}
+
+#[test]
+fn missing_or_invalid_snapshots_are_no_replay_and_a_live_run_grows() {
+    let dir = tempfile::tempdir().unwrap();
+    // A run still being written: a lock, no result, no snapshots yet.
+    let run = dir.path().join("live");
+    std::fs::create_dir_all(&run).unwrap();
+    std::fs::write(run.join("task.json"), "{}").unwrap();
+    std::fs::write(run.join("run.lock"), "{}").unwrap();
+    let (rest, faces) = golden_bunny();
+    let path = run.join("snapshots.npz");
+    let app = app(std::slice::from_ref(&run));
+    rt().block_on(async {
+        let uri = format!("/{TOKEN}/api/items/0/replay");
+        let index = json(&app, &uri).await;
+        assert_eq!(index["available"], false);
+        assert_eq!(index["status"], "running");
+        assert!(
+            index["reason"]
+                .as_str()
+                .unwrap()
+                .contains("no snapshots.npz"),
+            "{index}"
+        );
+        let r = get(&app, &format!("{uri}/0")).await;
+        assert_eq!(r.status, StatusCode::CONFLICT, "{}", r.text());
+
+        // Damaged files of every kind: no replay, with the reason; never a 500.
+        write_snapshots(&path, &[0, 50], snapshot_positions(&rest, 2), None);
+        let whole = std::fs::read(&path).unwrap();
+        let mut shape_mismatch = snapshot_positions(&rest, 2);
+        shape_mismatch.truncate(3 * rest.len());
+        let mut non_finite = snapshot_positions(&rest, 2);
+        non_finite[3 * rest.len() + 4] = f32::NAN;
+        let cases: Vec<(&str, Box<dyn Fn()>)> = vec![
+            ("half-written", {
+                let (p, w) = (path.clone(), whole.clone());
+                Box::new(move || std::fs::write(&p, &w[..w.len() / 2]).unwrap())
+            }),
+            ("empty", {
+                let p = path.clone();
+                Box::new(move || std::fs::write(&p, b"").unwrap())
+            }),
+            ("not a zip", {
+                let p = path.clone();
+                Box::new(move || std::fs::write(&p, b"PK\x03\x04garbage").unwrap())
+            }),
+            ("K mismatch", {
+                // Two iterations but one row of positions.
+                let p = path.clone();
+                let x = shape_mismatch.clone();
+                Box::new(move || {
+                    use npy::{NpyArray, NpyData};
+                    let it = NpyArray::new(vec![2], NpyData::I64(vec![0, 50])).unwrap();
+                    let v = x.len() / 3;
+                    let xa = NpyArray::new(vec![1, v, 3], NpyData::F32(x.clone())).unwrap();
+                    npy::npz::write_npz(&p, [("iterations", &it), ("x", &xa)]).unwrap();
+                })
+            }),
+            ("not increasing", {
+                let p = path.clone();
+                let x = snapshot_positions(&rest, 2);
+                Box::new(move || write_snapshots(&p, &[50, 50], x.clone(), None))
+            }),
+            ("non-finite", {
+                let p = path.clone();
+                let x = non_finite.clone();
+                Box::new(move || write_snapshots(&p, &[0, 50], x.clone(), None))
+            }),
+            ("face out of range", {
+                let p = path.clone();
+                let x = snapshot_positions(&rest, 2);
+                let bad = [[0, 1, rest.len() as u32]];
+                Box::new(move || write_snapshots(&p, &[0, 50], x.clone(), Some(&bad[..])))
+            }),
+        ];
+        for (what, damage) in &cases {
+            damage();
+            let index = json(&app, &uri).await;
+            assert_eq!(index["available"], false, "{what}: {index}");
+            let reason = index["reason"].as_str().unwrap();
+            assert!(reason.contains("snapshots.npz"), "{what}: {reason}");
+            let r = get(&app, &format!("{uri}/0")).await;
+            assert_eq!(r.status, StatusCode::CONFLICT, "{what}: {}", r.text());
+        }
+
+        // The run writes its first two snapshots (with faces), then a third: the index follows.
+        write_snapshots(
+            &path,
+            &[0, 50],
+            snapshot_positions(&rest, 2),
+            Some(faces.as_slice()),
+        );
+        let index = json(&app, &uri).await;
+        assert_eq!(index["available"], true, "{index}");
+        assert_eq!(index["iterations"], serde_json::json!([0, 50]));
+        assert_eq!(index["faces_from"], "snapshots.npz");
+        let r = get(&app, &format!("{uri}/50?faces=1")).await;
+        let (head, _) = unframe(&r.body);
+        assert_eq!(head["faces"], faces.len());
+        write_snapshots(&path, &[0, 50, 100], snapshot_positions(&rest, 3), None);
+        let index = json(&app, &uri).await;
+        assert_eq!(index["iterations"], serde_json::json!([0, 50, 100]));
+        // No faces anywhere yet (no deformation.npz): the page draws points.
+        assert_eq!(index["faces_from"], serde_json::Value::Null);
+        let r = get(&app, &format!("{uri}/100?faces=1")).await;
+        assert_eq!(r.status, StatusCode::OK, "{}", r.text());
+        let (head, payload) = unframe(&r.body);
+        assert_eq!(head["faces"], 0);
+        assert_eq!(payload.len(), 12 * rest.len());
+    });
+}
+
+#[test]
+fn replay_of_a_mesh_or_through_a_symlink_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = complete_run(dir.path(), "run");
+    let (rest, _) = golden_bunny();
+    let outside = dir.path().join("elsewhere.npz");
+    write_snapshots(&outside, &[0], snapshot_positions(&rest, 1), None);
+    #[cfg(unix)]
+    std::os::unix::fs::symlink(&outside, run.join("snapshots.npz")).unwrap();
+    let mesh = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/meshes/bunny.obj");
+    let app = app(&[run, mesh]);
+    rt().block_on(async {
+        #[cfg(unix)]
+        {
+            let index = json(&app, &format!("/{TOKEN}/api/items/0/replay")).await;
+            assert_eq!(index["available"], false, "{index}");
+            assert!(
+                index["reason"].as_str().unwrap().contains("outside"),
+                "{index}"
+            );
+        }
+        let index = json(&app, &format!("/{TOKEN}/api/items/1/replay")).await;
+        assert_eq!(index["available"], false);
+        assert_eq!(index["status"], "mesh");
+        let r = get(&app, &format!("/{TOKEN}/api/items/1/replay/0")).await;
+        assert_eq!(r.status, StatusCode::NOT_FOUND);
+    });
+}
+
+// ---------- metrics, gallery, target normals ----------
+
+#[test]
+fn metrics_are_columns_and_garbage_lines_are_skipped() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = complete_run(dir.path(), "run");
+    std::fs::write(
+        run.join("metrics.jsonl"),
+        "{\"iteration\":1,\"loss\":2.0,\"grad_norm\":0.5,\"seconds\":{\"total\":0.1}}\n\
+         \u{0}\u{1} binary garbage\n\
+         {\"iteration\":2,\"loss\":1.0,\"stage2_weight\":0.2,\"seconds\":{\"total\":0.2}}\n\
+         \"a string\"\n\
+         {\"iteration\":3,\"lo",
+    )
+    .unwrap();
+    let empty = dir.path().join("empty");
+    std::fs::create_dir_all(&empty).unwrap();
+    let mesh = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/meshes/bunny.obj");
+    let app = app(&[run, empty, mesh]);
+    rt().block_on(async {
+        let m = json(&app, &format!("/{TOKEN}/api/items/0/metrics")).await;
+        assert_eq!(m["available"], true);
+        assert_eq!(m["iterations"], serde_json::json!([1.0, 2.0]));
+        assert_eq!(m["series"]["loss"], serde_json::json!([2.0, 1.0]));
+        assert_eq!(m["series"]["grad_norm"], serde_json::json!([0.5, null]));
+        assert_eq!(m["series"]["stage2_weight"], serde_json::json!([null, 0.2]));
+        assert_eq!(m["series"]["seconds.total"], serde_json::json!([0.1, 0.2]));
+        assert_eq!(m["skipped"], 3);
+        assert_eq!(m["first_skipped_line"], 2);
+        for id in [1, 2] {
+            let m = json(&app, &format!("/{TOKEN}/api/items/{id}/metrics")).await;
+            assert_eq!(m["available"], false, "item {id}: {m}");
+        }
+    });
+}
+
+#[test]
+fn gallery_of_a_manifest_lists_rows_not_started() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = complete_run(dir.path(), "runs/bunny-cube");
+    std::fs::write(run.join("turntable.png"), b"\x89PNG not really").unwrap();
+    let manifest = dir.path().join("batch.toml");
+    std::fs::write(
+        &manifest,
+        "[[run]]\nmesh = \"meshes/bunny.obj\"\nstyle = \"cube\"\nout = \"runs/bunny-cube\"\n\n\
+         [[run]]\nmesh = \"meshes/cow.off\"\nprompt = \"a gothic cow\"\nout = \"runs/cow\"\n",
+    )
+    .unwrap();
+    let app = app(std::slice::from_ref(&manifest));
+    rt().block_on(async {
+        let items = json(&app, &format!("/{TOKEN}/api/items")).await;
+        let items = items.as_array().unwrap();
+        assert_eq!(items.len(), 2);
+        assert_eq!(items[0]["name"], "runs/bunny-cube");
+        assert_eq!(items[0]["status"], "complete");
+        assert_eq!(items[0]["style"], "cube");
+        assert_eq!(items[0]["thumbnail"], "turntable.png");
+        assert_eq!(items[0]["row"], 0);
+        assert!(
+            items[0]["mesh"]
+                .as_str()
+                .unwrap()
+                .ends_with("meshes/bunny.obj")
+        );
+        assert_eq!(items[1]["name"], "runs/cow");
+        assert_eq!(items[1]["status"], "not started");
+        assert_eq!(items[1]["prompt"], "a gothic cow");
+        assert_eq!(items[1]["thumbnail"], serde_json::Value::Null);
+        assert_eq!(items[1]["has_deformation"], false);
+        // The row not started answers cleanly.
+        let r = get(&app, &format!("/{TOKEN}/api/items/1/files/run.json")).await;
+        assert_eq!(r.status, StatusCode::NOT_FOUND, "{}", r.text());
+        let r = get(&app, &format!("/{TOKEN}/api/items/1/source")).await;
+        assert_eq!(r.status, StatusCode::CONFLICT, "{}", r.text());
+        let replay = json(&app, &format!("/{TOKEN}/api/items/1/replay")).await;
+        assert_eq!(replay["available"], false);
+        let m = json(&app, &format!("/{TOKEN}/api/items/1/metrics")).await;
+        assert_eq!(m["available"], false);
+        // The row starts: running, with its newest preview as the thumbnail.
+        let cow = dir.path().join("runs/cow");
+        std::fs::create_dir_all(cow.join("previews")).unwrap();
+        std::fs::write(cow.join("task.json"), "{}").unwrap();
+        std::fs::write(cow.join("run.lock"), "{}").unwrap();
+        for it in ["000050", "000100"] {
+            std::fs::write(cow.join(format!("previews/iter_{it}.png")), b"png").unwrap();
+        }
+        let items = json(&app, &format!("/{TOKEN}/api/items")).await;
+        assert_eq!(items[1]["status"], "running");
+        assert_eq!(items[1]["thumbnail"], "previews/iter_000100.png");
+        let r = get(
+            &app,
+            &format!("/{TOKEN}/api/items/1/files/previews/iter_000100.png"),
+        )
+        .await;
+        assert_eq!(r.status, StatusCode::OK, "{}", r.text());
+    });
+    // A manifest that does not parse is refused, naming it.
+    let bad = dir.path().join("bad.jsonl");
+    std::fs::write(&bad, "{\"mesh\": \"m.obj\"}\n").unwrap();
+    let e = Viewer::open(&[bad], TOKEN.into()).unwrap_err();
+    assert!(format!("{e:#}").contains("bad.jsonl"), "{e:#}");
+}
+
+#[test]
+fn target_normals_are_unit_vectors_per_source_vertex() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = complete_run(dir.path(), "run");
+    let running = dir.path().join("running");
+    std::fs::create_dir_all(&running).unwrap();
+    let mesh = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/meshes/bunny.obj");
+    let app = app(&[run, running, mesh]);
+    let saved = stylize::saved::SavedDeformation::read(golden("bunny_targets.npz")).unwrap();
+    rt().block_on(async {
+        let r = get(&app, &format!("/{TOKEN}/api/items/0/targets")).await;
+        assert_eq!(r.status, StatusCode::OK, "{}", r.text());
+        let (head, payload) = unframe(&r.body);
+        assert_eq!(head["vertices"], saved.verts.len());
+        let n = f32s(payload);
+        assert_eq!(n.len(), 3 * saved.verts.len());
+        for (got, raw) in n.chunks_exact(3).zip(&saved.verts_normals) {
+            let len = raw.iter().map(|c| c * c).sum::<f32>().sqrt();
+            for k in 0..3 {
+                assert!((got[k] - raw[k] / len).abs() < 1e-5, "{got:?} vs {raw:?}");
+            }
+        }
+        let r = get(&app, &format!("/{TOKEN}/api/items/1/targets")).await;
+        assert_eq!(r.status, StatusCode::CONFLICT, "{}", r.text());
+        let r = get(&app, &format!("/{TOKEN}/api/items/2/targets")).await;
+        assert_eq!(r.status, StatusCode::NOT_FOUND, "{}", r.text());
+    });
+}

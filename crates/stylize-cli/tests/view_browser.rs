@@ -44,9 +44,14 @@ impl Drop for Server {
 
 /// Starts `stylize view --port 0 RUN` and returns it with its printed URL.
 fn serve(run: &Path) -> (Server, String) {
+    serve_all(&[run])
+}
+
+/// Starts `stylize view --port 0 PATHS…` and returns it with its printed URL.
+fn serve_all(paths: &[&Path]) -> (Server, String) {
     let mut child = Command::new(env!("CARGO_BIN_EXE_stylize"))
         .args(["view", "--port", "0"])
-        .arg(run)
+        .args(paths)
         .stdout(Stdio::piped())
         .stderr(Stdio::inherit())
         .spawn()
@@ -164,6 +169,296 @@ impl Shot {
         }
         diff as f64 / all as f64
     }
+}
+
+fn no_chromium() {
+    eprintln!();
+    eprintln!("############################################################################");
+    eprintln!("SKIPPED view_browser: no chromium on PATH (install it: bash scripts/setup.sh,");
+    eprintln!("or `apt-get install chromium`; or set CHROMIUM=/path/to/chrome)");
+    eprintln!("############################################################################");
+}
+
+/// The `<html …>` tag of a dumped DOM (the page reports through its attributes).
+fn html_tag(dom: &str) -> &str {
+    dom.find("<html")
+        .and_then(|i| dom[i..].find('>').map(|j| &dom[i..i + j]))
+        .unwrap_or_default()
+}
+
+/// The value of attribute `name` in the `<html>` tag.
+fn html_attr(dom: &str, name: &str) -> Option<String> {
+    let tag = html_tag(dom);
+    let key = format!("{name}=\"");
+    let i = tag.find(&key)? + key.len();
+    Some(tag[i..].split('"').next()?.to_string())
+}
+
+/// Where screenshots go: `STYLIZE_VIEW_SCREENSHOTS` when set, else `fallback`.
+fn shot_path(fallback: &Path, name: &str) -> PathBuf {
+    match std::env::var_os("STYLIZE_VIEW_SCREENSHOTS").map(PathBuf::from) {
+        Some(d) => {
+            std::fs::create_dir_all(&d).unwrap();
+            d.join(name)
+        }
+        None => fallback.join(name),
+    }
+}
+
+/// Screenshot of `url` that must have finished without page errors or console output.
+fn clean_shot(chromium: &Path, url: &str, out: &Path, profile: &Path) -> Shot {
+    let shot = screenshot(chromium, url, out, profile);
+    assert_eq!(
+        html_attr(&shot.dom, "data-state").as_deref(),
+        Some("ready"),
+        "{url}: the page did not finish: {}",
+        &shot.dom[..shot.dom.len().min(800)]
+    );
+    assert!(
+        html_attr(&shot.dom, "data-errors").is_none(),
+        "{url}: page errors: {}",
+        shot.dom
+    );
+    assert!(
+        shot.console.is_empty(),
+        "{url}: console output: {:?}",
+        shot.console
+    );
+    shot
+}
+
+fn golden_npz() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/golden/bunny_targets.npz")
+}
+
+/// A complete run of the golden bunny (λ = 8), with `snapshots.npz` at iterations 0, 50, 100 —
+/// snapshot k is the rest mesh stretched along x by 1 + 0.35·k, so the shape visibly changes —
+/// and a `metrics.jsonl` of 100 iterations with two garbage lines and a partial last line.
+fn replay_run(parent: &Path) -> PathBuf {
+    use npy::{NpyArray, NpyData};
+    let run = parent.join("replay_run");
+    std::fs::create_dir_all(&run).unwrap();
+    std::fs::copy(golden_npz(), run.join("deformation.npz")).unwrap();
+    std::fs::write(run.join("run.json"), r#"{"lambda": 8.0, "objective": "normal alignment with style cube", "vertices": 1839, "faces": 3674, "seconds": {"setup": 0.1, "loop": 2.5}, "task": {"style": "cube"}}"#).unwrap();
+    std::fs::write(run.join("config.toml"), "[darap]\nlambda = 8.0\n").unwrap();
+    let saved = stylize::saved::SavedDeformation::read(golden_npz()).unwrap();
+    let iterations = [0i64, 50, 100];
+    let x: Vec<f32> = (0..iterations.len())
+        .flat_map(|k| {
+            saved
+                .verts
+                .iter()
+                .flat_map(move |p| [p[0] * (1.0 + 0.35 * k as f32), p[1], p[2]])
+        })
+        .collect();
+    let it = NpyArray::new(vec![3], NpyData::I64(iterations.to_vec())).unwrap();
+    let xa = NpyArray::new(vec![3, saved.verts.len(), 3], NpyData::F32(x)).unwrap();
+    npy::npz::write_npz(run.join("snapshots.npz"), [("iterations", &it), ("x", &xa)]).unwrap();
+    let mut metrics = String::new();
+    for i in 1..=100 {
+        let t = f64::from(i);
+        metrics.push_str(&format!(
+            "{{\"iteration\":{i},\"loss\":{},\"loss_stage1\":{},\"loss_stage2\":{},\"stage2_weight\":{},\"grad_norm\":{},\"seconds\":{{\"render\":0.01,\"guidance\":{},\"total\":0.05}}}}\n",
+            2.0 / t.sqrt(),
+            1.5 / t.sqrt(),
+            0.5 / t.sqrt(),
+            (t / 100.0).min(1.0),
+            1.0 / t,
+            0.03 + 0.001 * (t % 7.0),
+        ));
+        if i == 30 {
+            metrics.push_str("garbage that is not JSON\n[1, 2, 3]\n");
+        }
+    }
+    metrics.push_str("{\"iteration\":101,\"lo");
+    std::fs::write(run.join("metrics.jsonl"), metrics).unwrap();
+    run
+}
+
+#[test]
+fn replay_scrubber_changes_the_shape_and_plots_render() {
+    let Some(chromium) = chromium() else {
+        no_chromium();
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let run = replay_run(dir.path());
+    let (_server, url) = serve(&run);
+    let shots: Vec<Shot> = ["0", "100"]
+        .iter()
+        .map(|it| {
+            let shot = clean_shot(
+                &chromium,
+                &format!("{url}?panel=1&iteration={it}"),
+                &shot_path(dir.path(), &format!("view_replay_iter{it}.png")),
+                &dir.path().join(format!("profile{it}")),
+            );
+            assert_eq!(html_attr(&shot.dom, "data-replay").as_deref(), Some(*it));
+            // loss terms, stage-II weight, gradient norm, seconds: four charts, drawn by uPlot.
+            assert_eq!(html_attr(&shot.dom, "data-plots").as_deref(), Some("4"));
+            assert!(
+                shot.dom.contains("class=\"uplot"),
+                "no uPlot chart in the page"
+            );
+            assert!(
+                shot.dom.contains("3 malformed line(s) skipped"),
+                "the skipped lines are not reported"
+            );
+            assert!(shot.dom.contains("normal alignment with style cube"));
+            assert!(shot.dom.contains("iteration 100 / 100") || *it != "100");
+            shot
+        })
+        .collect();
+    // The canvas is left of the 420-px panel: before | after halves of what remains.
+    let canvas = WIDTH as usize - 420;
+    let half = canvas / 2;
+    for shot in &shots {
+        assert!(shot.coverage(0, half) > 0.03 && shot.coverage(half, canvas) > 0.03);
+        // The plots draw lines and labels in the panel.
+        let panel = shot.coverage(canvas + 10, WIDTH as usize - 10);
+        assert!(panel > 0.01, "the panel looks empty ({panel:.4})");
+    }
+    let before = shots[0].difference(&shots[1], 0, half);
+    let after = shots[0].difference(&shots[1], half, canvas);
+    assert!(
+        before < 0.002,
+        "the 'before' view changed with the replay ({before:.4})"
+    );
+    assert!(
+        after > 0.02,
+        "the 'after' view did not change between iterations 0 and 100 ({after:.4})"
+    );
+}
+
+#[test]
+fn target_normals_and_the_reference_look() {
+    let Some(chromium) = chromium() else {
+        no_chromium();
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let run = replay_run(dir.path());
+    let (_server, url) = serve(&run);
+    let plain = clean_shot(
+        &chromium,
+        &url,
+        &shot_path(dir.path(), "view_plain.png"),
+        &dir.path().join("profile_plain"),
+    );
+    let styled = clean_shot(
+        &chromium,
+        &format!("{url}?normals=1&look=reference"),
+        &shot_path(dir.path(), "view_normals_reference.png"),
+        &dir.path().join("profile_styled"),
+    );
+    assert_eq!(
+        html_attr(&styled.dom, "data-normals").as_deref(),
+        Some("1839")
+    );
+    assert_eq!(
+        html_attr(&styled.dom, "data-look").as_deref(),
+        Some("reference")
+    );
+    let half = WIDTH as usize / 2;
+    // The reference look: white background, grey (r = g = b) shading in the 'after' view.
+    let (w, h) = (styled.width, styled.height);
+    assert_eq!(styled.pixel(half + 10, h / 2), [255, 255, 255]);
+    let (mut grey, mut lit) = (0usize, 0usize);
+    for (x, y) in styled.band(half, w) {
+        let p = styled.pixel(x, y);
+        if p != [255, 255, 255] {
+            lit += 1;
+            let spread = p.iter().max().unwrap() - p.iter().min().unwrap();
+            grey += usize::from(spread <= 2);
+        }
+    }
+    assert!(lit > 1000, "the mesh is not visible in the reference look");
+    assert!(
+        grey as f64 / lit as f64 > 0.95,
+        "the reference look is not grey: {grey} of {lit} pixels"
+    );
+    // The normals field: coloured segments in the 'before' view only.
+    let coloured = |shot: &Shot, x0: usize, x1: usize| {
+        shot.band(x0, x1)
+            .filter(|&(x, y)| {
+                let p = shot.pixel(x, y);
+                p.iter().max().unwrap() - p.iter().min().unwrap() > 60
+            })
+            .count()
+    };
+    assert!(
+        coloured(&styled, 0, half) > 10 * coloured(&plain, 0, half).max(50),
+        "no coloured normals field in the 'before' view"
+    );
+}
+
+#[test]
+fn gallery_lists_manifest_rows_and_filters() {
+    let Some(chromium) = chromium() else {
+        no_chromium();
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let run = replay_run(dir.path());
+    // The run's own picture: a striped image.
+    let (tw, th) = (96u32, 96u32);
+    let mut rgb = Vec::new();
+    for y in 0..th {
+        for x in 0..tw {
+            rgb.extend_from_slice(if (x / 12 + y / 12) % 2 == 0 {
+                &[200, 40, 40]
+            } else {
+                &[40, 40, 200]
+            });
+        }
+    }
+    let file = std::fs::File::create(run.join("turntable.png")).unwrap();
+    let mut enc = png::Encoder::new(std::io::BufWriter::new(file), tw, th);
+    enc.set_color(png::ColorType::Rgb);
+    enc.set_depth(png::BitDepth::Eight);
+    enc.write_header().unwrap().write_image_data(&rgb).unwrap();
+    let manifest = dir.path().join("batch.jsonl");
+    std::fs::write(
+        &manifest,
+        "{\"mesh\": \"meshes/bunny.obj\", \"style\": \"cube\", \"out\": \"replay_run\"}\n\
+         {\"mesh\": \"meshes/cow.off\", \"prompt\": \"a gothic cow\", \"out\": \"runs/cow\"}\n",
+    )
+    .unwrap();
+    let (_server, url) = serve_all(&[&manifest]);
+    let all = clean_shot(
+        &chromium,
+        &url,
+        &shot_path(dir.path(), "view_gallery.png"),
+        &dir.path().join("profile_all"),
+    );
+    assert_eq!(html_attr(&all.dom, "data-gallery").as_deref(), Some("2"));
+    assert!(
+        all.dom.contains("not started"),
+        "the row not started is not marked"
+    );
+    assert!(all.dom.contains("a gothic cow"));
+    // The thumbnail is drawn: red and blue stripes near the top left of the grid.
+    let striped = all
+        .band(0, WIDTH as usize / 2)
+        .filter(|&(x, y)| {
+            let p = all.pixel(x, y);
+            p[0].abs_diff(p[2]) > 100
+        })
+        .count();
+    assert!(
+        striped > 2000,
+        "the run's thumbnail is not shown ({striped} px)"
+    );
+    let filtered = clean_shot(
+        &chromium,
+        &format!("{url}?filter=gothic"),
+        &shot_path(dir.path(), "view_gallery_filtered.png"),
+        &dir.path().join("profile_filtered"),
+    );
+    assert_eq!(
+        html_attr(&filtered.dom, "data-gallery").as_deref(),
+        Some("1")
+    );
 }
 
 #[test]

@@ -7,6 +7,7 @@
 // request is pending and "ready" when the shown shape matches the slider; data-lambda is the λ shown.
 import * as THREE from 'three';
 import { OrbitControls } from './vendor/three/OrbitControls.js';
+import { renderPlots, renderInfo } from './plots.js';
 
 const $ = (id) => document.getElementById(id);
 const params = new URLSearchParams(location.search);
@@ -16,6 +17,11 @@ const ui = {
   dlObj: $('dl-obj'), dlPly: $('dl-ply'), dlGlb: $('dl-glb'), images: $('images'),
   metrics: $('metrics'), warnings: $('warnings'), left: $('label-left'), right: $('label-right'),
   canvas: $('canvas'), viewport: $('viewport'),
+  replayBar: $('replay-bar'), replay: $('replay'), replayValue: $('replay-value'), replayPlay: $('replay-play'),
+  replayFollow: $('replay-follow'), replayNote: $('replay-note'),
+  gallery: $('gallery'), galleryButton: $('gallery-button'), filter: $('filter'), cards: $('cards'), galleryCount: $('gallery-count'),
+  normals: $('normals'), look: $('look'),
+  panel: $('panel'), panelToggle: $('panel-toggle'), plots: $('plots'), plotsNote: $('plots-note'), info: $('info'),
 };
 
 function setState(s) { document.documentElement.dataset.state = s; }
@@ -43,12 +49,19 @@ const camera = new THREE.PerspectiveCamera(35, 1, 0.01, 100);
 const controls = new OrbitControls(camera, ui.canvas);
 controls.enableDamping = false;
 
+// Two looks. "studio": a sky/ground fill plus a head light. "reference": what the optimization's
+// renderer draws (docs/renderer.md, spec §6): grey albedo 0.5, Lambert only, one light at the eye
+// of power 5 without falloff, two-sided, no ambient, on white, values written as they are (linear)
+// — colour = 0.5 · 5 · max(n·l, 0)/π. three.js's Lambert BRDF is albedo/π and a point light with
+// decay 0 gives irradiance intensity · cos, so intensity 5 reproduces it.
 function makeScene() {
   const scene = new THREE.Scene();
-  scene.add(new THREE.HemisphereLight(0xffffff, 0x667080, 1.4));
+  const hemi = new THREE.HemisphereLight(0xffffff, 0x667080, 1.4);
   const head = new THREE.DirectionalLight(0xffffff, 1.6);
-  scene.add(head);
-  return { scene, head };
+  const eye = new THREE.PointLight(0xffffff, 5, 0, 0);
+  eye.visible = false;
+  scene.add(hemi, head, eye);
+  return { scene, hemi, head, eye };
 }
 const before = makeScene();
 const after = makeScene();
@@ -59,11 +72,32 @@ const solid = new THREE.MeshStandardMaterial({
 });
 const solidBefore = solid.clone();
 solidBefore.color.set(0xb9b3a8);
+const referenceMaterial = new THREE.MeshLambertMaterial({
+  side: THREE.DoubleSide, flatShading: false,
+  polygonOffset: true, polygonOffsetFactor: 1, polygonOffsetUnits: 1,
+});
+referenceMaterial.color.setRGB(0.5, 0.5, 0.5, THREE.LinearSRGBColorSpace);
+function referenceLook() { return ui.look.value === 'reference'; }
 const wireMaterial = new THREE.MeshBasicMaterial({ color: 0x202020, wireframe: true, transparent: true, opacity: 0.35 });
 
+const pointsMaterial = new THREE.PointsMaterial({ color: 0x3d5a80, size: 2, sizeAttenuation: false });
+
+function detach(target) {
+  for (const c of [...target.scene.children]) if (c.isMesh || c.isPoints || c.isLineSegments) target.scene.remove(c);
+  target.mesh = null;
+  target.wire = null;
+}
+
 function attach(target, geometry, material) {
-  for (const c of [...target.scene.children]) if (c.isMesh) target.scene.remove(c);
-  const mesh = new THREE.Mesh(geometry, material);
+  detach(target);
+  if (!geometry.index) {
+    // Snapshots of a run that has neither faces in snapshots.npz nor deformation.npz yet.
+    target.mesh = new THREE.Points(geometry, pointsMaterial);
+    target.scene.add(target.mesh);
+    return;
+  }
+  target.material = material;
+  const mesh = new THREE.Mesh(geometry, referenceLook() ? referenceMaterial : material);
   const wire = new THREE.Mesh(geometry, wireMaterial);
   wire.visible = ui.wire.checked;
   target.scene.add(mesh, wire);
@@ -87,6 +121,7 @@ function render() {
     camera.aspect = vw / h;
     camera.updateProjectionMatrix();
     target.head.position.copy(camera.position);
+    target.eye.position.copy(camera.position);
     renderer.setViewport(x, 0, vw, h);
     renderer.setScissor(x, 0, vw, h);
     renderer.render(target.scene, camera);
@@ -119,16 +154,21 @@ let sourceGeometry = null;
 let resultGeometry = null;
 let shownLambda = null;
 
+// Two views (before | after) when there is something to compare: a result or a replay.
+function twoViews() { return !!current && (current.has_deformation || replay.available); }
+
 function updateLayoutUi() {
-  const run = current && current.has_deformation;
+  const run = twoViews();
   ui.toggle.hidden = layout !== 'toggle' || !run;
   ui.toggle.textContent = showing === 'after' ? 'show before' : 'show after';
   ui.left.hidden = !run;
   ui.right.hidden = layout !== 'side' || !run;
+  const afterName = shownReplay !== null ? `iteration ${shownReplay}` : 'after';
   if (layout === 'toggle') {
-    ui.left.textContent = showing;
+    ui.left.textContent = showing === 'after' ? afterName : 'before';
   } else {
     ui.left.textContent = 'before';
+    ui.right.textContent = afterName;
   }
   if (!run) { layout = 'toggle'; showing = 'before'; }
 }
@@ -143,7 +183,16 @@ function fmt(x, digits = 3) { return x === null || x === undefined ? '—' : Num
 
 async function loadItem(id) {
   setState('loading');
+  stopPlaying();
   current = items[id];
+  ui.panelToggle.hidden = current.kind !== 'run';
+  if (current.kind !== 'run') ui.panel.hidden = true;
+  plotsIterations = -1;
+  await refreshPanel(true);
+  replay = { available: false, iterations: [] };
+  shownReplay = null;
+  delete document.documentElement.dataset.replay;
+  updateReplayUi();
   ui.status.textContent = `${current.kind} · ${current.status}`;
   ui.images.replaceChildren(...current.images.map((name) => {
     const a = document.createElement('a');
@@ -152,6 +201,10 @@ async function loadItem(id) {
     a.textContent = name;
     return a;
   }));
+  if (current.kind === 'run' && !current.has_deformation) {
+    await loadLiveRun();
+    return;
+  }
   const { head, buf, offset } = await fetchFramed(`api/items/${id}/source`);
   const positions = new Float32Array(buf, offset, 3 * head.vertices).slice();
   const index = new Uint32Array(buf, offset + 12 * head.vertices, 3 * head.faces).slice();
@@ -181,13 +234,200 @@ async function loadItem(id) {
   }
   updateLayoutUi();
   frame(sourceGeometry);
+  ui.normals.parentElement.hidden = !run;
+  await showNormals();
+  if (current.kind === 'run') await refreshReplay();
   if (run) {
-    await requestLambda(Number(ui.lambda.value));
+    await request({ kind: 'lambda', value: Number(ui.lambda.value) });
   } else {
     render();
     setState('ready');
   }
 }
+
+// A run without its result yet: before = its first snapshot, after = its newest (when it has
+// snapshots at all; else a message, and the polling below loads it once something appears).
+async function loadLiveRun() {
+  for (const el of [ui.lambda.parentElement, ui.reset, ui.dlObj.parentElement, ui.normals.parentElement]) el.hidden = true;
+  normalsField = null;
+  detach(before);
+  detach(after);
+  await refreshReplay();
+  if (!replay.available) {
+    ui.metrics.textContent = `this run has no result and no replay yet (${replay.reason}); the page picks them up when they appear`;
+    ui.warnings.textContent = '';
+    layout = 'toggle';
+    showing = 'before';
+    updateLayoutUi();
+    render();
+    setState('ready');
+    return;
+  }
+  const first = await fetchSnapshot(replay.iterations[0], true);
+  sourceGeometry = snapshotGeometry(first);
+  resultGeometry = snapshotGeometry(first);
+  attach(before, sourceGeometry, solidBefore);
+  attach(after, resultGeometry, solid);
+  layout = ui.layout.value;
+  showing = 'after';
+  updateLayoutUi();
+  frame(sourceGeometry);
+  const last = replay.iterations.length - 1;
+  ui.replay.value = String(last);
+  await request({ kind: 'replay', value: replay.iterations[last] });
+}
+
+// ---------- run panel: info and plots ----------
+let plotsIterations = -1;
+
+async function refreshPanel(force) {
+  if (ui.panel.hidden || !current || current.kind !== 'run') return;
+  const table = await (await check(await fetch(`api/items/${current.id}/metrics`), 'metrics')).json();
+  const n = table.iterations.length;
+  if (force) await renderInfo(ui.info, current);
+  if (!force && n === plotsIterations) return;
+  plotsIterations = n;
+  const count = renderPlots(ui.plots, table, ui.panel.clientWidth - 24);
+  const skipped = table.skipped ? ` · ${table.skipped} malformed line(s) skipped (the first is line ${table.first_skipped_line})` : '';
+  ui.plotsNote.textContent = table.available ? `metrics.jsonl: ${n} iterations${skipped}` : 'no metrics.jsonl yet';
+  document.documentElement.dataset.plots = String(count);
+}
+
+ui.panelToggle.addEventListener('click', () => {
+  ui.panel.hidden = !ui.panel.hidden;
+  render();
+  refreshPanel(true).catch((e) => { ui.plotsNote.textContent = e.message; });
+});
+// A live run: new metrics lines appear.
+setInterval(() => { refreshPanel(false).catch((e) => { ui.plotsNote.textContent = e.message; }); }, 5000);
+
+// ---------- replay (snapshots.npz) ----------
+let replay = { available: false, iterations: [] };
+let shownReplay = null;   // iteration shown in the 'after' view, null when it shows the λ result
+
+async function fetchSnapshot(iteration, faces) {
+  const { head, buf, offset } = await fetchFramed(`api/items/${current.id}/replay/${iteration}${faces ? '?faces=1' : ''}`);
+  const positions = new Float32Array(buf, offset, 3 * head.vertices).slice();
+  const index = head.faces > 0 ? new Uint32Array(buf, offset + 12 * head.vertices, 3 * head.faces).slice() : null;
+  return { head, positions, index };
+}
+
+function snapshotGeometry(s) {
+  const g = new THREE.BufferGeometry();
+  g.setAttribute('position', new THREE.BufferAttribute(s.positions.slice(), 3));
+  if (s.index) {
+    g.setIndex(new THREE.BufferAttribute(s.index, 1));
+    g.computeVertexNormals();
+  }
+  return g;
+}
+
+async function fetchReplayIndex() {
+  return (await check(await fetch(`api/items/${current.id}/replay`), 'replay')).json();
+}
+
+function updateReplayUi() {
+  const n = replay.iterations.length;
+  ui.replayBar.hidden = !current || current.kind !== 'run';
+  ui.replay.disabled = !replay.available;
+  ui.replayPlay.disabled = !replay.available || n < 2;
+  ui.replay.max = String(Math.max(0, n - 1));
+  if (!replay.available) {
+    ui.replayValue.textContent = 'no replay';
+    ui.replayNote.textContent = replay.reason || '';
+  } else {
+    ui.replayValue.textContent = shownReplay !== null
+      ? `iteration ${shownReplay} / ${replay.iterations[n - 1]}`
+      : `${n} snapshots (0…${replay.iterations[n - 1]})`;
+    ui.replayNote.textContent = replay.faces_from ? '' : 'no faces known yet: drawn as points';
+  }
+}
+
+async function refreshReplay() {
+  try {
+    replay = await fetchReplayIndex();
+  } catch (e) {
+    replay = { available: false, iterations: [], reason: e.message };
+  }
+  updateReplayUi();
+}
+
+async function applySnapshot(iteration) {
+  let s;
+  try {
+    s = await fetchSnapshot(iteration, false);
+  } catch (e) {
+    // The file changed under us (a live run rewrote it): not a page error; the poll refreshes it.
+    ui.replayNote.textContent = `snapshot ${iteration}: ${e.message}`;
+    return;
+  }
+  const attr = resultGeometry.getAttribute('position');
+  if (s.head.vertices !== attr.count) {
+    ui.replayNote.textContent = `snapshots hold ${s.head.vertices} vertices, the result ${attr.count}: not shown`;
+    return;
+  }
+  attr.array.set(s.positions);
+  attr.needsUpdate = true;
+  if (resultGeometry.index) resultGeometry.computeVertexNormals();
+  resultGeometry.computeBoundingSphere();
+  shownReplay = iteration;
+  document.documentElement.dataset.replay = String(iteration);
+  updateReplayUi();
+  updateLayoutUi();
+  render();
+  ui.metrics.textContent = `replay: iteration ${iteration} of ${replay.iterations[replay.iterations.length - 1]} · ${s.head.vertices} vertices` +
+    (current.has_deformation ? ' · move λ to see the result again' : ` · run ${current.status}`);
+  ui.warnings.textContent = '';
+}
+
+let playing = null;
+function stopPlaying() {
+  if (playing !== null) { clearInterval(playing); playing = null; ui.replayPlay.textContent = '▶'; }
+}
+ui.replayPlay.addEventListener('click', () => {
+  if (playing !== null) { stopPlaying(); return; }
+  ui.replay.value = '0';
+  ui.replay.dispatchEvent(new Event('input'));
+  ui.replayPlay.textContent = '■';
+  playing = setInterval(() => {
+    const k = Number(ui.replay.value) + 1;
+    if (k >= replay.iterations.length) { stopPlaying(); return; }
+    ui.replay.value = String(k);
+    ui.replay.dispatchEvent(new Event('input'));
+  }, 250);
+});
+ui.replay.addEventListener('input', () => {
+  if (!replay.available) return;
+  const it = replay.iterations[Number(ui.replay.value)];
+  if (it === undefined) return;
+  request({ kind: 'replay', value: it });
+});
+
+// A live run: new snapshots appear; follow the newest when the newest is shown (and 'live' is on).
+async function pollReplay() {
+  if (!current || current.kind !== 'run' || inflight) return;
+  let fresh;
+  try {
+    fresh = await fetchReplayIndex();
+  } catch (e) {
+    ui.replayNote.textContent = `cannot reach the server: ${e.message}`;
+    return;
+  }
+  const last = (r) => r.iterations[r.iterations.length - 1];
+  if (fresh.available === replay.available && fresh.iterations.length === replay.iterations.length && last(fresh) === last(replay)) return;
+  if (!current.has_deformation && !replay.available && fresh.available) {
+    await loadItem(current.id);
+    return;
+  }
+  const wasAtEnd = shownReplay !== null && shownReplay === last(replay);
+  replay = fresh;
+  updateReplayUi();
+  if (replay.available && ui.replayFollow.checked && wasAtEnd && playing === null) {
+    ui.replay.value = String(replay.iterations.length - 1);
+    await request({ kind: 'replay', value: last(replay) });
+  }
+}
+setInterval(() => { pollReplay().catch((e) => { ui.replayNote.textContent = e.message; }); }, 3000);
 
 // Latest wins: one request in flight; a slider move during it replaces the pending value.
 let pending = null;
@@ -206,6 +446,9 @@ async function applyResult(lambda) {
   render();
   const ms = performance.now() - Math.min(movedAt || t0, t0);
   shownLambda = lambda;
+  shownReplay = null;
+  updateReplayUi();
+  updateLayoutUi();
   document.documentElement.dataset.lambda = String(lambda);
   ui.metrics.textContent =
     `λ = ${lambda} · volume ratio ${fmt(head.volume_ratio)} · face-area ratio ${fmt(head.area_ratio_mean)} ± ${fmt(head.area_ratio_std)}` +
@@ -215,16 +458,17 @@ async function applyResult(lambda) {
   setDownloads(lambda);
 }
 
-async function requestLambda(lambda) {
-  pending = lambda;
+async function request(job) {
+  pending = job;
   setState('loading');
   if (inflight) return;
   inflight = true;
   try {
     while (pending !== null) {
-      const l = pending;
+      const j = pending;
       pending = null;
-      await applyResult(l);
+      if (j.kind === 'lambda') await applyResult(j.value);
+      else await applySnapshot(j.value);
     }
     setState('ready');
   } catch (e) {
@@ -240,7 +484,8 @@ ui.lambda.addEventListener('input', () => {
   const l = Number(ui.lambda.value);
   ui.lambdaValue.textContent = l.toFixed(1);
   movedAt = performance.now();
-  requestLambda(l);
+  stopPlaying();
+  request({ kind: 'lambda', value: l });
 });
 ui.reset.addEventListener('click', () => {
   if (current && current.lambda !== null) {
@@ -248,8 +493,60 @@ ui.reset.addEventListener('click', () => {
     ui.lambda.dispatchEvent(new Event('input'));
   }
 });
+function applyLook() {
+  const ref = referenceLook();
+  for (const t of [before, after]) {
+    t.hemi.visible = !ref;
+    t.head.visible = !ref;
+    t.eye.visible = ref;
+    if (t.mesh && t.mesh.isMesh) t.mesh.material = ref ? referenceMaterial : t.material;
+  }
+  renderer.setClearColor(ref ? 0xffffff : 0xf4f5f7);
+  renderer.outputColorSpace = ref ? THREE.LinearSRGBColorSpace : THREE.SRGBColorSpace;
+  document.documentElement.dataset.look = ui.look.value;
+  render();
+}
+ui.look.addEventListener('change', applyLook);
+
+// ---------- target normals (the saved deformation's, on the source) ----------
+let normalsField = null;
+async function showNormals() {
+  if (normalsField) {
+    before.scene.remove(normalsField);
+    normalsField.geometry.dispose();
+    normalsField = null;
+  }
+  delete document.documentElement.dataset.normals;
+  if (!ui.normals.checked || !current || !current.has_deformation || !sourceGeometry) { render(); return; }
+  const { head, buf, offset } = await fetchFramed(`api/items/${current.id}/targets`);
+  const p = sourceGeometry.getAttribute('position').array;
+  const v = head.vertices;
+  if (3 * v !== p.length) throw new Error(`target normals: ${v} vectors for ${p.length / 3} vertices`);
+  const n = new Float32Array(buf, offset, 3 * v);
+  sourceGeometry.computeBoundingSphere();
+  const len = 0.06 * sourceGeometry.boundingSphere.radius;
+  const seg = new Float32Array(6 * v);
+  const col = new Float32Array(6 * v);
+  for (let i = 0; i < v; i++) {
+    for (let c = 0; c < 3; c++) {
+      seg[6 * i + c] = p[3 * i + c];
+      seg[6 * i + 3 + c] = p[3 * i + c] + len * n[3 * i + c];
+      // Coloured by direction: |x|, |y|, |z| as red, green, blue (axis-aligned targets are pure).
+      col[6 * i + c] = col[6 * i + 3 + c] = Math.abs(n[3 * i + c]);
+    }
+  }
+  const g = new THREE.BufferGeometry();
+  g.setAttribute('position', new THREE.BufferAttribute(seg, 3));
+  g.setAttribute('color', new THREE.BufferAttribute(col, 3));
+  normalsField = new THREE.LineSegments(g, new THREE.LineBasicMaterial({ vertexColors: true }));
+  before.scene.add(normalsField);
+  document.documentElement.dataset.normals = String(v);
+  render();
+}
+ui.normals.addEventListener('change', () => { showNormals().catch((e) => console.error(e.message)); });
+
 ui.flat.addEventListener('change', () => {
-  for (const m of [solid, solidBefore]) { m.flatShading = ui.flat.checked; m.needsUpdate = true; }
+  for (const m of [solid, solidBefore, referenceMaterial]) { m.flatShading = ui.flat.checked; m.needsUpdate = true; }
   render();
 });
 ui.wire.addEventListener('change', () => {
@@ -262,7 +559,7 @@ ui.layout.addEventListener('change', () => {
   render();
 });
 function toggleShown() {
-  if (!current || !current.has_deformation) return;
+  if (!twoViews()) return;
   if (layout !== 'toggle') { layout = 'toggle'; ui.layout.value = 'toggle'; }
   showing = showing === 'after' ? 'before' : 'after';
   updateLayoutUi();
@@ -272,7 +569,7 @@ ui.toggle.addEventListener('click', toggleShown);
 window.addEventListener('keydown', (e) => {
   if ((e.key === 't' || e.key === 'T') && e.target.tagName !== 'INPUT') toggleShown();
 });
-ui.item.addEventListener('change', () => loadItem(Number(ui.item.value)));
+ui.item.addEventListener('change', () => { loadItem(Number(ui.item.value)).catch((e) => { setState('error'); console.error(e.message); }); });
 
 // A run still being written: poll until its result appears.
 async function pollIncomplete() {
@@ -285,14 +582,111 @@ async function pollIncomplete() {
 }
 setInterval(() => { pollIncomplete().catch((e) => console.error(e.message)); }, 3000);
 
+// ---------- gallery (several runs, or a batch manifest) ----------
+let galleryKey = '';
+
+function describe(it) {
+  const what = it.prompt !== null && it.prompt !== undefined ? `“${it.prompt}”` : (it.style ? `style ${it.style}` : '');
+  return [what, it.mesh || ''].filter(Boolean).join(' · ');
+}
+
+function buildCards() {
+  ui.cards.replaceChildren(...items.map((it) => {
+    const a = document.createElement('a');
+    a.className = 'card';
+    a.href = `?item=${it.id}`;
+    a.dataset.id = String(it.id);
+    a.dataset.text = [it.name, it.prompt || '', it.style || '', it.mesh || '', it.status].join(' ').toLowerCase();
+    let pic;
+    if (it.thumbnail) {
+      pic = document.createElement('img');
+      pic.loading = 'lazy';
+      pic.alt = it.name;
+      pic.src = `api/items/${it.id}/files/${it.thumbnail.split('/').map(encodeURIComponent).join('/')}?v=${encodeURIComponent(it.status)}`;
+    } else {
+      pic = document.createElement('div');
+      pic.className = 'noimg';
+      pic.textContent = it.kind === 'mesh' ? 'mesh' : (it.status === 'not started' ? 'not started' : 'no picture yet');
+    }
+    const title = document.createElement('div');
+    title.className = 'title';
+    title.textContent = it.row !== null && it.row !== undefined ? `#${it.row} ${it.name}` : it.name;
+    const sub = document.createElement('div');
+    sub.className = 'sub';
+    sub.textContent = describe(it);
+    const badge = document.createElement('span');
+    badge.className = `badge ${it.status.replace(' ', '-')}`;
+    badge.textContent = it.status;
+    a.append(pic, title, sub, badge);
+    a.addEventListener('click', (e) => {
+      e.preventDefault();
+      openItem(it.id);
+    });
+    return a;
+  }));
+  applyFilter();
+}
+
+function applyFilter() {
+  const terms = ui.filter.value.toLowerCase().split(/\s+/).filter(Boolean);
+  let shown = 0;
+  for (const card of ui.cards.children) {
+    const ok = terms.every((t) => card.dataset.text.includes(t));
+    card.hidden = !ok;
+    shown += ok ? 1 : 0;
+  }
+  ui.galleryCount.textContent = `${shown} of ${items.length} shown`;
+  document.documentElement.dataset.gallery = String(shown);
+}
+ui.filter.addEventListener('input', applyFilter);
+
+function showGallery() {
+  stopPlaying();
+  document.body.classList.add('gallery-mode');
+  ui.gallery.hidden = false;
+  current = null;
+  buildCards();
+  setState('ready');
+}
+
+function openItem(id) {
+  document.body.classList.remove('gallery-mode');
+  ui.gallery.hidden = true;
+  ui.item.value = String(id);
+  loadItem(id).catch((e) => { setState('error'); console.error(e.message); });
+}
+ui.galleryButton.addEventListener('click', showGallery);
+
+// Statuses and thumbnails change while a batch runs.
+async function pollGallery() {
+  if (ui.gallery.hidden) return;
+  const fresh = await (await check(await fetch('api/items'), 'api/items')).json();
+  const key = JSON.stringify(fresh.map((it) => [it.status, it.thumbnail]));
+  if (key === galleryKey) return;
+  galleryKey = key;
+  items = fresh;
+  buildCards();
+}
+setInterval(() => { pollGallery().catch((e) => { ui.galleryCount.textContent = e.message; }); }, 5000);
+
 async function main() {
   items = await (await check(await fetch('api/items'), 'api/items')).json();
+  galleryKey = JSON.stringify(items.map((it) => [it.status, it.thumbnail]));
+  if (params.get('panel') !== null) ui.panel.hidden = false;
+  if (params.get('normals') !== null) ui.normals.checked = true;
+  if (params.get('look') === 'reference') { ui.look.value = 'reference'; applyLook(); }
+  ui.galleryButton.hidden = items.length < 2;
   ui.item.replaceChildren(...items.map((it) => {
     const o = document.createElement('option');
     o.value = String(it.id);
     o.textContent = `${it.name} (${it.kind})`;
     return o;
   }));
+  if (items.length > 1 && params.get('item') === null) {
+    if (params.get('filter') !== null) ui.filter.value = params.get('filter');
+    showGallery();
+    return;
+  }
   const first = Math.min(items.length - 1, Math.max(0, Number(params.get('item') || 0)));
   ui.item.value = String(first);
   await loadItem(first);
@@ -302,6 +696,14 @@ async function main() {
     // Through the slider's own handler, as a user would.
     ui.lambda.value = wanted;
     ui.lambda.dispatchEvent(new Event('input'));
+  }
+  const iteration = params.get('iteration');
+  if (iteration !== null && replay.available) {
+    // Through the replay scrubber's own handler.
+    const k = replay.iterations.indexOf(Number(iteration));
+    if (k < 0) throw new Error(`no snapshot at iteration ${iteration}`);
+    ui.replay.value = String(k);
+    ui.replay.dispatchEvent(new Event('input'));
   }
 }
 main().catch((e) => { setState('error'); console.error(e.message); });

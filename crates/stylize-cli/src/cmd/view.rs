@@ -16,8 +16,9 @@ use crate::view::{Viewer, random_token};
 /// Arguments of `stylize view`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// Run directories and/or mesh files to show.
-    #[arg(required = true, value_name = "RUN_DIR|MESH")]
+    /// Run directories, mesh files and/or batch manifests (one run per row, started or not) to
+    /// show; several runs open on a gallery.
+    #[arg(required = true, value_name = "RUN_DIR|MESH|MANIFEST")]
     pub paths: Vec<PathBuf>,
     /// Port (default: the first free one of 8765–8774; 0: any free port).
     #[arg(long)]

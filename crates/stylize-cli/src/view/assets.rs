@@ -1,6 +1,6 @@
 //! The viewer's page and its vendored libraries, embedded in the binary (no network, no build
-//! step): `crates/stylize-cli/web/` (three.js: `web/vendor/three/README.md` names its version and
-//! licence).
+//! step): `crates/stylize-cli/web/` (three.js and uPlot: `web/vendor/*/README.md` name their
+//! versions, licences and tarball hashes).
 
 /// `(path below the token, content type, bytes)` of every static file the page loads.
 pub const ASSETS: &[(&str, &str, &[u8])] = &[
@@ -13,6 +13,11 @@ pub const ASSETS: &[(&str, &str, &[u8])] = &[
         "app.js",
         "text/javascript; charset=utf-8",
         include_bytes!("../../web/app.js"),
+    ),
+    (
+        "plots.js",
+        "text/javascript; charset=utf-8",
+        include_bytes!("../../web/plots.js"),
     ),
     (
         "style.css",
@@ -33,6 +38,21 @@ pub const ASSETS: &[(&str, &str, &[u8])] = &[
         "vendor/three/OrbitControls.js",
         "text/javascript; charset=utf-8",
         include_bytes!("../../web/vendor/three/OrbitControls.js"),
+    ),
+    (
+        "vendor/uplot/uPlot.esm.js",
+        "text/javascript; charset=utf-8",
+        include_bytes!("../../web/vendor/uplot/uPlot.esm.js"),
+    ),
+    (
+        "vendor/uplot/uPlot.min.css",
+        "text/css; charset=utf-8",
+        include_bytes!("../../web/vendor/uplot/uPlot.min.css"),
+    ),
+    (
+        "vendor/uplot/LICENSE",
+        "text/plain; charset=utf-8",
+        include_bytes!("../../web/vendor/uplot/LICENSE"),
     ),
     (
         "vendor/three/LICENSE",

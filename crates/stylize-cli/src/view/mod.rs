@@ -12,10 +12,12 @@
 //! λ is accepted when finite and within `[0, LAMBDA_MAX]`.
 
 pub mod assets;
+pub mod metrics;
+pub mod replay;
 pub mod server;
 
 use std::path::{Component, Path, PathBuf};
-use std::sync::Mutex;
+use std::sync::{Arc, Mutex, OnceLock};
 use std::time::SystemTime;
 
 use anyhow::{Context, bail, ensure};
@@ -25,6 +27,7 @@ use serde::Serialize;
 use stylize::saved::SavedDeformation;
 
 use crate::sanity::LambdaSanity;
+use replay::{ReplayState, SNAPSHOTS_FILE, Snapshots};
 
 /// The largest λ the server computes (the slider goes to ~20; the reference's values are 5–10).
 pub const LAMBDA_MAX: f64 = 100.0;
@@ -70,8 +73,9 @@ pub struct ItemInfo {
     pub name: String,
     /// `run` or `mesh`.
     pub kind: &'static str,
-    /// `complete` (run.json present), `running` (`run.lock` is there: a run is writing it, or one was killed), `incomplete` (no result
-    /// yet or an interrupted run) or `mesh`.
+    /// `complete` (run.json present), `running` (`run.lock` is there: a run is writing it, or one
+    /// was killed), `incomplete` (`task.json` but no result: an interrupted run), `not started`
+    /// (no such directory yet, or none of those files: a batch row not reached) or `mesh`.
     pub status: &'static str,
     /// The run's saved λ (None for meshes and runs without a result yet).
     pub lambda: Option<f64>,
@@ -81,6 +85,34 @@ pub struct ItemInfo {
     pub has_deformation: bool,
     /// Image files of the run the page can show (`turntable.png`, …), relative to the run.
     pub images: Vec<String>,
+    /// The gallery's picture: `turntable.png`, else `before_after.png`, else the newest
+    /// `previews/iter_*.png` (relative to the run; None when there is none yet).
+    pub thumbnail: Option<String>,
+    /// The text prompt (manifest row, else the run's `task.json`).
+    pub prompt: Option<String>,
+    /// The model-free style (manifest row, else the run's `task.json`).
+    pub style: Option<String>,
+    /// The input mesh (manifest row, else the run's `run.json`).
+    pub mesh: Option<String>,
+    /// The manifest and row index this run comes from.
+    pub manifest: Option<String>,
+    /// 0-based row of the manifest.
+    pub row: Option<usize>,
+}
+
+/// What a batch manifest row says about its run (shown before the run exists).
+#[derive(Clone, Debug, Default)]
+pub struct RunLabel {
+    /// Text prompt.
+    pub prompt: Option<String>,
+    /// Model-free style.
+    pub style: Option<String>,
+    /// Input mesh, as resolved by the manifest reader.
+    pub mesh: Option<String>,
+    /// The manifest's path as given.
+    pub manifest: Option<String>,
+    /// 0-based row.
+    pub row: Option<usize>,
 }
 
 /// A run's saved deformation, loaded and prefactored.
@@ -91,8 +123,6 @@ struct LoadedRun {
     rest: TriMesh,
     /// The saved target normals.
     targets: Vec<[f64; 3]>,
-    /// The saved λ.
-    lambda: Option<f64>,
     layer: Darap,
 }
 
@@ -100,9 +130,18 @@ struct LoadedRun {
 pub struct RunItem {
     /// The path as given.
     pub name: String,
-    /// The canonical path of the run directory (every file served lies inside it).
+    /// The run directory: canonical when it existed when the viewer started; a batch row's
+    /// directory that did not exist yet is kept as the manifest resolved it.
     pub root: PathBuf,
+    /// The canonical run directory (every file served lies inside it), known once it exists.
+    canonical: OnceLock<PathBuf>,
+    /// From the batch manifest, when the run comes from one.
+    pub label: RunLabel,
     loaded: Mutex<Option<Box<LoadedRun>>>,
+    /// The last valid `snapshots.npz` read (reused while its stamp is unchanged).
+    snapshots: Mutex<Option<Arc<Snapshots>>>,
+    /// The saved λ with the stamp of the `deformation.npz` it was read from.
+    saved_lambda: Mutex<Option<((SystemTime, u64), Option<f64>)>>,
 }
 
 impl std::fmt::Debug for RunItem {
@@ -138,9 +177,48 @@ impl RunItem {
         ensure!(root.is_dir(), "{} is not a directory", dir.display());
         Ok(Self {
             name,
+            canonical: OnceLock::from(root.clone()),
             root,
+            label: RunLabel::default(),
             loaded: Mutex::new(None),
+            snapshots: Mutex::new(None),
+            saved_lambda: Mutex::new(None),
         })
+    }
+
+    /// A batch row's run directory, which may not exist yet (the row is not started).
+    pub fn planned(name: String, dir: &Path, label: RunLabel) -> anyhow::Result<Self> {
+        let canonical = OnceLock::new();
+        let root = match std::fs::canonicalize(dir) {
+            Ok(c) => {
+                ensure!(c.is_dir(), "{} is not a directory", dir.display());
+                let _ = canonical.set(c.clone());
+                c
+            }
+            Err(_) => std::path::absolute(dir)
+                .with_context(|| format!("cannot resolve run directory {}", dir.display()))?,
+        };
+        Ok(Self {
+            name,
+            root,
+            canonical,
+            label,
+            loaded: Mutex::new(None),
+            snapshots: Mutex::new(None),
+            saved_lambda: Mutex::new(None),
+        })
+    }
+
+    /// The canonical run directory, once it exists.
+    fn canonical_root(&self) -> Option<&Path> {
+        if let Some(c) = self.canonical.get() {
+            return Some(c);
+        }
+        let c = std::fs::canonicalize(&self.root).ok()?;
+        if !c.is_dir() {
+            return None;
+        }
+        Some(self.canonical.get_or_init(|| c))
     }
 
     fn npz(&self) -> PathBuf {
@@ -153,8 +231,10 @@ impl RunItem {
             "complete"
         } else if self.root.join(crate::lock::LOCK_FILE).exists() {
             "running"
-        } else {
+        } else if self.root.join("task.json").is_file() {
             "incomplete"
+        } else {
+            "not started"
         }
     }
 
@@ -194,8 +274,24 @@ impl RunItem {
     }
 
     /// The saved λ (None when the run has no `deformation.npz` or it records none).
+    ///
+    /// Read without building the dARAP layer (a gallery lists many runs; only the one opened is
+    /// factored), and cached while the file is unchanged.
     pub fn saved_lambda(&self) -> Option<f64> {
-        self.with_loaded(|l| Ok(l.lambda)).ok().flatten()
+        let npz = self.npz();
+        let now = stamp(&npz).ok()?;
+        let mut cache = self
+            .saved_lambda
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        if let Some((s, l)) = *cache
+            && s == now
+        {
+            return l;
+        }
+        let lambda = SavedDeformation::read(&npz).ok()?.lambda();
+        *cache = Some((now, lambda));
+        lambda
     }
 
     /// The rest mesh (side-2 cube frame).
@@ -206,6 +302,24 @@ impl RunItem {
                 faces: l.rest.faces.clone(),
                 sanity: None,
             })
+        })
+    }
+
+    /// The saved target normals, one per rest vertex, scaled to unit length (the layer normalizes
+    /// them too; a zero vector stays zero).
+    pub fn target_normals(&self) -> Result<Vec<[f64; 3]>, ViewError> {
+        self.with_loaded(|l| {
+            Ok(l.targets
+                .iter()
+                .map(|n| {
+                    let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+                    if len > 0.0 && len.is_finite() {
+                        n.map(|c| c / len)
+                    } else {
+                        [0.0; 3]
+                    }
+                })
+                .collect())
         })
     }
 
@@ -246,8 +360,14 @@ impl RunItem {
             return Err(bad());
         }
         let not_found = || ViewError::NotFound(format!("run {} has no file {rel}", self.name));
-        let path = std::fs::canonicalize(self.root.join(rel_path)).map_err(|_| not_found())?;
-        if !path.starts_with(&self.root) {
+        let root = self.canonical_root().ok_or_else(|| {
+            ViewError::NotFound(format!(
+                "run {} has not started (no directory yet)",
+                self.name
+            ))
+        })?;
+        let path = std::fs::canonicalize(root.join(rel_path)).map_err(|_| not_found())?;
+        if !path.starts_with(root) {
             return Err(ViewError::BadRequest(format!(
                 "{rel} leads outside the run directory"
             )));
@@ -256,6 +376,122 @@ impl RunItem {
             return Err(not_found());
         }
         Ok(path)
+    }
+
+    /// The run's replay (`snapshots.npz`, see [`replay`]): read again whenever the file changes; a
+    /// missing or unusable file is [`ReplayState::Unavailable`] with the reason, never an error.
+    pub fn replay(&self) -> ReplayState {
+        let path = match self.resolve_file(SNAPSHOTS_FILE) {
+            Ok(p) => p,
+            Err(ViewError::NotFound(_)) => {
+                return ReplayState::Unavailable(format!("the run has no {SNAPSHOTS_FILE} (yet)"));
+            }
+            Err(e) => return ReplayState::Unavailable(e.to_string()),
+        };
+        let now = match stamp(&path) {
+            Ok(s) => s,
+            Err(e) => {
+                return ReplayState::Unavailable(format!("cannot read {SNAPSHOTS_FILE}: {e}"));
+            }
+        };
+        let mut guard = self
+            .snapshots
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        if let Some(s) = guard.as_ref().filter(|s| s.stamp == now) {
+            return ReplayState::Available(Arc::clone(s));
+        }
+        match Snapshots::read(&path, now) {
+            Ok(s) => {
+                let s = Arc::new(s);
+                *guard = Some(Arc::clone(&s));
+                ReplayState::Available(s)
+            }
+            Err(e) => {
+                *guard = None;
+                ReplayState::Unavailable(format!("{SNAPSHOTS_FILE} is not usable: {e:#}"))
+            }
+        }
+    }
+
+    /// The faces to draw `snapshots` with: the file's own, else the saved deformation's when its
+    /// vertex count matches, else none (the page draws points).
+    pub fn replay_faces(&self, snapshots: &Snapshots) -> Option<(Vec<[u32; 3]>, &'static str)> {
+        if let Some(f) = &snapshots.faces {
+            return Some((f.clone(), SNAPSHOTS_FILE));
+        }
+        self.with_loaded(|l| {
+            Ok((l.rest.positions.len() == snapshots.vertices).then(|| l.rest.faces.clone()))
+        })
+        .ok()
+        .flatten()
+        .map(|f| (f, "deformation.npz"))
+    }
+
+    /// The run's `metrics.jsonl` as columns (None when the run has none yet; malformed lines are
+    /// skipped, see [`metrics`]).
+    pub fn metrics(&self) -> Result<Option<metrics::MetricsTable>, ViewError> {
+        let path = match self.resolve_file("metrics.jsonl") {
+            Ok(p) => p,
+            Err(ViewError::NotFound(_)) => return Ok(None),
+            Err(e) => return Err(e),
+        };
+        let bytes = std::fs::read(&path).map_err(|e| {
+            ViewError::Failed(
+                anyhow::Error::from(e).context(format!("cannot read {}", path.display())),
+            )
+        })?;
+        Ok(Some(metrics::MetricsTable::parse(
+            &String::from_utf8_lossy(&bytes),
+        )))
+    }
+
+    /// The gallery's picture (see [`ItemInfo::thumbnail`]).
+    pub fn thumbnail(&self) -> Option<String> {
+        for name in ["turntable.png", "before_after.png"] {
+            if self.resolve_file(name).is_ok() {
+                return Some(name.to_string());
+            }
+        }
+        // Preview names carry zero-padded iterations: the largest name is the newest.
+        let newest = std::fs::read_dir(self.root.join("previews"))
+            .ok()?
+            .filter_map(|e| e.ok()?.file_name().into_string().ok())
+            .filter(|n| n.starts_with("iter_") && n.ends_with(".png"))
+            .max()?;
+        let rel = format!("previews/{newest}");
+        self.resolve_file(&rel).ok().map(|_| rel)
+    }
+
+    /// Prompt, style and mesh: the manifest's when given, else read from `task.json` (prompt,
+    /// style) and `run.json` (mesh); unreadable files leave them None.
+    pub fn describe(&self) -> (Option<String>, Option<String>, Option<String>) {
+        let read_json = |name: &str| -> Option<serde_json::Value> {
+            let path = self.resolve_file(name).ok()?;
+            let meta = std::fs::metadata(&path).ok()?;
+            // These files are small; anything large is not ours.
+            if meta.len() > 1 << 20 {
+                return None;
+            }
+            serde_json::from_slice(&std::fs::read(path).ok()?).ok()
+        };
+        let mut prompt = self.label.prompt.clone();
+        let mut style = self.label.style.clone();
+        let mut mesh = self.label.mesh.clone();
+        if prompt.is_none() && style.is_none() {
+            if let Some(task) = read_json("task.json") {
+                let fields = &task["identity"]["fields"];
+                // Values are canonical text: the prompt is JSON-quoted, the style is not.
+                prompt = fields["prompt"]
+                    .as_str()
+                    .map(|p| serde_json::from_str::<String>(p).unwrap_or_else(|_| p.to_string()));
+                style = fields["style"].as_str().map(str::to_string);
+            }
+        }
+        if mesh.is_none() {
+            mesh = read_json("run.json").and_then(|r| r["mesh"].as_str().map(str::to_string));
+        }
+        (prompt, style, mesh)
     }
 
     /// Image files of the run the page offers (present ones only).
@@ -277,12 +513,11 @@ fn load_run(npz: &Path, stamp: (SystemTime, u64)) -> anyhow::Result<LoadedRun> {
         npz.display()
     );
     let rule = crate::cmd::apply::saved_rotation_rule(&saved)?.unwrap_or_default();
-    let lambda = saved.lambda();
     let mut rest = saved.verts_f64();
     mesh_core::normalize::side2_cube(&mut rest);
     let targets = saved.verts_normals_f64();
     let options = DarapOptions {
-        lambda: lambda.unwrap_or(0.0),
+        lambda: saved.lambda().unwrap_or(0.0),
         rotation_rule: rule,
         post_process: PostProcess::RecenterRescale,
     };
@@ -298,7 +533,6 @@ fn load_run(npz: &Path, stamp: (SystemTime, u64)) -> anyhow::Result<LoadedRun> {
         stamp,
         rest: TriMesh::new(rest, saved.faces.clone()),
         targets,
-        lambda,
         layer,
     })
 }
@@ -322,12 +556,13 @@ pub enum Item {
 }
 
 impl Item {
-    /// Opens a command-line argument: a directory is a run, a file a mesh.
-    pub fn open(path: &Path) -> anyhow::Result<Self> {
+    /// Opens a command-line argument: a directory is a run, a mesh file a mesh, and a batch
+    /// manifest (`.toml`, `.jsonl`/`.json`) one run per row — rows not started yet included.
+    pub fn open_all(path: &Path) -> anyhow::Result<Vec<Self>> {
         let name = path.display().to_string();
         let meta = std::fs::metadata(path).with_context(|| format!("cannot open {name}"))?;
         if meta.is_dir() {
-            return Ok(Item::Run(RunItem::new(name, path)?));
+            return Ok(vec![Item::Run(RunItem::new(name, path)?)]);
         }
         let ext = path
             .extension()
@@ -335,9 +570,48 @@ impl Item {
             .map(str::to_ascii_lowercase)
             .unwrap_or_default();
         if !matches!(ext.as_str(), "obj" | "off" | "ply" | "gltf" | "glb") {
+            // Anything else is read as a batch manifest (`.toml`, else JSON Lines).
+            let rows = crate::batch::read_manifest(path).with_context(|| {
+                format!(
+                    "{name}: not a run directory, a mesh (.obj, .off, .ply, .gltf, .glb) or a \
+                     batch manifest (.toml, JSON Lines)"
+                )
+            })?;
+            return rows
+                .iter()
+                .enumerate()
+                .map(|(i, row)| {
+                    let label = RunLabel {
+                        prompt: row.prompt.clone(),
+                        style: row.style.clone(),
+                        mesh: Some(row.mesh.display().to_string()),
+                        manifest: Some(name.clone()),
+                        row: Some(i),
+                    };
+                    // Named as the manifest names it (relative to the manifest's folder).
+                    let base = path.parent().unwrap_or(Path::new(""));
+                    let shown = row.out.strip_prefix(base).unwrap_or(&row.out);
+                    let run = RunItem::planned(shown.display().to_string(), &row.out, label)
+                        .with_context(|| format!("{name} row {i}"))?;
+                    Ok(Item::Run(run))
+                })
+                .collect();
+        }
+        Ok(vec![Self::open_mesh(path)?])
+    }
+
+    /// Opens a mesh file (shown as is).
+    pub fn open_mesh(path: &Path) -> anyhow::Result<Self> {
+        let name = path.display().to_string();
+        let ext = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase)
+            .unwrap_or_default();
+        if !matches!(ext.as_str(), "obj" | "off" | "ply" | "gltf" | "glb") {
             bail!(
-                "{name}: not a run directory or a mesh (.obj, .off, .ply, .gltf, .glb); \
-                 batch manifests are not supported yet — pass their run directories"
+                "{name}: not a run directory, a mesh (.obj, .off, .ply, .gltf, .glb) or a batch \
+                 manifest (.toml, .jsonl)"
             );
         }
         let mut mesh =
@@ -352,7 +626,14 @@ impl Item {
         match self {
             Item::Run(r) => {
                 let lambda = r.saved_lambda();
+                let (prompt, style, mesh) = r.describe();
                 ItemInfo {
+                    thumbnail: r.thumbnail(),
+                    prompt,
+                    style,
+                    mesh,
+                    manifest: r.label.manifest.clone(),
+                    row: r.label.row,
                     id,
                     name: r.name.clone(),
                     kind: "run",
@@ -372,6 +653,12 @@ impl Item {
                 lambda_max: LAMBDA_MAX,
                 has_deformation: false,
                 images: Vec::new(),
+                thumbnail: None,
+                prompt: None,
+                style: None,
+                mesh: Some(m.name.clone()),
+                manifest: None,
+                row: None,
             },
         }
     }
@@ -385,6 +672,17 @@ impl Item {
                 faces: m.mesh.faces.clone(),
                 sanity: None,
             }),
+        }
+    }
+
+    /// The run's target normals (runs only; see [`RunItem::target_normals`]).
+    pub fn target_normals(&self) -> Result<Vec<[f64; 3]>, ViewError> {
+        match self {
+            Item::Run(r) => r.target_normals(),
+            Item::Mesh(m) => Err(ViewError::NotFound(format!(
+                "{} is a mesh, not a run: it has no target normals",
+                m.name
+            ))),
         }
     }
 
@@ -434,10 +732,11 @@ impl Viewer {
     /// Opens every command-line argument.
     pub fn open(paths: &[PathBuf], token: String) -> anyhow::Result<Self> {
         ensure!(!paths.is_empty(), "name at least one run directory or mesh");
-        let items = paths
-            .iter()
-            .map(|p| Item::open(p))
-            .collect::<anyhow::Result<Vec<_>>>()?;
+        let mut items = Vec::new();
+        for p in paths {
+            items.extend(Item::open_all(p)?);
+        }
+        ensure!(!items.is_empty(), "the manifest names no runs");
         Ok(Self { items, token })
     }
 

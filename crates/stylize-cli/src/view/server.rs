@@ -9,6 +9,15 @@
 //! /TOKEN/api/items/ID/result?lambda=L       framed: header JSON (λ diagnostics) + f32 positions
 //! /TOKEN/api/items/ID/download?lambda=L&format=obj|ply|glb   the mesh at λ as a file
 //! /TOKEN/api/items/ID/files/PATH            a file inside a run directory (images, metrics)
+//! /TOKEN/api/items/ID/targets               framed: header JSON + f32 unit target normals, one
+//!                                           per source vertex (the saved deformation's)
+//! /TOKEN/api/items/ID/metrics               JSON: metrics.jsonl as columns (`available`,
+//!                                           `iterations`, `series`, `skipped` lines)
+//! /TOKEN/api/items/ID/replay                JSON: the run's snapshot iterations (always 200;
+//!                                           `available: false` + `reason` when there is no
+//!                                           usable snapshots.npz)
+//! /TOKEN/api/items/ID/replay/ITER[?faces=1] framed: header JSON + f32 positions at iteration
+//!                                           ITER (+ u32 faces when asked and known)
 //! ```
 //!
 //! **Framed responses** (`application/octet-stream`): a little-endian `u32` header length `H`, `H`
@@ -30,6 +39,7 @@ use axum::response::{IntoResponse, Redirect, Response};
 use axum::routing::get;
 use serde::Deserialize;
 
+use super::replay::ReplayState;
 use super::{Shape, ViewError, Viewer};
 
 impl IntoResponse for ViewError {
@@ -64,6 +74,13 @@ pub fn router(viewer: Arc<Viewer>) -> Router {
         .route(&format!("/{t}/api/items/{{id}}/result"), get(result))
         .route(&format!("/{t}/api/items/{{id}}/download"), get(download))
         .route(&format!("/{t}/api/items/{{id}}/files/{{*path}}"), get(file))
+        .route(&format!("/{t}/api/items/{{id}}/metrics"), get(metrics))
+        .route(&format!("/{t}/api/items/{{id}}/targets"), get(targets))
+        .route(&format!("/{t}/api/items/{{id}}/replay"), get(replay_index))
+        .route(
+            &format!("/{t}/api/items/{{id}}/replay/{{iteration}}"),
+            get(replay_snapshot),
+        )
         .fallback(fallback)
         .with_state(viewer)
 }
@@ -338,4 +355,154 @@ async fn file(
 /// Serves until the process ends.
 pub async fn serve(listener: tokio::net::TcpListener, viewer: Arc<Viewer>) -> std::io::Result<()> {
     axum::serve(listener, router(viewer)).await
+}
+
+fn json_response(value: &serde_json::Value) -> Response {
+    (
+        no_store(),
+        [(
+            header::CONTENT_TYPE,
+            HeaderValue::from_static("application/json"),
+        )],
+        value.to_string(),
+    )
+        .into_response()
+}
+
+/// The replay index: which iterations `snapshots.npz` holds right now.
+async fn replay_index(State(viewer): State<Arc<Viewer>>, Path(id): Path<usize>) -> Response {
+    let index = on_item(viewer, id, |item| {
+        Ok(match item {
+            super::Item::Run(run) => match run.replay() {
+                ReplayState::Available(s) => {
+                    let faces = run.replay_faces(&s).map(|(_, from)| from);
+                    serde_json::json!({
+                        "available": true,
+                        "status": run.status(),
+                        "iterations": s.iterations,
+                        "vertices": s.vertices,
+                        "faces_from": faces,
+                    })
+                }
+                ReplayState::Unavailable(reason) => serde_json::json!({
+                    "available": false,
+                    "status": run.status(),
+                    "iterations": [],
+                    "reason": reason,
+                }),
+            },
+            super::Item::Mesh(m) => serde_json::json!({
+                "available": false,
+                "status": "mesh",
+                "iterations": [],
+                "reason": format!("{} is a mesh, not a run: it has no replay", m.name),
+            }),
+        })
+    })
+    .await;
+    match index {
+        Ok(v) => json_response(&v),
+        Err(e) => e.into_response(),
+    }
+}
+
+/// `?faces=1`: also send the faces.
+#[derive(Debug, Deserialize)]
+struct ReplayQuery {
+    #[serde(default)]
+    faces: Option<u8>,
+}
+
+/// The positions of one snapshot.
+async fn replay_snapshot(
+    State(viewer): State<Arc<Viewer>>,
+    Path((id, iteration)): Path<(usize, i64)>,
+    Query(q): Query<ReplayQuery>,
+) -> Response {
+    let want_faces = q.faces.unwrap_or(0) != 0;
+    let made = on_item(viewer, id, move |item| {
+        let run = match item {
+            super::Item::Run(run) => run,
+            super::Item::Mesh(m) => {
+                return Err(ViewError::NotFound(format!(
+                    "{} is a mesh, not a run: it has no replay",
+                    m.name
+                )));
+            }
+        };
+        let snapshots = match run.replay() {
+            ReplayState::Available(s) => s,
+            ReplayState::Unavailable(reason) => return Err(ViewError::NotReady(reason)),
+        };
+        let Some(x) = snapshots.at(iteration) else {
+            let (first, last) = (
+                snapshots.iterations.first().copied().unwrap_or(0),
+                snapshots.iterations.last().copied().unwrap_or(0),
+            );
+            return Err(ViewError::NotFound(format!(
+                "run {} has no snapshot at iteration {iteration} ({} snapshots, iterations {first}…{last})",
+                run.name,
+                snapshots.iterations.len()
+            )));
+        };
+        let positions: Vec<u8> = x.iter().flat_map(|c| c.to_le_bytes()).collect();
+        let faces = if want_faces {
+            run.replay_faces(&snapshots).map(|(f, _)| f)
+        } else {
+            None
+        };
+        let head = serde_json::json!({
+            "iteration": iteration,
+            "vertices": snapshots.vertices,
+            "faces": faces.as_ref().map_or(0, Vec::len),
+        });
+        let face_bytes: Vec<u8> = faces
+            .iter()
+            .flatten()
+            .flatten()
+            .flat_map(|v| v.to_le_bytes())
+            .collect();
+        Ok(frame(&head, &[&positions, &face_bytes]))
+    })
+    .await;
+    match made {
+        Ok(body) => framed(body),
+        Err(e) => e.into_response(),
+    }
+}
+
+/// The run's metrics as columns (always 200 for a run; `available: false` without the file).
+async fn metrics(State(viewer): State<Arc<Viewer>>, Path(id): Path<usize>) -> Response {
+    let table = on_item(viewer, id, |item| match item {
+        super::Item::Run(run) => run.metrics(),
+        super::Item::Mesh(_) => Ok(None),
+    })
+    .await;
+    match table {
+        Ok(Some(t)) => match serde_json::to_value(&t) {
+            Ok(mut v) => {
+                v["available"] = true.into();
+                json_response(&v)
+            }
+            Err(e) => ViewError::Failed(e.into()).into_response(),
+        },
+        Ok(None) => json_response(&serde_json::json!({
+            "available": false,
+            "iterations": [],
+            "series": {},
+            "skipped": 0,
+        })),
+        Err(e) => e.into_response(),
+    }
+}
+
+/// The saved deformation's target normals (unit length), in the source's vertex order.
+async fn targets(State(viewer): State<Arc<Viewer>>, Path(id): Path<usize>) -> Response {
+    match on_item(viewer, id, |item| item.target_normals()).await {
+        Ok(normals) => framed(frame(
+            &serde_json::json!({ "vertices": normals.len() }),
+            &[&f32_bytes(&normals)],
+        )),
+        Err(e) => e.into_response(),
+    }
 }
