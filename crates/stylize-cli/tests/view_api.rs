@@ -595,6 +595,9 @@ fn bad_replay_iterations_are_refused() {
     });
 }
 
+/// Writes a damaged `snapshots.npz`.
+type Damage = Box<dyn Fn()>;
+
 #[test]
 fn missing_or_invalid_snapshots_are_no_replay_and_a_live_run_grows() {
     let dir = tempfile::tempdir().unwrap();
@@ -628,7 +631,7 @@ fn missing_or_invalid_snapshots_are_no_replay_and_a_live_run_grows() {
         shape_mismatch.truncate(3 * rest.len());
         let mut non_finite = snapshot_positions(&rest, 2);
         non_finite[3 * rest.len() + 4] = f32::NAN;
-        let cases: Vec<(&str, Box<dyn Fn()>)> = vec![
+        let cases: Vec<(&str, Damage)> = vec![
             ("half-written", {
                 let (p, w) = (path.clone(), whole.clone());
                 Box::new(move || std::fs::write(&p, &w[..w.len() / 2]).unwrap())

@@ -547,3 +547,53 @@ fn page_shows_the_mesh_and_follows_the_lambda_slider() {
         "the 'after' view did not change between λ = 2 and 16 ({after:.4} of its pixels)"
     );
 }
+
+/// A run still being written (a lock, no `deformation.npz` yet) with two snapshots: the page
+/// shows its first snapshot as "before" and its newest as "after", without errors.
+#[test]
+fn a_live_run_shows_its_newest_snapshot() {
+    use npy::{NpyArray, NpyData};
+    let Some(chromium) = chromium() else {
+        no_chromium();
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("live_run");
+    std::fs::create_dir_all(&run).unwrap();
+    std::fs::write(run.join("task.json"), "{}").unwrap();
+    std::fs::write(run.join("run.lock"), "{}").unwrap();
+    let saved = stylize::saved::SavedDeformation::read(golden_npz()).unwrap();
+    let x: Vec<f32> = (0..2)
+        .flat_map(|k| {
+            saved
+                .verts
+                .iter()
+                .flat_map(move |p| [p[0], p[1] * (1.0 - 0.4 * k as f32), p[2]])
+        })
+        .collect();
+    let it = NpyArray::new(vec![2], NpyData::I64(vec![0, 50])).unwrap();
+    let xa = NpyArray::new(vec![2, saved.verts.len(), 3], NpyData::F32(x)).unwrap();
+    let faces = NpyArray::i64_rows3(&saved.faces);
+    npy::npz::write_npz(
+        run.join("snapshots.npz"),
+        [("iterations", &it), ("x", &xa), ("faces", &faces)],
+    )
+    .unwrap();
+    let (_server, url) = serve(&run);
+    let shot = clean_shot(
+        &chromium,
+        &url,
+        &shot_path(dir.path(), "view_live_run.png"),
+        &dir.path().join("profile_live"),
+    );
+    assert_eq!(html_attr(&shot.dom, "data-replay").as_deref(), Some("50"));
+    assert!(shot.dom.contains("run · running"), "status not shown");
+    let half = WIDTH as usize / 2;
+    let (left, right) = (shot.coverage(0, half), shot.coverage(half, 2 * half));
+    assert!(
+        left > 0.03 && right > 0.03,
+        "the live run is not drawn (before {left:.4}, after {right:.4})"
+    );
+    // The newest snapshot is flattened along y: less covered than the first.
+    assert!(right < 0.9 * left, "before {left:.4}, after {right:.4}");
+}

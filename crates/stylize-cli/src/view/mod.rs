@@ -141,7 +141,7 @@ pub struct RunItem {
     /// The last valid `snapshots.npz` read (reused while its stamp is unchanged).
     snapshots: Mutex<Option<Arc<Snapshots>>>,
     /// The saved λ with the stamp of the `deformation.npz` it was read from.
-    saved_lambda: Mutex<Option<((SystemTime, u64), Option<f64>)>>,
+    saved_lambda: Mutex<Option<StampedLambda>>,
 }
 
 impl std::fmt::Debug for RunItem {
@@ -163,6 +163,9 @@ pub struct Shape {
     /// Diagnostics (None for the source itself).
     pub sanity: Option<LambdaSanity>,
 }
+
+/// A saved λ with the (modification time, length) of the file it was read from.
+type StampedLambda = ((SystemTime, u64), Option<f64>);
 
 fn stamp(path: &Path) -> std::io::Result<(SystemTime, u64)> {
     let m = std::fs::metadata(path)?;
@@ -478,15 +481,16 @@ impl RunItem {
         let mut prompt = self.label.prompt.clone();
         let mut style = self.label.style.clone();
         let mut mesh = self.label.mesh.clone();
-        if prompt.is_none() && style.is_none() {
-            if let Some(task) = read_json("task.json") {
-                let fields = &task["identity"]["fields"];
-                // Values are canonical text: the prompt is JSON-quoted, the style is not.
-                prompt = fields["prompt"]
-                    .as_str()
-                    .map(|p| serde_json::from_str::<String>(p).unwrap_or_else(|_| p.to_string()));
-                style = fields["style"].as_str().map(str::to_string);
-            }
+        if prompt.is_none()
+            && style.is_none()
+            && let Some(task) = read_json("task.json")
+        {
+            let fields = &task["identity"]["fields"];
+            // Values are canonical text: the prompt is JSON-quoted, the style is not.
+            prompt = fields["prompt"]
+                .as_str()
+                .map(|p| serde_json::from_str::<String>(p).unwrap_or_else(|_| p.to_string()));
+            style = fields["style"].as_str().map(str::to_string);
         }
         if mesh.is_none() {
             mesh = read_json("run.json").and_then(|r| r["mesh"].as_str().map(str::to_string));
