@@ -220,6 +220,9 @@ async function loadItem(id) {
     resultGeometry = new THREE.BufferGeometry();
     resultGeometry.setAttribute('position', new THREE.BufferAttribute(positions.slice(), 3));
     resultGeometry.setIndex(new THREE.BufferAttribute(index, 1));
+    // Normals before the first draw: an attribute added after a geometry was first drawn is not
+    // picked up by three.js's cached vertex state, and the shading would keep the first normals.
+    resultGeometry.computeVertexNormals();
     attach(after, resultGeometry, solid);
     const saved = current.lambda ?? 8;
     ui.lambda.max = String(Math.min(current.lambda_max, Math.max(20, Math.ceil(2 * saved))));
