@@ -11,6 +11,21 @@ use crate::CotanError;
 use faer::sparse::linalg::cholesky::{SymbolicCholesky, SymbolicCholeskyRaw};
 use std::cell::Cell;
 
+/// [`CscFactor::substitute`] as a `pulp` kernel: `with_simd` is inlined into the function pulp
+/// compiles for the CPU's instruction set (a closure would be compiled for the baseline SSE2).
+struct Substitute<'a> {
+    factor: &'a CscFactor,
+    x: &'a mut [[f64; 4]],
+}
+
+impl pulp::WithSimd for Substitute<'_> {
+    type Output = ();
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _simd: S) {
+        self.factor.substitute(self.x);
+    }
+}
+
 thread_local! {
     /// Padded rows for [`CscFactor::solve_in_place`], kept between calls (no allocation per solve).
     static SCRATCH: Cell<Vec<[f64; 4]>> = const { Cell::new(Vec::new()) };
@@ -155,7 +170,10 @@ impl CscFactor {
             let mut work = cell.take();
             work.clear();
             work.extend(x.iter().map(|r| [r[0], r[1], r[2], 0.0]));
-            pulp::Arch::new().dispatch(|| self.substitute(&mut work));
+            pulp::Arch::new().dispatch(Substitute {
+                factor: self,
+                x: &mut work,
+            });
             for (o, r) in x.iter_mut().zip(&work) {
                 *o = [r[0], r[1], r[2]];
             }

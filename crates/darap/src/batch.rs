@@ -287,6 +287,33 @@ mod tests {
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
 
+    // The kernels as `pulp` ops, so that the test runs the lanes compiled as the layer runs them
+    // (with the CPU's instruction set), not a baseline-compiled closure.
+    struct SvdOp<'a>(&'a M3);
+    impl pulp::WithSimd for SvdOp<'_> {
+        type Output = SvdLanes;
+        #[inline(always)]
+        fn with_simd<S: pulp::Simd>(self, _simd: S) -> SvdLanes {
+            svd3_lanes(self.0)
+        }
+    }
+    struct RuleOp<'a>(&'a SvdLanes, RotationRule);
+    impl pulp::WithSimd for RuleOp<'_> {
+        type Output = (M3, F);
+        #[inline(always)]
+        fn with_simd<S: pulp::Simd>(self, _simd: S) -> (M3, F) {
+            rule_lanes(self.0, self.1)
+        }
+    }
+    struct VjpOp<'a>(&'a SvdLanes, F, RotationRule, &'a M3);
+    impl pulp::WithSimd for VjpOp<'_> {
+        type Output = M3;
+        #[inline(always)]
+        fn with_simd<S: pulp::Simd>(self, _simd: S) -> M3 {
+            rotation_vjp_lanes(self.0, self.1, self.2, self.3)
+        }
+    }
+
     fn to_lanes(ms: &[Mat3]) -> M3 {
         std::array::from_fn(|i| std::array::from_fn(|j| std::array::from_fn(|l| ms[l][i][j])))
     }
@@ -374,10 +401,10 @@ mod tests {
                 .collect();
             let s = to_lanes(&batch);
             let g = to_lanes(&grads);
-            let svd = dispatch(|| svd3_lanes(&s));
+            let svd = dispatch(SvdOp(&s));
             for rule in [RotationRule::Gis, RotationRule::Procrustes] {
-                let (r, d2) = dispatch(|| rule_lanes(&svd, rule));
-                let ds = dispatch(|| rotation_vjp_lanes(&svd, d2, rule, &g));
+                let (r, d2) = dispatch(RuleOp(&svd, rule));
+                let ds = dispatch(VjpOp(&svd, d2, rule, &g));
                 for (l, m) in batch.iter().enumerate() {
                     let reference = svd3(m);
                     assert_eq!(bits(&lane(&svd.u, l)), bits(&reference.u), "U of {m:?}");
