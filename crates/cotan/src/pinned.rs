@@ -460,6 +460,48 @@ mod tests {
         (p, f)
     }
 
+    /// A supernodal factor pads its relaxed supernodes with explicit zeros; the copy drops them
+    /// (and stores the diagonal blocks' lower triangles only), so it has exactly the simplicial
+    /// factor's pattern, and both solve alike.
+    #[test]
+    fn supernodal_copy_stores_the_simplicial_pattern_only() {
+        use faer::sparse::linalg::SupernodalThreshold;
+        let (p, f) = grid(24);
+        let l = laplacian(&p, &f).unwrap();
+        let split = PinSplit::new(l.size(), &[0]);
+        let reduced = reduce(&l, &split);
+        let m = split.free.len();
+        let pattern =
+            SymbolicSparseColMatRef::new_checked(m, m, &reduced.col_ptr, None, &reduced.row_idx);
+        let copy = |threshold| {
+            let symbolic = factorize_symbolic_cholesky(
+                pattern,
+                Side::Lower,
+                SymmetricOrdering::Amd,
+                CholeskySymbolicParams {
+                    supernodal_flop_ratio_threshold: threshold,
+                    ..Default::default()
+                },
+            )
+            .unwrap();
+            let values = numeric(&symbolic, SparseColMatRef::new(pattern, &reduced.vals)).unwrap();
+            CscFactor::from_faer(&symbolic, &values).unwrap()
+        };
+        let supernodal = copy(SupernodalThreshold::FORCE_SUPERNODAL);
+        let simplicial = copy(SupernodalThreshold::FORCE_SIMPLICIAL);
+        assert_eq!(supernodal.nnz(), simplicial.nnz());
+        let b: Vec<[f64; 3]> = (0..m)
+            .map(|i| [(i as f64).sin(), (i as f64 * 0.7).cos(), 1.0])
+            .collect();
+        let (mut x, mut y) = (b.clone(), b);
+        supernodal.solve_in_place(&mut x);
+        simplicial.solve_in_place(&mut y);
+        let scale = y.iter().flatten().fold(0.0f64, |a, v| a.max(v.abs()));
+        for (a, b) in x.iter().flatten().zip(y.iter().flatten()) {
+            assert!((a - b).abs() <= 1e-12 * scale, "{a} vs {b}");
+        }
+    }
+
     #[test]
     fn pinned_solve_satisfies_free_rows_and_keeps_pins() {
         let (p, f) = grid(6);

@@ -80,6 +80,23 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 .expect("fake guidance evaluates");
         }),
     );
+    // The same minus the time inside the (fake) denoiser calls, which allocate and zero their
+    // outputs (16×6×256² f32 for stage II): the guidance's own overhead, as `metrics.jsonl`
+    // reports it (`guidance − guidance_denoiser`).
+    let mut outside: Vec<f64> = (0..reps)
+        .map(|_| {
+            let t = Instant::now();
+            let out = guidance
+                .evaluate_with_weight(&batch, 0.3, &mut rng)
+                .expect("fake guidance evaluates");
+            (t.elapsed().as_secs_f64() - out.denoiser_seconds) * 1e3
+        })
+        .collect();
+    outside.sort_by(f64::total_cmp);
+    row(
+        "evaluate, stage I + II, outside the denoiser calls",
+        outside[outside.len() / 2],
+    );
     row(
         "evaluate, stage I only (w_II = 0)",
         time_ms(reps, || {

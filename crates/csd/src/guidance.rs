@@ -20,6 +20,7 @@ use crate::{Denoiser, Embedding, Guidance, GuidanceError, GuidanceOutput, Images
 use optim::Schedule;
 use rand::RngCore;
 use rayon::prelude::*;
+use std::time::Instant;
 
 /// Image channels the guidance works on (RGB).
 pub const CHANNELS: usize = 3;
@@ -463,6 +464,8 @@ fn fused_sds(
 struct Stage1Core {
     t1: Vec<i64>,
     loss1: f64,
+    /// Wall time of the denoiser call, seconds.
+    denoiser_seconds: f64,
     /// The UNet output, kept only for a trace.
     out1: Option<Tensor>,
 }
@@ -472,6 +475,8 @@ struct Stage2Core {
     t2: Vec<i64>,
     s2: Vec<i64>,
     loss2: f64,
+    /// Wall time of the denoiser call, seconds.
+    denoiser_seconds: f64,
     /// The UNet output, kept only for a trace.
     out2: Option<Tensor>,
 }
@@ -587,7 +592,9 @@ impl Stages<'_> {
         }
         let ts: Vec<i64> = t1.iter().chain(&t1).copied().collect();
         let embeddings = batch_embeddings(self.cond, self.uncond, b);
+        let clock = Instant::now();
         let out1 = model.predict(&w.sample1, &ts, &embeddings, None)?;
+        let denoiser_seconds = clock.elapsed().as_secs_f64();
         let w1 = weights(self.schedule, &t1)?;
         let loss1 = fused_sds(
             &out1,
@@ -613,6 +620,7 @@ impl Stages<'_> {
         Ok(Stage1Core {
             t1,
             loss1,
+            denoiser_seconds,
             out1: self.keep_outputs.then_some(out1),
         })
     }
@@ -696,7 +704,9 @@ impl Stages<'_> {
         let ts: Vec<i64> = t2.iter().chain(&t2).copied().collect();
         let labels: Vec<i64> = s2.iter().chain(&s2).copied().collect();
         let embeddings = batch_embeddings(self.cond, self.uncond, b);
+        let clock = Instant::now();
         let out2 = model.predict(&w.sample2, &ts, &embeddings, Some(&labels))?;
+        let denoiser_seconds = clock.elapsed().as_secs_f64();
         let w2 = weights(self.schedule, &t2)?;
         let loss2 = fused_sds(
             &out2,
@@ -725,6 +735,7 @@ impl Stages<'_> {
             t2,
             s2,
             loss2,
+            denoiser_seconds,
             out2: self.keep_outputs.then_some(out2),
         })
     }
@@ -998,6 +1009,8 @@ impl<'m> CascadedGuidance<'m> {
                 .as_ref()
                 .map_or(0.0, |s| cfg.loss_scale * stage2_weight * s.loss2),
             stage2_weight,
+            denoiser_seconds: stage1.denoiser_seconds
+                + stage2.as_ref().map_or(0.0, |s| s.denoiser_seconds),
             grad_images: stages.decode_gradient(images, work),
         };
         Ok((

@@ -195,6 +195,10 @@ pub struct GuidanceOutput {
     pub loss_stage2: f64,
     /// The stage-II weight w_II used for this evaluation (0 for a guidance without a second stage).
     pub stage2_weight: f64,
+    /// Wall time spent inside the denoiser calls (the UNets), seconds: what a caller subtracts
+    /// from the evaluation's time to get the guidance's own overhead (resizes, noise, CFG, SDS).
+    /// 0 for a guidance without a denoiser.
+    pub denoiser_seconds: f64,
     /// dL/dimages, same sizes as the input images.
     pub grad_images: Images,
 }

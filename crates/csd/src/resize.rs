@@ -398,10 +398,15 @@ impl Gather1d {
     fn vertical(&self, src: &[f32], width: usize, dst: &mut [f32]) {
         for (i, d) in dst.chunks_exact_mut(width).enumerate() {
             let (start, weights) = self.row(i);
-            d.fill(0.0);
-            for (k, &w) in weights.iter().enumerate() {
-                let r = start + k;
-                for (o, &x) in d.iter_mut().zip(&src[r * width..(r + 1) * width]) {
+            let rows = src[start * width..].chunks_exact(width);
+            let mut taps = weights.iter().zip(rows);
+            // The first tap initializes the row (`0 + w·x = w·x`): one pass fewer than zeroing.
+            match taps.next() {
+                Some((&w, x)) => d.iter_mut().zip(x).for_each(|(o, &x)| *o = w * x),
+                None => d.fill(0.0),
+            }
+            for (&w, x) in taps {
+                for (o, &x) in d.iter_mut().zip(x) {
                     *o += w * x;
                 }
             }
@@ -415,13 +420,17 @@ impl Gather1d {
             .chunks_exact(self.in_len)
             .zip(dst.chunks_exact_mut(out_len))
         {
-            for (j, o) in d.iter_mut().enumerate() {
-                let (start, weights) = self.row(j);
-                *o = weights
-                    .iter()
-                    .zip(&s[start..])
-                    .map(|(&w, &x)| w * x)
-                    .sum::<f32>();
+            for ((o, &start), span) in d.iter_mut().zip(&self.start).zip(self.offset.windows(2)) {
+                let weights = &self.weights[span[0]..span[1]];
+                *o = match (weights, &s[start..]) {
+                    // Two taps (bilinear), the common case, without the loop.
+                    ([w0, w1], [x0, x1, ..]) => 0.0 + w0 * x0 + w1 * x1,
+                    _ => weights
+                        .iter()
+                        .zip(&s[start..])
+                        .map(|(&w, &x)| w * x)
+                        .sum::<f32>(),
+                };
             }
         }
     }

@@ -89,11 +89,15 @@ pub(crate) fn svd3_lanes(s: &M3) -> SvdLanes {
             rotated = or(rotated, not(skip));
             let zeta = div(sub(beta, alpha), mul(splat(2.0), gamma));
             let zeta_abs = abs(zeta);
-            let t = select(
-                gt(zeta_abs, splat(1e150)),
-                div(splat(0.5), zeta),
-                div(
-                    signum(zeta),
+            // t = 0.5/ζ where |ζ| > 1e150, else sgn(ζ)/(|ζ| + √(1 + ζ²)): one division of the
+            // selected numerator by the selected denominator (the same IEEE division per lane as
+            // the scalar branch, so bit for bit the same t).
+            let huge = gt(zeta_abs, splat(1e150));
+            let t = div(
+                select(huge, splat(0.5), signum(zeta)),
+                select(
+                    huge,
+                    zeta,
                     add(zeta_abs, sqrt(add(splat(1.0), mul(zeta, zeta)))),
                 ),
             );
@@ -173,6 +177,16 @@ pub(crate) fn svd3_lanes(s: &M3) -> SvdLanes {
     SvdLanes { u, sigma, v }
 }
 
+/// Lane-wise `if c { a } else { b }` on masks.
+#[inline(always)]
+fn select_mask(c: Mask, a: Mask, b: Mask) -> Mask {
+    let mut r = a;
+    for i in 0..W {
+        r[i] = if c[i] { a[i] } else { b[i] };
+    }
+    r
+}
+
 #[inline(always)]
 fn eq_mask(a: Mask, b: Mask) -> Mask {
     let mut r = a;
@@ -236,22 +250,21 @@ pub(crate) fn rotation_vjp_lanes(svd: &SvdLanes, d2: F, rule: RotationRule, grad
                 continue;
             }
             let den_same = add(sigma[i], sigma[j]);
-            let q_same = select(
-                gt(den_same, guard),
-                div(mul(d[i], sub(h[i][j], h[j][i])), den_same),
-                zero,
-            );
+            let num_same = mul(d[i], sub(h[i][j], h[j][i]));
             if i != 2 && j != 2 {
-                q[i][j] = q_same;
+                q[i][j] = select(gt(den_same, guard), div(num_same, den_same), zero);
                 continue;
             }
             let den_diff = sub(sigma[j], sigma[i]);
-            let q_diff = select(
-                gt(abs(den_diff), guard),
-                div(mul(d[j], add(h[i][j], h[j][i])), den_diff),
-                zero,
+            let num_diff = mul(d[j], add(h[i][j], h[j][i]));
+            // One division per lane of the selected case's numerator by its denominator (bit for
+            // bit the scalar branch's quotient).
+            let (num, den) = (
+                select(same2, num_same, num_diff),
+                select(same2, den_same, den_diff),
             );
-            q[i][j] = select(same2, q_same, q_diff);
+            let ok = select_mask(same2, gt(den_same, guard), gt(abs(den_diff), guard));
+            q[i][j] = select(ok, div(num, den), zero);
         }
     }
     let ds = matmul(&matmul(&svd.u, &q), &transpose(&svd.v));
@@ -273,6 +286,33 @@ mod tests {
     use crate::svd3::svd3;
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
+
+    // The kernels as `pulp` ops, so that the test runs the lanes compiled as the layer runs them
+    // (with the CPU's instruction set), not a baseline-compiled closure.
+    struct SvdOp<'a>(&'a M3);
+    impl pulp::WithSimd for SvdOp<'_> {
+        type Output = SvdLanes;
+        #[inline(always)]
+        fn with_simd<S: pulp::Simd>(self, _simd: S) -> SvdLanes {
+            svd3_lanes(self.0)
+        }
+    }
+    struct RuleOp<'a>(&'a SvdLanes, RotationRule);
+    impl pulp::WithSimd for RuleOp<'_> {
+        type Output = (M3, F);
+        #[inline(always)]
+        fn with_simd<S: pulp::Simd>(self, _simd: S) -> (M3, F) {
+            rule_lanes(self.0, self.1)
+        }
+    }
+    struct VjpOp<'a>(&'a SvdLanes, F, RotationRule, &'a M3);
+    impl pulp::WithSimd for VjpOp<'_> {
+        type Output = M3;
+        #[inline(always)]
+        fn with_simd<S: pulp::Simd>(self, _simd: S) -> M3 {
+            rotation_vjp_lanes(self.0, self.1, self.2, self.3)
+        }
+    }
 
     fn to_lanes(ms: &[Mat3]) -> M3 {
         std::array::from_fn(|i| std::array::from_fn(|j| std::array::from_fn(|l| ms[l][i][j])))
@@ -361,10 +401,10 @@ mod tests {
                 .collect();
             let s = to_lanes(&batch);
             let g = to_lanes(&grads);
-            let svd = dispatch(|| svd3_lanes(&s));
+            let svd = dispatch(SvdOp(&s));
             for rule in [RotationRule::Gis, RotationRule::Procrustes] {
-                let (r, d2) = dispatch(|| rule_lanes(&svd, rule));
-                let ds = dispatch(|| rotation_vjp_lanes(&svd, d2, rule, &g));
+                let (r, d2) = dispatch(RuleOp(&svd, rule));
+                let ds = dispatch(VjpOp(&svd, d2, rule, &g));
                 for (l, m) in batch.iter().enumerate() {
                     let reference = svd3(m);
                     assert_eq!(bits(&lane(&svd.u, l)), bits(&reference.u), "U of {m:?}");

@@ -202,18 +202,16 @@ pub fn local_step(
         .enumerate()
         .with_min_len(PAR_MIN_LEN / W)
         .map(|(c, out)| {
-            dispatch(|| {
-                local_chunk(
-                    c * W,
-                    covariance_rest,
-                    mass,
-                    lambda,
-                    rest_normals,
-                    targets_unit,
-                    rule,
-                    free,
-                    out,
-                )
+            dispatch(LocalChunk {
+                base: c * W,
+                covariance_rest,
+                mass,
+                lambda,
+                rest_normals,
+                targets_unit,
+                rule,
+                free,
+                out,
             })
         })
         .collect();
@@ -225,6 +223,69 @@ pub fn local_step(
             chunks,
         },
     )
+}
+
+/// One batch of [`local_step`] as a `pulp` kernel: [`dispatch`] runs `with_simd` inside a
+/// function compiled for the CPU's instruction set, and everything below it is `inline(always)`,
+/// so the lane loops are vectorized with that instruction set (a closure would be compiled
+/// separately, for the baseline SSE2).
+struct LocalChunk<'a> {
+    base: usize,
+    covariance_rest: &'a [Mat3],
+    mass: &'a [f64],
+    lambda: f64,
+    rest_normals: &'a [[f64; 3]],
+    targets_unit: &'a [[f64; 3]],
+    rule: RotationRule,
+    free: Option<&'a [bool]>,
+    out: &'a mut [Mat3],
+}
+
+impl pulp::WithSimd for LocalChunk<'_> {
+    type Output = TapeChunk;
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _simd: S) -> TapeChunk {
+        local_chunk(
+            self.base,
+            self.covariance_rest,
+            self.mass,
+            self.lambda,
+            self.rest_normals,
+            self.targets_unit,
+            self.rule,
+            self.free,
+            self.out,
+        )
+    }
+}
+
+/// One batch of [`local_step_vjp`] as a `pulp` kernel (see [`LocalChunk`]).
+struct LocalVjpChunk<'a> {
+    base: usize,
+    chunk: &'a TapeChunk,
+    rule: RotationRule,
+    mass: &'a [f64],
+    lambda: f64,
+    rest_normals: &'a [[f64; 3]],
+    grad_rotations: &'a [Mat3],
+    out: &'a mut [[f64; 3]],
+}
+
+impl pulp::WithSimd for LocalVjpChunk<'_> {
+    type Output = ();
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _simd: S) {
+        local_vjp_chunk(
+            self.base,
+            self.chunk,
+            self.rule,
+            self.mass,
+            self.lambda,
+            self.rest_normals,
+            self.grad_rotations,
+            self.out,
+        )
+    }
 }
 
 #[inline(always)]
@@ -297,17 +358,15 @@ pub fn local_step_vjp(
         .enumerate()
         .with_min_len(PAR_MIN_LEN / W)
         .for_each(|(c, (out, chunk))| {
-            dispatch(|| {
-                local_vjp_chunk(
-                    c * W,
-                    chunk,
-                    tape.rule,
-                    mass,
-                    lambda,
-                    rest_normals,
-                    grad_rotations,
-                    out,
-                )
+            dispatch(LocalVjpChunk {
+                base: c * W,
+                chunk,
+                rule: tape.rule,
+                mass,
+                lambda,
+                rest_normals,
+                grad_rotations,
+                out,
             })
         });
     out

@@ -50,6 +50,7 @@ impl Guidance for DarkerGuidance {
             loss_stage1: scale * mean,
             loss_stage2: stage2_weight,
             stage2_weight,
+            denoiser_seconds: 0.0,
             grad_images,
         })
     }

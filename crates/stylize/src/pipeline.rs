@@ -397,6 +397,7 @@ impl Objective for TextObjective<'_> {
             .evaluate(images, iteration, rng)
             .context("guidance")?;
         timings.push(("guidance", t.elapsed().as_secs_f64()));
+        timings.push(("guidance_denoiser", out.denoiser_seconds));
         if !out.grad_images.same_shape(images) {
             bail!(
                 "guidance returned {} gradient values for {} image values",
