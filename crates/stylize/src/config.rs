@@ -5,7 +5,7 @@
 //! ```toml
 //! [darap]    lambda = 8.0, rotation_rule = "gis", post_process = "recenter_rescale"
 //! [optim]    lr = 0.002, iterations = 2500, steps_per_batch = 2, beta1, beta2, eps
-//! [camera]   preset, views = 8, elevation_deg, azimuth_deg, distance, fov_deg = 90, adapt_distance
+//! [camera]   views = 8, elevation_deg, azimuth_deg, distance, fov_deg = 90, adapt_distance
 //! [render]   width = 512, height = 512, backend = "auto"
 //! [guidance] scale = 100, t_min = 20, t_max = 980, loss_scale = 100, stage1_weight = 1,
 //!            stage2_weight = "0.0>0.2:1000; 0.2>0.3:750", negative_prompt = "", grad_clip = 0 (off),
@@ -77,33 +77,30 @@ impl Default for OptimSection {
     }
 }
 
-/// `[camera]`: the per-iteration view sampler (spec §6).
+/// `[camera]`: the per-iteration view sampler (spec §6). Its keys `elevation_deg`
+/// ([0, 60]), `azimuth_deg` ([0, 361]), `distance` ([2.5, 3.0], before the adaptive multiplier)
+/// and `fov_deg` (90: focal length 1, the reference's effective value) are
+/// [`raster_diff::CameraConfig`]'s own, through its `serde` feature (defaults live there only);
+/// `views` and `adapt_distance` are the loop's.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct CameraSection {
     /// Views per iteration: 8.
     pub views: usize,
-    /// Elevation range in degrees: [0, 60].
-    pub elevation_deg: [f64; 2],
-    /// Azimuth range in degrees: [0, 361].
-    pub azimuth_deg: [f64; 2],
-    /// Camera distance range (before the adaptive multiplier): [2.5, 3.0].
-    pub distance: [f64; 2],
-    /// Vertical field of view in degrees: 90 (focal length 1, the reference's effective value).
-    pub fov_deg: f64,
     /// Scale the distance by the deformed mesh's extent from iteration 2 on (spec §5): true.
     pub adapt_distance: bool,
+    /// The ranges of the per-view draws and the field of view (flattened: the file's `[camera]`
+    /// keys `elevation_deg`, `azimuth_deg`, `distance`, `fov_deg`).
+    #[serde(flatten)]
+    pub sampler: raster_diff::CameraConfig,
 }
 
 impl Default for CameraSection {
     fn default() -> Self {
         Self {
             views: 8,
-            elevation_deg: [0.0, 60.0],
-            azimuth_deg: [0.0, 361.0],
-            distance: [2.5, 3.0],
-            fov_deg: 90.0,
             adapt_distance: true,
+            sampler: raster_diff::CameraConfig::default(),
         }
     }
 }
@@ -130,7 +127,12 @@ impl Default for RenderSection {
     }
 }
 
-/// `[guidance]` (spec §7).
+/// `[guidance]` (spec §7): the file-format layer over [`csd::GuidanceConfig`], whose defaults
+/// these are (taken from it, not retyped). A separate struct because the file deliberately names
+/// things differently: `scale` (csd's `guidance_scale`: the section already says "guidance"),
+/// `t_min`/`t_max` (csd's nested `timesteps`), `grad_clip = 0` for "off" (csd's `None`: TOML has
+/// no null), and the section also carries what csd does not own (the stage-II schedule text, the
+/// negative prompt, ONNX Runtime's arena). [`GuidanceSection::guidance_config`] maps it back.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct GuidanceSection {
@@ -144,7 +146,8 @@ pub struct GuidanceSection {
     pub loss_scale: f64,
     /// Stage-I weight: 1.
     pub stage1_weight: f64,
-    /// Stage-II weight schedule (spec §5 grammar, 1-indexed iterations).
+    /// Stage-II weight schedule (spec §5 grammar, 1-indexed iterations):
+    /// [`csd::REFERENCE_STAGE2_WEIGHT`].
     pub stage2_weight: String,
     /// Negative prompt ("" = unconditional).
     pub negative_prompt: String,
@@ -158,16 +161,35 @@ pub struct GuidanceSection {
 
 impl Default for GuidanceSection {
     fn default() -> Self {
+        let csd = csd::GuidanceConfig::default();
         Self {
-            scale: 100.0,
-            t_min: 20,
-            t_max: 980,
-            loss_scale: 100.0,
-            stage1_weight: 1.0,
-            stage2_weight: "0.0>0.2:1000; 0.2>0.3:750".to_string(),
+            scale: f64::from(csd.guidance_scale),
+            t_min: csd.timesteps.min,
+            t_max: csd.timesteps.max,
+            loss_scale: csd.loss_scale,
+            stage1_weight: csd.stage1_weight,
+            stage2_weight: csd::REFERENCE_STAGE2_WEIGHT.to_string(),
             negative_prompt: String::new(),
-            grad_clip: 0.0,
-            onnx_memory_arena: true,
+            grad_clip: csd.grad_clip.map_or(0.0, f64::from),
+            onnx_memory_arena: diffusion_onnx::SessionOptions::default().cpu_memory_arena,
+        }
+    }
+}
+
+impl GuidanceSection {
+    /// The `csd` guidance settings this section names (csd's defaults for what the file does not
+    /// expose: the 224/64/256 resolutions and T = 1000).
+    pub fn guidance_config(&self) -> csd::GuidanceConfig {
+        csd::GuidanceConfig {
+            guidance_scale: self.scale as f32,
+            timesteps: csd::TimestepRange {
+                min: self.t_min,
+                max: self.t_max,
+            },
+            loss_scale: self.loss_scale,
+            stage1_weight: self.stage1_weight,
+            grad_clip: (self.grad_clip > 0.0).then_some(self.grad_clip as f32),
+            ..csd::GuidanceConfig::default()
         }
     }
 }
@@ -335,25 +357,26 @@ impl Config {
         if self.camera.views == 0 {
             bail!("camera.views must be at least 1");
         }
+        let sampler = &self.camera.sampler;
         for (name, r) in [
-            ("camera.elevation_deg", self.camera.elevation_deg),
-            ("camera.azimuth_deg", self.camera.azimuth_deg),
-            ("camera.distance", self.camera.distance),
+            ("camera.elevation_deg", sampler.elevation_deg),
+            ("camera.azimuth_deg", sampler.azimuth_deg),
+            ("camera.distance", sampler.distance),
         ] {
             if !(r[0].is_finite() && r[1].is_finite() && r[0] <= r[1]) {
                 bail!("{name} must be a finite range [low, high] with low <= high, got {r:?}");
             }
         }
-        if self.camera.distance[0] <= 0.0 {
+        if sampler.distance[0] <= 0.0 {
             bail!(
                 "camera.distance must be positive, got {:?}",
-                self.camera.distance
+                sampler.distance
             );
         }
-        if !(self.camera.fov_deg > 0.0 && self.camera.fov_deg < 180.0) {
+        if !(sampler.fov_y_deg > 0.0 && sampler.fov_y_deg < 180.0) {
             bail!(
                 "camera.fov_deg must be in (0, 180), got {}",
-                self.camera.fov_deg
+                sampler.fov_y_deg
             );
         }
         if self.render.width == 0 || self.render.height == 0 {

@@ -93,7 +93,7 @@ impl Default for ClipSettings {
         Self {
             views: 16,
             render_size: 512,
-            fov_deg: crate::config::Config::default().camera.fov_deg,
+            fov_deg: raster_diff::CameraConfig::default().fov_y_deg,
         }
     }
 }

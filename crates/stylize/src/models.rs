@@ -8,25 +8,16 @@
 use std::path::Path;
 
 use anyhow::Context;
-use csd::{CascadedGuidance, Denoiser, Embedding, GuidanceConfig, TimestepRange};
+use csd::{CascadedGuidance, Denoiser, Embedding, GuidanceConfig};
 use diffusion_onnx::{EmbeddingCache, ModelDir, OnnxDenoiser, SessionOptions, Stage};
 
 use crate::config::Config;
 
-/// The `csd` guidance settings from the configuration.
+/// The `csd` guidance settings from the configuration ([`GuidanceSection::guidance_config`]).
+///
+/// [`GuidanceSection::guidance_config`]: crate::config::GuidanceSection::guidance_config
 pub fn guidance_config(config: &Config) -> GuidanceConfig {
-    let g = &config.guidance;
-    GuidanceConfig {
-        guidance_scale: g.scale as f32,
-        timesteps: TimestepRange {
-            min: g.t_min,
-            max: g.t_max,
-        },
-        loss_scale: g.loss_scale,
-        stage1_weight: g.stage1_weight,
-        grad_clip: (g.grad_clip > 0.0).then_some(g.grad_clip as f32),
-        ..GuidanceConfig::default()
-    }
+    config.guidance.guidance_config()
 }
 
 /// Opened model sessions, reusable across prompts.

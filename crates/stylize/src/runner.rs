@@ -15,7 +15,7 @@ use npy::{NpyArray, NpyData};
 use optim::{Adam, AdamConfig};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use raster_diff::{CameraConfig, Images, Renderer};
+use raster_diff::{Images, Renderer};
 
 use crate::checkpoint::{CHECKPOINT_VERSION, Checkpoint};
 use crate::config::{Backend, Config};
@@ -575,14 +575,8 @@ pub fn build_objective<'g>(
         }
         Task::Text { guidance, .. } => {
             let (renderer, why) = renderer(config);
-            let camera = CameraConfig {
-                elevation_deg: config.camera.elevation_deg,
-                azimuth_deg: config.camera.azimuth_deg,
-                distance: config.camera.distance,
-                fov_y_deg: config.camera.fov_deg,
-            };
             let views = ViewSettings {
-                camera,
+                camera: config.camera.sampler.clone(),
                 views: config.camera.views,
                 width: config.render.width,
                 height: config.render.height,
@@ -695,7 +689,7 @@ pub fn write_outputs(
         &deformed.faces,
         config.run.turntable_views,
         config.run.turntable_size,
-        config.camera.fov_deg,
+        config.camera.sampler.fov_y_deg,
     )?;
     if let (Some(r), true, Some(ids)) = (region, config.region.tint, tt_renderer.triangle_ids()) {
         tint_region(&mut tt, &ids, &deformed.faces, &r.free);
@@ -708,7 +702,7 @@ pub fn write_outputs(
         &deformed.faces,
         config.run.turntable_views,
         config.run.turntable_size,
-        config.camera.fov_deg,
+        config.camera.sampler.fov_y_deg,
     )?;
     Ok(deformed)
 }
@@ -825,7 +819,7 @@ pub fn execute_with<'g>(
         cancel,
         config_toml: prepared.config_toml.clone(),
         preview_size: config.run.turntable_size,
-        fov: config.camera.fov_deg,
+        fov: config.camera.sampler.fov_y_deg,
         faces: mesh.faces.clone(),
         preview_renderer: raster_diff::CpuRenderer::default(),
         tint: prepared
