@@ -457,10 +457,10 @@ fn run_row(
                 // `move`: the closure takes the `&mut` to the model set, so the guidance it builds
                 // may borrow the UNets for the whole run.
                 move || {
-                    let set = models.get_or_insert_with(|| ModelSet::open(model, &options.config));
-                    let set = set
-                        .as_mut()
-                        .map_err(|e| anyhow::anyhow!("{}", e.full_message()))?;
+                    let set = models.get_or_insert_with(|| {
+                        ModelSet::open(model, &options.config).map_err(anyhow::Error::from)
+                    });
+                    let set = set.as_mut().map_err(|e| anyhow::anyhow!("{e:#}"))?;
                     Ok(Task::Text {
                         prompt: prompt.clone(),
                         guidance: Box::new(set.guidance_for(prompt, config)?),
