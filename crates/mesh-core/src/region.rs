@@ -460,12 +460,57 @@ pub struct RegionInput<'a> {
     pub positions: &'a [[f64; 3]],
     /// Repaired faces.
     pub faces: &'a [[u32; 3]],
-    /// Input vertex → repaired vertex (`None`: dropped). Identity when the mesh was not repaired.
+    /// Input vertex → repaired vertex (`None`: dropped). Empty: the identity (a mesh that was
+    /// not repaired, [`RegionInput::unrepaired`]).
     pub vertex_map: &'a [Option<u32>],
-    /// Input triangle → repaired face (`None`: dropped).
+    /// Input triangle → repaired face (`None`: dropped). Empty: the identity.
     pub face_map: &'a [Option<u32>],
     /// Parts of the input file.
     pub parts: &'a Parts,
+}
+
+impl<'a> RegionInput<'a> {
+    /// A mesh used as it is (no repair: both maps the identity), e.g. the rest mesh of a saved
+    /// deformation.
+    pub fn unrepaired(positions: &'a [[f64; 3]], faces: &'a [[u32; 3]], parts: &'a Parts) -> Self {
+        Self {
+            positions,
+            faces,
+            vertex_map: &[],
+            face_map: &[],
+            parts,
+        }
+    }
+
+    /// Vertices of the input file (before repair).
+    fn input_vertices(&self) -> usize {
+        if self.vertex_map.is_empty() {
+            self.positions.len()
+        } else {
+            self.vertex_map.len()
+        }
+    }
+
+    /// The repaired vertex of input vertex `i`: `None` when `i` is out of range, `Some(None)` when
+    /// the repair dropped it.
+    fn repaired_vertex(&self, i: usize) -> Option<Option<u32>> {
+        if self.vertex_map.is_empty() {
+            (i < self.positions.len()).then(|| u32::try_from(i).ok())
+        } else {
+            self.vertex_map.get(i).copied()
+        }
+    }
+
+    /// The repaired face of input triangle `f` (`None`: dropped or out of range).
+    fn repaired_face(&self, f: usize) -> Option<u32> {
+        if self.face_map.is_empty() {
+            (f < self.faces.len())
+                .then(|| u32::try_from(f).ok())
+                .flatten()
+        } else {
+            self.face_map.get(f).copied().flatten()
+        }
+    }
 }
 
 /// A resolved region: `free[v]` for each vertex of the repaired mesh, and notes for the user.
@@ -496,8 +541,8 @@ fn vertices_of_faces(
 ) -> Vec<bool> {
     let mut out = vec![false; input.positions.len()];
     for f in selected_faces {
-        if let Some(Some(g)) = input.face_map.get(f)
-            && let Some(face) = input.faces.get(*g as usize)
+        if let Some(g) = input.repaired_face(f)
+            && let Some(face) = input.faces.get(g as usize)
         {
             for &v in face {
                 if let Some(slot) = out.get_mut(v as usize) {
@@ -532,17 +577,16 @@ fn select_one(spec: &RegionSpec, input: &RegionInput<'_>) -> Result<Vec<bool>, R
             let mut out = vec![false; n];
             for &i in indices {
                 let mapped = input
-                    .vertex_map
-                    .get(i)
+                    .repaired_vertex(i)
                     .ok_or_else(|| RegionError::NotFound {
                         spec: label.clone(),
                         message: format!(
                             "vertex {i} is out of range (the file has {} vertices)",
-                            input.vertex_map.len()
+                            input.input_vertices()
                         ),
                     })?;
                 if let Some(m) = mapped
-                    && let Some(slot) = out.get_mut(*m as usize)
+                    && let Some(slot) = out.get_mut(m as usize)
                 {
                     *slot = true;
                 }
@@ -579,8 +623,8 @@ fn select_one(spec: &RegionSpec, input: &RegionInput<'_>) -> Result<Vec<bool>, R
                 let mut out = vec![false; n];
                 for (i, &x) in p.values.iter().enumerate() {
                     if op.holds(x, *value)
-                        && let Some(Some(m)) = input.vertex_map.get(i)
-                        && let Some(slot) = out.get_mut(*m as usize)
+                        && let Some(Some(m)) = input.repaired_vertex(i)
+                        && let Some(slot) = out.get_mut(m as usize)
                     {
                         *slot = true;
                     }
@@ -806,15 +850,8 @@ mod tests {
     #[test]
     fn box_sphere_not_and_union_select_the_right_vertices() {
         let (p, f) = strip();
-        let (vm, fm) = identity_maps(p.len(), f.len());
         let parts = Parts::default();
-        let input = RegionInput {
-            positions: &p,
-            faces: &f,
-            vertex_map: &vm,
-            face_map: &fm,
-            parts: &parts,
-        };
+        let input = RegionInput::unrepaired(&p, &f, &parts);
         let left = RegionSpec::parse("box:-1,-1,-1,-0.5,1,1").expect("ok");
         let r = select(std::slice::from_ref(&left), &input).expect("ok");
         assert_eq!(
@@ -838,15 +875,8 @@ mod tests {
     #[test]
     fn an_empty_union_is_an_error_and_an_empty_member_a_warning() {
         let (p, f) = strip();
-        let (vm, fm) = identity_maps(p.len(), f.len());
         let parts = Parts::default();
-        let input = RegionInput {
-            positions: &p,
-            faces: &f,
-            vertex_map: &vm,
-            face_map: &fm,
-            parts: &parts,
-        };
+        let input = RegionInput::unrepaired(&p, &f, &parts);
         let far = RegionSpec::parse("sphere:5,5,5,1").expect("ok");
         let e = select(std::slice::from_ref(&far), &input).expect_err("an error");
         assert!(matches!(e, RegionError::Empty { .. }), "{e}");
@@ -857,6 +887,51 @@ mod tests {
         )
         .expect("ok");
         assert!(r.warnings.iter().any(|w| w.contains("sphere:5,5,5,1")));
+    }
+
+    #[test]
+    fn unrepaired_input_selects_as_explicit_identity_maps_do() {
+        let (p, f) = strip();
+        let (vm, fm) = identity_maps(p.len(), f.len());
+        let parts = Parts {
+            named: vec![NamedPart {
+                kind: PartKind::Group,
+                name: "first".into(),
+                faces: vec![0, 1, 99],
+            }],
+            vertex_properties: vec![ScalarProperty {
+                name: "label".into(),
+                values: vec![0., 0., 0., 0., 0., 0., 0., 0., 0., 3.],
+            }],
+            face_properties: Vec::new(),
+        };
+        let explicit = RegionInput {
+            positions: &p,
+            faces: &f,
+            vertex_map: &vm,
+            face_map: &fm,
+            parts: &parts,
+        };
+        let unrepaired = RegionInput::unrepaired(&p, &f, &parts);
+        for spec in ["part:first", "property:label>1", "not:part:first"] {
+            let spec = RegionSpec::parse(spec).expect("parses");
+            assert_eq!(
+                select(std::slice::from_ref(&spec), &unrepaired).expect("selects"),
+                select(std::slice::from_ref(&spec), &explicit).expect("selects"),
+                "{spec}"
+            );
+        }
+        let vertices = RegionSpec::Vertices {
+            source: "test".into(),
+            indices: vec![3, 10],
+        };
+        let message = |input: &RegionInput<'_>| {
+            select(std::slice::from_ref(&vertices), input)
+                .expect_err("vertex 10 is out of range")
+                .to_string()
+        };
+        assert_eq!(message(&unrepaired), message(&explicit));
+        assert!(message(&unrepaired).contains("10 vertices"));
     }
 
     #[test]

@@ -11,7 +11,17 @@ use rand::{Rng, RngCore};
 use crate::{RenderError, View};
 
 /// Ranges of the uniform per-view draws. Each range is `[low, high)`.
+///
+/// Under feature `serde` this (de)serializes by its field names, except that
+/// [`fov_y_deg`](Self::fov_y_deg) is named `fov_deg` (the config files' key since the first
+/// release: a config's `[camera]` section embeds this struct); missing keys take the defaults and
+/// unknown keys are refused.
 #[derive(Clone, Debug, PartialEq)]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize),
+    serde(default, deny_unknown_fields)
+)]
 pub struct CameraConfig {
     /// Elevation above the xz-plane in degrees.
     pub elevation_deg: [f64; 2],
@@ -19,7 +29,8 @@ pub struct CameraConfig {
     pub azimuth_deg: [f64; 2],
     /// Distance of the eye from the origin, before the adaptive multiplier.
     pub distance: [f64; 2],
-    /// Vertical field of view in degrees.
+    /// Vertical field of view in degrees (serialized as `fov_deg`).
+    #[cfg_attr(feature = "serde", serde(rename = "fov_deg"))]
     pub fov_y_deg: f64,
 }
 

@@ -406,7 +406,6 @@ fn run_row(
         config: config.clone(),
         force: options.force,
         resume: false,
-        log: options.log,
         halt_after: None,
     };
     let mut run_options = RunOptions {
@@ -424,7 +423,13 @@ fn run_row(
                     .push(("exemplar mesh".into(), path.clone()));
             }
             let objective = ObjectiveIdentity::of_style(&style);
-            execute_with(&request, objective, || Ok(Task::Style(style)), &run_options)?
+            execute_with(
+                &request,
+                options.log,
+                objective,
+                || Ok(Task::Style(style)),
+                &run_options,
+            )?
         }
         (None, Some(prompt)) => {
             let Some(model) = &options.model else {
@@ -447,11 +452,14 @@ fn run_row(
             let config = &config;
             execute_with(
                 &request,
+                options.log,
                 objective,
                 // `move`: the closure takes the `&mut` to the model set, so the guidance it builds
                 // may borrow the UNets for the whole run.
                 move || {
-                    let set = models.get_or_insert_with(|| ModelSet::open(model, &options.config));
+                    let set = models.get_or_insert_with(|| {
+                        ModelSet::open(model, &options.config).map_err(anyhow::Error::from)
+                    });
                     let set = set.as_mut().map_err(|e| anyhow::anyhow!("{e:#}"))?;
                     Ok(Task::Text {
                         prompt: prompt.clone(),

@@ -186,22 +186,22 @@ pub fn from_reference_json(text: &str) -> anyhow::Result<(Config, Vec<String>)> 
             c.render.height = r as usize;
         }
         if let Some(p) = pair(cl, "dist_minmax")? {
-            c.camera.distance = p;
+            c.camera.sampler.distance = p;
         }
         if let Some(p) = pair(cl, "elev_minmax")? {
-            c.camera.elevation_deg = p;
+            c.camera.sampler.elevation_deg = p;
         }
         if let Some(p) = pair(cl, "azim_minmax")? {
-            c.camera.azimuth_deg = [p[0], p[1] + 1.0];
+            c.camera.sampler.azimuth_deg = [p[0], p[1] + 1.0];
         }
         if let Some([lo, hi]) = pair(cl, "fov_minmax")? {
             if lo != hi {
                 bail!("`fov_minmax` = [{lo}, {hi}]: a range of fields of view is not supported");
             }
-            c.camera.fov_deg = effective_fov_deg(lo)?;
+            c.camera.sampler.fov_y_deg = effective_fov_deg(lo)?;
             notes.push(format!(
                 "fov {lo}° is {:.2}° in effect (integer projection matrix, spec §6)",
-                c.camera.fov_deg
+                c.camera.sampler.fov_y_deg
             ));
         }
         if let Some(p) = num(cl, "light_power")?

@@ -99,11 +99,14 @@ pub fn exit_code(e: &anyhow::Error) -> u8 {
     if let Some(i) = e.downcast_ref::<Interrupted>() {
         return i.exit_code();
     }
+    use stylize::lock::LockError;
+    let locked = |l: &LockError| matches!(l, LockError::Held { .. } | LockError::Busy { .. });
     if e.chain().any(|c| {
-        matches!(
-            c.downcast_ref::<stylize::lock::LockError>(),
-            Some(stylize::lock::LockError::Held { .. } | stylize::lock::LockError::Busy { .. })
-        )
+        c.downcast_ref::<LockError>().is_some_and(locked)
+            || matches!(
+                c.downcast_ref::<stylize::Error>().map(stylize::Error::kind),
+                Some(stylize::Error::Lock(l)) if locked(l)
+            )
     }) {
         return 75;
     }

@@ -85,10 +85,9 @@ fn partial_row_is_resumed() {
         config: config.clone(),
         force: false,
         resume: false,
-        log: LogMode::Quiet,
         halt_after: Some(3),
     };
-    ok(execute(&request, Task::Style(Style::Cube)));
+    ok(execute(&request, LogMode::Quiet, Task::Style(Style::Cube)));
     let results = run_batch(&rows[..1], &options(&config, Shard::ALL));
     assert_eq!(results[0].2, RowStatus::Done { resumed: true });
     assert!(tmp.path().join("runs/cube/run.json").is_file());
@@ -197,10 +196,9 @@ fn an_edited_row_is_never_skipped_or_mixed() {
         config: config.clone(),
         force: false,
         resume: false,
-        log: LogMode::Quiet,
         halt_after: Some(3),
     };
-    ok(execute(&request, Task::Style(Style::Cube)));
+    ok(execute(&request, LogMode::Quiet, Task::Style(Style::Cube)));
     let r = run_batch(&rows[2..], &options(&config, Shard::ALL));
     assert!(
         matches!(&r[0].2, RowStatus::Failed(m) if m.contains("refusing to resume")),

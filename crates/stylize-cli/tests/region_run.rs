@@ -53,9 +53,9 @@ fn run(out: &Path, config: Config, resume: bool, halt: Option<u64>) -> anyhow::R
             config,
             force: false,
             resume,
-            log: LogMode::Quiet,
             halt_after: halt,
         },
+        LogMode::Quiet,
         Task::Style(Style::Cube),
     )
 }

@@ -47,10 +47,9 @@ fn run(
         config,
         force: false,
         resume,
-        log: LogMode::Quiet,
         halt_after,
     };
-    execute(&request, Task::Style(Style::Cube))
+    execute(&request, LogMode::Quiet, Task::Style(Style::Cube))
 }
 
 #[test]

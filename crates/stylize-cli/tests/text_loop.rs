@@ -85,14 +85,14 @@ impl Renderer for CountingRenderer {
 struct Records(Vec<IterationRecord>);
 
 impl Observer for Records {
-    fn iteration(&mut self, record: &IterationRecord) -> anyhow::Result<()> {
+    fn iteration(&mut self, record: &IterationRecord) -> stylize::Result<()> {
         self.0.push(record.clone());
         Ok(())
     }
-    fn checkpoint(&mut self, _state: &LoopState) -> anyhow::Result<()> {
+    fn checkpoint(&mut self, _state: &LoopState) -> stylize::Result<()> {
         Ok(())
     }
-    fn preview(&mut self, _: u64, _: &[[f64; 3]], _: Option<&Images>) -> anyhow::Result<()> {
+    fn preview(&mut self, _: u64, _: &[[f64; 3]], _: Option<&Images>) -> stylize::Result<()> {
         Ok(())
     }
 }
@@ -243,7 +243,7 @@ impl Objective for Scaled {
         substep: u32,
         _: &[[f64; 3]],
         _: &mut ChaCha8Rng,
-    ) -> anyhow::Result<StepEval> {
+    ) -> stylize::Result<StepEval> {
         let s = f64::from(substep + 1);
         Ok(StepEval {
             grad_positions: self.0.iter().map(|v| v.map(|c| s * c)).collect(),
@@ -352,13 +352,16 @@ fn text_run_resumed_from_checkpoint_equals_uninterrupted_run() {
         config: config.clone(),
         force: false,
         resume,
-        log: LogMode::Quiet,
         halt_after,
     };
-    ok(execute(&request("a", false, None), task()));
-    let halted = ok(execute(&request("b", false, Some(3)), task()));
+    ok(execute(&request("a", false, None), LogMode::Quiet, task()));
+    let halted = ok(execute(
+        &request("b", false, Some(3)),
+        LogMode::Quiet,
+        task(),
+    ));
     assert!(!halted.complete);
-    ok(execute(&request("b", true, None), task()));
+    ok(execute(&request("b", true, None), LogMode::Quiet, task()));
     let load = |d: &str| {
         ok(stylize_cli::checkpoint::Checkpoint::load(
             &tmp.path().join(d).join("checkpoint.json"),

@@ -9,7 +9,7 @@
 
 use std::path::Path;
 
-use anyhow::Context;
+use crate::error::{Error, IoContext, Result};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
@@ -43,30 +43,35 @@ pub struct Checkpoint {
 
 impl Checkpoint {
     /// Writes `path` atomically and durably (see [`crate::durable::replace_with`]).
-    pub fn save_atomic(&self, path: &Path) -> anyhow::Result<()> {
-        let text = serde_json::to_string(self).context("cannot serialize checkpoint")?;
+    pub fn save_atomic(&self, path: &Path) -> Result<()> {
+        let text = serde_json::to_string(self)?;
         crate::durable::replace_bytes(path, text.as_bytes())
     }
 
     /// Reads a checkpoint.
-    pub fn load(path: &Path) -> anyhow::Result<Self> {
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("cannot read {}", path.display()))?;
+    pub fn load(path: &Path) -> Result<Self> {
+        let corrupt = |message: String| Error::Corrupt {
+            path: path.to_path_buf(),
+            message,
+        };
+        let text = std::fs::read_to_string(path).io_context("cannot read", path)?;
         let c: Self = serde_json::from_str(&text)
-            .with_context(|| format!("checkpoint {} is corrupt", path.display()))?;
-        anyhow::ensure!(
-            (OLDEST_CHECKPOINT_VERSION..=CHECKPOINT_VERSION).contains(&c.version),
-            "checkpoint {} has version {}, this build reads versions \
-             {OLDEST_CHECKPOINT_VERSION} to {CHECKPOINT_VERSION}",
-            path.display(),
-            c.version
-        );
-        anyhow::ensure!(
-            c.version < 2 || c.identity.is_some(),
-            "checkpoint {} (version {}) has no task identity: it is corrupt",
-            path.display(),
-            c.version
-        );
+            .map_err(|e| corrupt(format!("checkpoint {} is corrupt: {e}", path.display())))?;
+        if !(OLDEST_CHECKPOINT_VERSION..=CHECKPOINT_VERSION).contains(&c.version) {
+            return Err(corrupt(format!(
+                "checkpoint {} has version {}, this build reads versions \
+                 {OLDEST_CHECKPOINT_VERSION} to {CHECKPOINT_VERSION}",
+                path.display(),
+                c.version
+            )));
+        }
+        if c.version >= 2 && c.identity.is_none() {
+            return Err(corrupt(format!(
+                "checkpoint {} (version {}) has no task identity: it is corrupt",
+                path.display(),
+                c.version
+            )));
+        }
         Ok(c)
     }
 }

@@ -5,7 +5,7 @@
 //! ```toml
 //! [darap]    lambda = 8.0, rotation_rule = "gis", post_process = "recenter_rescale"
 //! [optim]    lr = 0.002, iterations = 2500, steps_per_batch = 2, beta1, beta2, eps
-//! [camera]   preset, views = 8, elevation_deg, azimuth_deg, distance, fov_deg = 90, adapt_distance
+//! [camera]   views = 8, elevation_deg, azimuth_deg, distance, fov_deg = 90, adapt_distance
 //! [render]   width = 512, height = 512, backend = "auto"
 //! [guidance] scale = 100, t_min = 20, t_max = 980, loss_scale = 100, stage1_weight = 1,
 //!            stage2_weight = "0.0>0.2:1000; 0.2>0.3:750", negative_prompt = "", grad_clip = 0 (off),
@@ -15,7 +15,14 @@
 //! ```
 //! `docs/cli.md` lists every key with its meaning.
 
-use anyhow::{Context, bail};
+use crate::error::{Context, Error, Result};
+
+/// `return Err(Error::config(field, format!(…)))`.
+macro_rules! bad_field {
+    ($field:expr, $($arg:tt)*) => {
+        return Err(Error::config($field, format!($($arg)*)))
+    };
+}
 use serde::{Deserialize, Serialize};
 
 /// The dARAP enums are darap's own (names `gis` / `procrustes`, `recenter_rescale` /
@@ -77,33 +84,30 @@ impl Default for OptimSection {
     }
 }
 
-/// `[camera]`: the per-iteration view sampler (spec §6).
+/// `[camera]`: the per-iteration view sampler (spec §6). Its keys `elevation_deg`
+/// ([0, 60]), `azimuth_deg` ([0, 361]), `distance` ([2.5, 3.0], before the adaptive multiplier)
+/// and `fov_deg` (90: focal length 1, the reference's effective value) are
+/// [`raster_diff::CameraConfig`]'s own, through its `serde` feature (defaults live there only);
+/// `views` and `adapt_distance` are the loop's.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct CameraSection {
     /// Views per iteration: 8.
     pub views: usize,
-    /// Elevation range in degrees: [0, 60].
-    pub elevation_deg: [f64; 2],
-    /// Azimuth range in degrees: [0, 361].
-    pub azimuth_deg: [f64; 2],
-    /// Camera distance range (before the adaptive multiplier): [2.5, 3.0].
-    pub distance: [f64; 2],
-    /// Vertical field of view in degrees: 90 (focal length 1, the reference's effective value).
-    pub fov_deg: f64,
     /// Scale the distance by the deformed mesh's extent from iteration 2 on (spec §5): true.
     pub adapt_distance: bool,
+    /// The ranges of the per-view draws and the field of view (flattened: the file's `[camera]`
+    /// keys `elevation_deg`, `azimuth_deg`, `distance`, `fov_deg`).
+    #[serde(flatten)]
+    pub sampler: raster_diff::CameraConfig,
 }
 
 impl Default for CameraSection {
     fn default() -> Self {
         Self {
             views: 8,
-            elevation_deg: [0.0, 60.0],
-            azimuth_deg: [0.0, 361.0],
-            distance: [2.5, 3.0],
-            fov_deg: 90.0,
             adapt_distance: true,
+            sampler: raster_diff::CameraConfig::default(),
         }
     }
 }
@@ -130,7 +134,12 @@ impl Default for RenderSection {
     }
 }
 
-/// `[guidance]` (spec §7).
+/// `[guidance]` (spec §7): the file-format layer over [`csd::GuidanceConfig`], whose defaults
+/// these are (taken from it, not retyped). A separate struct because the file deliberately names
+/// things differently: `scale` (csd's `guidance_scale`: the section already says "guidance"),
+/// `t_min`/`t_max` (csd's nested `timesteps`), `grad_clip = 0` for "off" (csd's `None`: TOML has
+/// no null), and the section also carries what csd does not own (the stage-II schedule text, the
+/// negative prompt, ONNX Runtime's arena). [`GuidanceSection::guidance_config`] maps it back.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct GuidanceSection {
@@ -144,7 +153,8 @@ pub struct GuidanceSection {
     pub loss_scale: f64,
     /// Stage-I weight: 1.
     pub stage1_weight: f64,
-    /// Stage-II weight schedule (spec §5 grammar, 1-indexed iterations).
+    /// Stage-II weight schedule (spec §5 grammar, 1-indexed iterations):
+    /// [`csd::REFERENCE_STAGE2_WEIGHT`].
     pub stage2_weight: String,
     /// Negative prompt ("" = unconditional).
     pub negative_prompt: String,
@@ -158,16 +168,35 @@ pub struct GuidanceSection {
 
 impl Default for GuidanceSection {
     fn default() -> Self {
+        let csd = csd::GuidanceConfig::default();
         Self {
-            scale: 100.0,
-            t_min: 20,
-            t_max: 980,
-            loss_scale: 100.0,
-            stage1_weight: 1.0,
-            stage2_weight: "0.0>0.2:1000; 0.2>0.3:750".to_string(),
+            scale: f64::from(csd.guidance_scale),
+            t_min: csd.timesteps.min,
+            t_max: csd.timesteps.max,
+            loss_scale: csd.loss_scale,
+            stage1_weight: csd.stage1_weight,
+            stage2_weight: csd::REFERENCE_STAGE2_WEIGHT.to_string(),
             negative_prompt: String::new(),
-            grad_clip: 0.0,
-            onnx_memory_arena: true,
+            grad_clip: csd.grad_clip.map_or(0.0, f64::from),
+            onnx_memory_arena: diffusion_onnx::SessionOptions::default().cpu_memory_arena,
+        }
+    }
+}
+
+impl GuidanceSection {
+    /// The `csd` guidance settings this section names (csd's defaults for what the file does not
+    /// expose: the 224/64/256 resolutions and T = 1000).
+    pub fn guidance_config(&self) -> csd::GuidanceConfig {
+        csd::GuidanceConfig {
+            guidance_scale: self.scale as f32,
+            timesteps: csd::TimestepRange {
+                min: self.t_min,
+                max: self.t_max,
+            },
+            loss_scale: self.loss_scale,
+            stage1_weight: self.stage1_weight,
+            grad_clip: (self.grad_clip > 0.0).then_some(self.grad_clip as f32),
+            ..csd::GuidanceConfig::default()
         }
     }
 }
@@ -259,20 +288,20 @@ pub struct Config {
 
 impl Config {
     /// Parses a TOML document (missing keys take their defaults; unknown keys are errors).
-    pub fn from_toml_str(text: &str) -> anyhow::Result<Self> {
+    pub fn from_toml_str(text: &str) -> Result<Self> {
         let config: Self = toml::from_str(text).context("invalid configuration")?;
         config.validate()?;
         Ok(config)
     }
 
     /// The resolved configuration as TOML (what a run directory's `config.toml` holds).
-    pub fn to_toml_string(&self) -> anyhow::Result<String> {
+    pub fn to_toml_string(&self) -> Result<String> {
         toml::to_string_pretty(self).context("cannot serialize the configuration")
     }
 
     /// Applies `section.key=value` overrides in order. The value is parsed with the type of the
     /// key's current value (number, integer, boolean, string, or a TOML array such as `[0, 30]`).
-    pub fn with_overrides<S: AsRef<str>>(self, overrides: &[S]) -> anyhow::Result<Self> {
+    pub fn with_overrides<S: AsRef<str>>(self, overrides: &[S]) -> Result<Self> {
         let mut table =
             toml::Table::try_from(&self).context("cannot serialize the configuration")?;
         for o in overrides {
@@ -292,7 +321,7 @@ impl Config {
         specs: &[String],
         feather: Option<u32>,
         tint: bool,
-    ) -> anyhow::Result<Self> {
+    ) -> Result<Self> {
         if !specs.is_empty() {
             self.region.specs = specs.to_vec();
         }
@@ -305,15 +334,19 @@ impl Config {
     }
 
     /// Checks ranges that the types alone do not (positive sizes, a parsable schedule, …).
-    pub fn validate(&self) -> anyhow::Result<()> {
-        let finite_pos = |name: &str, v: f64| -> anyhow::Result<()> {
+    pub fn validate(&self) -> Result<()> {
+        let finite_pos = |name: &str, v: f64| -> Result<()> {
             if !(v.is_finite() && v > 0.0) {
-                bail!("{name} must be a finite positive number, got {v}");
+                return Err(Error::config(
+                    name,
+                    format!("{name} must be a finite positive number, got {v}"),
+                ));
             }
             Ok(())
         };
         if !(self.darap.lambda.is_finite() && self.darap.lambda >= 0.0) {
-            bail!(
+            bad_field!(
+                "darap.lambda",
                 "darap.lambda must be finite and >= 0, got {}",
                 self.darap.lambda
             );
@@ -326,54 +359,68 @@ impl Config {
             ("optim.beta2", self.optim.beta2),
         ] {
             if !(0.0..1.0).contains(&b) {
-                bail!("{name} must be in [0, 1), got {b}");
+                bad_field!(name, "{name} must be in [0, 1), got {b}");
             }
         }
         if self.optim.steps_per_batch == 0 {
-            bail!("optim.steps_per_batch must be at least 1");
-        }
-        if self.camera.views == 0 {
-            bail!("camera.views must be at least 1");
-        }
-        for (name, r) in [
-            ("camera.elevation_deg", self.camera.elevation_deg),
-            ("camera.azimuth_deg", self.camera.azimuth_deg),
-            ("camera.distance", self.camera.distance),
-        ] {
-            if !(r[0].is_finite() && r[1].is_finite() && r[0] <= r[1]) {
-                bail!("{name} must be a finite range [low, high] with low <= high, got {r:?}");
-            }
-        }
-        if self.camera.distance[0] <= 0.0 {
-            bail!(
-                "camera.distance must be positive, got {:?}",
-                self.camera.distance
+            bad_field!(
+                "optim.steps_per_batch",
+                "optim.steps_per_batch must be at least 1"
             );
         }
-        if !(self.camera.fov_deg > 0.0 && self.camera.fov_deg < 180.0) {
-            bail!(
+        if self.camera.views == 0 {
+            bad_field!("camera.views", "camera.views must be at least 1");
+        }
+        let sampler = &self.camera.sampler;
+        for (name, r) in [
+            ("camera.elevation_deg", sampler.elevation_deg),
+            ("camera.azimuth_deg", sampler.azimuth_deg),
+            ("camera.distance", sampler.distance),
+        ] {
+            if !(r[0].is_finite() && r[1].is_finite() && r[0] <= r[1]) {
+                bad_field!(
+                    name,
+                    "{name} must be a finite range [low, high] with low <= high, got {r:?}"
+                );
+            }
+        }
+        if sampler.distance[0] <= 0.0 {
+            bad_field!(
+                "camera.distance",
+                "camera.distance must be positive, got {:?}",
+                sampler.distance
+            );
+        }
+        if !(sampler.fov_y_deg > 0.0 && sampler.fov_y_deg < 180.0) {
+            bad_field!(
+                "camera.fov_deg",
                 "camera.fov_deg must be in (0, 180), got {}",
-                self.camera.fov_deg
+                sampler.fov_y_deg
             );
         }
         if self.render.width == 0 || self.render.height == 0 {
-            bail!("render.width and render.height must be positive");
+            bad_field!(
+                "render.width",
+                "render.width and render.height must be positive"
+            );
         }
         if self.run.turntable_size == 0 {
-            bail!("run.turntable_size must be positive");
+            bad_field!("run.turntable_size", "run.turntable_size must be positive");
         }
         if !(self.guidance.t_min >= 1
             && self.guidance.t_min <= self.guidance.t_max
             && self.guidance.t_max < 1000)
         {
-            bail!(
+            bad_field!(
+                "guidance.t_min",
                 "guidance timesteps must satisfy 1 <= t_min <= t_max <= 999, got [{}, {}]",
                 self.guidance.t_min,
                 self.guidance.t_max
             );
         }
         if !(self.guidance.grad_clip.is_finite() && self.guidance.grad_clip >= 0.0) {
-            bail!(
+            bad_field!(
+                "guidance.grad_clip",
                 "guidance.grad_clip must be >= 0 (0 = off), got {}",
                 self.guidance.grad_clip
             );
@@ -386,26 +433,35 @@ impl Config {
     }
 
     /// The parsed stage-II weight schedule.
-    pub fn stage2_schedule(&self) -> anyhow::Result<optim::Schedule> {
+    pub fn stage2_schedule(&self) -> Result<optim::Schedule> {
         optim::Schedule::parse(&self.guidance.stage2_weight).context("guidance.stage2_weight")
     }
 }
 
 /// Applies one `section.key=value` override to a serialized config table.
-fn apply_override(table: &mut toml::Table, assignment: &str) -> anyhow::Result<()> {
+fn apply_override(table: &mut toml::Table, assignment: &str) -> Result<()> {
     let Some((path, raw)) = assignment.split_once('=') else {
-        bail!("override {assignment:?} is not of the form section.key=value");
+        bad_field!(
+            assignment,
+            "override {assignment:?} is not of the form section.key=value"
+        );
     };
     let path = path.trim();
     let raw = raw.trim();
     let mut parts = path.split('.');
     let (Some(section), Some(key), None) = (parts.next(), parts.next(), parts.next()) else {
-        bail!("override key {path:?} must be section.key (e.g. optim.lr)");
+        bad_field!(
+            path,
+            "override key {path:?} must be section.key (e.g. optim.lr)"
+        );
     };
     let sections: Vec<&str> = table.keys().map(String::as_str).collect();
     let known_sections = sections.join(", ");
     let Some(toml::Value::Table(sec)) = table.get_mut(section) else {
-        bail!("unknown config section {section:?} in override {path:?} (known: {known_sections})");
+        bad_field!(
+            path,
+            "unknown config section {section:?} in override {path:?} (known: {known_sections})"
+        );
     };
     let known_keys = sec
         .keys()
@@ -413,9 +469,12 @@ fn apply_override(table: &mut toml::Table, assignment: &str) -> anyhow::Result<(
         .collect::<Vec<_>>()
         .join(", ");
     let Some(current) = sec.get_mut(key) else {
-        bail!("unknown config key {path:?} (keys of [{section}]: {known_keys})");
+        bad_field!(
+            path,
+            "unknown config key {path:?} (keys of [{section}]: {known_keys})"
+        );
     };
-    let bad = |what: &str| anyhow::anyhow!("override {path}={raw}: expected {what}");
+    let bad = |what: &str| Error::config(path, format!("override {path}={raw}: expected {what}"));
     let new = match current {
         toml::Value::Float(_) => {
             toml::Value::Float(raw.parse::<f64>().map_err(|_| bad("a number"))?)
@@ -441,7 +500,8 @@ fn apply_override(table: &mut toml::Table, assignment: &str) -> anyhow::Result<(
                 _ => return Err(bad("a TOML array such as [0.0, 30.0]")),
             }
         }
-        other => bail!(
+        other => bad_field!(
+            path,
             "override {path}: cannot override a value of type {}",
             other.type_str()
         ),
@@ -454,8 +514,8 @@ fn apply_override(table: &mut toml::Table, assignment: &str) -> anyhow::Result<(
 mod tests {
     use super::*;
 
-    fn ok<T>(r: anyhow::Result<T>) -> T {
-        r.unwrap_or_else(|e| panic!("{e:#}"))
+    fn ok<T>(r: Result<T>) -> T {
+        r.unwrap_or_else(|e| panic!("{}", e.full_message()))
     }
 
     #[test]
@@ -530,14 +590,14 @@ mod tests {
             match Config::default().with_overrides(&[o]) {
                 Ok(_) => panic!("{o:?} accepted"),
                 Err(e) => {
-                    let msg = format!("{e:#}");
+                    let msg = e.full_message();
                     assert!(msg.contains(needle), "{o:?}: {msg}");
                 }
             }
         }
         let e = Config::from_toml_str("[darap]\nlamda = 3.0\n")
             .err()
-            .map(|e| format!("{e:#}"));
+            .map(|e| e.full_message());
         assert!(e.is_some_and(|m| m.contains("lamda")));
     }
 }

@@ -11,7 +11,7 @@
 use std::fs::File;
 use std::path::{Path, PathBuf};
 
-use anyhow::Context;
+use crate::error::{Error, IoContext, Result};
 
 /// Marker between the stem and the process id in temporary names.
 const TEMP_MARK: &str = ".tmp-";
@@ -39,7 +39,7 @@ pub fn is_temp_name(name: &str) -> bool {
 /// `fsync` of a folder, so that renames and creations inside it are durable. Folders that cannot
 /// be opened for syncing (some network file systems refuse) are skipped silently: the data itself
 /// was synced, only the rename's durability is then up to the file system.
-pub fn sync_dir(dir: &Path) -> anyhow::Result<()> {
+pub fn sync_dir(dir: &Path) -> Result<()> {
     let dir = if dir.as_os_str().is_empty() {
         Path::new(".")
     } else {
@@ -50,7 +50,7 @@ pub fn sync_dir(dir: &Path) -> anyhow::Result<()> {
             Ok(()) => Ok(()),
             // EINVAL/ENOTSUP: the file system does not sync folders; nothing more can be done.
             Err(e) if matches!(e.raw_os_error(), Some(22) | Some(95)) => Ok(()),
-            Err(e) => Err(e).with_context(|| format!("cannot sync folder {}", dir.display())),
+            Err(e) => Err(Error::io("cannot sync folder", dir, e)),
         },
         Err(_) => Ok(()),
     }
@@ -59,17 +59,17 @@ pub fn sync_dir(dir: &Path) -> anyhow::Result<()> {
 /// Writes `target` atomically: `write` fills a temporary path next to it, which is then synced,
 /// renamed over `target`, and the folder synced. On any error the temporary file is removed and
 /// `target` is left as it was.
-pub fn replace_with(
-    target: &Path,
-    write: impl FnOnce(&Path) -> anyhow::Result<()>,
-) -> anyhow::Result<()> {
+pub fn replace_with(target: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
     let tmp = temp_path(target);
     let result = write(&tmp).and_then(|()| {
         File::open(&tmp)
             .and_then(|f| f.sync_all())
-            .with_context(|| format!("cannot sync {}", tmp.display()))?;
-        std::fs::rename(&tmp, target)
-            .with_context(|| format!("cannot move {} to {}", tmp.display(), target.display()))?;
+            .io_context("cannot sync", &tmp)?;
+        std::fs::rename(&tmp, target).map_err(|e| Error::Io {
+            message: format!("cannot move {} to {}", tmp.display(), target.display()),
+            path: target.to_path_buf(),
+            source: e,
+        })?;
         sync_dir(target.parent().unwrap_or(Path::new(".")))
     });
     if result.is_err() {
@@ -79,9 +79,9 @@ pub fn replace_with(
 }
 
 /// [`replace_with`] for bytes already in memory.
-pub fn replace_bytes(target: &Path, bytes: &[u8]) -> anyhow::Result<()> {
+pub fn replace_bytes(target: &Path, bytes: &[u8]) -> Result<()> {
     replace_with(target, |tmp| {
-        std::fs::write(tmp, bytes).with_context(|| format!("cannot write {}", tmp.display()))
+        std::fs::write(tmp, bytes).io_context("cannot write", tmp)
     })
 }
 
@@ -105,10 +105,10 @@ mod tests {
     fn failed_write_leaves_target_and_no_temporary() {
         let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
         let target = dir.path().join("run.json");
-        replace_bytes(&target, b"old").unwrap_or_else(|e| panic!("{e:#}"));
+        replace_bytes(&target, b"old").unwrap_or_else(|e| panic!("{}", e.full_message()));
         let r = replace_with(&target, |tmp| {
-            std::fs::write(tmp, b"partial")?;
-            anyhow::bail!("disk full")
+            std::fs::write(tmp, b"partial").io_context("cannot write", tmp)?;
+            Err(Error::Invalid("disk full".into()))
         });
         assert!(r.is_err());
         assert_eq!(std::fs::read(&target).unwrap_or_default(), b"old");

@@ -26,7 +26,7 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, bail};
+use crate::error::{Context, Error, Result, invalid};
 use diffusion_onnx::{ClipModel, cosine_similarity};
 use mesh_core::TriMesh;
 use mesh_core::geometry::{bbox_diagonal, face_areas, signed_volume, vertex_centroid};
@@ -93,7 +93,7 @@ impl Default for ClipSettings {
         Self {
             views: 16,
             render_size: 512,
-            fov_deg: crate::config::Config::default().camera.fov_deg,
+            fov_deg: raster_diff::CameraConfig::default().fov_y_deg,
         }
     }
 }
@@ -128,16 +128,16 @@ fn mean_std(values: &[f64]) -> (f64, f64) {
 }
 
 /// The per-face area ratios and the volume ratio of one pair (see the module docs).
-pub fn pair_ratios(source: &TriMesh, result: &TriMesh) -> anyhow::Result<(Vec<f64>, usize, f64)> {
+pub fn pair_ratios(source: &TriMesh, result: &TriMesh) -> Result<(Vec<f64>, usize, f64)> {
     if source.faces != result.faces {
-        bail!(
+        invalid!(
             "source and result must have the same faces (source {} faces, result {}): identity metrics compare face by face",
             source.faces.len(),
             result.faces.len()
         );
     }
     if source.positions.len() != result.positions.len() {
-        bail!(
+        invalid!(
             "source has {} vertices, result {}",
             source.positions.len(),
             result.positions.len()
@@ -145,7 +145,7 @@ pub fn pair_ratios(source: &TriMesh, result: &TriMesh) -> anyhow::Result<(Vec<f6
     }
     let n = source.positions.len();
     if let Some(f) = source.faces.iter().flatten().find(|&&v| v as usize >= n) {
-        bail!("face index {f} out of range ({n} vertices)");
+        invalid!("face index {f} out of range ({n} vertices)");
     }
     let mut src = source.positions.clone();
     mesh_core::normalize::side2_cube(&mut src);
@@ -157,7 +157,7 @@ pub fn pair_ratios(source: &TriMesh, result: &TriMesh) -> anyhow::Result<(Vec<f6
         .collect();
     let (d_src, d_res) = (bbox_diagonal(&src), bbox_diagonal(&res));
     if !(d_res > 0.0 && d_res.is_finite()) {
-        bail!("the result mesh has zero or non-finite extent");
+        invalid!("the result mesh has zero or non-finite extent");
     }
     let s = d_src / d_res;
     for p in &mut res {
@@ -185,7 +185,7 @@ pub fn pair_ratios(source: &TriMesh, result: &TriMesh) -> anyhow::Result<(Vec<f6
 }
 
 /// Evaluates named `(source, result)` pairs.
-pub fn evaluate(pairs: &[(String, TriMesh, TriMesh)]) -> anyhow::Result<EvalReport> {
+pub fn evaluate(pairs: &[(String, TriMesh, TriMesh)]) -> Result<EvalReport> {
     let mut pooled = Vec::new();
     let mut out = Vec::new();
     for (name, source, result) in pairs {
@@ -240,7 +240,7 @@ pub fn view_embeddings(
     mesh: &TriMesh,
     settings: &ClipSettings,
     timings: &mut ClipTimings,
-) -> anyhow::Result<Vec<Vec<f32>>> {
+) -> Result<Vec<Vec<f32>>> {
     let start = std::time::Instant::now();
     let mut positions = mesh.positions.clone();
     mesh_core::normalize::side2_cube(&mut positions);
@@ -253,7 +253,7 @@ pub fn view_embeddings(
         settings.fov_deg,
     )?;
     if images.width != images.height {
-        bail!(
+        invalid!(
             "the turntable render is {}×{}, CLIP needs square images",
             images.width,
             images.height
@@ -291,9 +291,9 @@ pub fn add_clip_scores(
     prompts: &[Prompt],
     clip: &mut ClipModel,
     settings: &ClipSettings,
-) -> anyhow::Result<ClipTimings> {
+) -> Result<ClipTimings> {
     if pairs.len() != report.pairs.len() || prompts.len() != pairs.len() {
-        bail!(
+        invalid!(
             "{} pairs, {} prompts, {} report rows: they must match",
             pairs.len(),
             prompts.len(),
@@ -301,7 +301,7 @@ pub fn add_clip_scores(
         );
     }
     if settings.views == 0 || settings.render_size == 0 {
-        bail!("CLIP needs at least one view and a positive render size");
+        invalid!("CLIP needs at least one view and a positive render size");
     }
     let mut renderer = raster_diff::CpuRenderer::default();
     let mut timings = ClipTimings::default();
@@ -329,7 +329,9 @@ pub fn add_clip_scores(
                     .embed_texts(&[text])
                     .with_context(|| format!("CLIP text embedding of {text:?}"))?
                     .pop()
-                    .context("the CLIP text encoder returned nothing")?;
+                    .ok_or_else(|| {
+                        Error::Invalid("the CLIP text encoder returned nothing".into())
+                    })?;
                 texts.push((text.clone(), e.clone()));
                 timings.embed_texts_s += start.elapsed().as_secs_f64();
                 e
@@ -380,12 +382,12 @@ pub fn prompt_of_dataset_cfg(dataset_cfg: &str) -> Prompt {
 
 /// The pair stored in a run directory: source = `deformation.npz`'s `verts` (the normalized rest
 /// mesh), result = `mesh.obj`.
-pub fn load_run_pair(dir: &Path) -> anyhow::Result<(TriMesh, TriMesh)> {
+pub fn load_run_pair(dir: &Path) -> Result<(TriMesh, TriMesh)> {
     load_run(dir).map(|(s, r, _)| (s, r))
 }
 
 /// [`load_run_pair`] plus the run's prompt ([`prompt_of_dataset_cfg`]).
-pub fn load_run(dir: &Path) -> anyhow::Result<(TriMesh, TriMesh, Prompt)> {
+pub fn load_run(dir: &Path) -> Result<(TriMesh, TriMesh, Prompt)> {
     let saved = crate::saved::SavedDeformation::read(dir.join("deformation.npz"))
         .with_context(|| format!("{} is not a complete run directory", dir.display()))?;
     let source = TriMesh::new(saved.verts_f64(), saved.faces.clone());
@@ -395,7 +397,7 @@ pub fn load_run(dir: &Path) -> anyhow::Result<(TriMesh, TriMesh, Prompt)> {
 }
 
 /// Loads a pair of mesh files.
-pub fn load_file_pair(source: &Path, result: &Path) -> anyhow::Result<(TriMesh, TriMesh)> {
+pub fn load_file_pair(source: &Path, result: &Path) -> Result<(TriMesh, TriMesh)> {
     let s = mesh_core::io::read_mesh(source)
         .with_context(|| format!("cannot read {}", source.display()))?;
     let r = mesh_core::io::read_mesh(result)

@@ -23,7 +23,7 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use anyhow::Context;
+use crate::error::{IoContext, Result};
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
@@ -55,11 +55,11 @@ pub struct ModelIdentity {
 
 impl ModelIdentity {
     /// Reads `DIR/manifest.toml` of a model directory.
-    pub fn of_dir(dir: &Path) -> anyhow::Result<Self> {
+    pub fn of_dir(dir: &Path) -> Result<Self> {
         let path = dir.join("manifest.toml");
         let bytes = mesh_core::io::ensure_regular_file(&path)
             .and_then(|()| std::fs::read(&path))
-            .with_context(|| format!("cannot read {}", path.display()))?;
+            .io_context("cannot read", &path)?;
         let name = std::str::from_utf8(&bytes)
             .ok()
             .and_then(|t| toml::from_str::<toml::Table>(t).ok())
@@ -161,7 +161,7 @@ impl TaskIdentity {
         faces: &[[u32; 3]],
         objective: &ObjectiveIdentity,
         config: &Config,
-    ) -> anyhow::Result<Self> {
+    ) -> Result<Self> {
         let mut fields = BTreeMap::new();
         fields.insert("mesh.sha256".to_string(), mesh_sha256(positions, faces));
         fields.insert("mesh.vertices".to_string(), positions.len().to_string());
@@ -189,7 +189,7 @@ impl TaskIdentity {
                 false
             }
         };
-        let table = toml::Table::try_from(config).context("cannot serialize the configuration")?;
+        let table = toml::Table::try_from(config)?;
         for (section, keys) in &table {
             let Some(keys) = keys.as_table() else {
                 continue;

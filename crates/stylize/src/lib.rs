@@ -10,7 +10,8 @@
 //!   every file replaced atomically and durably), checkpoints and the task identity that guards a
 //!   resume;
 //! - [`saved`]: the reference's saved-deformation `.npz`; [`run_pictures`]: the before/after sheet;
-//! - [`models`]: DeepFloyd IF guidance from a model directory; [`eval`]: metrics of finished runs.
+//! - [`models`]: DeepFloyd IF guidance from a model directory; [`eval`]: metrics of finished runs;
+//! - [`error`]: the typed [`Error`] every public function returns.
 //!
 //! The command line (`stylize-cli`) adds argument parsing, config files, progress display and
 //! batches; this crate depends on nothing of that kind (`cargo xtask check-deps`).
@@ -18,6 +19,7 @@
 pub mod checkpoint;
 pub mod config;
 pub mod durable;
+pub mod error;
 pub mod eval;
 pub mod identity;
 pub mod lock;
@@ -28,3 +30,5 @@ pub mod rundir;
 pub mod runner;
 pub mod saved;
 pub mod style;
+
+pub use error::{Error, Result};

@@ -75,19 +75,19 @@ impl Default for LockSettings {
 impl LockSettings {
     /// The defaults, overridden by [`HEARTBEAT_ENV`] and [`STALE_ENV`] (seconds, fractions
     /// allowed). The staleness limit must be at least three heartbeats.
-    pub fn from_env() -> anyhow::Result<Self> {
+    pub fn from_env() -> Result<Self, LockError> {
         let mut s = Self::default();
-        let read = |name: &str| -> anyhow::Result<Option<Duration>> {
+        let read = |name: &str| -> Result<Option<Duration>, LockError> {
             match std::env::var(name) {
                 Ok(v) => {
-                    let secs: f64 = v
-                        .trim()
-                        .parse()
-                        .map_err(|_| anyhow::anyhow!("{name}={v:?} is not a number of seconds"))?;
-                    anyhow::ensure!(
-                        secs.is_finite() && secs > 0.0 && secs < 1e6,
-                        "{name}={v:?} must be a positive number of seconds"
-                    );
+                    let secs: f64 = v.trim().parse().map_err(|_| {
+                        LockError::Settings(format!("{name}={v:?} is not a number of seconds"))
+                    })?;
+                    if !(secs.is_finite() && secs > 0.0 && secs < 1e6) {
+                        return Err(LockError::Settings(format!(
+                            "{name}={v:?} must be a positive number of seconds"
+                        )));
+                    }
                     Ok(Some(Duration::from_secs_f64(secs)))
                 }
                 Err(_) => Ok(None),
@@ -99,12 +99,12 @@ impl LockSettings {
         if let Some(t) = read(STALE_ENV)? {
             s.stale_after = t;
         }
-        anyhow::ensure!(
-            s.stale_after >= 3 * s.heartbeat,
-            "{STALE_ENV} ({:?}) must be at least three heartbeats ({HEARTBEAT_ENV} = {:?})",
-            s.stale_after,
-            s.heartbeat
-        );
+        if s.stale_after < 3 * s.heartbeat {
+            return Err(LockError::Settings(format!(
+                "{STALE_ENV} ({:?}) must be at least three heartbeats ({HEARTBEAT_ENV} = {:?})",
+                s.stale_after, s.heartbeat
+            )));
+        }
         Ok(s)
     }
 }
@@ -200,6 +200,22 @@ pub enum LockError {
         path: PathBuf,
         /// What was found.
         detail: Box<str>,
+    },
+    /// The lock settings from the environment are invalid ([`LockSettings::from_env`]).
+    #[error("{0}")]
+    Settings(String),
+    /// The lock was taken over by another process while the run held it.
+    #[error(
+        "lost the lock of run directory {}{}: another process took it over; stopping without \
+         writing",
+        dir.display(),
+        holder.as_deref().unwrap_or("")
+    )]
+    Lost {
+        /// The run directory.
+        dir: PathBuf,
+        /// ` (now held by pid P on host H)` when known.
+        holder: Option<String>,
     },
     /// Input/output error on the lock file.
     #[error("run directory lock {path}: {source}")]
@@ -351,9 +367,9 @@ pub struct RunLock {
 
 impl RunLock {
     /// Takes the lock of run directory `dir` (which must exist), with [`LockSettings::from_env`].
-    pub fn acquire(dir: &Path) -> anyhow::Result<Self> {
+    pub fn acquire(dir: &Path) -> Result<Self, LockError> {
         let settings = LockSettings::from_env()?;
-        Ok(Self::acquire_with(dir, settings)?)
+        Self::acquire_with(dir, settings)
     }
 
     /// Takes the lock of `dir` with explicit settings.
@@ -462,19 +478,17 @@ impl RunLock {
 
     /// An error when the lock is no longer ours (another process took it over, e.g. after this
     /// process was suspended longer than the staleness limit): the run must stop writing.
-    pub fn ensure_held(&self) -> anyhow::Result<()> {
+    pub fn ensure_held(&self) -> Result<(), LockError> {
         if self.lost.load(Ordering::SeqCst) || !owns(&self.path, self.ino) {
             self.lost.store(true, Ordering::SeqCst);
             let holder = read_seen(&self.path)
                 .ok()
                 .and_then(|s| s.record)
-                .map(|r| format!(" (now held by pid {} on host {})", r.pid, r.host))
-                .unwrap_or_default();
-            anyhow::bail!(
-                "lost the lock of run directory {}{holder}: another process took it over; \
-                 stopping without writing",
-                self.dir.display()
-            );
+                .map(|r| format!(" (now held by pid {} on host {})", r.pid, r.host));
+            return Err(LockError::Lost {
+                dir: self.dir.clone(),
+                holder,
+            });
         }
         Ok(())
     }

@@ -7,26 +7,17 @@
 
 use std::path::Path;
 
-use anyhow::Context;
-use csd::{CascadedGuidance, Denoiser, Embedding, GuidanceConfig, TimestepRange};
+use crate::error::{Context, Result, invalid};
+use csd::{CascadedGuidance, Denoiser, Embedding, GuidanceConfig};
 use diffusion_onnx::{EmbeddingCache, ModelDir, OnnxDenoiser, SessionOptions, Stage};
 
 use crate::config::Config;
 
-/// The `csd` guidance settings from the configuration.
+/// The `csd` guidance settings from the configuration ([`GuidanceSection::guidance_config`]).
+///
+/// [`GuidanceSection::guidance_config`]: crate::config::GuidanceSection::guidance_config
 pub fn guidance_config(config: &Config) -> GuidanceConfig {
-    let g = &config.guidance;
-    GuidanceConfig {
-        guidance_scale: g.scale as f32,
-        timesteps: TimestepRange {
-            min: g.t_min,
-            max: g.t_max,
-        },
-        loss_scale: g.loss_scale,
-        stage1_weight: g.stage1_weight,
-        grad_clip: (g.grad_clip > 0.0).then_some(g.grad_clip as f32),
-        ..GuidanceConfig::default()
-    }
+    config.guidance.guidance_config()
 }
 
 /// Opened model sessions, reusable across prompts.
@@ -50,7 +41,7 @@ impl std::fmt::Debug for ModelSet {
 impl ModelSet {
     /// Opens the model directory and its UNets (stage II only when the manifest lists it), with
     /// the session settings of `config` (`guidance.onnx_memory_arena`).
-    pub fn open(model: &Path, config: &Config) -> anyhow::Result<Self> {
+    pub fn open(model: &Path, config: &Config) -> Result<Self> {
         let dir = ModelDir::open(model)
             .with_context(|| format!("cannot open model directory {}", model.display()))?;
         let options = SessionOptions {
@@ -74,17 +65,13 @@ impl ModelSet {
 
     /// The prompt embeddings for `prompt` (negative prompt from `config`), after checking that the
     /// stage-II weight schedule only uses stage II when the model directory has it.
-    fn embeddings_for(
-        &self,
-        prompt: &str,
-        config: &Config,
-    ) -> anyhow::Result<(Embedding, Embedding)> {
+    fn embeddings_for(&self, prompt: &str, config: &Config) -> Result<(Embedding, Embedding)> {
         let stage2_used = config.stage2_schedule()?.phases().iter().any(|p| match *p {
             optim::Phase::Constant { value, .. } => value != 0.0,
             optim::Phase::Ramp { from, to, .. } => from != 0.0 || to != 0.0,
         });
         if self.stage2.is_none() && stage2_used {
-            anyhow::bail!(
+            invalid!(
                 "the model directory {} has no stage-II UNet but guidance.stage2_weight = {:?} uses it; \
                  export stage II (docs/models.md) or run stage I only with --set guidance.stage2_weight=0",
                 self.dir.root().display(),
@@ -104,11 +91,7 @@ impl ModelSet {
     /// A guidance for `prompt` (negative prompt, settings and stage-II weight schedule from
     /// `config`) that borrows this set's UNets until it is dropped. Without a stage-II model the
     /// stage-II weight schedule must stay at 0.
-    pub fn guidance_for(
-        &mut self,
-        prompt: &str,
-        config: &Config,
-    ) -> anyhow::Result<CascadedGuidance<'_>> {
+    pub fn guidance_for(&mut self, prompt: &str, config: &Config) -> Result<CascadedGuidance<'_>> {
         let (cond, uncond) = self.embeddings_for(prompt, config)?;
         let stage2 = self
             .stage2
@@ -127,11 +110,7 @@ impl ModelSet {
     }
 
     /// Like [`Self::guidance_for`], handing the UNets over to the guidance.
-    pub fn into_guidance(
-        self,
-        prompt: &str,
-        config: &Config,
-    ) -> anyhow::Result<CascadedGuidance<'static>> {
+    pub fn into_guidance(self, prompt: &str, config: &Config) -> Result<CascadedGuidance<'static>> {
         let (cond, uncond) = self.embeddings_for(prompt, config)?;
         let stage2 = self.stage2.map(|s| Box::new(s) as Box<dyn Denoiser>);
         let guidance = CascadedGuidance::new(
@@ -152,6 +131,6 @@ pub fn load_guidance(
     model: &Path,
     prompt: &str,
     config: &Config,
-) -> anyhow::Result<CascadedGuidance<'static>> {
+) -> Result<CascadedGuidance<'static>> {
     ModelSet::open(model, config)?.into_guidance(prompt, config)
 }

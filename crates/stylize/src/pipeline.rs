@@ -12,7 +12,7 @@
 
 use std::time::Instant;
 
-use anyhow::{Context, bail};
+use crate::error::{Context, Result, invalid};
 use csd::Guidance;
 use darap::Darap;
 use optim::Adam;
@@ -44,7 +44,7 @@ pub trait Objective {
         substep: u32,
         deformed: &[[f64; 3]],
         rng: &mut ChaCha8Rng,
-    ) -> anyhow::Result<StepEval>;
+    ) -> Result<StepEval>;
     /// The images of the current iteration, if the objective renders any (for previews).
     fn current_images(&self) -> Option<&Images> {
         None
@@ -96,16 +96,16 @@ pub struct IterationRecord {
 /// Receives progress from [`run_loop`].
 pub trait Observer {
     /// After every iteration.
-    fn iteration(&mut self, record: &IterationRecord) -> anyhow::Result<()>;
+    fn iteration(&mut self, record: &IterationRecord) -> Result<()>;
     /// When a checkpoint is due (state after `state.iteration`).
-    fn checkpoint(&mut self, state: &LoopState) -> anyhow::Result<()>;
+    fn checkpoint(&mut self, state: &LoopState) -> Result<()>;
     /// When a preview is due.
     fn preview(
         &mut self,
         iteration: u64,
         deformed: &[[f64; 3]],
         images: Option<&Images>,
-    ) -> anyhow::Result<()>;
+    ) -> Result<()>;
     /// Something the user should know that does not stop the loop (e.g. a streak of zero
     /// gradients). The default drops it; the command line prints it.
     fn warning(&mut self, _message: &str) {}
@@ -159,13 +159,13 @@ pub fn run_loop(
     state: &mut LoopState,
     objective: &mut dyn Objective,
     observer: &mut dyn Observer,
-) -> anyhow::Result<()> {
+) -> Result<()> {
     if spec.steps_per_batch == 0 {
-        bail!("steps_per_batch must be at least 1");
+        invalid!("steps_per_batch must be at least 1");
     }
     let n = darap.num_vertices();
     if state.x.len() != n {
-        bail!("x has {} rows, the mesh {} vertices", state.x.len(), n);
+        invalid!("x has {} rows, the mesh {} vertices", state.x.len(), n);
     }
     let mut zero_watch = ZeroGradientWatch::default();
     while state.iteration < spec.iterations && spec.halt_after.is_none_or(|h| state.iteration < h) {
@@ -287,7 +287,7 @@ impl Objective for StyleObjective {
         _substep: u32,
         deformed: &[[f64; 3]],
         _rng: &mut ChaCha8Rng,
-    ) -> anyhow::Result<StepEval> {
+    ) -> Result<StepEval> {
         let t = Instant::now();
         let (loss, grad) = alignment::alignment_loss_and_grad(deformed, &self.faces, &self.targets);
         let alignment = alignment::mean_alignment(deformed, &self.faces, &self.targets);
@@ -370,7 +370,7 @@ impl Objective for TextObjective<'_> {
         substep: u32,
         deformed: &[[f64; 3]],
         rng: &mut ChaCha8Rng,
-    ) -> anyhow::Result<StepEval> {
+    ) -> Result<StepEval> {
         let mut timings = Vec::new();
         let v = &self.views;
         if substep == 0 || self.images.is_none() {
@@ -389,7 +389,7 @@ impl Objective for TextObjective<'_> {
             timings.push(("render", t.elapsed().as_secs_f64()));
         }
         let Some(images) = &self.images else {
-            bail!("no renders")
+            invalid!("no renders")
         };
         let t = Instant::now();
         let out = self
@@ -399,7 +399,7 @@ impl Objective for TextObjective<'_> {
         timings.push(("guidance", t.elapsed().as_secs_f64()));
         timings.push(("guidance_denoiser", out.denoiser_seconds));
         if !out.grad_images.same_shape(images) {
-            bail!(
+            invalid!(
                 "guidance returned {} gradient values for {} image values",
                 out.grad_images.rgb.len(),
                 images.rgb.len()
@@ -448,7 +448,7 @@ mod tests {
             _substep: u32,
             deformed: &[[f64; 3]],
             _rng: &mut ChaCha8Rng,
-        ) -> anyhow::Result<StepEval> {
+        ) -> Result<StepEval> {
             let g = if self.zero.contains(&iteration) {
                 0.0
             } else {
@@ -466,14 +466,14 @@ mod tests {
     struct Records(Vec<IterationRecord>);
 
     impl Observer for Records {
-        fn iteration(&mut self, record: &IterationRecord) -> anyhow::Result<()> {
+        fn iteration(&mut self, record: &IterationRecord) -> Result<()> {
             self.0.push(record.clone());
             Ok(())
         }
-        fn checkpoint(&mut self, _: &LoopState) -> anyhow::Result<()> {
+        fn checkpoint(&mut self, _: &LoopState) -> Result<()> {
             Ok(())
         }
-        fn preview(&mut self, _: u64, _: &[[f64; 3]], _: Option<&Images>) -> anyhow::Result<()> {
+        fn preview(&mut self, _: u64, _: &[[f64; 3]], _: Option<&Images>) -> Result<()> {
             Ok(())
         }
     }
@@ -494,7 +494,7 @@ mod tests {
     }
 
     #[test]
-    fn zero_gradient_streak_is_recorded_in_the_iteration_records() -> anyhow::Result<()> {
+    fn zero_gradient_streak_is_recorded_in_the_iteration_records() -> Result<()> {
         let (p, f) = mesh_core::shapes::icosphere(1).into_parts();
         let darap = Darap::new(&p, &f, darap::DarapOptions::default())?;
         let mut state = LoopState {

@@ -6,7 +6,7 @@
 
 use std::path::Path;
 
-use anyhow::Context;
+use crate::error::{Context, IoContext, Result};
 use raster_diff::{Images, Renderer};
 
 /// Renders and writes the before/after sheet (see the module documentation); `views` columns.
@@ -18,11 +18,10 @@ pub fn write_before_after(
     views: usize,
     size: usize,
     fov_deg: f64,
-) -> anyhow::Result<()> {
+) -> Result<()> {
     let sheet = before_after(source, result, faces, views, size, fov_deg)?;
     crate::durable::replace_with(path, |tmp| {
-        let file = std::fs::File::create(tmp)
-            .with_context(|| format!("cannot create {}", tmp.display()))?;
+        let file = std::fs::File::create(tmp).io_context("cannot create", tmp)?;
         raster_diff::image::write_png(
             std::io::BufWriter::new(file),
             &sheet,
@@ -41,7 +40,7 @@ pub fn before_after(
     views: usize,
     size: usize,
     fov_deg: f64,
-) -> anyhow::Result<Images> {
+) -> Result<Images> {
     let views = views.max(1);
     let radius = source
         .iter()

@@ -28,7 +28,14 @@
 use std::os::unix::fs::MetadataExt;
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, bail};
+use crate::error::{Error, IoContext, Result};
+
+/// `return Err(Error::run_dir(dir, format!(…)))`.
+macro_rules! run_dir_err {
+    ($dir:expr, $($arg:tt)*) => {
+        return Err(Error::run_dir($dir, format!($($arg)*)))
+    };
+}
 use serde::{Deserialize, Serialize};
 
 use crate::checkpoint::Checkpoint;
@@ -153,7 +160,7 @@ pub fn refuse_overwriting_inputs(
     outputs: &[PathBuf],
     trees: &[PathBuf],
     inputs: &[(String, PathBuf)],
-) -> anyhow::Result<()> {
+) -> Result<()> {
     for (role, input) in inputs {
         let Some((in_entry, in_target)) = file_ids(input) else {
             continue;
@@ -166,7 +173,8 @@ pub fn refuse_overwriting_inputs(
                 || (out_target.is_some() && out_target == in_target)
                 || out_target == Some(in_entry);
             if same {
-                bail!(
+                run_dir_err!(
+                    out,
                     "refusing to write {}: it is the {role} {} — an output never replaces an \
                      input (not even with --force); choose another output location",
                     out.display(),
@@ -182,7 +190,8 @@ pub fn refuse_overwriting_inputs(
             };
             let inside = |p: &Option<PathBuf>| p.as_ref().is_some_and(|p| p.starts_with(&tree_c));
             if inside(&entry) || inside(&target) {
-                bail!(
+                run_dir_err!(
+                    tree,
                     "refusing to use {}: the {role} {} lies inside it and would be removed — \
                      an output never replaces an input (not even with --force); move the input",
                     tree.display(),
@@ -263,12 +272,12 @@ impl RunDir {
     }
 
     /// Writes `task.json` (first file of a fresh run: it marks the folder as ours).
-    pub fn write_task(&self, identity: &TaskIdentity) -> anyhow::Result<()> {
+    pub fn write_task(&self, identity: &TaskIdentity) -> Result<()> {
         let t = TaskFile {
             format: TASK_FORMAT.into(),
             identity: identity.clone(),
         };
-        let text = serde_json::to_string_pretty(&t).context("cannot serialize task.json")?;
+        let text = serde_json::to_string_pretty(&t)?;
         crate::durable::replace_bytes(&self.task(), text.as_bytes())
     }
 
@@ -287,17 +296,17 @@ impl RunDir {
     }
 
     /// What is at `root` now.
-    pub fn inspect(&self) -> anyhow::Result<Existing> {
+    pub fn inspect(&self) -> Result<Existing> {
         let entries = match std::fs::read_dir(&self.root) {
             Ok(e) => e,
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Existing::Missing),
             Err(e) => {
-                return Err(e).with_context(|| format!("cannot list {}", self.root.display()));
+                return Err(Error::io("cannot list", &self.root, e));
             }
         };
         let mut names = Vec::new();
         for e in entries {
-            let e = e.with_context(|| format!("cannot list {}", self.root.display()))?;
+            let e = e.io_context("cannot list", &self.root)?;
             names.push(e.file_name().to_string_lossy().into_owned());
         }
         if names
@@ -315,18 +324,23 @@ impl RunDir {
 
     /// Takes the directory for a run: checks inputs are not overwritten, refuses foreign folders
     /// without `--force`, takes the lock, and decides (under the lock) how to start.
-    pub fn claim(&self, claim: &Claim<'_>) -> anyhow::Result<(RunLock, Start)> {
+    pub fn claim(&self, claim: &Claim<'_>) -> Result<(RunLock, Start)> {
         if self.root.exists() && !self.root.is_dir() {
-            bail!(
+            run_dir_err!(
+                &self.root,
                 "output {} exists and is not a directory",
                 self.root.display()
             );
         }
         if claim.force && claim.resume == ResumeMode::Required {
-            bail!("--resume and --force contradict each other: --force starts over");
+            run_dir_err!(
+                &self.root,
+                "--resume and --force contradict each other: --force starts over"
+            );
         }
         if claim.resume == ResumeMode::Required && !self.root.is_dir() {
-            bail!(
+            run_dir_err!(
+                &self.root,
                 "--resume: {} does not exist, so there is nothing to resume (start the run \
                  without --resume)",
                 self.root.display()
@@ -344,7 +358,8 @@ impl RunDir {
         match self.inspect()? {
             Existing::Foreign(names) if !claim.force => {
                 let shown: Vec<&str> = names.iter().take(6).map(String::as_str).collect();
-                bail!(
+                run_dir_err!(
+                    &self.root,
                     "{} is not empty and is not a stylize run directory (it holds {}{}); choose \
                      a new or empty folder, or pass --force to write into it anyway (--force \
                      replaces only files named like the run's own: {}, previews/)",
@@ -360,21 +375,20 @@ impl RunDir {
             }
             _ => {}
         }
-        std::fs::create_dir_all(&self.root)
-            .with_context(|| format!("cannot create {}", self.root.display()))?;
+        std::fs::create_dir_all(&self.root).io_context("cannot create", &self.root)?;
         let lock = RunLock::acquire(&self.root)?;
         self.remove_temporaries();
         let start = self.decide(claim)?;
         Ok((lock, start))
     }
 
-    fn decide(&self, claim: &Claim<'_>) -> anyhow::Result<Start> {
+    fn decide(&self, claim: &Claim<'_>) -> Result<Start> {
         let dir = self.root.display();
         if claim.force {
             self.remove_outputs()?;
             return Ok(Start::Fresh);
         }
-        let recorded = || -> anyhow::Result<Option<TaskIdentity>> {
+        let recorded = || -> Result<Option<TaskIdentity>> {
             if self.has_checkpoint() {
                 return Ok(Checkpoint::load(&self.checkpoint())?.identity);
             }
@@ -384,19 +398,28 @@ impl RunDir {
             if claim.skip_complete {
                 return match recorded()? {
                     Some(id) if id == *claim.identity => Ok(Start::Complete),
-                    Some(id) => bail!(
-                        "{dir} holds a complete run of a different task:\n  {}\nchange the \
-                         row's `out`, restore its settings, or pass --force to redo it",
-                        id.differences(claim.identity).join("\n  ")
-                    ),
-                    None => bail!(
+                    Some(id) => {
+                        let differences = id.differences(claim.identity);
+                        Err(Error::DifferentTask {
+                            dir: self.root.clone(),
+                            message: format!(
+                                "{dir} holds a complete run of a different task:\n  {}\nchange \
+                                 the row's `out`, restore its settings, or pass --force to redo it",
+                                differences.join("\n  ")
+                            ),
+                            differences,
+                        })
+                    }
+                    None => run_dir_err!(
+                        &self.root,
                         "{dir} holds a complete run written by an older stylize without a task \
                          identity, so it cannot be told whether it is this task; pass --force \
                          to redo it"
                     ),
                 };
             }
-            bail!(
+            run_dir_err!(
+                &self.root,
                 "{dir} already holds a complete run (run.json){}; pass --force to overwrite it",
                 if claim.resume == ResumeMode::Required {
                     ": there is nothing to resume"
@@ -407,14 +430,16 @@ impl RunDir {
         }
         if self.has_checkpoint() {
             if claim.resume == ResumeMode::Never {
-                bail!(
+                run_dir_err!(
+                    &self.root,
                     "{dir} holds an interrupted run (checkpoint.json); pass --resume to continue \
                      it or --force to start over"
                 );
             }
             let c = Checkpoint::load(&self.checkpoint())?;
             let Some(id) = &c.identity else {
-                bail!(
+                run_dir_err!(
+                    &self.root,
                     "the checkpoint in {dir} was written by an older stylize (checkpoint version \
                      {}) without a task identity, so it cannot be verified to belong to this \
                      task; pass --force to start over",
@@ -423,23 +448,28 @@ impl RunDir {
             };
             let diffs = id.differences(claim.identity);
             if !diffs.is_empty() {
-                bail!(
-                    "refusing to resume: the checkpoint in {dir} belongs to a different task \
+                return Err(Error::DifferentTask {
+                    dir: self.root.clone(),
+                    message: format!(
+                        "refusing to resume: the checkpoint in {dir} belongs to a different task \
                      ({} {}):\n  {}\nresume with the run's own settings (see its \
                      config.toml and task.json), or pass --force to start over",
-                    diffs.len(),
-                    if diffs.len() == 1 {
-                        "field differs"
-                    } else {
-                        "fields differ"
-                    },
-                    diffs.join("\n  ")
-                );
+                        diffs.len(),
+                        if diffs.len() == 1 {
+                            "field differs"
+                        } else {
+                            "fields differ"
+                        },
+                        diffs.join("\n  ")
+                    ),
+                    differences: diffs,
+                });
             }
             return Ok(Start::Resume(Box::new(c)));
         }
         if claim.resume == ResumeMode::Required {
-            bail!(
+            run_dir_err!(
+                &self.root,
                 "--resume: {dir} holds no checkpoint, so there is nothing to resume (a run \
                  writes its first checkpoint after run.checkpoint_every iterations); start it \
                  again without --resume"
@@ -461,18 +491,16 @@ impl RunDir {
         }
     }
 
-    fn remove_outputs(&self) -> anyhow::Result<()> {
+    fn remove_outputs(&self) -> Result<()> {
         for name in RUN_FILES {
             let p = self.file(name);
             if p.is_file() {
-                std::fs::remove_file(&p)
-                    .with_context(|| format!("cannot remove {}", p.display()))?;
+                std::fs::remove_file(&p).io_context("cannot remove", &p)?;
             }
         }
         let previews = self.previews();
         if previews.is_dir() {
-            std::fs::remove_dir_all(&previews)
-                .with_context(|| format!("cannot remove {}", previews.display()))?;
+            std::fs::remove_dir_all(&previews).io_context("cannot remove", &previews)?;
         }
         self.remove_temporaries();
         Ok(())
@@ -481,13 +509,12 @@ impl RunDir {
     /// Keeps the `metrics.jsonl` lines of iterations `<= iteration`, each once and in increasing
     /// order (after a resume, the lines a killed run wrote past its last checkpoint, and a
     /// partial last line, are dropped). Replaced atomically.
-    pub fn truncate_metrics(&self, iteration: u64) -> anyhow::Result<()> {
+    pub fn truncate_metrics(&self, iteration: u64) -> Result<()> {
         let path = self.metrics();
         if !path.is_file() {
             return crate::durable::replace_bytes(&path, b"");
         }
-        let text = std::fs::read_to_string(&path)
-            .with_context(|| format!("cannot read {}", path.display()))?;
+        let text = std::fs::read_to_string(&path).io_context("cannot read", &path)?;
         let mut kept = String::new();
         let mut last = 0;
         for line in text.split_inclusive('\n') {
@@ -538,8 +565,8 @@ mod tests {
         }
     }
 
-    fn err<T>(r: anyhow::Result<T>) -> String {
-        r.err().map(|e| format!("{e:#}")).unwrap_or_default()
+    fn err<T>(r: Result<T>) -> String {
+        r.err().map(|e| e.full_message()).unwrap_or_default()
     }
 
     #[test]

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
-use anyhow::{Context, bail};
+use crate::error::{Context, Error, IoContext, Result, invalid};
 use csd::Guidance;
 use darap::Darap;
 use mesh_core::TriMesh;
@@ -15,7 +15,7 @@ use npy::{NpyArray, NpyData};
 use optim::{Adam, AdamConfig};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use raster_diff::{CameraConfig, Images, Renderer};
+use raster_diff::{Images, Renderer};
 
 use crate::checkpoint::{CHECKPOINT_VERSION, Checkpoint};
 use crate::config::{Backend, Config};
@@ -142,7 +142,7 @@ pub struct RunOutcome {
 /// A mesh prepared as the reference does: repaired, side-2 cube normalized, rounded to the f32
 /// values `deformation.npz` stores and normalized again in f64 — so `stylize apply` on the saved
 /// file rebuilds exactly this rest mesh.
-pub fn prepare_mesh(path: &Path) -> anyhow::Result<(TriMesh, Vec<String>)> {
+pub fn prepare_mesh(path: &Path) -> Result<(TriMesh, Vec<String>)> {
     prepare_mesh_with_region(path, &crate::config::RegionSection::default()).map(|(m, w, _)| (m, w))
 }
 
@@ -157,19 +157,19 @@ pub struct ResolvedRegion {
 
 /// Region specs parsed, with vertex files read (relative paths as given: from the working
 /// directory; a batch manifest rebases them on its folder).
-pub fn parse_region_specs(specs: &[String]) -> anyhow::Result<Vec<RegionSpec>> {
+pub fn parse_region_specs(specs: &[String]) -> Result<Vec<RegionSpec>> {
     specs
         .iter()
         .map(|s| {
-            RegionSpec::parse(s)?.with_indices(&mut |path: &Path| -> anyhow::Result<Vec<usize>> {
+            RegionSpec::parse(s)?.with_indices(&mut |path: &Path| -> Result<Vec<usize>> {
                 use std::io::Read;
                 let mut text = String::new();
                 mesh_core::io::open_regular(path)
-                    .map_err(anyhow::Error::from)
-                    .and_then(|mut f| f.read_to_string(&mut text).map_err(anyhow::Error::from))
-                    .with_context(|| format!("cannot read vertex file {}", path.display()))?;
+                    .with_context(|| format!("cannot read vertex file {}", path.display()))?
+                    .read_to_string(&mut text)
+                    .io_context("cannot read vertex file", path)?;
                 mesh_core::region::parse_index_list(&text)
-                    .map_err(|e| anyhow::anyhow!("vertex file {}: {e}", path.display()))
+                    .map_err(|e| Error::Invalid(format!("vertex file {}: {e}", path.display())))
             })
         })
         .collect()
@@ -181,7 +181,7 @@ pub fn resolve_region(
     section: &crate::config::RegionSection,
     input: &RegionInput<'_>,
     warnings: &mut Vec<String>,
-) -> anyhow::Result<Option<ResolvedRegion>> {
+) -> Result<Option<ResolvedRegion>> {
     if section.specs.is_empty() {
         return Ok(None);
     }
@@ -201,7 +201,7 @@ pub fn resolve_region(
 pub fn prepare_mesh_with_region(
     path: &Path,
     section: &crate::config::RegionSection,
-) -> anyhow::Result<(TriMesh, Vec<String>, Option<ResolvedRegion>)> {
+) -> Result<(TriMesh, Vec<String>, Option<ResolvedRegion>)> {
     let (mesh, parts) = mesh_core::io::read_mesh_with_parts(path)
         .with_context(|| format!("cannot read mesh {}", path.display()))?;
     let repaired =
@@ -244,11 +244,6 @@ pub fn renderer(config: &Config) -> (Box<dyn Renderer>, String) {
     raster_diff::select_renderer(config.render.backend != Backend::Cpu)
 }
 
-/// The loop was asked to stop (returned by the observer after a full iteration).
-#[derive(Debug, thiserror::Error)]
-#[error("stop requested")]
-struct StopRequested;
-
 struct RunObserver<'a> {
     dir: &'a RunDir,
     lock: &'a RunLock,
@@ -282,16 +277,14 @@ fn record_json(r: &IterationRecord) -> serde_json::Value {
 }
 
 /// Writes a grid of images as one PNG.
-pub fn write_grid(path: &Path, images: &Images) -> anyhow::Result<()> {
+pub fn write_grid(path: &Path, images: &Images) -> Result<()> {
     if let Some(parent) = path.parent() {
-        std::fs::create_dir_all(parent)
-            .with_context(|| format!("cannot create {}", parent.display()))?;
+        std::fs::create_dir_all(parent).io_context("cannot create", parent)?;
     }
     let columns = images.count.clamp(1, 4);
     let sheet = raster_diff::image::contact_sheet(images, columns.max(1));
     crate::durable::replace_with(path, |tmp| {
-        let file = std::fs::File::create(tmp)
-            .with_context(|| format!("cannot create {}", tmp.display()))?;
+        let file = std::fs::File::create(tmp).io_context("cannot create", tmp)?;
         raster_diff::image::write_png(
             std::io::BufWriter::new(file),
             &sheet,
@@ -333,7 +326,7 @@ pub fn turntable(
     n: usize,
     size: usize,
     fov: f64,
-) -> anyhow::Result<Images> {
+) -> Result<Images> {
     let radius = positions
         .iter()
         .map(|p| (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt())
@@ -349,12 +342,17 @@ pub fn turntable(
 }
 
 impl Observer for RunObserver<'_> {
-    fn iteration(&mut self, record: &IterationRecord) -> anyhow::Result<()> {
+    fn iteration(&mut self, record: &IterationRecord) -> Result<()> {
         let line = record_json(record).to_string();
-        writeln!(self.metrics, "{line}").context("cannot write metrics.jsonl")?;
+        writeln!(self.metrics, "{line}").io_context("cannot write", &self.dir.metrics())?;
         self.progress.iteration(record, &line);
         if self.cancel.load(Ordering::SeqCst) {
-            return Err(StopRequested.into());
+            // The loop was asked to stop after a full iteration; `execute_with` writes the
+            // checkpoint and returns the `Stopped` with its iteration.
+            return Err(Error::Stopped(Stopped {
+                dir: self.dir.root().to_path_buf(),
+                checkpoint_iteration: None,
+            }));
         }
         Ok(())
     }
@@ -363,13 +361,14 @@ impl Observer for RunObserver<'_> {
         self.progress.warning(message);
     }
 
-    fn checkpoint(&mut self, state: &LoopState) -> anyhow::Result<()> {
+    fn checkpoint(&mut self, state: &LoopState) -> Result<()> {
         self.lock.ensure_held()?;
-        self.metrics.flush().context("cannot flush metrics.jsonl")?;
+        let metrics = self.dir.metrics();
+        self.metrics.flush().io_context("cannot flush", &metrics)?;
         // The checkpoint must not be durable before the metrics lines it accounts for.
         self.metrics
             .sync_data()
-            .context("cannot sync metrics.jsonl")?;
+            .io_context("cannot sync", &metrics)?;
         Checkpoint {
             version: CHECKPOINT_VERSION,
             iteration: state.iteration,
@@ -387,7 +386,7 @@ impl Observer for RunObserver<'_> {
         iteration: u64,
         deformed: &[[f64; 3]],
         images: Option<&Images>,
-    ) -> anyhow::Result<()> {
+    ) -> Result<()> {
         let path = self.dir.previews().join(format!("iter_{iteration:06}.png"));
         match images {
             Some(images) => write_grid(&path, images),
@@ -439,7 +438,7 @@ pub fn objective_identity(task: &Task<'_>) -> ObjectiveIdentity {
 }
 
 /// Runs one request to completion (or to `halt_after`), reporting nothing and never cancelled.
-pub fn execute(request: &RunRequest, task: Task<'_>) -> anyhow::Result<RunOutcome> {
+pub fn execute(request: &RunRequest, task: Task<'_>) -> Result<RunOutcome> {
     let objective = objective_identity(&task);
     let mut options = RunOptions::default();
     if let Task::Style(Style::Exemplar { path, .. }) = &task {
@@ -479,7 +478,7 @@ pub fn prepare(
     request: &RunRequest,
     mut objective: ObjectiveIdentity,
     model: Option<&crate::identity::ModelIdentity>,
-) -> anyhow::Result<Prepared> {
+) -> Result<Prepared> {
     let config = &request.config;
     config.validate()?;
     let config_toml = config.to_toml_string()?;
@@ -543,7 +542,7 @@ pub fn build_objective<'g>(
     mesh: &TriMesh,
     config: &Config,
     halt_after: Option<u64>,
-) -> anyhow::Result<BuiltObjective<'g>> {
+) -> Result<BuiltObjective<'g>> {
     let label = match &task {
         Task::Style(s) => ("style", s.name()),
         Task::Text { prompt, .. } => ("prompt", prompt.clone()),
@@ -575,14 +574,8 @@ pub fn build_objective<'g>(
         }
         Task::Text { guidance, .. } => {
             let (renderer, why) = renderer(config);
-            let camera = CameraConfig {
-                elevation_deg: config.camera.elevation_deg,
-                azimuth_deg: config.camera.azimuth_deg,
-                distance: config.camera.distance,
-                fov_y_deg: config.camera.fov_deg,
-            };
             let views = ViewSettings {
-                camera,
+                camera: config.camera.sampler.clone(),
                 views: config.camera.views,
                 width: config.render.width,
                 height: config.render.height,
@@ -610,7 +603,7 @@ pub fn initial_state(
     prepared: &Prepared,
     config: &Config,
     adam: AdamConfig,
-) -> anyhow::Result<LoopState> {
+) -> Result<LoopState> {
     let n = prepared.mesh.positions.len();
     Ok(match start {
         Start::Fresh | Start::Complete => {
@@ -626,7 +619,7 @@ pub fn initial_state(
         }
         Start::Resume(c) => {
             if c.x.len() != n {
-                bail!(
+                invalid!(
                     "the checkpoint has {} vertices, the mesh {n}: not the same mesh",
                     c.x.len()
                 );
@@ -655,7 +648,7 @@ pub fn write_outputs(
     config: &Config,
     source: &Path,
     label: &(&'static str, String),
-) -> anyhow::Result<TriMesh> {
+) -> Result<TriMesh> {
     let mesh = &prepared.mesh;
     let x_saved: Vec<[f64; 3]> = x.iter().map(|p| p.map(|c| f64::from(c as f32))).collect();
     let result = prepared
@@ -669,14 +662,14 @@ pub fn write_outputs(
     for ext in ["obj", "ply", "glb"] {
         let path = dir.file(&format!("mesh.{ext}"));
         let written = crate::durable::replace_with(&path, |tmp| {
-            mesh_core::io::write_mesh(tmp, &deformed, Some(&normals)).map_err(anyhow::Error::from)
+            mesh_core::io::write_mesh(tmp, &deformed, Some(&normals)).map_err(Error::from)
         });
         match written {
             Ok(()) => {}
             Err(e)
                 if matches!(
-                    e.downcast_ref::<mesh_core::MeshError>(),
-                    Some(mesh_core::MeshError::UnsupportedFormat { .. })
+                    e.kind(),
+                    Error::Mesh(mesh_core::MeshError::UnsupportedFormat { .. })
                 ) =>
             {
                 prepared.warnings.push(format!(
@@ -695,7 +688,7 @@ pub fn write_outputs(
         &deformed.faces,
         config.run.turntable_views,
         config.run.turntable_size,
-        config.camera.fov_deg,
+        config.camera.sampler.fov_y_deg,
     )?;
     if let (Some(r), true, Some(ids)) = (region, config.region.tint, tt_renderer.triangle_ids()) {
         tint_region(&mut tt, &ids, &deformed.faces, &r.free);
@@ -708,7 +701,7 @@ pub fn write_outputs(
         &deformed.faces,
         config.run.turntable_views,
         config.run.turntable_size,
-        config.camera.fov_deg,
+        config.camera.sampler.fov_y_deg,
     )?;
     Ok(deformed)
 }
@@ -723,32 +716,17 @@ pub fn write_outputs(
 pub fn execute_with<'g>(
     request: &RunRequest,
     objective: ObjectiveIdentity,
-    make_task: impl FnOnce() -> anyhow::Result<Task<'g>>,
+    make_task: impl FnOnce() -> Result<Task<'g>>,
     options: &RunOptions,
     hooks: RunHooks<'_>,
-) -> anyhow::Result<RunOutcome> {
+) -> Result<RunOutcome> {
     let RunHooks { progress, cancel } = hooks;
-    let cancelled = || cancel.load(Ordering::SeqCst);
     let config = &request.config;
     let mut prepared = prepare(request, objective, options.model.as_ref())?;
-
     let dir = RunDir::new(&request.out);
     let mut inputs = vec![("input mesh".to_string(), request.mesh.clone())];
     inputs.extend(options.inputs.iter().cloned());
-    let resume = if options.resume_if_checkpoint {
-        ResumeMode::IfCheckpoint
-    } else if request.resume {
-        ResumeMode::Required
-    } else {
-        ResumeMode::Never
-    };
-    let (lock, start) = dir.claim(&Claim {
-        force: request.force,
-        resume,
-        skip_complete: options.skip_complete,
-        identity: &prepared.identity,
-        inputs: &inputs,
-    })?;
+    let (lock, start) = claim_run_dir(&dir, request, options, &prepared, &inputs)?;
     if matches!(start, Start::Complete) {
         return Ok(RunOutcome {
             iteration: 0,
@@ -758,34 +736,7 @@ pub fn execute_with<'g>(
             already_complete: true,
         });
     }
-    let stopped_before = |start: &Start| {
-        cancelled().then(|| Stopped {
-            dir: request.out.clone(),
-            checkpoint_iteration: match start {
-                Start::Resume(c) => Some(c.iteration),
-                _ => None,
-            },
-        })
-    };
-    if let Some(s) = stopped_before(&start) {
-        return Err(s.into());
-    }
-    let task = make_task()?;
-    if let Some(s) = stopped_before(&start) {
-        return Err(s.into());
-    }
-    if let Task::Style(Style::Exemplar { path, .. }) = &task {
-        inputs.push(("exemplar mesh".into(), path.clone()));
-        crate::rundir::refuse_overwriting_inputs(
-            &crate::rundir::RUN_FILES
-                .iter()
-                .map(|n| dir.file(n))
-                .collect::<Vec<_>>(),
-            &[dir.previews()],
-            &inputs,
-        )?;
-    }
-
+    let task = make_task_unless_stopped(&dir, &start, cancel, make_task, &mut inputs)?;
     let BuiltObjective {
         mut objective,
         spec,
@@ -795,68 +746,24 @@ pub fn execute_with<'g>(
         label,
     } = build_objective(task, &prepared.mesh, config, request.halt_after)?;
     let mut state = initial_state(start, &dir, &prepared, config, adam)?;
-
-    // The loop.
-    let mesh = &prepared.mesh;
     let alignment_before = style_objective
         .as_ref()
-        .map(|o| o.mean_alignment(&mesh.positions));
-    let metrics = std::fs::OpenOptions::new()
-        .append(true)
-        .create(true)
-        .open(dir.metrics())
-        .context("cannot open metrics.jsonl")?;
-    let mut headline = vec![format!(
-        "{} on {} ({} vertices)",
-        objective.describe(),
-        request.mesh.display(),
-        mesh.positions.len()
-    )];
-    if let Some(why) = &renderer_choice {
-        headline.push(format!("renderer: {why}"));
-    }
-    progress.start(spec.iterations, state.iteration, &headline);
-    let mut observer = RunObserver {
+        .map(|o| o.mean_alignment(&prepared.mesh.positions));
+    let looped = ObservedLoop {
         dir: &dir,
         lock: &lock,
-        identity: prepared.identity.clone(),
-        metrics,
+        prepared: &prepared,
+        config,
         progress,
         cancel,
-        config_toml: prepared.config_toml.clone(),
-        preview_size: config.run.turntable_size,
-        fov: config.camera.fov_deg,
-        faces: mesh.faces.clone(),
-        preview_renderer: raster_diff::CpuRenderer::default(),
-        tint: prepared
-            .region
-            .as_ref()
-            .filter(|_| config.region.tint)
-            .map(|r| r.free.clone()),
-    };
-    let loop_start = Instant::now();
-    let looped = run_loop(
-        &prepared.darap,
+    }
+    .run(
+        request,
+        objective.as_mut(),
         &spec,
         &mut state,
-        objective.as_mut(),
-        &mut observer,
-    );
-    observer.progress.finish();
-    match looped {
-        Ok(()) => {}
-        Err(e) if e.is::<StopRequested>() => {
-            // The iteration is complete (state is consistent): keep it.
-            observer.checkpoint(&state)?;
-            return Err(Stopped {
-                dir: request.out.clone(),
-                checkpoint_iteration: Some(state.iteration),
-            }
-            .into());
-        }
-        Err(e) => return Err(e),
-    }
-    let loop_seconds = loop_start.elapsed().as_secs_f64();
+        renderer_choice.as_deref(),
+    )?;
     if state.iteration < spec.iterations {
         return Ok(RunOutcome {
             iteration: state.iteration,
@@ -866,7 +773,7 @@ pub fn execute_with<'g>(
             already_complete: false,
         });
     }
-    if cancelled() {
+    if cancel.load(Ordering::SeqCst) {
         // The final checkpoint is written; the outputs are left to the resume.
         return Err(Stopped {
             dir: request.out.clone(),
@@ -874,7 +781,6 @@ pub fn execute_with<'g>(
         }
         .into());
     }
-
     let deformed = write_outputs(
         &dir,
         &lock,
@@ -888,11 +794,200 @@ pub fn execute_with<'g>(
         (Some(o), Some(before)) => Some((before, o.mean_alignment(&deformed.positions))),
         _ => None,
     };
+    lock.ensure_held()?;
+    write_summary(
+        &dir,
+        request,
+        &prepared,
+        &objective.describe(),
+        &state,
+        alignment,
+        renderer_choice.as_deref(),
+        looped.loop_seconds,
+    )?;
+    drop(lock);
+    Ok(RunOutcome {
+        iteration: state.iteration,
+        complete: true,
+        alignment,
+        warnings: prepared.warnings,
+        already_complete: false,
+    })
+}
+
+/// Stage 2 of [`execute_with`]: the run directory taken (inputs protected, the lock held) and
+/// how to start in it.
+fn claim_run_dir(
+    dir: &RunDir,
+    request: &RunRequest,
+    options: &RunOptions,
+    prepared: &Prepared,
+    inputs: &[(String, PathBuf)],
+) -> Result<(RunLock, Start)> {
+    let resume = if options.resume_if_checkpoint {
+        ResumeMode::IfCheckpoint
+    } else if request.resume {
+        ResumeMode::Required
+    } else {
+        ResumeMode::Never
+    };
+    dir.claim(&Claim {
+        force: request.force,
+        resume,
+        skip_complete: options.skip_complete,
+        identity: &prepared.identity,
+        inputs,
+    })
+}
+
+/// Stage 3 of [`execute_with`]: the caller's task (models load here), unless the run was
+/// cancelled before or while it loaded; an exemplar becomes an input no output may replace.
+fn make_task_unless_stopped<'g>(
+    dir: &RunDir,
+    start: &Start,
+    cancel: &AtomicBool,
+    make_task: impl FnOnce() -> Result<Task<'g>>,
+    inputs: &mut Vec<(String, PathBuf)>,
+) -> Result<Task<'g>> {
+    let stopped_before = || {
+        cancel.load(Ordering::SeqCst).then(|| Stopped {
+            dir: dir.root().to_path_buf(),
+            checkpoint_iteration: match start {
+                Start::Resume(c) => Some(c.iteration),
+                _ => None,
+            },
+        })
+    };
+    if let Some(s) = stopped_before() {
+        return Err(s.into());
+    }
+    let task = make_task()?;
+    if let Some(s) = stopped_before() {
+        return Err(s.into());
+    }
+    if let Task::Style(Style::Exemplar { path, .. }) = &task {
+        inputs.push(("exemplar mesh".into(), path.clone()));
+        crate::rundir::refuse_overwriting_inputs(
+            &crate::rundir::RUN_FILES
+                .iter()
+                .map(|n| dir.file(n))
+                .collect::<Vec<_>>(),
+            &[dir.previews()],
+            inputs,
+        )?;
+    }
+    Ok(task)
+}
+
+/// Stage 4 of [`execute_with`]: the loop with its observer (metrics, checkpoints, previews,
+/// progress, cancellation).
+struct ObservedLoop<'a> {
+    dir: &'a RunDir,
+    lock: &'a RunLock,
+    prepared: &'a Prepared,
+    config: &'a Config,
+    progress: &'a mut dyn Progress,
+    cancel: &'a AtomicBool,
+}
+
+/// What [`ObservedLoop::run`] measured.
+struct Looped {
+    loop_seconds: f64,
+}
+
+impl ObservedLoop<'_> {
+    /// Runs the loop from `state`; a cancellation writes a checkpoint of the last complete
+    /// iteration and returns [`Stopped`].
+    fn run(
+        self,
+        request: &RunRequest,
+        objective: &mut dyn Objective,
+        spec: &LoopSpec,
+        state: &mut LoopState,
+        renderer_choice: Option<&str>,
+    ) -> Result<Looped> {
+        let Self {
+            dir,
+            lock,
+            prepared,
+            config,
+            progress,
+            cancel,
+        } = self;
+        let mesh = &prepared.mesh;
+        let metrics = std::fs::OpenOptions::new()
+            .append(true)
+            .create(true)
+            .open(dir.metrics())
+            .io_context("cannot open", &dir.metrics())?;
+        let mut headline = vec![format!(
+            "{} on {} ({} vertices)",
+            objective.describe(),
+            request.mesh.display(),
+            mesh.positions.len()
+        )];
+        if let Some(why) = renderer_choice {
+            headline.push(format!("renderer: {why}"));
+        }
+        progress.start(spec.iterations, state.iteration, &headline);
+        let mut observer = RunObserver {
+            dir,
+            lock,
+            identity: prepared.identity.clone(),
+            metrics,
+            progress,
+            cancel,
+            config_toml: prepared.config_toml.clone(),
+            preview_size: config.run.turntable_size,
+            fov: config.camera.sampler.fov_y_deg,
+            faces: mesh.faces.clone(),
+            preview_renderer: raster_diff::CpuRenderer::default(),
+            tint: prepared
+                .region
+                .as_ref()
+                .filter(|_| config.region.tint)
+                .map(|r| r.free.clone()),
+        };
+        let loop_start = Instant::now();
+        let looped = run_loop(&prepared.darap, spec, state, objective, &mut observer);
+        observer.progress.finish();
+        match looped {
+            Ok(()) => Ok(Looped {
+                loop_seconds: loop_start.elapsed().as_secs_f64(),
+            }),
+            Err(e) if matches!(e.kind(), Error::Stopped(_)) => {
+                // The iteration is complete (state is consistent): keep it.
+                observer.checkpoint(state)?;
+                Err(Stopped {
+                    dir: request.out.clone(),
+                    checkpoint_iteration: Some(state.iteration),
+                }
+                .into())
+            }
+            Err(e) => Err(e),
+        }
+    }
+}
+
+/// Stage 6 of [`execute_with`]: `run.json`, the run's summary (written last: it marks the run
+/// complete).
+#[allow(clippy::too_many_arguments)]
+fn write_summary(
+    dir: &RunDir,
+    request: &RunRequest,
+    prepared: &Prepared,
+    objective: &str,
+    state: &LoopState,
+    alignment: Option<(f64, f64)>,
+    renderer_choice: Option<&str>,
+    loop_seconds: f64,
+) -> Result<()> {
+    let config = &request.config;
     let mesh = &prepared.mesh;
     let summary = serde_json::json!({
         "status": "complete",
         "mesh": request.mesh.display().to_string(),
-        "objective": objective.describe(),
+        "objective": objective,
         "iterations": state.iteration,
         "adam_steps": state.adam.state().step,
         "seed": config.run.seed,
@@ -912,22 +1007,11 @@ pub fn execute_with<'g>(
         })),
         "task": prepared.identity.fields,
     });
-    lock.ensure_held()?;
     crate::durable::replace_bytes(
         &dir.summary(),
-        serde_json::to_string_pretty(&summary)
-            .context("summary")?
-            .as_bytes(),
+        serde_json::to_string_pretty(&summary)?.as_bytes(),
     )
-    .context("cannot write run.json")?;
-    drop(lock);
-    Ok(RunOutcome {
-        iteration: state.iteration,
-        complete: true,
-        alignment,
-        warnings: prepared.warnings,
-        already_complete: false,
-    })
+    .context("cannot write run.json")
 }
 
 /// Writes `deformation.npz` in the reference format plus our keys (for a localized run:
@@ -942,7 +1026,7 @@ fn write_deformation(
     task_key: &str,
     task_value: &str,
     region: Option<&ResolvedRegion>,
-) -> anyhow::Result<()> {
+) -> Result<()> {
     let csd_cfg = serde_json::json!({
         "local_step_procrustes": { "lamb": config.darap.lambda, "normalize_target_normals": true },
         "arap_energy_type": "spokes_and_rims_mine",
@@ -961,8 +1045,7 @@ fn write_deformation(
         dataset_cfg: dataset_cfg.to_string(),
         extra: Vec::new(),
     };
-    let scalar_i64 =
-        |v: i64| NpyArray::new(vec![], NpyData::I64(vec![v])).map_err(anyhow::Error::msg);
+    let scalar_i64 = |v: i64| NpyArray::new(vec![], NpyData::I64(vec![v])).map_err(Error::Invalid);
     saved.set_extra("format_version", scalar_i64(NPZ_FORMAT_VERSION)?)?;
     // The seed as i64 bits (NumPy has no portable u64 scalar in our reader).
     saved.set_extra("seed", scalar_i64(config.run.seed as i64)?)?;
@@ -974,7 +1057,7 @@ fn write_deformation(
         saved.set_extra(
             "region_weights",
             NpyArray::new(vec![r.weights.len()], NpyData::F64(r.weights.clone()))
-                .map_err(anyhow::Error::msg)?,
+                .map_err(Error::Invalid)?,
         )?;
         saved.set_extra(
             "region_specs",
@@ -986,7 +1069,7 @@ fn write_deformation(
         )?;
     }
     crate::durable::replace_with(&dir.deformation(), |tmp| {
-        saved.write(tmp).map_err(anyhow::Error::from)
+        saved.write(tmp).map_err(Error::from)
     })
     .with_context(|| format!("cannot write {}", dir.deformation().display()))
 }

@@ -141,35 +141,10 @@ pub(crate) fn create_parent_dirs(path: &Path) -> Result<(), MeshError> {
     Ok(())
 }
 
-/// Checks, without opening it, that `path` is a regular file (symbolic links followed). A
-/// directory, named pipe, socket or device is refused with an [`std::io::ErrorKind::InvalidInput`]
-/// error saying which: opening a named pipe would block until some other process writes to it, and a
-/// device such as `/dev/zero` never ends. Every reader of a user-named file should call this first.
-pub fn ensure_regular_file(path: &Path) -> std::io::Result<()> {
-    let meta = std::fs::metadata(path)?;
-    if meta.is_file() {
-        return Ok(());
-    }
-    let ft = meta.file_type();
-    let what = if ft.is_dir() {
-        "a directory"
-    } else {
-        use std::os::unix::fs::FileTypeExt;
-        if ft.is_fifo() {
-            "a named pipe (FIFO)"
-        } else if ft.is_socket() {
-            "a socket"
-        } else if ft.is_block_device() || ft.is_char_device() {
-            "a device"
-        } else {
-            "something else"
-        }
-    };
-    Err(std::io::Error::new(
-        std::io::ErrorKind::InvalidInput,
-        format!("it is {what}, not a regular file"),
-    ))
-}
+/// Checks, without opening it, that `path` is a regular file (a directory, named pipe, socket or
+/// device is refused, saying which). One definition, in the `npy` crate (which must not depend on
+/// mesh code), shared by every reader of a user-named file.
+pub use npy::ensure_regular_file;
 
 /// Opens `path` for reading after [`ensure_regular_file`].
 pub fn open_regular(path: &Path) -> Result<std::fs::File, MeshError> {

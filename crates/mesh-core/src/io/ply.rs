@@ -151,9 +151,44 @@ pub fn read_ply(path: &Path) -> Result<MeshWithNormals, MeshError> {
 
 /// Like [`read_ply`], also returning the scalar properties of `vertex` (other than `x y z nx ny
 /// nz`) and `face` as region properties (per triangle).
+///
+/// Stages: [`split_header`] (header text and where the body starts), [`parse_header`] (encoding
+/// and elements), then [`read_element`] for each element in file order.
 pub fn read_ply_with_parts(path: &Path) -> Result<(MeshWithNormals, Parts), MeshError> {
     let all = read_bytes(path)?;
     let bytes = super::strip_bom(&all);
+    let (header, body_start) = split_header(bytes, path)?;
+    let (encoding, elements) = parse_header(&header, path)?;
+    let mut body = Body {
+        bytes: &bytes[body_start..],
+        pos: 0,
+        encoding,
+        path,
+    };
+    let mut out = PlyContents::default();
+    for el in &elements {
+        read_element(el, &mut body, bytes.len(), &mut out)?;
+    }
+    if !out.saw_vertex {
+        return Err(parse_err(path, "the header declares no `vertex` element"));
+    }
+    let PlyContents {
+        positions,
+        normals,
+        faces,
+        parts,
+        ..
+    } = out;
+    let normals = (!normals.is_empty() && normals.len() == positions.len()).then_some(normals);
+    Ok(((TriMesh { positions, faces }, normals), parts))
+}
+
+/// The header's text (from `ply` to `end_header`) and the offset where the body starts (after the
+/// newline, `\n` or `\r\n`, that ends `end_header`).
+fn split_header<'b>(
+    bytes: &'b [u8],
+    path: &Path,
+) -> Result<(std::borrow::Cow<'b, str>, usize), MeshError> {
     if !bytes.starts_with(b"ply") {
         return Err(parse_err(path, "not a PLY file (it must start with `ply`)"));
     }
@@ -163,13 +198,15 @@ pub fn read_ply_with_parts(path: &Path) -> Result<(MeshWithNormals, Parts), Mesh
         .position(|w| w == marker)
         .ok_or_else(|| parse_err(path, "the header never ends (no `end_header` line)"))?;
     let header = String::from_utf8_lossy(&bytes[..hend]);
-    // The body starts after the newline that ends `end_header` (\n or \r\n).
     let mut body_start = hend + marker.len();
     while body_start < bytes.len() && bytes[body_start] != b'\n' {
         body_start += 1;
     }
-    body_start = (body_start + 1).min(bytes.len());
+    Ok((header, (body_start + 1).min(bytes.len())))
+}
 
+/// The `format` line's encoding and the declared elements with their properties.
+fn parse_header(header: &str, path: &Path) -> Result<(PlyEncoding, Vec<Element>), MeshError> {
     let mut encoding = None;
     let mut elements: Vec<Element> = Vec::new();
     for (i, line) in header.lines().enumerate().skip(1) {
@@ -213,189 +250,218 @@ pub fn read_ply_with_parts(path: &Path) -> Result<(MeshWithNormals, Parts), Mesh
                         format!("line {lineno}: `property` before any `element`"),
                     )
                 })?;
-                let bad = || {
-                    parse_err(
-                        path,
-                        format!("line {lineno}: malformed property `{}`", line.trim()),
-                    )
-                };
-                let prop = if t.get(1) == Some(&"list") {
-                    Property::List {
-                        count: t.get(2).and_then(|s| Scalar::parse(s)).ok_or_else(bad)?,
-                        item: t.get(3).and_then(|s| Scalar::parse(s)).ok_or_else(bad)?,
-                        name: t.get(4).ok_or_else(bad)?.to_string(),
-                    }
-                } else {
-                    Property::Scalar {
-                        ty: t.get(1).and_then(|s| Scalar::parse(s)).ok_or_else(bad)?,
-                        name: t.get(2).ok_or_else(bad)?.to_string(),
-                    }
-                };
-                el.properties.push(prop);
+                el.properties.push(parse_property(&t, line, lineno, path)?);
             }
             _ => {} // comment, obj_info, blank
         }
     }
     let encoding = encoding.ok_or_else(|| parse_err(path, "the header has no `format` line"))?;
-    let mut body = Body {
-        bytes: &bytes[body_start..],
-        pos: 0,
-        encoding,
-        path,
-    };
+    Ok((encoding, elements))
+}
 
-    let mut positions: Vec<[f64; 3]> = Vec::new();
-    let mut normals: Vec<[f64; 3]> = Vec::new();
-    let mut faces: Vec<[u32; 3]> = Vec::new();
-    let mut saw_vertex = false;
-    let mut parts = Parts::default();
-    for el in &elements {
-        let is_vertex = el.name == "vertex";
-        let is_face = el.name == "face";
-        let slot = |name: &str| {
-            el.properties
-                .iter()
-                .position(|p| matches!(p, Property::Scalar { name: n, .. } if n == name))
-        };
-        let xyz = [slot("x"), slot("y"), slot("z")];
-        let nxyz = [slot("nx"), slot("ny"), slot("nz")];
-        let has_normals = nxyz.iter().all(Option::is_some);
-        if is_vertex {
-            saw_vertex = true;
-            if xyz.iter().any(Option::is_none) {
-                return Err(parse_err(
-                    path,
-                    "element `vertex` lacks an x, y or z property",
-                ));
-            }
-            // Bounded by the file size, so a lying header cannot reserve gigabytes.
-            positions.reserve(el.count.min(bytes.len() / 3));
+/// One `property TYPE NAME` or `property list COUNT ITEM NAME` line, split into words `t`.
+fn parse_property(
+    t: &[&str],
+    line: &str,
+    lineno: usize,
+    path: &Path,
+) -> Result<Property, MeshError> {
+    let bad = || {
+        parse_err(
+            path,
+            format!("line {lineno}: malformed property `{}`", line.trim()),
+        )
+    };
+    Ok(if t.get(1) == Some(&"list") {
+        Property::List {
+            count: t.get(2).and_then(|s| Scalar::parse(s)).ok_or_else(bad)?,
+            item: t.get(3).and_then(|s| Scalar::parse(s)).ok_or_else(bad)?,
+            name: t.get(4).ok_or_else(bad)?.to_string(),
         }
-        let list_slot = el.properties.iter().position(
-            |p| matches!(p, Property::List { name, .. } if name == "vertex_indices" || name == "vertex_index"),
-        );
-        if is_face && list_slot.is_none() {
+    } else {
+        Property::Scalar {
+            ty: t.get(1).and_then(|s| Scalar::parse(s)).ok_or_else(bad)?,
+            name: t.get(2).ok_or_else(bad)?.to_string(),
+        }
+    })
+}
+
+/// What the body's elements fill in.
+#[derive(Default)]
+struct PlyContents {
+    positions: Vec<[f64; 3]>,
+    normals: Vec<[f64; 3]>,
+    faces: Vec<[u32; 3]>,
+    parts: Parts,
+    saw_vertex: bool,
+}
+
+/// Reads the `el.count` records of one element: vertices (positions, normals, extra scalar
+/// properties), faces (fan-triangulated polygons, per-face scalars repeated per triangle), or any
+/// other element (read and dropped). `file_len` bounds the reservation a header may ask for.
+fn read_element(
+    el: &Element,
+    body: &mut Body<'_>,
+    file_len: usize,
+    out: &mut PlyContents,
+) -> Result<(), MeshError> {
+    let path = body.path;
+    let is_vertex = el.name == "vertex";
+    let is_face = el.name == "face";
+    let slot = |name: &str| {
+        el.properties
+            .iter()
+            .position(|p| matches!(p, Property::Scalar { name: n, .. } if n == name))
+    };
+    let xyz = [slot("x"), slot("y"), slot("z")];
+    let nxyz = [slot("nx"), slot("ny"), slot("nz")];
+    let has_normals = nxyz.iter().all(Option::is_some);
+    if is_vertex {
+        out.saw_vertex = true;
+        if xyz.iter().any(Option::is_none) {
             return Err(parse_err(
                 path,
-                "element `face` has no `vertex_indices` list",
+                "element `vertex` lacks an x, y or z property",
             ));
         }
-        if el.properties.is_empty() {
-            // Nothing to read per element: skipping is exact and keeps the work bounded by the
-            // file's size whatever count the header declares.
-            continue;
-        }
-        let mut values = vec![0.0f64; el.properties.len()];
-        let mut poly: Vec<u32> = Vec::new();
-        // Scalar properties kept for regions: (slot, index into the parts' list).
-        let kept: Vec<usize> = if is_vertex || is_face {
-            el.properties
-                .iter()
-                .enumerate()
-                .filter(|(_, p)| match p {
-                    Property::Scalar { name, .. } => {
-                        !is_vertex || !["x", "y", "z", "nx", "ny", "nz"].contains(&name.as_str())
-                    }
-                    Property::List { .. } => false,
-                })
-                .map(|(k, _)| k)
-                .collect()
-        } else {
-            Vec::new()
-        };
-        let first_kept = if is_vertex {
-            parts.vertex_properties.len()
-        } else {
-            parts.face_properties.len()
-        };
-        for &k in &kept {
-            if let Property::Scalar { name, .. } = &el.properties[k] {
-                let list = if is_vertex {
-                    &mut parts.vertex_properties
-                } else {
-                    &mut parts.face_properties
-                };
-                list.push(ScalarProperty {
-                    name: name.clone(),
-                    values: Vec::new(),
-                });
-            }
-        }
-        for i in 0..el.count {
-            let triangles_before = faces.len();
-            for (k, p) in el.properties.iter().enumerate() {
-                let pname = match p {
-                    Property::Scalar { name, .. } | Property::List { name, .. } => name.as_str(),
-                };
-                let what = || format!("{} {i} of {} (its `{pname}`)", el.name, el.count);
-                match p {
-                    Property::Scalar { ty, .. } => values[k] = body.read(*ty, &what)?,
-                    Property::List { count, item, .. } => {
-                        let n = body.read(*count, &what)?;
-                        if !(n >= 0.0 && n.fract() == 0.0) {
-                            return Err(parse_err(
-                                path,
-                                format!("bad list length {n} in {}", what()),
-                            ));
-                        }
-                        let keep = Some(k) == list_slot && is_face;
-                        poly.clear();
-                        for _ in 0..n as usize {
-                            let v = body.read(*item, &what)?;
-                            if keep {
-                                if !(v >= 0.0 && v <= f64::from(u32::MAX) && v.fract() == 0.0) {
-                                    return Err(parse_err(
-                                        path,
-                                        format!("face {i}: `{v}` is not a vertex index"),
-                                    ));
-                                }
-                                poly.push(v as u32);
-                            }
-                        }
-                        if keep {
-                            if poly.len() < 3 {
-                                return Err(parse_err(
-                                    path,
-                                    format!(
-                                        "face {i} has {} corners, at least 3 are needed",
-                                        poly.len()
-                                    ),
-                                ));
-                            }
-                            for j in 1..poly.len() - 1 {
-                                faces.push([poly[0], poly[j], poly[j + 1]]);
-                            }
+        // Bounded by the file size, so a lying header cannot reserve gigabytes.
+        out.positions.reserve(el.count.min(file_len / 3));
+    }
+    let list_slot = el.properties.iter().position(
+        |p| matches!(p, Property::List { name, .. } if name == "vertex_indices" || name == "vertex_index"),
+    );
+    if is_face && list_slot.is_none() {
+        return Err(parse_err(
+            path,
+            "element `face` has no `vertex_indices` list",
+        ));
+    }
+    if el.properties.is_empty() {
+        // Nothing to read per element: skipping is exact and keeps the work bounded by the
+        // file's size whatever count the header declares.
+        return Ok(());
+    }
+    let (kept, first_kept) = register_region_properties(el, is_vertex, is_face, &mut out.parts);
+    let mut values = vec![0.0f64; el.properties.len()];
+    let mut poly: Vec<u32> = Vec::new();
+    for i in 0..el.count {
+        let triangles_before = out.faces.len();
+        for (k, p) in el.properties.iter().enumerate() {
+            let pname = match p {
+                Property::Scalar { name, .. } | Property::List { name, .. } => name.as_str(),
+            };
+            let what = || format!("{} {i} of {} (its `{pname}`)", el.name, el.count);
+            match p {
+                Property::Scalar { ty, .. } => values[k] = body.read(*ty, &what)?,
+                Property::List { count, item, .. } => {
+                    let keep = Some(k) == list_slot && is_face;
+                    read_list(body, *count, *item, keep, i, &what, &mut poly)?;
+                    if keep {
+                        for j in 1..poly.len() - 1 {
+                            out.faces.push([poly[0], poly[j], poly[j + 1]]);
                         }
                     }
                 }
             }
-            if is_vertex {
-                let g = |s: Option<usize>| values[s.unwrap_or(0)];
-                positions.push([g(xyz[0]), g(xyz[1]), g(xyz[2])]);
-                if has_normals {
-                    normals.push([g(nxyz[0]), g(nxyz[1]), g(nxyz[2])]);
-                }
-                for (j, &k) in kept.iter().enumerate() {
-                    parts.vertex_properties[first_kept + j]
-                        .values
-                        .push(values[k]);
-                }
-            } else if is_face {
-                for (j, &k) in kept.iter().enumerate() {
-                    let list = &mut parts.face_properties[first_kept + j].values;
-                    list.extend(std::iter::repeat_n(
-                        values[k],
-                        faces.len() - triangles_before,
-                    ));
-                }
+        }
+        if is_vertex {
+            let g = |s: Option<usize>| values[s.unwrap_or(0)];
+            out.positions.push([g(xyz[0]), g(xyz[1]), g(xyz[2])]);
+            if has_normals {
+                out.normals.push([g(nxyz[0]), g(nxyz[1]), g(nxyz[2])]);
+            }
+            for (j, &k) in kept.iter().enumerate() {
+                out.parts.vertex_properties[first_kept + j]
+                    .values
+                    .push(values[k]);
+            }
+        } else if is_face {
+            for (j, &k) in kept.iter().enumerate() {
+                let list = &mut out.parts.face_properties[first_kept + j].values;
+                list.extend(std::iter::repeat_n(
+                    values[k],
+                    out.faces.len() - triangles_before,
+                ));
             }
         }
     }
-    if !saw_vertex {
-        return Err(parse_err(path, "the header declares no `vertex` element"));
+    Ok(())
+}
+
+/// The scalar properties of a `vertex` (other than `x y z nx ny nz`) or `face` element, added
+/// (empty) to `parts`: their slots in the element and the index of the first in the parts' list.
+fn register_region_properties(
+    el: &Element,
+    is_vertex: bool,
+    is_face: bool,
+    parts: &mut Parts,
+) -> (Vec<usize>, usize) {
+    if !(is_vertex || is_face) {
+        return (Vec::new(), 0);
     }
-    let normals = (!normals.is_empty() && normals.len() == positions.len()).then_some(normals);
-    Ok(((TriMesh { positions, faces }, normals), parts))
+    let list = if is_vertex {
+        &mut parts.vertex_properties
+    } else {
+        &mut parts.face_properties
+    };
+    let first = list.len();
+    let mut kept = Vec::new();
+    for (k, p) in el.properties.iter().enumerate() {
+        if let Property::Scalar { name, .. } = p
+            && (!is_vertex || !["x", "y", "z", "nx", "ny", "nz"].contains(&name.as_str()))
+        {
+            kept.push(k);
+            list.push(ScalarProperty {
+                name: name.clone(),
+                values: Vec::new(),
+            });
+        }
+    }
+    (kept, first)
+}
+
+/// Reads one list property (its length, then its items). With `keep` (the face's vertex list)
+/// the items must be vertex indices, at least 3, and land in `poly`; otherwise they are skipped.
+fn read_list(
+    body: &mut Body<'_>,
+    count: Scalar,
+    item: Scalar,
+    keep: bool,
+    face: usize,
+    what: &dyn Fn() -> String,
+    poly: &mut Vec<u32>,
+) -> Result<(), MeshError> {
+    let path = body.path;
+    let n = body.read(count, what)?;
+    if !(n >= 0.0 && n.fract() == 0.0) {
+        return Err(parse_err(
+            path,
+            format!("bad list length {n} in {}", what()),
+        ));
+    }
+    poly.clear();
+    for _ in 0..n as usize {
+        let v = body.read(item, what)?;
+        if keep {
+            if !(v >= 0.0 && v <= f64::from(u32::MAX) && v.fract() == 0.0) {
+                return Err(parse_err(
+                    path,
+                    format!("face {face}: `{v}` is not a vertex index"),
+                ));
+            }
+            poly.push(v as u32);
+        }
+    }
+    if keep && poly.len() < 3 {
+        return Err(parse_err(
+            path,
+            format!(
+                "face {face} has {} corners, at least 3 are needed",
+                poly.len()
+            ),
+        ));
+    }
+    Ok(())
 }
 
 /// Writes a PLY file: vertices `double x y z` (plus `double nx ny nz` with normals), faces

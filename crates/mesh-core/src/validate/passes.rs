@@ -61,6 +61,33 @@ impl<'a> InputPass<'a> {
         }
         used
     }
+
+    /// The common tail of passes 4–6: when `faces` is not empty, marks them dead if `drop` and
+    /// records one issue of `kind` whose message `describe(count, listed faces)` writes.
+    fn drop_faces(
+        &mut self,
+        faces: &[u32],
+        kind: IssueKind,
+        drop: bool,
+        describe: impl FnOnce(usize, String) -> String,
+    ) {
+        if faces.is_empty() {
+            return;
+        }
+        let n = faces.len();
+        if drop {
+            for &f in faces {
+                self.face_alive[f as usize] = false;
+            }
+        }
+        self.issues.push(Issue {
+            kind,
+            count: n,
+            examples: Locations::Faces(examples(faces)),
+            action: action(drop),
+            message: describe(n, list(faces, n)),
+        });
+    }
 }
 
 /// The state of passes 8–12: the compacted mesh in the output numbering plus the maps back to the
@@ -297,31 +324,20 @@ pub fn drop_repeated_vertex_faces(s: &mut InputPass, o: &RepairOptions) {
     // Pass 3 welds only under `weld_exact_duplicates`, so "something was welded" is exactly that
     // option with a non-empty weld list.
     let welded_any = s.rep.iter().enumerate().any(|(v, &r)| r as usize != v);
-    if !repeated.is_empty() {
-        let n = repeated.len();
-        if o.drop_degenerate_faces {
-            for &f in &repeated {
-                s.face_alive[f as usize] = false;
-            }
-        }
-        s.issues.push(Issue {
-            kind: IssueKind::RepeatedVertexInFace,
-            count: n,
-            examples: Locations::Faces(examples(&repeated)),
-            action: action(o.drop_degenerate_faces),
-            message: format!(
-                "{} the same vertex twice{} (face {}); {}",
+    let drop = o.drop_degenerate_faces;
+    s.drop_faces(
+        &repeated,
+        IssueKind::RepeatedVertexInFace,
+        drop,
+        |n, listed| {
+            format!(
+                "{} the same vertex twice{} (face {listed}); {}",
                 plural(n, "face uses", "faces use"),
                 if welded_any { " after welding" } else { "" },
-                list(&repeated, n),
-                if o.drop_degenerate_faces {
-                    "they were removed"
-                } else {
-                    "kept"
-                }
-            ),
-        });
-    }
+                if drop { "they were removed" } else { "kept" }
+            )
+        },
+    );
 }
 
 /// Pass 5: live faces whose area is at most `zero_area_tolerance` × (their own longest edge)² —
@@ -338,30 +354,18 @@ pub fn drop_zero_area_faces(s: &mut InputPass, o: &RepairOptions) {
         })
         .map(|f| f as u32)
         .collect();
-    if !zero_area.is_empty() {
-        let n = zero_area.len();
-        if o.drop_degenerate_faces {
-            for &f in &zero_area {
-                s.face_alive[f as usize] = false;
+    let drop = o.drop_degenerate_faces;
+    s.drop_faces(&zero_area, IssueKind::ZeroAreaFaces, drop, |n, listed| {
+        format!(
+            "{} no area: corners on a line or a point (face {listed}); {}",
+            plural(n, "face has", "faces have"),
+            if drop {
+                "they were removed"
+            } else {
+                "kept: the solver's cotangent weights blow up there"
             }
-        }
-        s.issues.push(Issue {
-            kind: IssueKind::ZeroAreaFaces,
-            count: n,
-            examples: Locations::Faces(examples(&zero_area)),
-            action: action(o.drop_degenerate_faces),
-            message: format!(
-                "{} no area: corners on a line or a point (face {}); {}",
-                plural(n, "face has", "faces have"),
-                list(&zero_area, n),
-                if o.drop_degenerate_faces {
-                    "they were removed"
-                } else {
-                    "kept: the solver's cotangent weights blow up there"
-                }
-            ),
-        });
-    }
+        )
+    });
 }
 
 /// Pass 6: live faces with the same vertex set (any order, after welding) as an earlier live
@@ -380,30 +384,18 @@ pub fn drop_duplicate_faces(s: &mut InputPass, o: &RepairOptions) {
             dup_faces.push(f as u32);
         }
     }
-    if !dup_faces.is_empty() {
-        let n = dup_faces.len();
-        if o.drop_duplicate_faces {
-            for &f in &dup_faces {
-                s.face_alive[f as usize] = false;
+    let drop = o.drop_duplicate_faces;
+    s.drop_faces(&dup_faces, IssueKind::DuplicateFaces, drop, |n, listed| {
+        format!(
+            "{} the same three vertices as an earlier face (face {listed}); {}",
+            plural(n, "face uses", "faces use"),
+            if drop {
+                "the copies were removed"
+            } else {
+                "kept"
             }
-        }
-        s.issues.push(Issue {
-            kind: IssueKind::DuplicateFaces,
-            count: n,
-            examples: Locations::Faces(examples(&dup_faces)),
-            action: action(o.drop_duplicate_faces),
-            message: format!(
-                "{} the same three vertices as an earlier face (face {}); {}",
-                plural(n, "face uses", "faces use"),
-                list(&dup_faces, n),
-                if o.drop_duplicate_faces {
-                    "the copies were removed"
-                } else {
-                    "kept"
-                }
-            ),
-        });
-    }
+        )
+    });
 }
 
 /// Pass 7: finite vertices, not welded away, that no live face uses. Only reported here; [`compact`]

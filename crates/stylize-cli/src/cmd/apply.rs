@@ -140,16 +140,8 @@ fn region_weights(
         read_mask(mask_path, rest.len())?
     } else if !args.region.is_empty() {
         let specs = crate::runner::parse_region_specs(&args.region)?;
-        let vertex_map: Vec<Option<u32>> = (0..rest.len() as u32).map(Some).collect();
-        let face_map: Vec<Option<u32>> = (0..saved.faces.len() as u32).map(Some).collect();
         let parts = mesh_core::region::Parts::default();
-        let input = mesh_core::region::RegionInput {
-            positions: rest,
-            faces: &saved.faces,
-            vertex_map: &vertex_map,
-            face_map: &face_map,
-            parts: &parts,
-        };
+        let input = mesh_core::region::RegionInput::unrepaired(rest, &saved.faces, &parts);
         let region = mesh_core::region::select(&specs, &input)
             .context("--region (a saved file has no named parts: use box, sphere, vertices)")?;
         for w in &region.warnings {
@@ -306,7 +298,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 .with_context(|| format!("cannot create {}", parent.display()))?;
         }
         crate::durable::replace_with(out, |tmp| {
-            mesh_core::io::write_mesh(tmp, &mesh, Some(&normals)).map_err(anyhow::Error::from)
+            mesh_core::io::write_mesh(tmp, &mesh, Some(&normals)).map_err(stylize::Error::from)
         })
         .with_context(|| format!("cannot write {}", out.display()))?;
         println!("λ = {lambda}: wrote {}", out.display());

@@ -59,10 +59,11 @@ fn frame_path(dir: &Path, k: usize) -> PathBuf {
 fn save(path: &Path, images: &Images, index: usize, encoding: Encoding) -> anyhow::Result<()> {
     crate::durable::replace_with(path, |tmp| {
         let file =
-            std::fs::File::create(tmp).with_context(|| format!("creating {}", tmp.display()))?;
+            std::fs::File::create(tmp).map_err(|e| stylize::Error::io("cannot create", tmp, e))?;
         write_png(std::io::BufWriter::new(file), images, index, encoding)
-            .with_context(|| format!("writing {}", path.display()))
+            .map_err(stylize::Error::from)
     })
+    .with_context(|| format!("writing {}", path.display()))
 }
 
 /// Runs `stylize render`.

@@ -149,7 +149,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         config: config.clone(),
         force: args.force,
         resume: args.resume,
-        log,
         halt_after: args.stop_after,
     };
     let result = match (&args.style, &args.prompt) {
@@ -159,7 +158,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 options.inputs.push(("exemplar mesh".into(), path.clone()));
             }
             let objective = ObjectiveIdentity::of_style(&style);
-            execute_with(&request, objective, || Ok(Task::Style(style)), &options)
+            execute_with(
+                &request,
+                log,
+                objective,
+                || Ok(Task::Style(style)),
+                &options,
+            )
         }
         (None, Some(prompt)) => {
             let Some(model) = &args.settings.model else {
@@ -178,6 +183,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             };
             execute_with(
                 &request,
+                log,
                 objective,
                 || {
                     Ok(Task::Text {

@@ -15,7 +15,7 @@ pub mod alignment;
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, bail};
+use crate::error::{Context, Result, invalid};
 
 /// A normal style (a Gauss-map target).
 #[derive(Clone, Debug, PartialEq)]
@@ -35,13 +35,13 @@ pub enum Style {
 
 impl Style {
     /// Parses `cube`, `octahedron` or `exemplar:PATH` (the exemplar mesh is read here).
-    pub fn parse(spec: &str) -> anyhow::Result<Self> {
+    pub fn parse(spec: &str) -> Result<Self> {
         match spec.trim() {
             "cube" => Ok(Self::Cube),
             "octahedron" => Ok(Self::Octahedron),
             s => {
                 let Some(path) = s.strip_prefix("exemplar:") else {
-                    bail!("unknown style {spec:?} (expected cube, octahedron or exemplar:MESH)");
+                    invalid!("unknown style {spec:?} (expected cube, octahedron or exemplar:MESH)");
                 };
                 Self::exemplar(Path::new(path))
             }
@@ -49,7 +49,7 @@ impl Style {
     }
 
     /// Reads an exemplar mesh and keeps its unit area-weighted vertex normals.
-    pub fn exemplar(path: &Path) -> anyhow::Result<Self> {
+    pub fn exemplar(path: &Path) -> Result<Self> {
         let mesh = mesh_core::io::read_mesh(path)
             .with_context(|| format!("cannot read exemplar mesh {}", path.display()))?;
         if let Some(bad) = mesh
@@ -58,7 +58,7 @@ impl Style {
             .flatten()
             .find(|&&v| v as usize >= mesh.positions.len())
         {
-            bail!("exemplar {}: face index {bad} out of range", path.display());
+            invalid!("exemplar {}: face index {bad} out of range", path.display());
         }
         let normals: Vec<[f64; 3]> =
             mesh_core::normals::vertex_normals_area_weighted(&mesh.positions, &mesh.faces)
@@ -69,7 +69,7 @@ impl Style {
                 })
                 .collect();
         if normals.is_empty() {
-            bail!("exemplar {} has no usable vertex normals", path.display());
+            invalid!("exemplar {} has no usable vertex normals", path.display());
         }
         Ok(Self::Exemplar {
             path: path.to_path_buf(),
