@@ -11,7 +11,8 @@
 //!            stage2_weight = "0.0>0.2:1000; 0.2>0.3:750", negative_prompt = "", grad_clip = 0 (off),
 //!            onnx_memory_arena = true
 //! [style]    iterations, lr, objective   (the model-free path, see `crate::style`)
-//! [run]      seed, checkpoint_every, preview_every, turntable_views, turntable_size
+//! [run]      seed, checkpoint_every, preview_every, turntable_views, turntable_size,
+//!            turntable_gif_frames, snapshot_every
 //! ```
 //! `docs/cli.md` lists every key with its meaning.
 
@@ -237,6 +238,11 @@ pub struct RunSection {
     pub turntable_views: usize,
     /// Side in pixels of preview and turntable frames: 256.
     pub turntable_size: usize,
+    /// Frames of the animated `turntable.gif` (0: none): 36.
+    pub turntable_gif_frames: usize,
+    /// Save the deformed positions to `snapshots.npz` every N iterations, plus iteration 0 and the
+    /// last (0: no snapshots): 50.
+    pub snapshot_every: u64,
 }
 
 impl Default for RunSection {
@@ -247,6 +253,8 @@ impl Default for RunSection {
             preview_every: 250,
             turntable_views: 8,
             turntable_size: 256,
+            turntable_gif_frames: 36,
+            snapshot_every: 50,
         }
     }
 }

@@ -37,6 +37,8 @@ pub const PRESENTATION_KEYS: &[&str] = &[
     "run.preview_every",
     "run.turntable_views",
     "run.turntable_size",
+    "run.turntable_gif_frames",
+    "run.snapshot_every",
     "guidance.onnx_memory_arena",
     "region.tint",
 ];

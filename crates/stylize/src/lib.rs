@@ -9,7 +9,8 @@
 //! - [`rundir`], [`lock`], [`durable`], [`checkpoint`], [`identity`]: the run directory (locked,
 //!   every file replaced atomically and durably), checkpoints and the task identity that guards a
 //!   resume;
-//! - [`saved`]: the reference's saved-deformation `.npz`; [`run_pictures`]: the before/after sheet;
+//! - [`saved`]: the reference's saved-deformation `.npz`; [`snapshots`]: the deformed mesh along
+//!   the run, for replay; [`run_pictures`]: the before/after sheet and the turntable (PNG, GIF);
 //! - [`models`]: DeepFloyd IF guidance from a model directory; [`eval`]: metrics of finished runs;
 //! - [`error`]: the typed [`Error`] every public function returns.
 //!
@@ -29,6 +30,7 @@ pub mod run_pictures;
 pub mod rundir;
 pub mod runner;
 pub mod saved;
+pub mod snapshots;
 pub mod style;
 
 pub use error::{Error, Result};

@@ -106,6 +106,11 @@ pub trait Observer {
         deformed: &[[f64; 3]],
         images: Option<&Images>,
     ) -> Result<()>;
+    /// After every iteration, before [`Observer::iteration`], with the state after it (the run
+    /// directory's `snapshots.npz` of the deformed mesh). The default does nothing.
+    fn after_iteration(&mut self, _state: &LoopState) -> Result<()> {
+        Ok(())
+    }
     /// Something the user should know that does not stop the loop (e.g. a streak of zero
     /// gradients). The default drops it; the command line prints it.
     fn warning(&mut self, _message: &str) {}
@@ -230,6 +235,7 @@ pub fn run_loop(
         record
             .timings
             .push(("total", start.elapsed().as_secs_f64()));
+        observer.after_iteration(state)?;
         observer.iteration(&record)?;
         let due = |every: u64| every > 0 && iteration.is_multiple_of(every);
         if due(spec.preview_every) {

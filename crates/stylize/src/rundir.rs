@@ -11,7 +11,10 @@
 //!   previews/iter_NNNNNN.png   grid of the current views every run.preview_every iterations
 //!   mesh.obj, mesh.ply, mesh.glb   deformed mesh (side-2 cube frame) with vertex normals
 //!   deformation.npz    reference format (spec §8) + format_version, seed, rotation_rule
-//!   turntable.png      contact sheet of an orbit around the result
+//!   snapshots.npz      deformed positions at iteration 0, every run.snapshot_every and the last
+//!                      (crate::snapshots; rewritten atomically while the run goes)
+//!   turntable.png      contact sheet of an orbit around the result, filling its tiles
+//!   turntable.gif      the same orbit animated (run.turntable_gif_frames frames, looping)
 //!   before_after.png   source (top) and result (bottom), same views and crop (crate::run_pictures)
 //!   run.json           summary; written last — its presence marks the run complete
 //! ```
@@ -59,7 +62,9 @@ pub const RUN_FILES: &[&str] = &[
     "mesh.glb",
     "deformation.npz",
     "turntable.png",
+    "turntable.gif",
     "before_after.png",
+    "snapshots.npz",
     "run.json",
 ];
 

@@ -258,6 +258,8 @@ struct RunObserver<'a> {
     preview_renderer: raster_diff::CpuRenderer,
     /// Region to tint in model-free previews (`region.tint`).
     tint: Option<Vec<bool>>,
+    /// `snapshots.npz` (`run.snapshot_every`; `None` when off).
+    snapshots: Option<crate::snapshots::SnapshotRecorder<'a>>,
 }
 
 fn record_json(r: &IterationRecord) -> serde_json::Value {
@@ -359,6 +361,16 @@ impl Observer for RunObserver<'_> {
 
     fn warning(&mut self, message: &str) {
         self.progress.warning(message);
+    }
+
+    fn after_iteration(&mut self, state: &LoopState) -> Result<()> {
+        match &mut self.snapshots {
+            Some(s) => {
+                self.lock.ensure_held()?;
+                s.after_iteration(state.iteration, &state.x)
+            }
+            None => Ok(()),
+        }
     }
 
     fn checkpoint(&mut self, state: &LoopState) -> Result<()> {
@@ -636,7 +648,8 @@ pub fn initial_state(
 }
 
 /// Stage 5: the final outputs of a finished loop — `mesh.obj/.ply/.glb` (formats this build cannot
-/// write become warnings), `deformation.npz`, `turntable.png` and `before_after.png`. Returns the deformed mesh.
+/// write become warnings), `deformation.npz`, `turntable.png`, `turntable.gif` and
+/// `before_after.png`. Returns the deformed mesh.
 ///
 /// The outputs are the deformation of x as saved (f32), so re-applying `deformation.npz`
 /// reproduces `mesh.*` exactly.
@@ -681,19 +694,33 @@ pub fn write_outputs(
     }
     let region = prepared.region.as_ref();
     write_deformation(dir, mesh, x, config, source, label.0, &label.1, region)?;
-    let mut tt_renderer = raster_diff::CpuRenderer::default();
-    let mut tt = turntable(
-        &mut tt_renderer,
+    let free = region
+        .filter(|_| config.region.tint)
+        .map(|r| r.free.as_slice());
+    let tt = crate::run_pictures::filled_orbit(
         &deformed.positions,
         &deformed.faces,
         config.run.turntable_views,
         config.run.turntable_size,
         config.camera.sampler.fov_y_deg,
+        free,
     )?;
-    if let (Some(r), true, Some(ids)) = (region, config.region.tint, tt_renderer.triangle_ids()) {
-        tint_region(&mut tt, &ids, &deformed.faces, &r.free);
-    }
     write_grid(&dir.file("turntable.png"), &tt)?;
+    if config.run.turntable_gif_frames > 0 {
+        let frames = crate::run_pictures::filled_orbit(
+            &deformed.positions,
+            &deformed.faces,
+            config.run.turntable_gif_frames,
+            config.run.turntable_size,
+            config.camera.sampler.fov_y_deg,
+            free,
+        )?;
+        crate::run_pictures::write_turntable_gif(
+            &dir.file("turntable.gif"),
+            &frames,
+            crate::run_pictures::GIF_FRAME_DELAY_CS,
+        )?;
+    }
     crate::run_pictures::write_before_after(
         &dir.file("before_after.png"),
         &mesh.positions,
@@ -737,6 +764,10 @@ pub fn execute_with<'g>(
         });
     }
     let task = make_task_unless_stopped(&dir, &start, cancel, make_task, &mut inputs)?;
+    let style = match &task {
+        Task::Style(s) => Some(s.clone()),
+        Task::Text { .. } => None,
+    };
     let BuiltObjective {
         mut objective,
         spec,
@@ -746,6 +777,29 @@ pub fn execute_with<'g>(
         label,
     } = build_objective(task, &prepared.mesh, config, request.halt_after)?;
     let mut state = initial_state(start, &dir, &prepared, config, adam)?;
+    if let (Some(style), Some(o)) = (&style, &style_objective)
+        && let Some(w) = crate::style::target_angle::weak_style_warning(
+            style,
+            &prepared.mesh.positions,
+            &prepared.mesh.faces,
+            o.targets(),
+        )
+    {
+        progress.warning(&format!("warning: {w}"));
+        prepared.warnings.push(w);
+    }
+    let (snapshots, snapshot_warning) = crate::snapshots::SnapshotRecorder::start(
+        dir.file(crate::snapshots::FILE_NAME),
+        &prepared.darap,
+        config.run.snapshot_every,
+        state.iteration,
+        &state.x,
+        spec.iterations,
+    )?;
+    if let Some(w) = snapshot_warning {
+        progress.warning(&format!("warning: {w}"));
+        prepared.warnings.push(w);
+    }
     let alignment_before = style_objective
         .as_ref()
         .map(|o| o.mean_alignment(&prepared.mesh.positions));
@@ -756,6 +810,7 @@ pub fn execute_with<'g>(
         config,
         progress,
         cancel,
+        snapshots,
     }
     .run(
         request,
@@ -888,6 +943,8 @@ struct ObservedLoop<'a> {
     config: &'a Config,
     progress: &'a mut dyn Progress,
     cancel: &'a AtomicBool,
+    /// `snapshots.npz` (`run.snapshot_every`; `None` when off).
+    snapshots: Option<crate::snapshots::SnapshotRecorder<'a>>,
 }
 
 /// What [`ObservedLoop::run`] measured.
@@ -913,6 +970,7 @@ impl ObservedLoop<'_> {
             config,
             progress,
             cancel,
+            snapshots,
         } = self;
         let mesh = &prepared.mesh;
         let metrics = std::fs::OpenOptions::new()
@@ -947,6 +1005,7 @@ impl ObservedLoop<'_> {
                 .as_ref()
                 .filter(|_| config.region.tint)
                 .map(|r| r.free.clone()),
+            snapshots,
         };
         let loop_start = Instant::now();
         let looped = run_loop(&prepared.darap, spec, state, objective, &mut observer);
@@ -993,6 +1052,7 @@ fn write_summary(
         "seed": config.run.seed,
         "lambda": config.darap.lambda,
         "rotation_rule": config.darap.rotation_rule.name(),
+        "snapshot_every": config.run.snapshot_every,
         "vertices": mesh.positions.len(),
         "faces": mesh.faces.len(),
         "alignment_before": alignment.map(|a| a.0),

@@ -1,10 +1,11 @@
-//! `stylize render`: turntable frames and a contact sheet of a mesh.
+//! `stylize render`: turntable frames, a contact sheet and an animated `turntable.gif` of a mesh.
 //!
 //! The mesh is read with `mesh_core::io::read_mesh`, normalized to the side-2 cube (spec §1.1) and
 //! rendered with the project's renderer (`raster_diff`, the shading the guidance sees) from
 //! `--turntable N` cameras on a circle (azimuth 360°·k/N, fixed elevation and distance, light at the
 //! camera). Pixel values are written as they are, byte = round(255·v) (see `raster_diff::image`);
-//! `--srgb` applies the sRGB transfer curve first.
+//! `--srgb` applies the sRGB transfer curve first. `turntable.gif` loops over the same frames
+//! (`stylize::run_pictures::encode_gif`: exact greys, colour frames quantized); `--no-gif` skips it.
 
 use std::path::{Path, PathBuf};
 
@@ -47,7 +48,10 @@ pub struct Args {
     /// Use the CPU renderer even if a GPU backend is available.
     #[arg(long)]
     pub cpu: bool,
-    /// Overwrite existing frames and contact sheet.
+    /// Do not write the animated `turntable.gif`.
+    #[arg(long)]
+    pub no_gif: bool,
+    /// Overwrite existing frames, contact sheet and GIF.
     #[arg(long)]
     pub force: bool,
 }
@@ -89,9 +93,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
     let dir = &args.output;
     let sheet_path = dir.join("contact_sheet.png");
+    let gif_path = dir.join("turntable.gif");
     let outputs: Vec<PathBuf> = (0..args.turntable)
         .map(|k| frame_path(dir, k))
         .chain([sheet_path.clone()])
+        .chain((!args.no_gif).then(|| gif_path.clone()))
         .collect();
     crate::rundir::refuse_overwriting_inputs(
         &outputs,
@@ -99,10 +105,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         &[("input mesh".to_string(), args.mesh.clone())],
     )?;
     if !args.force {
-        let existing = (0..args.turntable)
-            .map(|k| frame_path(dir, k))
-            .chain([sheet_path.clone()])
-            .find(|p| p.exists());
+        let existing = outputs.iter().find(|p| p.exists());
         if let Some(p) = existing {
             anyhow::bail!("{} already exists (use --force to overwrite)", p.display());
         }
@@ -138,9 +141,27 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .columns
         .unwrap_or_else(|| (args.turntable as f64).sqrt().ceil() as usize);
     save(&sheet_path, &contact_sheet(&all, columns), 0, encoding)?;
+    if !args.no_gif {
+        crate::durable::replace_with(&gif_path, |tmp| {
+            let file = std::fs::File::create(tmp)
+                .with_context(|| format!("creating {}", tmp.display()))?;
+            stylize::run_pictures::encode_gif(
+                std::io::BufWriter::new(file),
+                &all,
+                stylize::run_pictures::GIF_FRAME_DELAY_CS,
+                encoding,
+            )
+            .with_context(|| format!("writing {}", gif_path.display()))
+        })?;
+    }
     eprintln!(
-        "wrote {} frames and contact_sheet.png to {}",
+        "wrote {} frames, contact_sheet.png{} to {}",
         args.turntable,
+        if args.no_gif {
+            ""
+        } else {
+            " and turntable.gif"
+        },
         dir.display()
     );
     Ok(())
@@ -162,6 +183,7 @@ mod tests {
             columns: None,
             srgb: false,
             cpu: true,
+            no_gif: false,
             force,
         }
     }
@@ -192,6 +214,23 @@ mod tests {
         }
         // 3 frames, ceil(sqrt 3) = 2 columns → 2×2 grid.
         assert_eq!(png_size(&out.join("contact_sheet.png")), (48, 48));
+        // The GIF loops over the same 3 frames.
+        let gif = std::fs::read(out.join("turntable.gif")).expect("turntable.gif");
+        let mut decoder = gif::DecodeOptions::new()
+            .read_info(std::io::Cursor::new(gif))
+            .expect("the GIF decodes");
+        assert_eq!((decoder.width(), decoder.height()), (24, 24));
+        let mut frames = 0;
+        while decoder.read_next_frame().expect("frame").is_some() {
+            frames += 1;
+        }
+        assert_eq!(frames, 3);
+        // A GIF left from an earlier render blocks a render without --force, like the frames.
+        std::fs::remove_file(out.join("contact_sheet.png")).expect("rm");
+        for k in 0..3 {
+            std::fs::remove_file(frame_path(&out, k)).expect("rm");
+        }
+        assert!(run(args(mesh.clone(), out.clone(), false)).is_err());
         assert!(run(args(mesh.clone(), out.clone(), false)).is_err());
         run(args(mesh, out, true)).expect("forced render");
     }

@@ -12,6 +12,7 @@
 //! `ℓ → positions (alignment adjoint) → x (dARAP adjoint)`.
 
 pub mod alignment;
+pub mod target_angle;
 
 use std::path::{Path, PathBuf};
 
