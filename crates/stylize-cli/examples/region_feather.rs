@@ -87,9 +87,9 @@ fn main() -> anyhow::Result<()> {
                 config: c.clone(),
                 force: false,
                 resume: false,
-                log: LogMode::Quiet,
                 halt_after: None,
             },
+            LogMode::Quiet,
             Task::Style(Style::Cube),
         )?;
         let (rest, _, region) = prepare_mesh_with_region(&mesh_path, &c.region)?;

@@ -86,9 +86,10 @@ pub enum Error {
     /// The guidance (score distillation) failed.
     #[error(transparent)]
     Guidance(#[from] csd::GuidanceError),
-    /// Loading or running a model (IF UNets, T5, CLIP) failed.
+    /// Loading or running a model (IF UNets, T5, CLIP) failed (boxed: the ONNX error is large, and
+    /// every `Result` of the library carries this enum).
     #[error(transparent)]
-    Model(#[from] diffusion_onnx::OnnxError),
+    Model(Box<diffusion_onnx::OnnxError>),
     /// The optimizer refused a step.
     #[error(transparent)]
     Adam(#[from] optim::AdamError),
@@ -123,6 +124,12 @@ pub enum Error {
         /// The failure.
         source: Box<Error>,
     },
+}
+
+impl From<diffusion_onnx::OnnxError> for Error {
+    fn from(e: diffusion_onnx::OnnxError) -> Self {
+        Error::Model(Box::new(e))
+    }
 }
 
 impl Error {
@@ -232,7 +239,7 @@ mod tests {
     #[test]
     fn context_chains_without_repeating_and_kind_skips_it() {
         let inner: Result<()> = Err(Error::config("optim.lr", "optim.lr must be positive"));
-        let e = inner.context("in config a.toml").err().expect("an error");
+        let e = inner.context("in config a.toml").expect_err("an error");
         assert_eq!(
             e.full_message(),
             "in config a.toml: optim.lr must be positive"
@@ -240,8 +247,7 @@ mod tests {
         assert!(matches!(e.kind(), Error::Config { field, .. } if field == "optim.lr"));
         let io = std::fs::read("/nonexistent/stylize-error-test")
             .io_context("cannot read", Path::new("/nonexistent/stylize-error-test"))
-            .err()
-            .expect("an error");
+            .expect_err("an error");
         let text = io.full_message();
         assert_eq!(
             text.matches("/nonexistent/stylize-error-test").count(),

@@ -266,10 +266,13 @@ pub fn encode_gif<W: Write>(
     } else {
         Vec::new()
     };
-    let mut encoder = gif::Encoder::new(writer, width, height, &palette).map_err(crate::Error::external).context("GIF header")?;
+    let mut encoder = gif::Encoder::new(writer, width, height, &palette)
+        .map_err(crate::Error::external)
+        .context("GIF header")?;
     encoder
         .set_repeat(gif::Repeat::Infinite)
-        .map_err(crate::Error::external).context("GIF loop extension")?;
+        .map_err(crate::Error::external)
+        .context("GIF loop extension")?;
     for rgb in &bytes {
         let mut frame = if grey {
             let indices: Vec<u8> = rgb.chunks_exact(3).map(|p| p[0]).collect();
@@ -278,10 +281,19 @@ pub fn encode_gif<W: Write>(
             gif::Frame::from_rgb_speed(width, height, rgb, 10)
         };
         frame.delay = delay_cs;
-        encoder.write_frame(&frame).map_err(crate::Error::external).context("GIF frame")?;
+        encoder
+            .write_frame(&frame)
+            .map_err(crate::Error::external)
+            .context("GIF frame")?;
     }
-    let mut writer = encoder.into_inner().map_err(crate::Error::external).context("GIF trailer")?;
-    writer.flush().map_err(crate::Error::external).context("GIF flush")?;
+    let mut writer = encoder
+        .into_inner()
+        .map_err(crate::Error::external)
+        .context("GIF trailer")?;
+    writer
+        .flush()
+        .map_err(crate::Error::external)
+        .context("GIF flush")?;
     Ok(())
 }
 

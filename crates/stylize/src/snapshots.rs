@@ -176,7 +176,10 @@ impl<'a> SnapshotRecorder<'a> {
                 x: Vec::new(),
             };
             for (&i, x) in its.iter().zip(xs) {
-                s.iterations.push(i64::try_from(i).map_err(|_| Error::Invalid(format!("iteration {i} out of range")))?);
+                s.iterations.push(
+                    i64::try_from(i)
+                        .map_err(|_| Error::Invalid(format!("iteration {i} out of range")))?,
+                );
                 s.x.extend(deformed_f32(darap, x)?);
             }
             Ok(s)
@@ -252,9 +255,10 @@ impl<'a> SnapshotRecorder<'a> {
         if !(due && newer) {
             return Ok(());
         }
-        self.snapshots
-            .iterations
-            .push(i64::try_from(iteration).map_err(|_| Error::Invalid(format!("iteration {iteration} out of range")))?);
+        self.snapshots.iterations.push(
+            i64::try_from(iteration)
+                .map_err(|_| Error::Invalid(format!("iteration {iteration} out of range")))?,
+        );
         self.snapshots.x.extend(deformed_f32(self.darap, x)?);
         self.snapshots.write(&self.path)
     }

@@ -10,7 +10,7 @@ use mesh_core::TriMesh;
 use stylize::config::Config;
 use stylize::identity::ObjectiveIdentity;
 use stylize::runner::{
-    Progress, RunHooks, RunOptions, RunOutcome, RunRequest, Stopped, Task, execute, execute_with,
+    Progress, RunHooks, RunOptions, RunOutcome, RunRequest, Task, execute, execute_with,
 };
 use stylize::snapshots::{FILE_NAME, Snapshots};
 use stylize::style::Style;
@@ -51,7 +51,7 @@ fn request(mesh: &Path, out: &Path, config: Config, resume: bool, halt: Option<u
     }
 }
 
-fn run(r: &RunRequest) -> anyhow::Result<RunOutcome> {
+fn run(r: &RunRequest) -> stylize::Result<RunOutcome> {
     execute(r, Task::Style(Style::Cube))
 }
 
@@ -69,7 +69,7 @@ impl Progress for CancelAt<'_> {
     }
 }
 
-fn run_cancelled_at(r: &RunRequest, at: u64) -> anyhow::Result<RunOutcome> {
+fn run_cancelled_at(r: &RunRequest, at: u64) -> stylize::Result<RunOutcome> {
     let flag = AtomicBool::new(false);
     let mut progress = CancelAt { at, flag: &flag };
     let hooks = RunHooks {
@@ -166,9 +166,9 @@ fn killed_or_stopped_runs_resume_without_duplicate_or_future_entries() {
     let e = run_cancelled_at(&request(&mesh, &stopped, config(7, 1), false, None), 3)
         .err()
         .unwrap_or_else(|| panic!("the run was not stopped"));
-    let s = e
-        .downcast_ref::<Stopped>()
-        .unwrap_or_else(|| panic!("{e:#}"));
+    let stylize::Error::Stopped(s) = e.kind() else {
+        panic!("{}", e.full_message())
+    };
     assert_eq!(s.checkpoint_iteration, Some(3));
     assert_eq!(snapshots(&stopped).iterations, vec![0, 1, 2, 3]);
     ok(run(&request(&mesh, &stopped, config(7, 1), true, None)));

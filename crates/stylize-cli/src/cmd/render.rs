@@ -144,15 +144,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if !args.no_gif {
         crate::durable::replace_with(&gif_path, |tmp| {
             let file = std::fs::File::create(tmp)
-                .with_context(|| format!("creating {}", tmp.display()))?;
+                .map_err(|e| stylize::Error::io("cannot create", tmp, e))?;
             stylize::run_pictures::encode_gif(
                 std::io::BufWriter::new(file),
                 &all,
                 stylize::run_pictures::GIF_FRAME_DELAY_CS,
                 encoding,
             )
-            .with_context(|| format!("writing {}", gif_path.display()))
-        })?;
+        })
+        .with_context(|| format!("cannot write {}", gif_path.display()))?;
     }
     eprintln!(
         "wrote {} frames, contact_sheet.png{} to {}",
