@@ -103,18 +103,85 @@ def check_close(got: np.ndarray, ref: np.ndarray, atol: float, rtol: float, labe
         raise SystemExit(f"error: {label} disagrees with PyTorch beyond tolerance")
 
 
-def verify(path: Path, module, feeds: dict[str, np.ndarray], atol: float, rtol: float, label: str) -> np.ndarray:
-    """Runs the ONNX model at ``path`` (ONNX Runtime, CPU) and ``module`` (PyTorch) on ``feeds`` (in the
-    module's argument order), checks them with :func:`check_close` and returns the PyTorch output."""
-    import onnxruntime as ort
+def reference_device() -> str:
+    """Where the PyTorch reference of the check runs: CUDA when torch sees a GPU, else the CPU."""
     import torch
 
-    sess = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
-    got = sess.run(None, feeds)[0]
+    return "cuda" if torch.cuda.is_available() else "cpu"
+
+
+def torch_reference(module, feeds: dict[str, np.ndarray]) -> np.ndarray:
+    """``module`` on ``feeds`` (in the module's argument order) in **fp32**, as f32 NumPy.
+
+    A half-precision module is upcast *in place* (``module.float()``, parameter by parameter, so the
+    fp16 copy is released as the fp32 one is made): PyTorch's fp16 convolutions on the CPU run at
+    ~1 GFLOP/s, which made the check of a real-size UNet take most of an hour; fp32 runs ~50x faster
+    and is the more accurate reference anyway. The caller must not use the module afterwards. Float
+    inputs are widened to f32 (their values are those the ONNX graph sees). Runs on CUDA when
+    available (the module is moved there, and the inputs)."""
+    import torch
+
+    device = reference_device()
+    module.float().to(device)
+    args = []
+    for v in feeds.values():
+        t = torch.from_numpy(np.ascontiguousarray(v))
+        if t.is_floating_point():
+            t = t.float()
+        args.append(t.to(device))
     with torch.no_grad():
-        ref = module(*[torch.from_numpy(v) for v in feeds.values()]).float().numpy()
+        out = module(*args)
+    return out.float().cpu().numpy()
+
+
+def onnx_run(path: Path, feeds: dict[str, np.ndarray]) -> np.ndarray:
+    """The ONNX model at ``path`` on ``feeds`` in ONNX Runtime (CPU), first output as f32.
+
+    The session keeps memory low (as ``diffusion-onnx``'s lean settings do): no CPU memory arena, no
+    memory pattern, no weight pre-packing -- so that checking a multi-GB model does not need several
+    copies of its weights."""
+    import onnxruntime as ort
+
+    so = ort.SessionOptions()
+    so.enable_cpu_mem_arena = False
+    so.enable_mem_pattern = False
+    so.add_session_config_entry("session.disable_prepacking", "1")
+    sess = ort.InferenceSession(str(path), so, providers=["CPUExecutionProvider"])
+    got = sess.run(None, feeds)[0]
+    del sess
+    return np.asarray(got, dtype=np.float32)
+
+
+def verify(path: Path, module, feeds: dict[str, np.ndarray], atol: float, rtol: float, label: str) -> np.ndarray:
+    """Runs ``module`` (PyTorch, fp32 -- see :func:`torch_reference`; a half-precision module is upcast
+    in place) and the ONNX model at ``path`` (ONNX Runtime, CPU) on ``feeds`` (in the module's
+    argument order), checks them with :func:`check_close` and returns the PyTorch output."""
+    ref = torch_reference(module, feeds)
+    got = onnx_run(path, feeds)
     check_close(got, ref, atol, rtol, label)
     return ref
+
+
+SKIP_CHECK_WARNING = """
+################################################################################################
+#  WARNING: --skip-check: the exported ONNX models were NOT compared with PyTorch.             #
+#  A wrong graph (a broken op conversion, wrong weights, a wrong output scaling) would go      #
+#  unnoticed and silently ruin every stylization that uses it. Rerun without --skip-check       #
+#  (the check runs at a small size in fp32: minutes, not hours) before trusting this export.   #
+################################################################################################
+"""
+
+
+def warn_skip_check():
+    """The loud warning ``--skip-check`` prints (to stderr, before and after the export)."""
+    print(SKIP_CHECK_WARNING, file=sys.stderr, flush=True)
+
+
+def peak_rss_gib() -> float:
+    """This process's peak resident set size so far (GiB; Linux ``ru_maxrss`` is in KiB)."""
+    import resource
+
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / (1 << 20)
 
 
 def sha256(path: Path) -> str:
