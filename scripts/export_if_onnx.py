@@ -17,7 +17,9 @@ Two modes, one output layout (``manifest.toml`` + ``.onnx`` files, see docs/mode
 
 Every exported model is run once in ONNX Runtime and in PyTorch on the same random inputs; the
 maximum absolute difference is printed and the script fails above the tolerance
-(fp32: 1e-4 + 1e-4 * max|torch output|; fp16: 2e-2 + 2e-2 * max|torch output|).
+(fp32: 1e-4 + 1e-4 * max|torch output|; fp16: 1e-2 + 1e-2 * max|torch output|). The PyTorch side runs
+in fp32 (one layer upcast at a time) at a small size (stage I 32 px, stage II 64 px, batch 2): minutes,
+not hours, at IF scale. ``--skip-check`` skips it with a loud warning.
 
 Needs: torch (CPU is enough), diffusers, transformers, onnx, onnxscript, onnxruntime, numpy, tokenizers.
 """
@@ -40,7 +42,10 @@ TOKENIZER_JSON = common.ASSETS / "t5_tokenizer.json"
 MAX_TOKENS = 77
 FORMAT_VERSION = 1
 
-TOLERANCE = {"fp32": (1e-4, 1e-4), "fp16": (2e-2, 2e-2)}  # (absolute, relative to max |reference|)
+# (absolute, relative to max |reference|), against the fp32 PyTorch reference. fp16: the tiny fixtures and
+# the IF-II-L-size random UNet differ by ~1e-3 at max |y| ~ 1.5 (docs/models.md); a single changed weight
+# of the output convolution gives ~9e-2 (scripts/tests/test_export_check.py).
+TOLERANCE = {"fp32": (1e-4, 1e-4), "fp16": (1e-2, 1e-2)}
 
 
 # --------------------------------------------------------------------------------------------
@@ -192,20 +197,27 @@ def tokenize(prompts: list[str]) -> tuple[np.ndarray, np.ndarray]:
 
 
 def verify(path: Path, module, feeds: dict[str, np.ndarray], dtype: str, label: str) -> np.ndarray:
-    """The exporter's check (see :func:`onnx_export_common.verify`): ``module`` in fp32 (upcast in place
-    when it is fp16 -- the module is not used afterwards) against the ONNX model at ``path``."""
+    """The exporter's check (see :func:`onnx_export_common.verify`): ``module`` computed in fp32 against
+    the ONNX model at ``path``."""
     atol, rtol = TOLERANCE[dtype]
     return common.verify(path, module, feeds, atol, rtol, label)
 
 
 def free_memory():
-    """Returns what the previous model held to the allocator before the next one is loaded."""
+    """Returns what the previous model held to the system before the next one is loaded: collects
+    cycles, then asks glibc to give freed heap memory back (``malloc_trim``: without it a freed 5 GB
+    fp32 model stayed resident after an export and the next step's memory came on top)."""
+    import ctypes
     import gc
 
     gc.collect()
     torch = _torch()
     if torch.cuda.is_available():
         torch.cuda.empty_cache()
+    try:
+        ctypes.CDLL("libc.so.6").malloc_trim(0)
+    except (OSError, AttributeError):  # not glibc
+        pass
 
 
 @dataclass
@@ -357,13 +369,22 @@ def check(path: Path, reference: np.ndarray, feeds: dict[str, np.ndarray], dtype
 
 
 def report_memory(label: str):
-    print(f"[memory] after {label}: peak RSS of the exporter so far {common.peak_rss_gib():.2f} GiB", flush=True)
+    """Peak RSS so far (includes file-backed pages: the checkpoint and the written external data, which
+    the kernel can drop under pressure) and the anonymous part now."""
+    now = ""
+    try:
+        status = dict(line.split(":", 1) for line in Path("/proc/self/status").read_text().splitlines() if ":" in line)
+        now = f"; now: anonymous {int(status['RssAnon'].split()[0]) / 2**20:.2f} GiB, " \
+              f"file-backed {int(status['RssFile'].split()[0]) / 2**20:.2f} GiB"
+    except (OSError, KeyError, ValueError):
+        pass
+    print(f"[memory] after {label}: peak RSS of the exporter so far {common.peak_rss_gib():.2f} GiB{now}", flush=True)
 
 
 def export_text_encoder(load, ctx: ExportContext) -> tuple[dict, np.ndarray]:
     """Exports (and checks) the T5 encoder ``load()`` returns; returns the manifest entry and the
-    prompts' embeddings (conditioning for the UNet checks). The model is released before ONNX Runtime
-    loads the export for the check (``load`` should hold no other reference to it)."""
+    prompts' embeddings (conditioning for the UNet checks, computed in fp32). The model is released
+    before ONNX Runtime loads the export for the check (``load`` should hold no other reference to it)."""
     torch = _torch()
     _, _, TextEncoder = make_wrappers()
     enc = TextEncoder(load()).eval()
@@ -373,8 +394,8 @@ def export_text_encoder(load, ctx: ExportContext) -> tuple[dict, np.ndarray]:
     export_module(enc, (torch.from_numpy(ids), torch.from_numpy(mask)), ["input_ids", "attention_mask"],
                   "last_hidden_state", path, {"input_ids": [0], "attention_mask": [0]}, ctx.big)
     text = {"file": path.name, "external": external_files(path), "dim": text_dim}
-    # The unconditional embedding: this encoder's output for the empty prompt, in the model's dtype
-    # (before the reference upcasts it). The real T5-v1.1-XXL (dim 4096) uses IF's own shipped
+    # The unconditional embedding: this encoder's output for the empty prompt, in the model's dtype.
+    # The real T5-v1.1-XXL (dim 4096) uses IF's own shipped
     # empty-prompt vector instead (builtin).
     if ctx.save_reference or text_dim != 4096:
         e_ids, e_mask = tokenize([""])
@@ -398,8 +419,8 @@ def export_text_encoder(load, ctx: ExportContext) -> tuple[dict, np.ndarray]:
 
 def export_unet(key: str, load, cond: np.ndarray, ctx: ExportContext) -> StageSpec:
     """Exports (and checks) the UNet ``load()`` returns (``key`` "stage1" or "stage2") with ``cond``
-    (2, 77, D) as the check's text conditioning. The check's PyTorch reference runs first (fp32 upcast
-    in place, small size); the model is then released before ONNX Runtime loads the export."""
+    (2, 77, D) as the check's text conditioning. The check's PyTorch reference runs first (computed in
+    fp32, small size); the model is then released before ONNX Runtime loads the export."""
     torch = _torch()
     Stage1, Stage2, _ = make_wrappers()
     has_class = key == "stage2"
@@ -419,6 +440,7 @@ def export_unet(key: str, load, cond: np.ndarray, ctx: ExportContext) -> StageSp
         dyn["class_labels"] = [0]
     path = ctx.out / f"unet_{key}.onnx"
     export_module(mod, tuple(torch.from_numpy(v) for v in feeds.values()), names, "noise_pred", path, dyn, ctx.big)
+    free_memory()  # what the export traced and wrote
     ref = common.torch_reference(mod, feeds) if ctx.check else None
     del mod
     free_memory()

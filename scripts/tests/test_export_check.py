@@ -22,7 +22,7 @@ import onnx_export_common as common  # noqa: E402
 @pytest.fixture(scope="module")
 def tiny_stage1_fp16(tmp_path_factory):
     """The tiny stage-I UNet exported in fp16 (external data, as a real-size model), with its check
-    inputs and the fp32 PyTorch reference computed from an fp16 copy upcast in place."""
+    inputs and the fp32 PyTorch reference of the fp16 weights."""
     import torch
 
     _, stage1, _ = exp.build_tiny(0)
@@ -39,8 +39,7 @@ def tiny_stage1_fp16(tmp_path_factory):
         "timestep": np.array([20, 980], dtype=np.int64),
         "encoder_hidden_states": np.random.default_rng(1).standard_normal((2, 77, 8)).astype(np.float16),
     }
-    _, fresh, _ = exp.build_tiny(0)
-    ref = common.torch_reference(exp.make_wrappers()[0](fresh.to(torch.float16)).eval(), feeds)
+    ref = common.torch_reference(exp.make_wrappers()[0](stage1).eval(), feeds)
     return path, feeds, ref
 
 
@@ -92,14 +91,24 @@ def test_wrong_output_scaling_fails_the_check(tiny_stage1_fp16, tmp_path):
         exp.check(tmp_path / "scaled.onnx", ref, feeds, "fp16", "output x1.1")
 
 
-def test_torch_reference_upcasts_a_half_module_in_place():
+def test_torch_reference_computes_in_fp32_and_leaves_the_module_in_fp16():
+    """The reference of an fp16 layer equals the fp32 computation on the fp16-rounded weights (not an
+    fp16 computation), and the module keeps its fp16 weights (one layer is upcast at a time)."""
     import torch
 
-    lin = torch.nn.Linear(4, 3).to(torch.float16)
-    x = np.ones((2, 4), dtype=np.float16)
-    y = common.torch_reference(lin, {"x": x})
+    torch.manual_seed(0)
+    seq = torch.nn.Sequential(torch.nn.Linear(64, 64), torch.nn.GELU(), torch.nn.Linear(64, 3)).to(torch.float16)
+    x = np.random.default_rng(0).standard_normal((2, 64)).astype(np.float16)
+    y = common.torch_reference(seq, {"x": x})
     assert y.dtype == np.float32 and y.shape == (2, 3)
-    assert lin.weight.dtype == torch.float32, "the reference runs in fp32"
+    assert all(p.dtype == torch.float16 for p in seq.parameters()), "weights stay fp16"
+    assert not seq[0]._forward_pre_hooks, "hooks removed"
+    fp32 = [m.float() if hasattr(m, "weight") else m for m in [torch.nn.Linear(64, 64), torch.nn.GELU(), torch.nn.Linear(64, 3)]]
+    exact = torch.nn.Sequential(*fp32)
+    exact.load_state_dict({k: v.float() for k, v in seq.state_dict().items()})
+    with torch.no_grad():
+        want = exact(torch.from_numpy(x).float()).numpy()
+    np.testing.assert_allclose(y, want, rtol=1e-6, atol=1e-6)
 
 
 def test_skip_check_warning_is_loud(capsys):
