@@ -222,6 +222,7 @@ def main(argv=None):
     p.add_argument("--stylize", type=Path, default=REPO / "target" / "release" / "stylize", help="the binary")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--cpu-profile", action="store_true", help="also export and run the fp32 CPU profile")
+    p.add_argument("--profiles", default=None, help="comma-separated export dtypes to use (overrides --cpu-profile)")
     p.add_argument("--ablation", action="store_true", help="also run each low-memory setting alone")
     p.add_argument("--min-available-gb", type=float, default=16.0)
     p.add_argument("--threads", type=int, default=None, help="ONNX Runtime intra-op threads")
@@ -269,7 +270,7 @@ def main(argv=None):
                                              "--seed", str(a.seed)], logs / "build.log"))
     d = a.work / "diffusers"
     print(f"parameters: {(d / 'params.json').read_text()}", flush=True)
-    profiles = ["fp16"] + (["fp32"] if a.cpu_profile else [])
+    profiles = a.profiles.split(",") if a.profiles else ["fp16"] + (["fp32"] if a.cpu_profile else [])
     for dtype in profiles:
         out = a.work / f"onnx-{dtype}"
         if not a.skip_export:
