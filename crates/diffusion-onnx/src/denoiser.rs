@@ -14,9 +14,11 @@ use crate::session::{Kind, check_signature, float_input, float_output, int_input
 /// 0..3, learned variance after). An fp16 model gets its float inputs rounded to f16 and its output
 /// widened back to f32; everything outside the session is f32.
 ///
-/// The whole batch (csd's conditional and unconditional halves, 2B samples) runs in one session call.
+/// The whole batch (csd's conditional and unconditional halves, 2B samples) runs in one session call,
+/// or in calls of at most [`SessionOptions::max_batch`] samples each.
 pub struct OnnxDenoiser {
     session: Session,
+    max_batch: Option<usize>,
     stage: Stage,
     spec: StageManifest,
     embedding_shape: [usize; 2],
@@ -53,6 +55,12 @@ impl OnnxDenoiser {
             })?
             .clone();
         let file = model.path_of(&spec.file);
+        if options.max_batch == Some(0) {
+            return Err(OnnxError::Shape {
+                model: label,
+                message: "max_batch = 0: at least one sample per session call".into(),
+            });
+        }
         let session = open_session(&file, options, &label)?;
         let mut inputs = vec![
             (spec.sample.as_str(), Kind::Float, 4),
@@ -72,6 +80,7 @@ impl OnnxDenoiser {
         let e = &model.manifest().embeddings;
         Ok(Self {
             session,
+            max_batch: options.max_batch,
             stage,
             spec,
             embedding_shape: [e.tokens, e.dim],
@@ -166,23 +175,63 @@ impl OnnxDenoiser {
             (None, Some(_)) => return Err(self.shape_error("stage I takes no class labels".into())),
             (None, None) => None,
         };
+        let chunk = self.max_batch.unwrap_or(n).clamp(1, n);
+        let per_sample = c * h * w;
+        let mut data = Vec::new();
+        for start in (0..n).step_by(chunk) {
+            let end = (start + chunk).min(n);
+            let out = self.run_session(
+                [end - start, c, h, w],
+                sample.data[start * per_sample..end * per_sample].to_vec(),
+                &timesteps[start..end],
+                text[start * tokens * dim..end * tokens * dim].to_vec(),
+                labels.as_ref().map(|l| &l[start..end]),
+            )?;
+            if data.is_empty() {
+                data = out;
+                data.reserve((n - end) * self.spec.out_channels * h * w);
+            } else {
+                data.extend_from_slice(&out);
+            }
+        }
+        Ok(csd::Tensor {
+            shape: vec![n, self.spec.out_channels, h, w],
+            data,
+        })
+    }
+
+    /// One session call on `m = shape[0]` samples whose inputs are already checked; returns the
+    /// output values `(m, C_out, H, W)` after checking their shape.
+    fn run_session(
+        &mut self,
+        shape: [usize; 4],
+        sample: Vec<f32>,
+        timesteps: &[i64],
+        text: Vec<f32>,
+        labels: Option<&[i64]>,
+    ) -> Result<Vec<f32>, OnnxError> {
+        let [m, c, h, w] = shape;
+        let [tokens, dim] = self.embedding_shape;
         let dtype = self.spec.dtype;
         let mut inputs: Vec<(Cow<'_, str>, SessionInputValue<'_>)> = vec![
             (
                 Cow::from(self.spec.sample.as_str()),
-                float_input(dtype, vec![n, c, h, w], sample.data.clone())?.into(),
+                float_input(dtype, vec![m, c, h, w], sample)?.into(),
             ),
             (
                 Cow::from(self.spec.timestep.as_str()),
-                int_input(vec![n], timesteps.to_vec())?.into(),
+                int_input(vec![m], timesteps.to_vec())?.into(),
             ),
             (
                 Cow::from(self.spec.encoder_hidden_states.as_str()),
-                float_input(dtype, vec![n, tokens, dim], text)?.into(),
+                float_input(dtype, vec![m, tokens, dim], text)?.into(),
             ),
         ];
         if let (Some(name), Some(l)) = (&self.spec.class_labels, labels) {
-            inputs.push((Cow::from(name.as_str()), int_input(vec![n], l)?.into()));
+            inputs.push((
+                Cow::from(name.as_str()),
+                int_input(vec![m], l.to_vec())?.into(),
+            ));
         }
         let label = self.label.clone();
         let outputs = self
@@ -195,17 +244,17 @@ impl OnnxDenoiser {
                 model: label.clone(),
                 message: format!("output `{}` missing from the results", self.spec.output),
             })?;
-        let (shape, data) = float_output(value, dtype, &format!("the {label} output"))?;
-        if shape != [n, self.spec.out_channels, h, w] {
+        let (out_shape, data) = float_output(value, dtype, &format!("the {label} output"))?;
+        if out_shape != [m, self.spec.out_channels, h, w] {
             return Err(OnnxError::Shape {
                 model: label,
                 message: format!(
-                    "output shape {shape:?}, expected [{n}, {}, {h}, {w}]",
+                    "output shape {out_shape:?}, expected [{m}, {}, {h}, {w}]",
                     self.spec.out_channels
                 ),
             });
         }
-        Ok(csd::Tensor { shape, data })
+        Ok(data)
     }
 }
 

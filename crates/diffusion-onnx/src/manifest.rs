@@ -233,6 +233,31 @@ impl ModelDir {
         }
     }
 
+    /// The bytes of one stage's files (the `.onnx` and its external data) as they are on disk: about
+    /// the weights' size. None for a missing stage; an unreadable file counts 0 (opening the session
+    /// reports it).
+    pub fn weight_bytes(&self, stage: Stage) -> Option<u64> {
+        let s = self.stage(stage)?;
+        Some(
+            std::iter::once(&s.file)
+                .chain(&s.external_data)
+                .filter_map(|f| std::fs::metadata(self.path_of(f)).ok())
+                .map(|m| m.len())
+                .sum(),
+        )
+    }
+
+    /// About how many parameters one stage's UNet has: [`Self::weight_bytes`] over the size of the
+    /// manifest's float type (the graph itself is small next to the weights).
+    pub fn approx_parameters(&self, stage: Stage) -> Option<u64> {
+        let s = self.stage(stage)?;
+        let per = match s.dtype {
+            Dtype::Fp16 => 2,
+            Dtype::Fp32 => 4,
+        };
+        Some(self.weight_bytes(stage)? / per)
+    }
+
     /// Absolute path of a file named in the manifest.
     pub fn path_of(&self, file: &str) -> PathBuf {
         self.root.join(file)

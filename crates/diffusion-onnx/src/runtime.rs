@@ -288,6 +288,10 @@ pub enum Device {
 }
 
 /// Options for every session this crate creates.
+///
+/// The memory settings matter at DeepFloyd IF's size (docs/models.md, "Runtime memory"): on the CPU
+/// execution provider a UNet call holds the weights, any fp32 copies ONNX Runtime makes of fp16
+/// weights, pre-packed copies of weights, and the activations of the batch in one call.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct SessionOptions {
     /// Execution provider.
@@ -299,6 +303,25 @@ pub struct SessionOptions {
     /// text loop's peak memory fell from 3.5 GB to 1.4 GB and its guidance took 15–25 % longer
     /// (docs/benchmarks.md). Only affects the CPU execution provider.
     pub cpu_memory_arena: bool,
+    /// ONNX Runtime's memory pattern (its default, on): after the first run with an input shape it
+    /// plans one block for all intermediate tensors of that shape and keeps it. Off, intermediates
+    /// are allocated and freed as the graph runs (a lower peak when tensors die early).
+    pub memory_pattern: bool,
+    /// Weight pre-packing (ONNX Runtime's default, on; config entry `session.disable_prepacking`):
+    /// MatMul/Gemm/Conv kernels keep a second, re-laid-out copy of their constant weights for speed.
+    /// Off, that copy is not made.
+    pub prepacking: bool,
+    /// ONNX Runtime's graph optimizations (on: all levels; off: none). On the CPU execution provider
+    /// an fp16 model's weights are converted once, at load, into fp32 copies that stay resident
+    /// (measured at IF-II-L's size: 2.3× the fp16 file after loading, 3.8× at the peak); off, the
+    /// weights stay mapped from the external-data file and the casts run in each call (peak 1.9×,
+    /// the call ≈ 1.4× slower: the fusions are lost too). An fp32 export gains nothing from it.
+    pub graph_optimizations: bool,
+    /// At most this many samples per session call (None: the whole batch in one call). csd hands
+    /// the UNet a batch of 2B samples (conditional and unconditional halves); splitting it runs the
+    /// same arithmetic in several calls, so the activations held at once shrink by the split factor.
+    /// The results are identical up to floating-point summation order (tested).
+    pub max_batch: Option<usize>,
 }
 
 impl Default for SessionOptions {
@@ -307,11 +330,31 @@ impl Default for SessionOptions {
             device: Device::Cpu,
             intra_threads: None,
             cpu_memory_arena: true,
+            memory_pattern: true,
+            prepacking: true,
+            graph_optimizations: true,
+            max_batch: None,
         }
     }
 }
 
-/// Opens an ONNX model file as a session (graph optimizations: all).
+impl SessionOptions {
+    /// The settings for models near the machine's memory: CPU arena, memory pattern, pre-packing
+    /// and graph optimizations off, one sample per call. What each costs in time and saves in memory at
+    /// IF-II-L's size is measured in docs/models.md.
+    pub fn low_memory() -> Self {
+        Self {
+            cpu_memory_arena: false,
+            memory_pattern: false,
+            prepacking: false,
+            graph_optimizations: false,
+            max_batch: Some(1),
+            ..Self::default()
+        }
+    }
+}
+
+/// Opens an ONNX model file as a session with `options`.
 pub(crate) fn open_session(
     model: &Path,
     options: &SessionOptions,
@@ -322,8 +365,18 @@ pub(crate) fn open_session(
     let mut builder =
         Session::builder(&env).map_err(|e| OnnxError::ort(ctx("creating a session"), e))?;
     builder = builder
-        .with_optimization_level(GraphOptimizationLevel::All)
+        .with_optimization_level(if options.graph_optimizations {
+            GraphOptimizationLevel::All
+        } else {
+            GraphOptimizationLevel::Disable
+        })
         .map_err(|e| OnnxError::ort(ctx("setting the optimization level"), e))?;
+    builder = builder
+        .with_memory_pattern(options.memory_pattern)
+        .map_err(|e| OnnxError::ort(ctx("setting the memory pattern"), e))?;
+    builder = builder
+        .with_prepacking(options.prepacking)
+        .map_err(|e| OnnxError::ort(ctx("setting weight pre-packing"), e))?;
     if let Some(n) = options.intra_threads {
         builder = builder
             .with_intra_threads(n)

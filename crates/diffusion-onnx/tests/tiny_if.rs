@@ -613,3 +613,68 @@ fn denoiser_describes_itself_with_its_model_file() {
         "{d}"
     );
 }
+
+/// The low-memory settings (arena, memory pattern and pre-packing off, the batch split into calls
+/// of `max_batch` samples) give the whole-batch result: stage II with its per-sample class labels,
+/// on a batch of 5 split into 1 + … and 2 + 2 + 1 (a ragged last chunk), and the PyTorch reference.
+#[test]
+fn low_memory_options_and_split_batches_match_the_whole_batch_call() {
+    let model = ModelDir::open(tiny()).expect("model dir");
+    let (shape, sample) = ref_f32("stage2_sample");
+    let emb = embeddings_from("stage2_encoder_hidden_states");
+    let uncond = model.uncond_embedding().expect("uncond");
+    let per = shape[1] * shape[2] * shape[3];
+    // 5 samples: x0, x1, x0, x1, x0 with distinct timesteps, labels and embeddings.
+    let mut data = Vec::new();
+    for i in 0..5 {
+        data.extend_from_slice(&sample[(i % 2) * per..(i % 2 + 1) * per]);
+    }
+    let x = csd::Tensor {
+        shape: vec![5, shape[1], shape[2], shape[3]],
+        data,
+    };
+    let t = [20i64, 980, 500, 30, 700];
+    let labels = [250i64, 0, 100, 20, 0];
+    let embs = [&emb[0], &emb[1], &uncond, &uncond, &emb[1]];
+    let mut whole = OnnxDenoiser::open(&model, Stage::Two, &options()).expect("open");
+    let want = whole
+        .predict(&x, &t, &embs, Some(&labels))
+        .expect("whole batch");
+    for max_batch in [1, 2, 7] {
+        let opts = SessionOptions {
+            intra_threads: Some(1),
+            max_batch: Some(max_batch),
+            ..SessionOptions::low_memory()
+        };
+        let mut split = OnnxDenoiser::open(&model, Stage::Two, &opts).expect("open low-memory");
+        let got = split
+            .predict(&x, &t, &embs, Some(&labels))
+            .expect("split batch");
+        assert_eq!(got.shape, want.shape);
+        assert_close(
+            &got.data,
+            &want.data,
+            (1e-5, 1e-5),
+            &format!("max_batch {max_batch}"),
+        );
+    }
+    // The first two samples are the PyTorch reference's inputs.
+    let (_, reference) = ref_f32("stage2_noise_pred");
+    assert_close(
+        &want.data[..2 * want.data.len() / 5],
+        &reference,
+        FP32_TOL,
+        "reference",
+    );
+}
+
+#[test]
+fn max_batch_zero_is_refused_with_the_reason() {
+    let model = ModelDir::open(tiny()).expect("model dir");
+    let opts = SessionOptions {
+        max_batch: Some(0),
+        ..SessionOptions::default()
+    };
+    let msg = err_text(OnnxDenoiser::open(&model, Stage::One, &opts));
+    assert!(msg.contains("max_batch = 0"), "{msg}");
+}

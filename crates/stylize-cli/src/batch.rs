@@ -458,7 +458,13 @@ fn run_row(
                 // may borrow the UNets for the whole run.
                 move || {
                     let set = models.get_or_insert_with(|| {
-                        ModelSet::open(model, &options.config).map_err(anyhow::Error::from)
+                        let set = ModelSet::open(model, &options.config);
+                        if let Ok(s) = &set
+                            && let Some(w) = s.cpu_time_warning(&options.config)
+                        {
+                            eprintln!("warning: {w}");
+                        }
+                        set.map_err(anyhow::Error::from)
                     });
                     let set = set.as_mut().map_err(|e| anyhow::anyhow!("{e:#}"))?;
                     Ok(Task::Text {

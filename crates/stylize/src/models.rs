@@ -9,7 +9,7 @@ use std::path::Path;
 
 use crate::error::{Context, Result, invalid};
 use csd::{CascadedGuidance, Denoiser, Embedding, GuidanceConfig};
-use diffusion_onnx::{EmbeddingCache, ModelDir, OnnxDenoiser, SessionOptions, Stage};
+use diffusion_onnx::{Device, EmbeddingCache, ModelDir, OnnxDenoiser, SessionOptions, Stage};
 
 use crate::config::Config;
 
@@ -18,6 +18,56 @@ use crate::config::Config;
 /// [`GuidanceSection::guidance_config`]: crate::config::GuidanceSection::guidance_config
 pub fn guidance_config(config: &Config) -> GuidanceConfig {
     config.guidance.guidance_config()
+}
+
+/// UNets with at least this many parameters are real-size (IF-II-L: 1.2 B, IF-I-XL: 4.3 B; the test
+/// fixtures: a few thousand).
+pub const REAL_SIZE_PARAMETERS: u64 = 300_000_000;
+
+/// FLOPs per parameter of one UNet sample, `[stage I at 64 px, stage II at 256 px]`: the random
+/// IF-II-L-size UNet of `scripts/realsize_check.py` (1.24 B parameters) takes 12.18 TFLOP per sample
+/// at 256 px and 0.77 TFLOP at 64 px (PyTorch's FLOP counter); stage I is taken at the 64 px ratio
+/// (IF-I-XL's own count is not measured here).
+pub const FLOP_PER_PARAMETER_SAMPLE: [f64; 2] = [620.0, 9_830.0];
+
+/// What two cores deliver on these UNets: one IF-II-L-size call (cond + uncond at 256 px, 24.4 TFLOP)
+/// took 2 min 45 s with ONNX Runtime on an otherwise idle 2-core machine (issue 15; docs/models.md,
+/// "What a CPU can do").
+pub const CPU_FLOP_PER_SECOND: f64 = 1.5e11;
+
+/// The warning `stylize run` prints before it starts when real-size UNets (by
+/// [`ModelDir::approx_parameters`], i.e. the size of their files) would run on the CPU execution
+/// provider: the estimated time per iteration and for the whole run, from
+/// parameters × [`FLOP_PER_PARAMETER_SAMPLE`] / [`CPU_FLOP_PER_SECOND`] × views × 2 (conditional and
+/// unconditional) × steps per batch.
+/// None on a GPU or for small models.
+pub fn cpu_time_warning(dir: &ModelDir, device: &Device, config: &Config) -> Option<String> {
+    if *device != Device::Cpu {
+        return None;
+    }
+    let p1 = dir.approx_parameters(Stage::One).unwrap_or(0);
+    let p2 = dir.approx_parameters(Stage::Two).unwrap_or(0);
+    if p1.max(p2) < REAL_SIZE_PARAMETERS {
+        return None;
+    }
+    let samples = 2.0 * config.camera.views as f64 * f64::from(config.optim.steps_per_batch);
+    let [f1, f2] = FLOP_PER_PARAMETER_SAMPLE;
+    let per_iteration = samples * (p1 as f64 * f1 + p2 as f64 * f2) / CPU_FLOP_PER_SECOND;
+    let hours = per_iteration * config.optim.iterations as f64 / 3600.0;
+    Some(format!(
+        "{} holds real-size UNets (stage I ≈ {:.2} B parameters, stage II ≈ {:.2} B) and runs on the CPU: \
+         expect roughly {:.0} min per iteration ({} views, {} steps per batch; measured on a 2-core machine, \
+         stage II counted at full weight although the schedule may use less), so {} iterations ≈ {:.0} h. \
+         A GPU (CUDA execution provider) is the realistic way to run this; see docs/models.md, \"What a CPU can do\"",
+        dir.root().display(),
+        p1 as f64 / 1e9,
+        p2 as f64 / 1e9,
+        per_iteration / 60.0,
+        config.camera.views,
+        config.optim.steps_per_batch,
+        config.optim.iterations,
+        hours
+    ))
 }
 
 /// Opened model sessions, reusable across prompts.
@@ -39,6 +89,12 @@ impl std::fmt::Debug for ModelSet {
 }
 
 impl ModelSet {
+    /// [`cpu_time_warning`] for these models and session settings (the command line prints it
+    /// before a run starts).
+    pub fn cpu_time_warning(&self, config: &Config) -> Option<String> {
+        cpu_time_warning(&self.dir, &self.options.device, config)
+    }
+
     /// Opens the model directory and its UNets (stage II only when the manifest lists it), with
     /// the session settings of `config` (`guidance.onnx_memory_arena`).
     pub fn open(model: &Path, config: &Config) -> Result<Self> {
@@ -133,4 +189,83 @@ pub fn load_guidance(
     config: &Config,
 ) -> Result<CascadedGuidance<'static>> {
     ModelSet::open(model, config)?.into_guidance(prompt, config)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A model directory whose stage files have the given sizes (sparse files: nothing is written).
+    fn fake_model(stage1_bytes: u64, stage2_bytes: Option<u64>) -> tempfile::TempDir {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let fixture =
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/models/tiny-if-fp16");
+        for entry in std::fs::read_dir(&fixture).expect("fixture") {
+            let entry = entry.expect("entry");
+            std::fs::copy(entry.path(), dir.path().join(entry.file_name())).expect("copy");
+        }
+        let grow = |name: &str, len: u64| {
+            let f = std::fs::OpenOptions::new()
+                .write(true)
+                .open(dir.path().join(name))
+                .expect("open data");
+            f.set_len(len).expect("set_len");
+        };
+        grow("unet_stage1.onnx.data", stage1_bytes);
+        match stage2_bytes {
+            Some(b) => grow("unet_stage2.onnx.data", b),
+            None => {
+                let m = dir.path().join("manifest.toml");
+                let text = std::fs::read_to_string(&m).expect("manifest");
+                let cut = text.find("[stage2]").expect("stage2 section");
+                std::fs::write(&m, &text[..cut]).expect("write manifest");
+            }
+        }
+        dir
+    }
+
+    #[test]
+    fn real_size_models_on_the_cpu_get_a_time_warning() {
+        // fp16: 8.6 GB ≈ IF-I-XL's 4.3 B parameters, 2.4 GB ≈ IF-II-L's 1.2 B.
+        let d = fake_model(8_600_000_000, Some(2_400_000_000));
+        let dir = ModelDir::open(d.path()).expect("open");
+        assert_eq!(
+            dir.approx_parameters(Stage::Two).map(|p| p / 100_000_000),
+            Some(12)
+        );
+        let config = Config::default();
+        let w = cpu_time_warning(&dir, &Device::Cpu, &config).expect("a warning");
+        assert!(
+            w.contains("stage I ≈ 4.30 B") && w.contains("stage II ≈ 1.20 B"),
+            "{w}"
+        );
+        let samples = 2.0 * config.camera.views as f64 * f64::from(config.optim.steps_per_batch);
+        let [f1, f2] = FLOP_PER_PARAMETER_SAMPLE;
+        let minutes = samples * (4.3e9 * f1 + 1.2e9 * f2) / CPU_FLOP_PER_SECOND / 60.0;
+        assert!(
+            w.contains(&format!("roughly {minutes:.0} min per iteration")),
+            "{w}"
+        );
+        assert!(w.contains("GPU"), "{w}");
+        // Stage I alone is real-size too.
+        let d = fake_model(8_600_000_000, None);
+        let dir = ModelDir::open(d.path()).expect("open");
+        assert!(cpu_time_warning(&dir, &Device::Cpu, &config).is_some());
+    }
+
+    #[test]
+    fn tiny_models_or_a_gpu_get_no_warning() {
+        let config = Config::default();
+        let tiny = ModelDir::open(
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/models/tiny-if-fp16"),
+        )
+        .expect("open");
+        assert_eq!(cpu_time_warning(&tiny, &Device::Cpu, &config), None);
+        let d = fake_model(8_600_000_000, Some(2_400_000_000));
+        let dir = ModelDir::open(d.path()).expect("open");
+        assert_eq!(
+            cpu_time_warning(&dir, &Device::Cuda { device_id: 0 }, &config),
+            None
+        );
+    }
 }

@@ -59,6 +59,21 @@ pub struct Args {
     /// ONNX Runtime intra-op threads (default: one per core).
     #[arg(long)]
     pub threads: Option<usize>,
+    /// Turn ONNX Runtime's CPU memory arena off.
+    #[arg(long)]
+    pub no_arena: bool,
+    /// Turn ONNX Runtime's memory pattern off.
+    #[arg(long)]
+    pub no_memory_pattern: bool,
+    /// Turn weight pre-packing off (`session.disable_prepacking`).
+    #[arg(long)]
+    pub no_prepacking: bool,
+    /// Turn ONNX Runtime's graph optimizations off.
+    #[arg(long)]
+    pub no_graph_optimizations: bool,
+    /// At most this many samples per UNet call (default: the whole 2B batch in one call).
+    #[arg(long)]
+    pub max_batch: Option<usize>,
     /// Output `.npz`.
     #[arg(long)]
     pub out: PathBuf,
@@ -132,6 +147,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .with_context(|| format!("opening model {}", args.model.display()))?;
     let options = SessionOptions {
         intra_threads: args.threads,
+        cpu_memory_arena: !args.no_arena,
+        memory_pattern: !args.no_memory_pattern,
+        prepacking: !args.no_prepacking,
+        graph_optimizations: !args.no_graph_optimizations,
+        max_batch: args.max_batch,
         ..SessionOptions::default()
     };
     let cache = match &args.cache {
@@ -271,6 +291,11 @@ mod tests {
             guidance_scale: 100.0,
             cache: Some(dir.join("cache")),
             threads: Some(1),
+            no_arena: false,
+            no_memory_pattern: false,
+            no_prepacking: false,
+            no_graph_optimizations: false,
+            max_batch: None,
             out: dir.join(out),
         }
     }

@@ -186,9 +186,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 log,
                 objective,
                 || {
+                    let set = crate::models::ModelSet::open(model, &config)?;
+                    if let Some(w) = set.cpu_time_warning(&config) {
+                        eprintln!("warning: {w}");
+                    }
                     Ok(Task::Text {
                         prompt: prompt.clone(),
-                        guidance: Box::new(crate::models::load_guidance(model, prompt, &config)?),
+                        guidance: Box::new(set.into_guidance(prompt, &config)?),
                     })
                 },
                 &options,
