@@ -791,6 +791,7 @@ pub fn execute_with<'g>(
     let (snapshots, snapshot_warning) = crate::snapshots::SnapshotRecorder::start(
         dir.file(crate::snapshots::FILE_NAME),
         &prepared.darap,
+        &prepared.mesh.faces,
         config.run.snapshot_every,
         state.iteration,
         &state.x,

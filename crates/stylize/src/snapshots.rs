@@ -3,6 +3,9 @@
 //!
 //! Contents (NumPy `.npz`, stored entries, written with the `npy` crate):
 //! - `iterations`: int64, shape `[K]`, strictly increasing, starting at 0;
+//! - `faces`: int64, shape `[F, 3]`: the mesh's faces (those of `mesh.obj`), so a reader can draw
+//!   a running run before `deformation.npz` exists (absent from files written by
+//!   [`Snapshots::write`]);
 //! - `x`: float32, shape `[K, V, 3]`: entry `k` holds the dARAP positions of the targets `x` after
 //!   iteration `iterations[k]`, i.e. `Darap::forward(x_k)` with `x_k` rounded to f32 as
 //!   `deformation.npz` saves it — the frame, vertex order and values of the run's `mesh.obj` /
@@ -101,9 +104,21 @@ impl Snapshots {
         self.x.truncate(keep * self.vertices * 3);
     }
 
-    /// Writes the file atomically and durably.
+    /// Writes the file atomically and durably (without `faces`).
     pub fn write(&self, path: &Path) -> Result<()> {
+        self.write_with_faces(path, &[])
+    }
+
+    /// Writes the file atomically and durably, with the mesh's `faces` (int64 `[F, 3]`) unless
+    /// `faces` is empty, so a reader can draw a running run before `deformation.npz` exists.
+    pub fn write_with_faces(&self, path: &Path, faces: &[[u32; 3]]) -> Result<()> {
         let k = self.iterations.len();
+        let faces = (!faces.is_empty())
+            .then(|| {
+                let flat = faces.iter().flatten().map(|&i| i64::from(i)).collect();
+                NpyArray::new(vec![faces.len(), 3], NpyData::I64(flat)).map_err(Error::Invalid)
+            })
+            .transpose()?;
         let iterations = NpyArray::new(vec![k], NpyData::I64(self.iterations.clone()))
             .map_err(Error::Invalid)?;
         let x = NpyArray::new(vec![k, self.vertices, 3], NpyData::F32(self.x.clone()))
@@ -112,6 +127,9 @@ impl Snapshots {
             let mut w = NpzWriter::create(tmp)?;
             w.add("iterations", &iterations)?;
             w.add("x", &x)?;
+            if let Some(f) = &faces {
+                w.add("faces", f)?;
+            }
             w.finish()?;
             Ok(())
         })
@@ -123,6 +141,8 @@ impl Snapshots {
 pub struct SnapshotRecorder<'a> {
     path: PathBuf,
     darap: &'a Darap,
+    /// The mesh's faces, written beside the positions.
+    faces: Vec<[u32; 3]>,
     every: u64,
     last_iteration: u64,
     snapshots: Snapshots,
@@ -163,6 +183,7 @@ impl<'a> SnapshotRecorder<'a> {
     pub fn start(
         path: PathBuf,
         darap: &'a Darap,
+        faces: &[[u32; 3]],
         every: u64,
         iteration: u64,
         x: &[[f64; 3]],
@@ -229,12 +250,13 @@ impl<'a> SnapshotRecorder<'a> {
             return Ok((None, warning));
         }
         if iteration == 0 {
-            snapshots.write(&path)?;
+            snapshots.write_with_faces(&path, faces)?;
         }
         Ok((
             Some(Self {
                 path,
                 darap,
+                faces: faces.to_vec(),
                 every,
                 last_iteration,
                 snapshots,
@@ -260,7 +282,7 @@ impl<'a> SnapshotRecorder<'a> {
                 .map_err(|_| Error::Invalid(format!("iteration {iteration} out of range")))?,
         );
         self.snapshots.x.extend(deformed_f32(self.darap, x)?);
-        self.snapshots.write(&self.path)
+        self.snapshots.write_with_faces(&self.path, &self.faces)
     }
 }
 

@@ -108,6 +108,9 @@ fn entries_are_iteration_zero_every_n_and_the_last_in_the_frame_of_mesh_obj() {
     let result = ok(mesh_core::io::read_mesh(out.join("mesh.obj")));
     assert_eq!(s.vertices, result.positions.len());
     assert_eq!(s.x.len(), 4 * s.vertices * 3);
+    // The faces ride along (a viewer draws a running run with them): those of mesh.obj.
+    let npz = ok(npy::npz::NpzReader::open(out.join(FILE_NAME)));
+    assert_eq!(ok(npz.rows3_u32("faces")), result.faces);
     let last = s.positions(3).unwrap_or_default();
     let d = max_abs_diff(&last, &result.positions);
     assert!(d < 1e-5, "last snapshot vs mesh.obj: {d}");
