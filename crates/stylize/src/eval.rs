@@ -17,8 +17,9 @@
 //! `clip(M) = (1/N) Σ_v cos(E_img(render_v(M)), E_txt(text))`, the mean over N orbit views (16 in the
 //! paper) of the cosine between each view's image embedding and the prompt's text embedding. Each
 //! mesh (source and result) is normalized to the side-2 cube and rendered with
-//! [`crate::runner::turntable`] (the framing of a run's `turntable.png`: azimuth 360°·k/N, elevation
-//! 20°, head light, distance fitting the bounding sphere in the field of view) on the CPU renderer at
+//! [`crate::runner::turntable`] (azimuth 360°·k/N, elevation 20°, head light, distance fitting the
+//! bounding sphere in the field of view — the same framing for every mesh, so scores compare across
+//! runs; a run's `turntable.png` is zoomed to fill its tiles instead) on the CPU renderer at
 //! [`ClipSettings::render_size`] pixels; the CLIP model resizes the renders to its own size
 //! (bicubic, antialiased; `diffusion_onnx::clip`). The prompt of a run directory is the `prompt` of
 //! its `deformation.npz` `dataset_cfg` (what the run was given); a model-free run has none, and its
