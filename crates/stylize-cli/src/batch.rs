@@ -435,10 +435,12 @@ fn run_row(
             let Some(model) = &options.model else {
                 bail!("prompt rows need --model DIR (docs/models.md)");
             };
-            if config.guidance.onnx_memory_arena != options.config.guidance.onnx_memory_arena {
+            if config.guidance.onnx_memory_arena != options.config.guidance.onnx_memory_arena
+                || config.guidance.onnx_low_memory != options.config.guidance.onnx_low_memory
+            {
                 bail!(
-                    "guidance.onnx_memory_arena cannot be overridden per row: the batch opens its \
-                     models once (set it for the whole batch with --set)"
+                    "guidance.onnx_memory_arena and guidance.onnx_low_memory cannot be overridden \
+                     per row: the batch opens its models once (set them for the whole batch with --set)"
                 );
             }
             run_options.model = Some(ModelIdentity::of_dir(model)?);

@@ -9,7 +9,7 @@
 //! [render]   width = 512, height = 512, backend = "auto"
 //! [guidance] scale = 100, t_min = 20, t_max = 980, loss_scale = 100, stage1_weight = 1,
 //!            stage2_weight = "0.0>0.2:1000; 0.2>0.3:750", negative_prompt = "", grad_clip = 0 (off),
-//!            onnx_memory_arena = true
+//!            onnx_memory_arena = true, onnx_low_memory = false
 //! [style]    iterations, lr, objective   (the model-free path, see `crate::style`)
 //! [run]      seed, checkpoint_every, preview_every, turntable_views, turntable_size,
 //!            turntable_gif_frames, snapshot_every
@@ -165,6 +165,12 @@ pub struct GuidanceSection {
     /// (3.5 → 1.4 GB with the tiny fixtures, guidance 15–25 % slower). Process-wide: a batch opens
     /// its models once, so rows cannot override it.
     pub onnx_memory_arena: bool,
+    /// ONNX Runtime's low-memory session settings (`diffusion_onnx::SessionOptions::low_memory`:
+    /// arena, memory pattern, pre-packing and graph optimizations off, one sample per UNet call):
+    /// false. For real-size models near the machine's memory (docs/models.md §5); slower, and the
+    /// results may differ from the default settings' in the last bits (other kernels). Process-wide
+    /// like `onnx_memory_arena`.
+    pub onnx_low_memory: bool,
 }
 
 impl Default for GuidanceSection {
@@ -180,6 +186,7 @@ impl Default for GuidanceSection {
             negative_prompt: String::new(),
             grad_clip: csd.grad_clip.map_or(0.0, f64::from),
             onnx_memory_arena: diffusion_onnx::SessionOptions::default().cpu_memory_arena,
+            onnx_low_memory: false,
         }
     }
 }

@@ -40,6 +40,7 @@ pub const PRESENTATION_KEYS: &[&str] = &[
     "run.turntable_gif_frames",
     "run.snapshot_every",
     "guidance.onnx_memory_arena",
+    "guidance.onnx_low_memory",
     "region.tint",
 ];
 

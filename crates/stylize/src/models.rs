@@ -70,6 +70,19 @@ pub fn cpu_time_warning(dir: &ModelDir, device: &Device, config: &Config) -> Opt
     ))
 }
 
+/// The ONNX Runtime session settings of `config`: [`SessionOptions::low_memory`] with
+/// `guidance.onnx_low_memory`, else the defaults with `guidance.onnx_memory_arena`.
+pub fn session_options(config: &Config) -> SessionOptions {
+    if config.guidance.onnx_low_memory {
+        SessionOptions::low_memory()
+    } else {
+        SessionOptions {
+            cpu_memory_arena: config.guidance.onnx_memory_arena,
+            ..SessionOptions::default()
+        }
+    }
+}
+
 /// Opened model sessions, reusable across prompts.
 pub struct ModelSet {
     dir: ModelDir,
@@ -100,10 +113,7 @@ impl ModelSet {
     pub fn open(model: &Path, config: &Config) -> Result<Self> {
         let dir = ModelDir::open(model)
             .with_context(|| format!("cannot open model directory {}", model.display()))?;
-        let options = SessionOptions {
-            cpu_memory_arena: config.guidance.onnx_memory_arena,
-            ..SessionOptions::default()
-        };
+        let options = session_options(config);
         let cache = EmbeddingCache::at_default().ok();
         let stage1 = OnnxDenoiser::open(&dir, Stage::One, &options).context("IF stage I")?;
         let stage2 = match dir.stage(Stage::Two) {
@@ -251,6 +261,19 @@ mod tests {
         let d = fake_model(8_600_000_000, None);
         let dir = ModelDir::open(d.path()).expect("open");
         assert!(cpu_time_warning(&dir, &Device::Cpu, &config).is_some());
+    }
+
+    #[test]
+    fn low_memory_setting_selects_the_low_memory_sessions() {
+        let mut config = Config::default();
+        assert_eq!(session_options(&config), SessionOptions::default());
+        config.guidance.onnx_memory_arena = false;
+        assert!(!session_options(&config).cpu_memory_arena);
+        assert_eq!(session_options(&config).max_batch, None);
+        config.guidance.onnx_low_memory = true;
+        assert_eq!(session_options(&config), SessionOptions::low_memory());
+        let parsed = Config::from_toml_str("[guidance]\nonnx_low_memory = true\n").expect("parses");
+        assert!(parsed.guidance.onnx_low_memory);
     }
 
     #[test]

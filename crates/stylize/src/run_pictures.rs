@@ -172,15 +172,7 @@ pub fn filled_orbit(
     free: Option<&[bool]>,
 ) -> Result<Images> {
     let size = size.max(1);
-    let radius = positions
-        .iter()
-        .map(|p| (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt())
-        .filter(|r| r.is_finite())
-        .fold(0.0_f64, f64::max)
-        .max(1e-3);
-    let half_fov = (fov_deg.clamp(1.0, 179.0) * 0.5).to_radians();
-    let orbit =
-        raster_diff::orbit_views(views.max(1), 20.0, 1.1 * radius / half_fov.sin(), fov_deg);
+    let orbit = crate::runner::bounding_orbit(positions, views, fov_deg);
     let mut renderer = raster_diff::CpuRenderer::default();
     let probe_size = size.min(128);
     let probe = renderer

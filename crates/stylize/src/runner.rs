@@ -316,19 +316,11 @@ pub fn tint_region(images: &mut Images, ids: &[u32], faces: &[[u32; 3]], free: &
     }
 }
 
-/// Renders `n` turntable views of a mesh (CPU renderer, elevation 20°, looking at the origin).
-///
-/// The camera distance makes the whole mesh visible: with r the largest distance of a vertex from
-/// the origin, a sphere of radius r subtends the field of view at distance r / sin(fov/2); 10 %
-/// margin is added.
-pub fn turntable(
-    renderer: &mut raster_diff::CpuRenderer,
-    positions: &[[f64; 3]],
-    faces: &[[u32; 3]],
-    n: usize,
-    size: usize,
-    fov: f64,
-) -> Result<Images> {
+/// `n` orbit views (elevation 20°, azimuth 360°·k/n, looking at the origin, vertical field of view
+/// `fov` degrees) from which the whole mesh is visible: with r the largest distance of a vertex
+/// from the origin, a sphere of radius r subtends the field of view at distance r / sin(fov/2);
+/// 10 % margin is added.
+pub fn bounding_orbit(positions: &[[f64; 3]], n: usize, fov: f64) -> Vec<raster_diff::View> {
     let radius = positions
         .iter()
         .map(|p| (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt())
@@ -337,7 +329,19 @@ pub fn turntable(
         .max(1e-3);
     let half_fov = (fov.clamp(1.0, 179.0) * 0.5).to_radians();
     let distance = 1.1 * radius / half_fov.sin();
-    let views = raster_diff::orbit_views(n.max(1), 20.0, distance, fov);
+    raster_diff::orbit_views(n.max(1), 20.0, distance, fov)
+}
+
+/// Renders `n` turntable views of a mesh on the CPU renderer, from [`bounding_orbit`].
+pub fn turntable(
+    renderer: &mut raster_diff::CpuRenderer,
+    positions: &[[f64; 3]],
+    faces: &[[u32; 3]],
+    n: usize,
+    size: usize,
+    fov: f64,
+) -> Result<Images> {
+    let views = bounding_orbit(positions, n, fov);
     renderer
         .render(positions, faces, &views, size, size)
         .context("turntable render")
