@@ -158,38 +158,35 @@ impl ModelSet {
     /// `config`) that borrows this set's UNets until it is dropped. Without a stage-II model the
     /// stage-II weight schedule must stay at 0.
     pub fn guidance_for(&mut self, prompt: &str, config: &Config) -> Result<CascadedGuidance<'_>> {
-        let (cond, uncond) = self.embeddings_for(prompt, config)?;
+        let embeddings = self.embeddings_for(prompt, config)?;
         let stage2 = self
             .stage2
             .as_mut()
             .map(|s| Box::new(s) as Box<dyn Denoiser + '_>);
-        let guidance = CascadedGuidance::new(
-            Box::new(&mut self.stage1),
-            stage2,
-            cond,
-            uncond,
-            guidance_config(config),
-        )
-        .context("guidance")?
-        .with_stage2_weight(config.stage2_schedule()?);
-        Ok(guidance)
+        cascaded(Box::new(&mut self.stage1), stage2, embeddings, config)
     }
 
     /// Like [`Self::guidance_for`], handing the UNets over to the guidance.
     pub fn into_guidance(self, prompt: &str, config: &Config) -> Result<CascadedGuidance<'static>> {
-        let (cond, uncond) = self.embeddings_for(prompt, config)?;
+        let embeddings = self.embeddings_for(prompt, config)?;
         let stage2 = self.stage2.map(|s| Box::new(s) as Box<dyn Denoiser>);
-        let guidance = CascadedGuidance::new(
-            Box::new(self.stage1),
-            stage2,
-            cond,
-            uncond,
-            guidance_config(config),
-        )
-        .context("guidance")?
-        .with_stage2_weight(config.stage2_schedule()?);
-        Ok(guidance)
+        cascaded(Box::new(self.stage1), stage2, embeddings, config)
     }
+}
+
+/// The cascaded guidance over these UNets with the (conditional, unconditional) embeddings and the
+/// guidance settings and stage-II weight schedule of `config`.
+fn cascaded<'m>(
+    stage1: Box<dyn Denoiser + 'm>,
+    stage2: Option<Box<dyn Denoiser + 'm>>,
+    (cond, uncond): (Embedding, Embedding),
+    config: &Config,
+) -> Result<CascadedGuidance<'m>> {
+    Ok(
+        CascadedGuidance::new(stage1, stage2, cond, uncond, guidance_config(config))
+            .context("guidance")?
+            .with_stage2_weight(config.stage2_schedule()?),
+    )
 }
 
 /// Opens the models and builds the guidance for one prompt.

@@ -35,15 +35,15 @@ pub fn write_before_after(
     fov_deg: f64,
 ) -> Result<()> {
     let sheet = before_after(source, result, faces, views, size, fov_deg)?;
+    write_png_atomic(path, &sheet)
+}
+
+/// Writes the first image of `images` as a PNG at `path`, atomically ([`crate::durable`]).
+pub fn write_png_atomic(path: &Path, images: &Images) -> Result<()> {
     crate::durable::replace_with(path, |tmp| {
         let file = std::fs::File::create(tmp).io_context("cannot create", tmp)?;
-        raster_diff::image::write_png(
-            std::io::BufWriter::new(file),
-            &sheet,
-            0,
-            raster_diff::image::Encoding::Direct,
-        )
-        .with_context(|| format!("cannot write {}", path.display()))
+        raster_diff::image::write_png(std::io::BufWriter::new(file), images, 0, Encoding::Direct)
+            .with_context(|| format!("cannot write {}", path.display()))
     })
 }
 

@@ -285,16 +285,7 @@ pub fn write_grid(path: &Path, images: &Images) -> Result<()> {
     }
     let columns = images.count.clamp(1, 4);
     let sheet = raster_diff::image::contact_sheet(images, columns.max(1));
-    crate::durable::replace_with(path, |tmp| {
-        let file = std::fs::File::create(tmp).io_context("cannot create", tmp)?;
-        raster_diff::image::write_png(
-            std::io::BufWriter::new(file),
-            &sheet,
-            0,
-            raster_diff::image::Encoding::Direct,
-        )
-        .with_context(|| format!("cannot write {}", path.display()))
-    })
+    crate::run_pictures::write_png_atomic(path, &sheet)
 }
 
 /// Tint of [`tint_region`] (a warm orange, multiplied into the shading).

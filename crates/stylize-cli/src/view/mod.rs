@@ -559,6 +559,14 @@ pub enum Item {
     Mesh(MeshItem),
 }
 
+/// Whether `path` names a mesh file the readers take (by extension, case-insensitive).
+fn is_mesh_path(path: &Path) -> bool {
+    path.extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase)
+        .is_some_and(|e| matches!(e.as_str(), "obj" | "off" | "ply" | "gltf" | "glb"))
+}
+
 impl Item {
     /// Opens a command-line argument: a directory is a run, a mesh file a mesh, and a batch
     /// manifest (`.toml`, `.jsonl`/`.json`) one run per row — rows not started yet included.
@@ -568,12 +576,7 @@ impl Item {
         if meta.is_dir() {
             return Ok(vec![Item::Run(RunItem::new(name, path)?)]);
         }
-        let ext = path
-            .extension()
-            .and_then(|e| e.to_str())
-            .map(str::to_ascii_lowercase)
-            .unwrap_or_default();
-        if !matches!(ext.as_str(), "obj" | "off" | "ply" | "gltf" | "glb") {
+        if !is_mesh_path(path) {
             // Anything else is read as a batch manifest (`.toml`, else JSON Lines).
             let rows = crate::batch::read_manifest(path).with_context(|| {
                 format!(
@@ -607,12 +610,7 @@ impl Item {
     /// Opens a mesh file (shown as is).
     pub fn open_mesh(path: &Path) -> anyhow::Result<Self> {
         let name = path.display().to_string();
-        let ext = path
-            .extension()
-            .and_then(|e| e.to_str())
-            .map(str::to_ascii_lowercase)
-            .unwrap_or_default();
-        if !matches!(ext.as_str(), "obj" | "off" | "ply" | "gltf" | "glb") {
+        if !is_mesh_path(path) {
             bail!(
                 "{name}: not a run directory, a mesh (.obj, .off, .ply, .gltf, .glb) or a batch \
                  manifest (.toml, .jsonl)"
