@@ -12,9 +12,9 @@
 
 use crate::RotationRule;
 use crate::lanes::{
-    F, M3, Mask, V3, W, abs, add, all, and, any, col, cross, det, div, dot, eq, ge, gt, identity,
-    is_finite, is_nan, le, lt, matmul, mul, neg, not, or, select, select3, signum, splat, sqrt,
-    sub, transpose,
+    F, FALSE, M3, Mask, V3, W, abs, add, all, and, any, col, cross, det, div, dot, eq, ge, gt,
+    identity, is_finite, is_nan, le, lt, mask_bit, matmul, mul, neg, not, or, select, select3,
+    signum, splat, sqrt, sub, transpose,
 };
 
 /// `S = U·diag(σ)·Vᵀ` for every lane (see [`crate::stages::Svd3`]).
@@ -51,6 +51,24 @@ fn any_orthogonal(u: V3) -> V3 {
     select3(ok, y, [zero, zero, one])
 }
 
+/// `x[0]` where `m[0]`, else `x[1]` where `m[1]`, else `x[2]`, lane by lane. A function, not a
+/// closure: closures are compiled for the baseline instruction set and not inlined into the
+/// dispatched kernel (see [`crate::lanes::dispatch`]).
+#[inline(always)]
+fn pick(m: [Mask; 2], x: [F; 3]) -> F {
+    select(m[0], x[0], select(m[1], x[1], x[2]))
+}
+
+/// The columns of `m` reordered: column `k` of the result is [`pick`]`(slot[k], row)` per row.
+#[inline(always)]
+fn permute_columns(m: &M3, slot: [[Mask; 2]; 3]) -> M3 {
+    let mut out = *m;
+    for (o, r) in out.iter_mut().zip(m) {
+        *o = [pick(slot[0], *r), pick(slot[1], *r), pick(slot[2], *r)];
+    }
+    out
+}
+
 /// The one-sided Jacobi SVD of [`crate::stages::svd3`], lane by lane.
 #[inline(always)]
 pub(crate) fn svd3_lanes(s: &M3) -> SvdLanes {
@@ -72,7 +90,7 @@ pub(crate) fn svd3_lanes(s: &M3) -> SvdLanes {
     let mut v = identity();
     const PAIRS: [(usize, usize); 3] = [(0, 1), (0, 2), (1, 2)];
     for _sweep in 0..32 {
-        let mut rotated: Mask = [false; W];
+        let mut rotated: Mask = FALSE;
         for (p, q) in PAIRS {
             let ap = col(&a, p);
             let aq = col(&a, q);
@@ -126,21 +144,13 @@ pub(crate) fn svd3_lanes(s: &M3) -> SvdLanes {
     let to0 = [and(b01, b02), and(not(b01), b12)];
     let to1 = [not(eq_mask(b01, b02)), eq_mask(b01, b12)];
     let to2 = [and(not(b01), not(b02)), and(b01, not(b12))];
-    let pick = |m: [Mask; 2], x: [F; 3]| select(m[0], x[0], select(m[1], x[1], x[2]));
     let sigma = [
         pick(to0, [s0, s1, s2]),
         pick(to1, [s0, s1, s2]),
         pick(to2, [s0, s1, s2]),
     ];
-    let permute = |m: &M3| -> M3 {
-        let mut out = *m;
-        for (o, r) in out.iter_mut().zip(m) {
-            *o = [pick(to0, *r), pick(to1, *r), pick(to2, *r)];
-        }
-        out
-    };
-    let a = permute(&a);
-    let v = permute(&v);
+    let a = permute_columns(&a, [to0, to1, to2]);
+    let v = permute_columns(&v, [to0, to1, to2]);
 
     let tau = mul(splat(1e-13), sigma[0]);
     let zero = splat(0.0);
@@ -182,7 +192,7 @@ pub(crate) fn svd3_lanes(s: &M3) -> SvdLanes {
 fn select_mask(c: Mask, a: Mask, b: Mask) -> Mask {
     let mut r = a;
     for i in 0..W {
-        r[i] = if c[i] { a[i] } else { b[i] };
+        r[i] = (a[i] & c[i]) | (b[i] & !c[i]);
     }
     r
 }
@@ -191,7 +201,7 @@ fn select_mask(c: Mask, a: Mask, b: Mask) -> Mask {
 fn eq_mask(a: Mask, b: Mask) -> Mask {
     let mut r = a;
     for i in 0..W {
-        r[i] = a[i] == b[i];
+        r[i] = mask_bit(a[i] == b[i]);
     }
     r
 }

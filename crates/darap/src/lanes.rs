@@ -13,8 +13,24 @@ pub(crate) const W: usize = 8;
 
 /// `W` f64 lanes.
 pub(crate) type F = [f64; W];
-/// `W` lane conditions.
-pub(crate) type Mask = [bool; W];
+/// `W` lane conditions, each all ones (true) or all zeros (false) — the layout of a SIMD compare
+/// result, so that [`select`] is a bitwise blend and no lane needs widening from a `bool`.
+pub(crate) type Mask = [u64; W];
+
+/// The all-false mask.
+pub(crate) const FALSE: Mask = [0; W];
+
+/// The mask word of one condition: all ones for `true`, zero for `false`.
+#[inline(always)]
+pub(crate) fn mask_bit(b: bool) -> u64 {
+    (b as u64).wrapping_neg()
+}
+
+/// Whether lane `l` of `m` is set.
+#[inline(always)]
+pub(crate) fn lane(m: Mask, l: usize) -> bool {
+    m[l] != 0
+}
 /// A 3-vector of lanes.
 pub(crate) type V3 = [F; 3];
 /// A row-major 3×3 matrix of lanes (`m[row][col]`).
@@ -111,63 +127,63 @@ pub(crate) fn signum(a: F) -> F {
 
 #[inline(always)]
 pub(crate) fn gt(a: F, b: F) -> Mask {
-    let mut r = [false; W];
+    let mut r = FALSE;
     for i in 0..W {
-        r[i] = a[i] > b[i];
+        r[i] = mask_bit(a[i] > b[i]);
     }
     r
 }
 
 #[inline(always)]
 pub(crate) fn ge(a: F, b: F) -> Mask {
-    let mut r = [false; W];
+    let mut r = FALSE;
     for i in 0..W {
-        r[i] = a[i] >= b[i];
+        r[i] = mask_bit(a[i] >= b[i]);
     }
     r
 }
 
 #[inline(always)]
 pub(crate) fn le(a: F, b: F) -> Mask {
-    let mut r = [false; W];
+    let mut r = FALSE;
     for i in 0..W {
-        r[i] = a[i] <= b[i];
+        r[i] = mask_bit(a[i] <= b[i]);
     }
     r
 }
 
 #[inline(always)]
 pub(crate) fn lt(a: F, b: F) -> Mask {
-    let mut r = [false; W];
+    let mut r = FALSE;
     for i in 0..W {
-        r[i] = a[i] < b[i];
+        r[i] = mask_bit(a[i] < b[i]);
     }
     r
 }
 
 #[inline(always)]
 pub(crate) fn eq(a: F, b: F) -> Mask {
-    let mut r = [false; W];
+    let mut r = FALSE;
     for i in 0..W {
-        r[i] = a[i] == b[i];
+        r[i] = mask_bit(a[i] == b[i]);
     }
     r
 }
 
 #[inline(always)]
 pub(crate) fn is_nan(a: F) -> Mask {
-    let mut r = [false; W];
+    let mut r = FALSE;
     for i in 0..W {
-        r[i] = a[i].is_nan();
+        r[i] = mask_bit(a[i].is_nan());
     }
     r
 }
 
 #[inline(always)]
 pub(crate) fn is_finite(a: F) -> Mask {
-    let mut r = [false; W];
+    let mut r = FALSE;
     for i in 0..W {
-        r[i] = a[i].is_finite();
+        r[i] = mask_bit(a[i].is_finite());
     }
     r
 }
@@ -201,12 +217,12 @@ pub(crate) fn not(a: Mask) -> Mask {
 
 #[inline(always)]
 pub(crate) fn all(a: Mask) -> bool {
-    a.iter().fold(true, |acc, &x| acc & x)
+    a.iter().fold(u64::MAX, |acc, &x| acc & x) != 0
 }
 
 #[inline(always)]
 pub(crate) fn any(a: Mask) -> bool {
-    a.iter().fold(false, |acc, &x| acc | x)
+    a.iter().fold(0, |acc, &x| acc | x) != 0
 }
 
 /// `m ? a : b`, lane-wise.
@@ -214,7 +230,7 @@ pub(crate) fn any(a: Mask) -> bool {
 pub(crate) fn select(m: Mask, a: F, b: F) -> F {
     let mut r = b;
     for i in 0..W {
-        r[i] = if m[i] { a[i] } else { b[i] };
+        r[i] = f64::from_bits((a[i].to_bits() & m[i]) | (b[i].to_bits() & !m[i]));
     }
     r
 }

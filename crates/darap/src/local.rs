@@ -3,7 +3,7 @@
 
 use crate::RotationRule;
 use crate::batch::{SvdLanes, d01, rotation_vjp_lanes, rule_lanes, svd3_lanes};
-use crate::lanes::{F, M3, Mask, W, dispatch};
+use crate::lanes::{F, FALSE, M3, Mask, W, dispatch, lane, mask_bit};
 use crate::mat3::{IDENTITY, Mat3, ZERO, mul_tvec, outer, sub};
 use crate::rotation_rule::RotationSvd;
 use crate::svd3::Svd3;
@@ -151,7 +151,7 @@ impl LocalTape {
         }
         let (c, l) = (v / W, v % W);
         let chunk = &self.chunks[c];
-        if !chunk.free[l] {
+        if !lane(chunk.free, l) {
             return None;
         }
         let lane =
@@ -301,7 +301,7 @@ fn local_chunk(
     out: &mut [Mat3],
 ) -> TapeChunk {
     let mut s: M3 = [[[0.0; W]; 3]; 3];
-    let mut is_free: Mask = [false; W];
+    let mut is_free: Mask = FALSE;
     for l in 0..out.len() {
         let v = base + l;
         let sv = covariance(
@@ -316,12 +316,12 @@ fn local_chunk(
                 s[i][j][l] = sv[i][j];
             }
         }
-        is_free[l] = free.is_none_or(|m| m[v]);
+        is_free[l] = mask_bit(free.is_none_or(|m| m[v]));
     }
     let svd = svd3_lanes(&s);
     let (r, d2) = rule_lanes(&svd, rule);
     for (l, o) in out.iter_mut().enumerate() {
-        *o = if is_free[l] {
+        *o = if lane(is_free, l) {
             std::array::from_fn(|i| std::array::from_fn(|j| r[i][j][l]))
         } else {
             IDENTITY
@@ -395,7 +395,7 @@ fn local_vjp_chunk(
     let ds = rotation_vjp_lanes(&chunk.svd, chunk.d2, rule, &g);
     for (l, o) in out.iter_mut().enumerate() {
         let v = base + l;
-        *o = if chunk.free[l] {
+        *o = if lane(chunk.free, l) {
             let dsv: Mat3 = std::array::from_fn(|i| std::array::from_fn(|j| ds[i][j][l]));
             let g = mul_tvec(&dsv, rest_normals[v]);
             let w = lambda * mass[v];
