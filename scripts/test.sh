@@ -2,10 +2,12 @@
 # Sets up and runs every check CI runs: format, lints, tests, gradient checks, dependency rules.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-bash scripts/setup.sh
+# Each step prints the seconds since the start, so a CI log shows where the time goes.
+started=$SECONDS
+step() { echo; echo "==> [$((SECONDS - started)) s] $*"; }
+step "setup (scripts/setup.sh)";   bash scripts/setup.sh
 export XDG_RUNTIME_DIR="${XDG_RUNTIME_DIR:-/tmp}"   # silences Mesa's warnings under lavapipe
 
-step() { echo; echo "==> $*"; }
 step "cargo fmt --check";          cargo fmt --all -- --check
 step "cargo fmt --check (xtask)";  cargo fmt --manifest-path xtask/Cargo.toml -- --check
 step "cargo clippy -D warnings";   cargo clippy --workspace --all-targets --locked -- -D warnings
@@ -20,4 +22,4 @@ step "darap-py: maturin develop";  VIRTUAL_ENV="$PWD/.venv" PATH="$PWD/.venv/bin
 step "pytest (darap-py, scripts)"; .venv/bin/python -m pytest crates/darap-py/tests scripts/tests
 # --- end Python bindings ---
 step "cargo xtask fuzz";           cargo xtask fuzz --seconds 60
-echo; echo "test.sh: all checks passed"
+echo; echo "test.sh: all checks passed in $((SECONDS - started)) s"

@@ -1,5 +1,6 @@
 //! The global step (spec §4.1–4.2): right-hand side from the rotations, pinned sparse solve.
 
+use crate::lanes::dispatch;
 use crate::local::PAR_MIN_LEN;
 use crate::mat3::{Mat3, ZERO};
 use cotan::CotWeights;
@@ -150,20 +151,47 @@ impl RhsPrecompute {
 pub(crate) fn rhs_add_into(pre: &RhsPrecompute, rotations: &[Mat3], out: &mut [[f64; 3]]) {
     assert_eq!(rotations.len(), pre.num_cols, "one rotation per vertex");
     assert_eq!(out.len(), pre.num_rows, "one row per entry of b");
-    out.par_iter_mut()
+    out.par_chunks_mut(PAR_MIN_LEN)
         .enumerate()
-        .with_min_len(PAR_MIN_LEN)
-        .for_each(|(a, acc)| {
+        .for_each(|(c, rows)| {
+            dispatch(RhsRows {
+                pre,
+                rotations,
+                first: c * PAR_MIN_LEN,
+                rows,
+            })
+        });
+}
+
+/// Rows `first..first + rows.len()` of [`rhs_add_into`] as a `pulp` kernel, so the gathers and
+/// 3×3 products are compiled for the CPU's instruction set (see [`crate::lanes::dispatch`]).
+/// Every operation is the scalar IEEE one in the same order (no fused multiply–add), so the
+/// result does not depend on the instruction set.
+struct RhsRows<'a> {
+    pre: &'a RhsPrecompute,
+    rotations: &'a [Mat3],
+    first: usize,
+    rows: &'a mut [[f64; 3]],
+}
+
+impl pulp::WithSimd for RhsRows<'_> {
+    type Output = ();
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _simd: S) {
+        let pre = self.pre;
+        for (k, acc) in self.rows.iter_mut().enumerate() {
+            let a = self.first + k;
             let range = pre.row_ptr[a]..pre.row_ptr[a + 1];
             let mut s = *acc;
             for (&v, h) in pre.row_col[range.clone()].iter().zip(&pre.row_h[range]) {
-                let r = &rotations[v as usize];
+                let r = &self.rotations[v as usize];
                 s[0] += r[0][0] * h[0] + r[0][1] * h[1] + r[0][2] * h[2];
                 s[1] += r[1][0] * h[0] + r[1][1] * h[1] + r[1][2] * h[2];
                 s[2] += r[2][0] * h[0] + r[2][1] * h[1] + r[2][2] * h[2];
             }
             *acc = s;
-        });
+        }
+    }
 }
 
 /// The right-hand side `b` of the global step (spec §4.1), one row per row of `pre`. With every
@@ -190,14 +218,37 @@ pub(crate) fn rhs_vjp_into(pre: &RhsPrecompute, grad_b: &[[f64; 3]], out: &mut [
         "one gradient row per entry of b"
     );
     assert_eq!(out.len(), pre.num_cols, "one rotation per vertex");
-    out.par_iter_mut()
+    out.par_chunks_mut(PAR_MIN_LEN)
         .enumerate()
-        .with_min_len(PAR_MIN_LEN)
-        .for_each(|(v, acc)| {
+        .for_each(|(c, cols)| {
+            dispatch(RhsVjpCols {
+                pre,
+                grad_b,
+                first: c * PAR_MIN_LEN,
+                cols,
+            })
+        });
+}
+
+/// Columns `first..first + cols.len()` of [`rhs_vjp_into`] as a `pulp` kernel (see [`RhsRows`]).
+struct RhsVjpCols<'a> {
+    pre: &'a RhsPrecompute,
+    grad_b: &'a [[f64; 3]],
+    first: usize,
+    cols: &'a mut [Mat3],
+}
+
+impl pulp::WithSimd for RhsVjpCols<'_> {
+    type Output = ();
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _simd: S) {
+        let pre = self.pre;
+        for (k, acc) in self.cols.iter_mut().enumerate() {
+            let v = self.first + k;
             let range = pre.col_ptr[v]..pre.col_ptr[v + 1];
             let mut m = ZERO;
             for (&a, h) in pre.col_row[range.clone()].iter().zip(&pre.col_h[range]) {
-                let gb = grad_b[a as usize];
+                let gb = self.grad_b[a as usize];
                 for i in 0..3 {
                     for j in 0..3 {
                         m[i][j] += gb[i] * h[j];
@@ -205,5 +256,6 @@ pub(crate) fn rhs_vjp_into(pre: &RhsPrecompute, grad_b: &[[f64; 3]], out: &mut [
                 }
             }
             *acc = m;
-        });
+        }
+    }
 }
