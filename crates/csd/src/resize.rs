@@ -436,6 +436,111 @@ impl Gather1d {
     }
 }
 
+/// Rows per block of the RGB width passes ([`Gather1d::rgb_rows_to_planes`],
+/// [`Gather1d::planes_to_rgb_rows`]): one `f32` lane per image row, 8 lanes = one 256-bit register.
+const ROW_BLOCK: usize = 8;
+
+/// One value per row of a block of [`ROW_BLOCK`] image rows.
+type RowLanes = [f32; ROW_BLOCK];
+
+/// `acc + w · x` for every lane (the scalar operations, lane by lane; no fused multiply–add).
+/// By value, so the compiler keeps the lanes in vector registers.
+#[inline(always)]
+fn add_scaled(acc: RowLanes, w: f32, x: RowLanes) -> RowLanes {
+    let mut r = acc;
+    for l in 0..ROW_BLOCK {
+        r[l] = acc[l] + w * x[l];
+    }
+    r
+}
+
+impl Gather1d {
+    /// The width pass of interleaved RGB rows (`src`: rows of `in_len` pixels × 3) into three
+    /// planes (`out[c]`: rows of `out_len` values): `out[c][i][j] = Σ_k w_jk · src[i][start_j + k][c]`,
+    /// summed from 0 in tap order.
+    ///
+    /// A width pass is a short dot product per output, which does not vectorize along a row; here
+    /// [`ROW_BLOCK`] rows are transposed into lanes (`block[pixel·3 + c][row]`), so every tap is one
+    /// vector multiply–add over 8 rows, and each lane performs exactly the scalar sum's operations in
+    /// the same order (bit-identical to the one-row-at-a-time loop; tested).
+    fn rgb_rows_to_planes(&self, src: &[f32], out: [&mut [f32]; 3]) {
+        let (iw, ow) = (self.in_len, self.out_len());
+        let row = 3 * iw;
+        let mut block = vec![[0.0f32; ROW_BLOCK]; row];
+        let mut acc = vec![[[0.0f32; ROW_BLOCK]; 3]; ow];
+        let [o0, o1, o2] = out;
+        for (b, rows) in src.chunks(ROW_BLOCK * row).enumerate() {
+            let n = rows.len() / row;
+            for (l, r) in rows.chunks_exact(row).enumerate() {
+                for (lanes, &x) in block.iter_mut().zip(r) {
+                    lanes[l] = x;
+                }
+            }
+            for (j, a) in acc.iter_mut().enumerate() {
+                let (start, weights) = self.row(j);
+                let (mut a0, mut a1, mut a2) =
+                    ([0.0; ROW_BLOCK], [0.0; ROW_BLOCK], [0.0; ROW_BLOCK]);
+                for (&w, px) in weights.iter().zip(block[3 * start..].chunks_exact(3)) {
+                    a0 = add_scaled(a0, w, px[0]);
+                    a1 = add_scaled(a1, w, px[1]);
+                    a2 = add_scaled(a2, w, px[2]);
+                }
+                *a = [a0, a1, a2];
+            }
+            for l in 0..n {
+                let i = b * ROW_BLOCK + l;
+                let (r0, r1, r2) = (
+                    &mut o0[i * ow..(i + 1) * ow],
+                    &mut o1[i * ow..(i + 1) * ow],
+                    &mut o2[i * ow..(i + 1) * ow],
+                );
+                for (j, a) in acc.iter().enumerate() {
+                    r0[j] = a[0][l];
+                    r1[j] = a[1][l];
+                    r2[j] = a[2][l];
+                }
+            }
+        }
+    }
+
+    /// The width pass of three planes (`planes[c]`: rows of `in_len` values) into interleaved RGB
+    /// rows (`dst`: rows of `out_len` pixels × 3): `dst[i][j][c] = Σ_k w_jk · planes[c][i][start_j + k]`,
+    /// summed from 0 in tap order; blocked over [`ROW_BLOCK`] rows like
+    /// [`Gather1d::rgb_rows_to_planes`] (bit-identical to the one-row-at-a-time loop; tested).
+    fn planes_to_rgb_rows(&self, planes: [&[f32]; 3], dst: &mut [f32]) {
+        let (iw, ow) = (self.in_len, self.out_len());
+        let row = 3 * ow;
+        let mut block = vec![[[0.0f32; ROW_BLOCK]; 3]; iw];
+        for (b, out_rows) in dst.chunks_mut(ROW_BLOCK * row).enumerate() {
+            let n = out_rows.len() / row;
+            for l in 0..n {
+                let i = b * ROW_BLOCK + l;
+                for (c, plane) in planes.iter().enumerate() {
+                    for (lanes, &x) in block.iter_mut().zip(&plane[i * iw..(i + 1) * iw]) {
+                        lanes[c][l] = x;
+                    }
+                }
+            }
+            for j in 0..ow {
+                let (start, weights) = self.row(j);
+                let (mut a0, mut a1, mut a2) =
+                    ([0.0f32; ROW_BLOCK], [0.0; ROW_BLOCK], [0.0; ROW_BLOCK]);
+                for (&w, x) in weights.iter().zip(&block[start..]) {
+                    a0 = add_scaled(a0, w, x[0]);
+                    a1 = add_scaled(a1, w, x[1]);
+                    a2 = add_scaled(a2, w, x[2]);
+                }
+                let a = [a0, a1, a2];
+                for (l, r) in out_rows.chunks_exact_mut(row).enumerate() {
+                    r[3 * j] = a[0][l];
+                    r[3 * j + 1] = a[1][l];
+                    r[3 * j + 2] = a[2][l];
+                }
+            }
+        }
+    }
+}
+
 /// A separable 2-D resize (or the adjoint of one) on single `f32` planes with `f32` weights and
 /// arithmetic: the guidance's product path (the reference computes in fp32 too). [`Resize2d`] keeps
 /// the `f64` arithmetic for checks. The pass order (height or width first) is the cheaper one for the
@@ -508,23 +613,9 @@ impl PlaneResize {
         self.rows
             .vertical(&src[..self.rows.in_len() * row], row, tmp);
         if channels == 3 {
-            // RGB: the three dot products share each weight and read contiguous pixels.
             let (o0, rest) = out.split_at_mut(oh * ow);
             let (o1, o2) = rest.split_at_mut(oh * ow);
-            for (i, t) in tmp.chunks_exact(row).enumerate() {
-                for j in 0..ow {
-                    let (start, weights) = self.cols.row(j);
-                    let (mut a, mut b, mut c) = (0.0f32, 0.0f32, 0.0f32);
-                    for (&w, px) in weights.iter().zip(t[start * 3..].chunks_exact(3)) {
-                        a += w * px[0];
-                        b += w * px[1];
-                        c += w * px[2];
-                    }
-                    o0[i * ow + j] = a;
-                    o1[i * ow + j] = b;
-                    o2[i * ow + j] = c;
-                }
-            }
+            self.cols.rgb_rows_to_planes(tmp, [o0, o1, o2]);
             return;
         }
         for (c, plane) in out.chunks_exact_mut(oh * ow).take(channels).enumerate() {
@@ -560,28 +651,9 @@ impl PlaneResize {
         let row = channels * ow;
         tmp.resize(ih * row, 0.0);
         if channels == 3 {
-            // RGB: the three dot products share each weight and write one contiguous pixel.
             let (p0, rest) = planes.split_at(ih * iw);
             let (p1, p2) = rest.split_at(ih * iw);
-            for (r, t) in tmp.chunks_exact_mut(row).enumerate() {
-                let (s0, s1, s2) = (
-                    &p0[r * iw..(r + 1) * iw],
-                    &p1[r * iw..(r + 1) * iw],
-                    &p2[r * iw..(r + 1) * iw],
-                );
-                for (j, px) in t.chunks_exact_mut(3).enumerate() {
-                    let (start, weights) = self.cols.row(j);
-                    let (mut a, mut b, mut c) = (0.0f32, 0.0f32, 0.0f32);
-                    for (k, &w) in weights.iter().enumerate() {
-                        a += w * s0[start + k];
-                        b += w * s1[start + k];
-                        c += w * s2[start + k];
-                    }
-                    px[0] = a;
-                    px[1] = b;
-                    px[2] = c;
-                }
-            }
+            self.cols.planes_to_rgb_rows([p0, p1, &p2[..ih * iw]], tmp);
         } else {
             self.width_to_interleaved(planes, channels, tmp);
         }
@@ -678,6 +750,61 @@ mod tests {
                     .zip(&want)
                     .fold(0.0f64, |m, (&g, &w)| m.max((g as f64 - w).abs()));
                 assert!(err < 2e-6 * scale.max(1.0), "{name}: max error {err}");
+            }
+        }
+    }
+
+    /// The blocked RGB width passes against the plain one-row-at-a-time loops they replaced, bit for
+    /// bit, on sizes whose row counts are not multiples of the block (remainder blocks).
+    #[test]
+    fn blocked_rgb_width_passes_are_the_row_loops_bit_for_bit() {
+        for (in_hw, out_hw) in [
+            ((37, 50), (21, 19)),
+            ((9, 7), (30, 41)),
+            ((5, 64), (3, 224)),
+        ] {
+            let op = Resize2d::cubic_antialias(in_hw, out_hw).expect("sizes");
+            for g in [Gather1d::of(&op.cols), Gather1d::transpose_of(&op.cols)] {
+                let (iw, ow) = (g.in_len(), g.out_len());
+                let h = 13;
+                let rgb: Vec<f32> = random(h * iw * 3, 21).iter().map(|&v| v as f32).collect();
+                let mut planes = vec![0.0f32; 3 * h * ow];
+                {
+                    let (o0, rest) = planes.split_at_mut(h * ow);
+                    let (o1, o2) = rest.split_at_mut(h * ow);
+                    g.rgb_rows_to_planes(&rgb, [o0, o1, o2]);
+                }
+                for i in 0..h {
+                    for j in 0..ow {
+                        let (start, weights) = g.row(j);
+                        let mut want = [0.0f32; 3];
+                        for (k, &w) in weights.iter().enumerate() {
+                            for (c, acc) in want.iter_mut().enumerate() {
+                                *acc += w * rgb[(i * iw + start + k) * 3 + c];
+                            }
+                        }
+                        for (c, &v) in want.iter().enumerate() {
+                            assert_eq!(planes[(c * h + i) * ow + j].to_bits(), v.to_bits());
+                        }
+                    }
+                }
+                let src: Vec<f32> = random(3 * h * iw, 22).iter().map(|&v| v as f32).collect();
+                let (p0, rest) = src.split_at(h * iw);
+                let (p1, p2) = rest.split_at(h * iw);
+                let mut rows = vec![0.0f32; h * ow * 3];
+                g.planes_to_rgb_rows([p0, p1, p2], &mut rows);
+                for i in 0..h {
+                    for j in 0..ow {
+                        let (start, weights) = g.row(j);
+                        for (c, p) in [p0, p1, p2].iter().enumerate() {
+                            let mut want = 0.0f32;
+                            for (k, &w) in weights.iter().enumerate() {
+                                want += w * p[i * iw + start + k];
+                            }
+                            assert_eq!(rows[(i * ow + j) * 3 + c].to_bits(), want.to_bits());
+                        }
+                    }
+                }
             }
         }
     }
