@@ -334,6 +334,8 @@ class ExportContext:
     big: bool
     save_reference: bool
     check: bool = True
+    # Per-phase peak RSS (run_pretrained turns it on; None: not sampled).
+    memory: common.MemoryPhases | None = None
     rng: np.random.Generator = field(init=False)
 
     def __post_init__(self):
@@ -341,6 +343,11 @@ class ExportContext:
         self.rng = np.random.default_rng(self.seed)
         if self.save_reference:
             (self.out / "reference").mkdir(exist_ok=True)
+
+    def phase(self, name: str):
+        """Marks the start of an export phase for the per-phase memory report."""
+        if self.memory is not None:
+            self.memory.phase(name)
 
     @property
     def np_dtype(self):
@@ -368,26 +375,27 @@ def check(path: Path, reference: np.ndarray, feeds: dict[str, np.ndarray], dtype
     common.check_close(common.onnx_run(path, feeds), reference, atol, rtol, label)
 
 
-def report_memory(label: str):
+def report_memory(label: str, ctx: ExportContext | None = None):
     """Peak RSS so far (includes file-backed pages: the checkpoint and the written external data, which
-    the kernel can drop under pressure) and the anonymous part now."""
-    now = ""
-    try:
-        status = dict(line.split(":", 1) for line in Path("/proc/self/status").read_text().splitlines() if ":" in line)
-        now = f"; now: anonymous {int(status['RssAnon'].split()[0]) / 2**20:.2f} GiB, " \
-              f"file-backed {int(status['RssFile'].split()[0]) / 2**20:.2f} GiB"
-    except (OSError, KeyError, ValueError):
-        pass
-    print(f"[memory] after {label}: peak RSS of the exporter so far {common.peak_rss_gib():.2f} GiB{now}", flush=True)
+    the kernel can drop under pressure), the anonymous part now, and (when ``ctx`` samples memory) the
+    peak of each phase so far: load, export (trace, translate, optimize, save), PyTorch reference, check."""
+    anon, file = common.rss_now_gib()
+    print(f"[memory] after {label}: peak RSS of the exporter so far {common.peak_rss_gib():.2f} GiB; "
+          f"now: anonymous {anon:.2f} GiB, file-backed {file:.2f} GiB", flush=True)
+    if ctx is not None and ctx.memory is not None:
+        print(f"[memory] peak RSS per phase (GiB): {ctx.memory.summary()}", flush=True)
 
 
 def export_text_encoder(load, ctx: ExportContext) -> tuple[dict, np.ndarray]:
     """Exports (and checks) the T5 encoder ``load()`` returns; returns the manifest entry and the
-    prompts' embeddings (conditioning for the UNet checks, computed in fp32). The model is released
-    before ONNX Runtime loads the export for the check (``load`` should hold no other reference to it)."""
+    prompts' embeddings (conditioning for the UNet checks, computed in fp32). The model's weights are
+    freed (:func:`onnx_export_common.release_weights`: the module is unusable afterwards) before ONNX
+    Runtime loads the export for the check."""
     torch = _torch()
     _, _, TextEncoder = make_wrappers()
+    ctx.phase("text_encoder load")
     enc = TextEncoder(load()).eval()
+    ctx.phase("text_encoder export")
     text_dim = enc.t5.config.d_model
     ids, mask = tokenize(PROMPTS)
     path = ctx.out / "text_encoder.onnx"
@@ -405,25 +413,30 @@ def export_text_encoder(load, ctx: ExportContext) -> tuple[dict, np.ndarray]:
         text["uncond"] = "uncond_embedding.npy"
     feeds = {"input_ids": ids, "attention_mask": mask}
     # The reference (fp32) also gives the UNet checks their conditioning, so it runs even without the check.
+    ctx.phase("text_encoder reference")
     emb = common.torch_reference(enc, feeds)
+    common.release_weights(enc)
     del enc
     free_memory()
     if ctx.check:
+        ctx.phase("text_encoder check")
         check(path, emb, feeds, ctx.dtype, "text_encoder")
     ctx.save("t5_input_ids", ids)
     ctx.save("t5_attention_mask", mask)
     ctx.save("t5_last_hidden_state", emb.astype(np.float32))
-    report_memory("text_encoder")
+    report_memory("text_encoder", ctx)
     return text, emb
 
 
 def export_unet(key: str, load, cond: np.ndarray, ctx: ExportContext) -> StageSpec:
     """Exports (and checks) the UNet ``load()`` returns (``key`` "stage1" or "stage2") with ``cond``
     (2, 77, D) as the check's text conditioning. The check's PyTorch reference runs first (computed in
-    fp32, small size); the model is then released before ONNX Runtime loads the export."""
+    fp32, small size); the model's weights are then freed (:func:`onnx_export_common.release_weights`:
+    the module is unusable afterwards) before ONNX Runtime loads the export."""
     torch = _torch()
     Stage1, Stage2, _ = make_wrappers()
     has_class = key == "stage2"
+    ctx.phase(f"{key} load")
     mod = (Stage2 if has_class else Stage1)(load()).eval()
     config = mod.unet.config
     in_ch, out_ch, sample_size = int(config.in_channels), int(config.out_channels), int(config.sample_size)
@@ -439,23 +452,27 @@ def export_unet(key: str, load, cond: np.ndarray, ctx: ExportContext) -> StageSp
         names.append("class_labels")
         dyn["class_labels"] = [0]
     path = ctx.out / f"unet_{key}.onnx"
+    ctx.phase(f"{key} export")
     export_module(mod, tuple(torch.from_numpy(v) for v in feeds.values()), names, "noise_pred", path, dyn, ctx.big)
     free_memory()  # what the export traced and wrote
+    ctx.phase(f"{key} reference")
     ref = common.torch_reference(mod, feeds) if ctx.check else None
+    common.release_weights(mod)  # before ONNX Runtime maps the exported weights (see release_weights)
     del mod
     free_memory()
     if ref is not None:
+        ctx.phase(f"{key} check")
         check(path, ref, feeds, ctx.dtype, f"unet_{key}")
         for n, v in feeds.items():
             ctx.save(f"{key}_{n}", v)
         ctx.save(f"{key}_noise_pred", ref.astype(np.float32))
-    report_memory(f"unet_{key}")
+    report_memory(f"unet_{key}", ctx)
     return StageSpec(key, path.name, in_ch, out_ch, sample_size, has_class, external_files(path))
 
 
 def export_all(t5, stage1, stage2, out: Path, dtype: str, seed: int, big: bool, save_reference: bool):
-    """All three models already in memory (the tiny fixtures); the real models go one at a time
-    through :func:`run_pretrained`."""
+    """All three models already in memory (the tiny fixtures; each has its weights freed once
+    exported); the real models go one at a time through :func:`run_pretrained`."""
     ctx = ExportContext(out, dtype, seed, big, save_reference)
     text, emb = export_text_encoder(lambda: t5, ctx)
     stages = [export_unet("stage1", lambda: stage1, emb, ctx), export_unet("stage2", lambda: stage2, emb, ctx)]
@@ -572,7 +589,8 @@ def run_pretrained(stage1_src: str, out: Path, dtype: str, stage2_src: str, text
             return m
         return load
 
-    ctx = ExportContext(out, dtype, seed, big=external == "always", save_reference=False, check=check)
+    ctx = ExportContext(out, dtype, seed, big=external == "always", save_reference=False, check=check,
+                        memory=common.MemoryPhases())
     text = None
     if not skip_text:
         if text_src is None:
