@@ -17,7 +17,7 @@ Steps (each its own process, so each peak RSS is that step's alone):
    export and runtime would not fit beside everything else.
 2. ``export-fp16``: ``export_if_onnx.py --from-pretrained ... --dtype fp16`` (with the check).
 3. ``export-fp32`` (``--cpu-profile``): the same weights exported in fp32, the CPU profile.
-4. ``embed``: ``stylize embed`` of the prompt (T5 alone), so that the guidance steps read the cache.
+4. ``embed``: ``stylize embed --force`` of the prompt (T5 alone), so that the guidance steps read the cache.
 5. ``guidance ...``: ``stylize debug-guidance --stage2-weight 0.3`` on one random 512 px render (one
    view: stage I on 2 samples at 64 px, stage II on 2 samples -- cond and uncond -- at 256 px), with
    ONNX Runtime's default settings and with the low-memory ones (``SessionOptions::low_memory``: arena,
@@ -343,7 +343,7 @@ def main(argv=None):
         models = a.work / f"onnx-{dtype}"
         # Encode the prompt once, so that every guidance step reads the cache and measures the UNets alone.
         record(timed(f"embed {dtype}", [str(a.stylize), "embed", "--model", str(models), "--prompt", "a wooden chair",
-                                        "--cache", str(a.work / "cache")], logs / f"embed-{dtype}.log",
+                                        "--cache", str(a.work / "cache"), "--force"], logs / f"embed-{dtype}.log",
                      weight_bytes(models, ("text_encoder",))))
         unets = weight_bytes(models, ("unet_stage1", "unet_stage2"))
         for name, flags in configs:
