@@ -142,3 +142,32 @@ def test_export_frees_the_weights_before_the_check(tmp_path):
     ctx.memory.stop()
     for phase in ("stage1 load", "stage1 export", "stage1 reference", "stage1 check"):
         assert phase in summary
+
+
+def test_in_child_runs_in_another_process_and_carries_state_back(tmp_path):
+    """With ``isolate`` the model side runs in a forked child: its result, its RNG draws and its
+    external-data decision come back; a failure there is an error here, not a silent empty result."""
+    import os
+
+    ctx = exp.ExportContext(tmp_path, "fp16", seed=3, big=False, save_reference=False, isolate=True,
+                            memory=common.MemoryPhases())
+
+    def side(c):
+        c.phase("child work")
+        c.big = True
+        return os.getpid(), c.rng.standard_normal(3)
+
+    pid, drawn = exp.in_child(ctx, side, ctx)
+    assert pid != os.getpid()
+    assert ctx.big, "the child's external-data decision is carried back"
+    expected = np.random.default_rng(3)
+    np.testing.assert_array_equal(drawn, expected.standard_normal(3))
+    np.testing.assert_array_equal(ctx.rng.standard_normal(2), expected.standard_normal(2))
+    assert "child work [child]" in ctx.memory.summary()
+    ctx.memory.stop()
+
+    def boom(_c):
+        raise ValueError("broken model")
+
+    with pytest.raises(SystemExit, match="broken model"):
+        exp.in_child(ctx, boom, ctx)
