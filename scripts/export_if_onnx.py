@@ -393,7 +393,8 @@ def export_text_encoder(load, ctx: ExportContext) -> tuple[dict, np.ndarray]:
     """Exports (and checks) the T5 encoder ``load()`` returns; returns the manifest entry and the
     prompts' embeddings (conditioning for the UNet checks, computed in fp32). The model's weights are
     freed (:func:`onnx_export_common.release_weights`: the module is unusable afterwards) before ONNX
-    Runtime loads the export for the check."""
+    Runtime loads the export for the check; with ``ctx.isolate`` the model side runs in a child process
+    (:func:`in_child`)."""
     text, emb, feeds = in_child(ctx, _text_encoder_torch_side, load, ctx)
     path = ctx.out / text["file"]
     if ctx.check:
@@ -442,7 +443,8 @@ def export_unet(key: str, load, cond: np.ndarray, ctx: ExportContext) -> StageSp
     """Exports (and checks) the UNet ``load()`` returns (``key`` "stage1" or "stage2") with ``cond``
     (2, 77, D) as the check's text conditioning. The check's PyTorch reference runs first (computed in
     fp32, small size); the model's weights are then freed (:func:`onnx_export_common.release_weights`:
-    the module is unusable afterwards) before ONNX Runtime loads the export."""
+    the module is unusable afterwards) before ONNX Runtime loads the export; with ``ctx.isolate`` the
+    model side runs in a child process (:func:`in_child`)."""
     spec, feeds, ref = in_child(ctx, _unet_torch_side, key, load, cond, ctx)
     if ref is not None:
         ctx.phase(f"{key} check")

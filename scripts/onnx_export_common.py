@@ -239,9 +239,10 @@ def release_weights(module):
 
     ``del module`` is not enough after ``torch.onnx.export``: onnxscript's module-level rewrite rules keep
     their last pattern match, whose values reference the exported graph, whose initializers wrap the
-    module's parameters -- the whole model stayed resident until the next export, and ONNX Runtime's
-    check then mapped the exported weights on top of it (an IF-II-L-size fp16 UNet: 6.8 GiB peak, 2.9x
-    the model; docs/models.md). The module is unusable afterwards."""
+    module's parameters, so the weights stayed resident while ONNX Runtime's check mapped the exported
+    ones beside them. Not enough on its own when the weights are views of a memory-mapped checkpoint
+    (``low_cpu_mem_usage``): torch itself keeps a few of those tensors, and with them the whole mapping
+    (export_if_onnx.in_child handles that). The module is unusable afterwards."""
     import torch
 
     with torch.no_grad():
