@@ -334,6 +334,11 @@ class ExportContext:
     big: bool
     save_reference: bool
     check: bool = True
+    # Per-phase peak RSS (run_pretrained turns it on; None: not sampled).
+    memory: common.MemoryPhases | None = None
+    # Load, export and compute the PyTorch reference of each model in a forked child process, which exits
+    # before this process runs ONNX Runtime's check (run_pretrained turns it on; see in_child).
+    isolate: bool = False
     rng: np.random.Generator = field(init=False)
 
     def __post_init__(self):
@@ -341,6 +346,11 @@ class ExportContext:
         self.rng = np.random.default_rng(self.seed)
         if self.save_reference:
             (self.out / "reference").mkdir(exist_ok=True)
+
+    def phase(self, name: str):
+        """Marks the start of an export phase for the per-phase memory report."""
+        if self.memory is not None:
+            self.memory.phase(name)
 
     @property
     def np_dtype(self):
@@ -368,26 +378,42 @@ def check(path: Path, reference: np.ndarray, feeds: dict[str, np.ndarray], dtype
     common.check_close(common.onnx_run(path, feeds), reference, atol, rtol, label)
 
 
-def report_memory(label: str):
+def report_memory(label: str, ctx: ExportContext | None = None):
     """Peak RSS so far (includes file-backed pages: the checkpoint and the written external data, which
-    the kernel can drop under pressure) and the anonymous part now."""
-    now = ""
-    try:
-        status = dict(line.split(":", 1) for line in Path("/proc/self/status").read_text().splitlines() if ":" in line)
-        now = f"; now: anonymous {int(status['RssAnon'].split()[0]) / 2**20:.2f} GiB, " \
-              f"file-backed {int(status['RssFile'].split()[0]) / 2**20:.2f} GiB"
-    except (OSError, KeyError, ValueError):
-        pass
-    print(f"[memory] after {label}: peak RSS of the exporter so far {common.peak_rss_gib():.2f} GiB{now}", flush=True)
+    the kernel can drop under pressure), the anonymous part now, and (when ``ctx`` samples memory) the
+    peak of each phase so far: load, export (trace, translate, optimize, save), PyTorch reference, check."""
+    anon, file = common.rss_now_gib()
+    print(f"[memory] after {label}: peak RSS of this process so far {common.peak_rss_gib():.2f} GiB; "
+          f"now: anonymous {anon:.2f} GiB, file-backed {file:.2f} GiB", flush=True)
+    if ctx is not None and ctx.memory is not None:
+        print(f"[memory] peak RSS per phase (GiB): {ctx.memory.summary()}", flush=True)
 
 
 def export_text_encoder(load, ctx: ExportContext) -> tuple[dict, np.ndarray]:
     """Exports (and checks) the T5 encoder ``load()`` returns; returns the manifest entry and the
-    prompts' embeddings (conditioning for the UNet checks, computed in fp32). The model is released
-    before ONNX Runtime loads the export for the check (``load`` should hold no other reference to it)."""
+    prompts' embeddings (conditioning for the UNet checks, computed in fp32). The model's weights are
+    freed (:func:`onnx_export_common.release_weights`: the module is unusable afterwards) before ONNX
+    Runtime loads the export for the check; with ``ctx.isolate`` the model side runs in a child process
+    (:func:`in_child`)."""
+    text, emb, feeds = in_child(ctx, _text_encoder_torch_side, load, ctx)
+    path = ctx.out / text["file"]
+    if ctx.check:
+        ctx.phase("text_encoder check")
+        check(path, emb, feeds, ctx.dtype, "text_encoder")
+    ctx.save("t5_input_ids", feeds["input_ids"])
+    ctx.save("t5_attention_mask", feeds["attention_mask"])
+    ctx.save("t5_last_hidden_state", emb.astype(np.float32))
+    report_memory("text_encoder", ctx)
+    return text, emb
+
+
+def _text_encoder_torch_side(load, ctx: ExportContext) -> tuple[dict, np.ndarray, dict]:
+    """:func:`export_text_encoder` up to the check: load, export, fp32 reference, free the weights."""
     torch = _torch()
     _, _, TextEncoder = make_wrappers()
+    ctx.phase("text_encoder load")
     enc = TextEncoder(load()).eval()
+    ctx.phase("text_encoder export")
     text_dim = enc.t5.config.d_model
     ids, mask = tokenize(PROMPTS)
     path = ctx.out / "text_encoder.onnx"
@@ -405,25 +431,38 @@ def export_text_encoder(load, ctx: ExportContext) -> tuple[dict, np.ndarray]:
         text["uncond"] = "uncond_embedding.npy"
     feeds = {"input_ids": ids, "attention_mask": mask}
     # The reference (fp32) also gives the UNet checks their conditioning, so it runs even without the check.
+    ctx.phase("text_encoder reference")
     emb = common.torch_reference(enc, feeds)
+    common.release_weights(enc)
     del enc
     free_memory()
-    if ctx.check:
-        check(path, emb, feeds, ctx.dtype, "text_encoder")
-    ctx.save("t5_input_ids", ids)
-    ctx.save("t5_attention_mask", mask)
-    ctx.save("t5_last_hidden_state", emb.astype(np.float32))
-    report_memory("text_encoder")
-    return text, emb
+    return text, emb, feeds
 
 
 def export_unet(key: str, load, cond: np.ndarray, ctx: ExportContext) -> StageSpec:
     """Exports (and checks) the UNet ``load()`` returns (``key`` "stage1" or "stage2") with ``cond``
     (2, 77, D) as the check's text conditioning. The check's PyTorch reference runs first (computed in
-    fp32, small size); the model is then released before ONNX Runtime loads the export."""
+    fp32, small size); the model's weights are then freed (:func:`onnx_export_common.release_weights`:
+    the module is unusable afterwards) before ONNX Runtime loads the export; with ``ctx.isolate`` the
+    model side runs in a child process (:func:`in_child`)."""
+    spec, feeds, ref = in_child(ctx, _unet_torch_side, key, load, cond, ctx)
+    if ref is not None:
+        ctx.phase(f"{key} check")
+        check(ctx.out / spec.file, ref, feeds, ctx.dtype, f"unet_{key}")
+        for n, v in feeds.items():
+            ctx.save(f"{key}_{n}", v)
+        ctx.save(f"{key}_noise_pred", ref.astype(np.float32))
+    report_memory(f"unet_{key}", ctx)
+    return spec
+
+
+def _unet_torch_side(key: str, load, cond: np.ndarray, ctx: ExportContext):
+    """:func:`export_unet` up to the check: load, export, fp32 reference (None without the check), free
+    the weights; returns the manifest entry, the check's feeds and the reference."""
     torch = _torch()
     Stage1, Stage2, _ = make_wrappers()
     has_class = key == "stage2"
+    ctx.phase(f"{key} load")
     mod = (Stage2 if has_class else Stage1)(load()).eval()
     config = mod.unet.config
     in_ch, out_ch, sample_size = int(config.in_channels), int(config.out_channels), int(config.sample_size)
@@ -439,23 +478,73 @@ def export_unet(key: str, load, cond: np.ndarray, ctx: ExportContext) -> StageSp
         names.append("class_labels")
         dyn["class_labels"] = [0]
     path = ctx.out / f"unet_{key}.onnx"
+    ctx.phase(f"{key} export")
     export_module(mod, tuple(torch.from_numpy(v) for v in feeds.values()), names, "noise_pred", path, dyn, ctx.big)
     free_memory()  # what the export traced and wrote
+    ctx.phase(f"{key} reference")
     ref = common.torch_reference(mod, feeds) if ctx.check else None
+    common.release_weights(mod)  # before ONNX Runtime maps the exported weights (see release_weights)
     del mod
     free_memory()
-    if ref is not None:
-        check(path, ref, feeds, ctx.dtype, f"unet_{key}")
-        for n, v in feeds.items():
-            ctx.save(f"{key}_{n}", v)
-        ctx.save(f"{key}_noise_pred", ref.astype(np.float32))
-    report_memory(f"unet_{key}")
-    return StageSpec(key, path.name, in_ch, out_ch, sample_size, has_class, external_files(path))
+    return StageSpec(key, path.name, in_ch, out_ch, sample_size, has_class, external_files(path)), feeds, ref
+
+
+def in_child(ctx: ExportContext, fn, *args):
+    """``fn(*args)``, in a forked child process when ``ctx.isolate`` (else here), returning its result.
+
+    Why a child: after ``torch.onnx.export`` some of the module's tensors stay referenced from inside
+    torch (not reachable from Python's garbage collector), and since the weights of a checkpoint loaded
+    with ``low_cpu_mem_usage`` are views of one memory-mapped file, a few of them keep the whole mapping
+    -- the model's size in resident, file-backed pages -- alive; ONNX Runtime's check then mapped the
+    exported weights on top (an IF-II-L-size fp16 UNet: 6.6 GiB peak, 2.9x the model, with
+    :func:`onnx_export_common.release_weights` alone; docs/models.md). A child that exits returns all of
+    it. The child's RNG draws, external-data decision and per-phase memory peaks are carried back."""
+    if not ctx.isolate:
+        return fn(*args)
+    import multiprocessing
+    import pickle
+    import traceback
+
+    recv, send = multiprocessing.get_context("fork").Pipe(duplex=False)
+    pid = os.fork()
+    if pid == 0:  # child: run, send the result, exit without running the parent's cleanup
+        code = 0
+        try:
+            recv.close()
+            if ctx.memory is not None:  # the sampling thread does not survive fork
+                ctx.memory = common.MemoryPhases()
+            result = fn(*args)
+            peaks = dict(ctx.memory.peaks) if ctx.memory is not None else {}
+            send.send_bytes(pickle.dumps(("ok", result, ctx.rng.bit_generator.state, ctx.big, peaks)))
+        except BaseException as e:  # noqa: BLE001 - reported by the parent
+            code = 1
+            try:
+                send.send_bytes(pickle.dumps(("error", f"{e!r}\n{traceback.format_exc()}", None, None, None)))
+            except Exception:  # noqa: BLE001
+                pass
+        finally:
+            send.close()
+            os._exit(code)
+    send.close()
+    try:
+        status, result, rng_state, big, peaks = pickle.loads(recv.recv_bytes())
+    except EOFError:
+        status, result = "error", "the child process died without a result (killed for memory?)"
+    finally:
+        recv.close()
+        _, wait_status = os.waitpid(pid, 0)
+    if status != "ok":
+        raise SystemExit(f"error: exporting in the child process failed (exit status {wait_status}): {result}")
+    ctx.rng.bit_generator.state = rng_state
+    ctx.big = big
+    if ctx.memory is not None:
+        ctx.memory.peaks.update({f"{name} [child]": v for name, v in peaks.items()})
+    return result
 
 
 def export_all(t5, stage1, stage2, out: Path, dtype: str, seed: int, big: bool, save_reference: bool):
-    """All three models already in memory (the tiny fixtures); the real models go one at a time
-    through :func:`run_pretrained`."""
+    """All three models already in memory (the tiny fixtures; each has its weights freed once
+    exported); the real models go one at a time through :func:`run_pretrained`."""
     ctx = ExportContext(out, dtype, seed, big, save_reference)
     text, emb = export_text_encoder(lambda: t5, ctx)
     stages = [export_unet("stage1", lambda: stage1, emb, ctx), export_unet("stage2", lambda: stage2, emb, ctx)]
@@ -572,7 +661,8 @@ def run_pretrained(stage1_src: str, out: Path, dtype: str, stage2_src: str, text
             return m
         return load
 
-    ctx = ExportContext(out, dtype, seed, big=external == "always", save_reference=False, check=check)
+    ctx = ExportContext(out, dtype, seed, big=external == "always", save_reference=False, check=check,
+                        memory=common.MemoryPhases(), isolate=True)
     text = None
     if not skip_text:
         if text_src is None:

@@ -233,6 +233,78 @@ def warn_skip_check():
     print(SKIP_CHECK_WARNING, file=sys.stderr, flush=True)
 
 
+def release_weights(module):
+    """Frees the storage of every parameter and buffer of ``module`` (each becomes an empty tensor of its
+    dtype), so the weights are gone even while something still references the module's tensors.
+
+    ``del module`` is not enough after ``torch.onnx.export``: onnxscript's module-level rewrite rules keep
+    their last pattern match, whose values reference the exported graph, whose initializers wrap the
+    module's parameters, so the weights stayed resident while ONNX Runtime's check mapped the exported
+    ones beside them. Not enough on its own when the weights are views of a memory-mapped checkpoint
+    (``low_cpu_mem_usage``): torch itself keeps a few of those tensors, and with them the whole mapping
+    (export_if_onnx.in_child handles that). The module is unusable afterwards."""
+    import torch
+
+    with torch.no_grad():
+        for t in list(module.parameters()) + list(module.buffers()):
+            t.data = torch.empty(0, dtype=t.dtype, device=t.device)
+
+
+def rss_now_gib() -> tuple[float, float]:
+    """(anonymous, file-backed) resident memory of this process now, GiB (Linux; (0, 0) elsewhere)."""
+    try:
+        fields = dict(line.split(":", 1) for line in Path("/proc/self/status").read_text().splitlines() if ":" in line)
+        return int(fields["RssAnon"].split()[0]) / 2**20, int(fields["RssFile"].split()[0]) / 2**20
+    except (OSError, KeyError, ValueError):
+        return 0.0, 0.0
+
+
+class MemoryPhases:
+    """Peak resident memory per phase of an export, sampled by a background thread every ``interval``
+    seconds (``ru_maxrss`` only gives the peak of the whole process). ``phase(name)`` starts a phase;
+    ``summary()`` lists each phase's peak with its anonymous / file-backed split at that moment.
+
+    File-backed pages (the checkpoint, the written or mapped ONNX weights) count in RSS as the kernel
+    reports it, although it can drop them under pressure; the split says how much of a peak they are."""
+
+    def __init__(self, interval: float = 0.05):
+        import threading
+
+        self.interval = interval
+        self.current = "start"
+        self.peaks: dict[str, tuple[float, float, float]] = {}
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _sample(self):
+        anon, file = rss_now_gib()
+        with self._lock:
+            best = self.peaks.get(self.current)
+            if best is None or anon + file > best[0]:
+                self.peaks[self.current] = (anon + file, anon, file)
+
+    def _run(self):
+        while not self._stop.wait(self.interval):
+            self._sample()
+
+    def phase(self, name: str):
+        self._sample()
+        with self._lock:
+            self.current = name
+        self._sample()
+
+    def summary(self) -> str:
+        self._sample()
+        with self._lock:
+            return "; ".join(f"{n} {t:.2f} (anon {a:.2f}, file {f:.2f})" for n, (t, a, f) in self.peaks.items())
+
+    def stop(self):
+        self._stop.set()
+        self._thread.join()
+
+
 def peak_rss_gib() -> float:
     """This process's peak resident set size so far (GiB; Linux ``ru_maxrss`` is in KiB)."""
     import resource

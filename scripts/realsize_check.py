@@ -17,10 +17,16 @@ Steps (each its own process, so each peak RSS is that step's alone):
    export and runtime would not fit beside everything else.
 2. ``export-fp16``: ``export_if_onnx.py --from-pretrained ... --dtype fp16`` (with the check).
 3. ``export-fp32`` (``--cpu-profile``): the same weights exported in fp32, the CPU profile.
-4. ``guidance ...``: ``stylize debug-guidance --stage2-weight 0.3`` on one random 512 px render (one
+4. ``embed``: ``stylize embed --force`` of the prompt (T5 alone), so that the guidance steps read the cache.
+5. ``guidance ...``: ``stylize debug-guidance --stage2-weight 0.3`` on one random 512 px render (one
    view: stage I on 2 samples at 64 px, stage II on 2 samples -- cond and uncond -- at 256 px), with
-   ONNX Runtime's default settings and with the low-memory ones (arena, memory pattern and pre-packing
-   off, one sample per call); ``--ablation`` also runs each setting alone.
+   ONNX Runtime's default settings and with the low-memory ones (``SessionOptions::low_memory``: arena,
+   memory pattern, pre-packing and graph optimizations off, one sample per call);
+   ``--guidance-configs`` picks settings by name, ``--ablation`` also runs each setting alone.
+
+Each step reports wall time, peak RSS, the 1-minute load average when it ended, and the ratio of its
+peak RSS to the models it holds on disk (export: the stage-II model, the largest; guidance: the stage-I
+and stage-II UNets; embed: the T5 encoder).
 
 Refuses to start when MemAvailable is under ``--min-available-gb`` (default 16): other people's work
 shares the machine.
@@ -153,8 +159,16 @@ def build(work: Path, seed: int):
     print(json.dumps(info))
 
 
-def timed(label: str, cmd: list[str], log: Path) -> dict:
-    """Runs ``cmd`` under ``/usr/bin/time -v``; returns wall seconds and peak RSS (GiB)."""
+def weight_bytes(model_dir: Path, prefixes: tuple[str, ...]) -> int:
+    """Bytes on disk of the exported models whose file names start with one of ``prefixes`` (the
+    ``.onnx`` graphs and their ``.onnx.data`` external weights)."""
+    return sum(f.stat().st_size for f in model_dir.iterdir() if f.name.startswith(prefixes))
+
+
+def timed(label: str, cmd: list[str], log: Path, model_bytes: int | None = None) -> dict:
+    """Runs ``cmd`` under ``/usr/bin/time -v``; returns wall seconds, peak RSS (GiB), the 1-minute load
+    average at the end (other work on the machine), and with ``model_bytes`` the ratio peak RSS / those
+    bytes on disk."""
     print(f"\n=== {label}: {' '.join(cmd)}", flush=True)
     t0 = time.monotonic()
     with open(log, "w") as f:
@@ -166,8 +180,15 @@ def timed(label: str, cmd: list[str], log: Path) -> dict:
     keep = [line for line in text.splitlines() if line.startswith(("[verify]", "[memory]", "[load]", "[ort]"))]
     tail = "\n".join(keep) if proc.returncode == 0 else text[-4000:]
     print(tail, flush=True)
-    res = {"step": label, "wall_s": round(wall, 1), "peak_rss_gib": round(rss, 2), "rc": proc.returncode}
-    print(f"=== {label}: rc {proc.returncode}, wall {wall:.1f} s, peak RSS {rss:.2f} GiB (log {log})", flush=True)
+    res = {"step": label, "wall_s": round(wall, 1), "peak_rss_gib": round(rss, 2), "rc": proc.returncode,
+           "load_1min": round(os.getloadavg()[0], 1)}
+    ratio = ""
+    if model_bytes:
+        res["model_gb"] = round(model_bytes / 1e9, 3)
+        res["ratio"] = round(rss * (1 << 30) / model_bytes, 2)
+        ratio = f" = {res['ratio']}x the {res['model_gb']} GB of models"
+    print(f"=== {label}: rc {proc.returncode}, wall {wall:.1f} s, peak RSS {rss:.2f} GiB{ratio}, "
+          f"load {res['load_1min']} (log {log})", flush=True)
     return res
 
 
@@ -224,6 +245,9 @@ def main(argv=None):
     p.add_argument("--cpu-profile", action="store_true", help="also export and run the fp32 CPU profile")
     p.add_argument("--profiles", default=None, help="comma-separated export dtypes to use (overrides --cpu-profile)")
     p.add_argument("--ablation", action="store_true", help="also run each low-memory setting alone")
+    p.add_argument("--guidance-configs", default=None,
+                   help="';'-separated guidance settings by name (default: 'ORT defaults;low memory'; also "
+                        "'low memory, graph optimizations on')")
     p.add_argument("--min-available-gb", type=float, default=16.0)
     p.add_argument("--threads", type=int, default=None, help="ONNX Runtime intra-op threads")
     p.add_argument("--skip-build", action="store_true", help="reuse WORK/diffusers")
@@ -274,10 +298,15 @@ def main(argv=None):
     for dtype in profiles:
         out = a.work / f"onnx-{dtype}"
         if not a.skip_export:
-            record(timed(f"export {dtype}", [py, str(SCRIPT_DIR / "export_if_onnx.py"), "--from-pretrained",
-                                             str(d / "stage1"), str(out), "--stage2", str(d / "stage2"),
-                                             "--dtype", dtype, "--name", f"realsize-{dtype}"],
-                         logs / f"export-{dtype}.log"))
+            r = timed(f"export {dtype}", [py, str(SCRIPT_DIR / "export_if_onnx.py"), "--from-pretrained",
+                                          str(d / "stage1"), str(out), "--stage2", str(d / "stage2"),
+                                          "--dtype", dtype, "--name", f"realsize-{dtype}"],
+                      logs / f"export-{dtype}.log")
+            if r["rc"] == 0:  # the ratio to the largest model (stage II), the one that sets the peak
+                stage2 = weight_bytes(out, ("unet_stage2",))
+                r.update(model_gb=round(stage2 / 1e9, 3), ratio=round(r["peak_rss_gib"] * (1 << 30) / stage2, 2))
+                print(f"=== export {dtype}: peak RSS = {r['ratio']}x the stage-II model ({r['model_gb']} GB)")
+            record(r)
         sizes = {f.name: f.stat().st_size for f in out.iterdir() if f.name.startswith("unet_stage2")}
         print(f"stage II files ({dtype}): {sizes}", flush=True)
     ort_settings = [("ORT defaults", []), ("arena off", ["no-arena"]), ("memory pattern off", ["no-memory-pattern"]),
@@ -298,11 +327,25 @@ def main(argv=None):
     write_render(render, a.seed)
     low = ["--no-arena", "--no-memory-pattern", "--no-prepacking", "--no-graph-optimizations", "--max-batch", "1"]
     configs = [("ORT defaults", []), ("low memory", low)]
+    # The low-memory settings but with graph optimizations (fusions: fewer intermediates; an fp32 model has
+    # no fp16->fp32 weight casts to fold, so the weights stay as stored).
+    extra = [("low memory, graph optimizations on", low[:3] + ["--max-batch", "1"])]
+    if a.guidance_configs:
+        wanted = [w.strip() for w in a.guidance_configs.split(";")]
+        configs = [c for c in configs + extra if c[0] in wanted]
+        if len(configs) != len(wanted):
+            raise SystemExit(f"error: --guidance-configs: unknown name in {wanted}")
     if a.ablation:
         configs += [("arena off", ["--no-arena"]), ("memory pattern off", ["--no-memory-pattern"]),
                     ("pre-packing off", ["--no-prepacking"]), ("graph optimizations off", ["--no-graph-optimizations"]),
                     ("max batch 1", ["--max-batch", "1"])]
     for dtype in profiles if not a.export_only else []:
+        models = a.work / f"onnx-{dtype}"
+        # Encode the prompt once, so that every guidance step reads the cache and measures the UNets alone.
+        record(timed(f"embed {dtype}", [str(a.stylize), "embed", "--model", str(models), "--prompt", "a wooden chair",
+                                        "--cache", str(a.work / "cache"), "--force"], logs / f"embed-{dtype}.log",
+                     weight_bytes(models, ("text_encoder",))))
+        unets = weight_bytes(models, ("unet_stage1", "unet_stage2"))
         for name, flags in configs:
             cmd = [str(a.stylize), "debug-guidance", "--model", str(a.work / f"onnx-{dtype}"), "--images",
                    str(render), "--prompt", "a wooden chair", "--seed", "0", "--stage2-weight", "0.3",
@@ -310,10 +353,11 @@ def main(argv=None):
             if a.threads:
                 cmd += ["--threads", str(a.threads)]
             slug = re.sub(r"[^a-z0-9]+", "-", name.lower())
-            record(timed(f"guidance {dtype}, {name}", cmd, logs / f"guidance-{dtype}-{slug}.log"))
-    print("\n| step | wall (s) | peak RSS (GiB) | rc |\n|---|---|---|---|")
+            record(timed(f"guidance {dtype}, {name}", cmd, logs / f"guidance-{dtype}-{slug}.log", unets))
+    print("\n| step | wall (s) | peak RSS (GiB) | models (GB) | peak / models | load | rc |\n|---|---|---|---|---|---|---|")
     for r in results:
-        print(f"| {r['step']} | {r['wall_s']} | {r['peak_rss_gib']} | {r['rc']} |")
+        print(f"| {r['step']} | {r['wall_s']} | {r['peak_rss_gib']} | {r.get('model_gb', '')} | {r.get('ratio', '')} | "
+              f"{r.get('load_1min', '')} | {r['rc']} |")
     if any(r["rc"] != 0 for r in results):
         raise SystemExit("error: a step failed (see its log)")
 

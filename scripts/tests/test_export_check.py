@@ -5,6 +5,7 @@ environment, scripts/requirements-export.txt); skipped cleanly where they are mi
 Run: `python -m pytest scripts/tests/test_export_check.py` with the export environment's Python.
 """
 
+import copy
 import sys
 from pathlib import Path
 
@@ -29,7 +30,9 @@ def tiny_stage1_fp16(tmp_path_factory):
     stage1 = stage1.to(torch.float16)
     out = tmp_path_factory.mktemp("export")
     ctx = exp.ExportContext(out, "fp16", seed=0, big=True, save_reference=False, check=True)
-    spec = exp.export_unet("stage1", lambda: stage1, np.random.default_rng(1).standard_normal((2, 77, 8)), ctx)
+    # The export frees the weights of the module it is given: it gets a copy.
+    spec = exp.export_unet("stage1", lambda: copy.deepcopy(stage1),
+                           np.random.default_rng(1).standard_normal((2, 77, 8)), ctx)
     path = out / spec.file
     assert spec.external == [path.name + ".data"], "the export must use external data"
     # The same feeds again, for the tests below (export_unet's are drawn from ctx.rng(seed 0)).
@@ -115,3 +118,56 @@ def test_skip_check_warning_is_loud(capsys):
     common.warn_skip_check()
     err = capsys.readouterr().err
     assert "WARNING" in err and "NOT compared" in err
+
+
+def test_export_frees_the_weights_before_the_check(tmp_path):
+    """The exported module's weights are freed before ONNX Runtime maps the export (they stayed resident
+    through onnxscript's rewrite rules and doubled the check's memory), and the per-phase memory report
+    names each phase."""
+    import gc
+    import weakref
+
+    import torch
+
+    _, stage1, _ = exp.build_tiny(0)
+    weight = stage1.conv_out.weight
+    storage = weakref.ref(weight.untyped_storage())
+    ctx = exp.ExportContext(tmp_path, "fp32", seed=0, big=True, save_reference=False, check=True,
+                            memory=common.MemoryPhases())
+    exp.export_unet("stage1", lambda: stage1, np.random.default_rng(1).standard_normal((2, 77, 8)), ctx)
+    gc.collect()
+    assert weight.numel() == 0 and weight.dtype == torch.float32, "the parameter's data is released"
+    assert storage() is None, "nothing keeps the old weight storage alive"
+    summary = ctx.memory.summary()
+    ctx.memory.stop()
+    for phase in ("stage1 load", "stage1 export", "stage1 reference", "stage1 check"):
+        assert phase in summary
+
+
+def test_in_child_runs_in_another_process_and_carries_state_back(tmp_path):
+    """With ``isolate`` the model side runs in a forked child: its result, its RNG draws and its
+    external-data decision come back; a failure there is an error here, not a silent empty result."""
+    import os
+
+    ctx = exp.ExportContext(tmp_path, "fp16", seed=3, big=False, save_reference=False, isolate=True,
+                            memory=common.MemoryPhases())
+
+    def side(c):
+        c.phase("child work")
+        c.big = True
+        return os.getpid(), c.rng.standard_normal(3)
+
+    pid, drawn = exp.in_child(ctx, side, ctx)
+    assert pid != os.getpid()
+    assert ctx.big, "the child's external-data decision is carried back"
+    expected = np.random.default_rng(3)
+    np.testing.assert_array_equal(drawn, expected.standard_normal(3))
+    np.testing.assert_array_equal(ctx.rng.standard_normal(2), expected.standard_normal(2))
+    assert "child work [child]" in ctx.memory.summary()
+    ctx.memory.stop()
+
+    def boom(_c):
+        raise ValueError("broken model")
+
+    with pytest.raises(SystemExit, match="broken model"):
+        exp.in_child(ctx, boom, ctx)
