@@ -322,6 +322,12 @@ pub struct SessionOptions {
     /// same arithmetic in several calls, so the activations held at once shrink by the split factor.
     /// The results are identical up to floating-point summation order (tested).
     pub max_batch: Option<usize>,
+    /// Whether ONNX Runtime's intra-op worker threads may spin (busy-wait) for new work between
+    /// parallel sections and after a call returns (config entry `session.intra_op.allow_spinning`).
+    /// ONNX Runtime's default is on; **this crate's default is off**: in the stylization loop the
+    /// caller's own threads (resizes, the renderer, dARAP) run right after each UNet call on the same
+    /// cores, and spinning workers take CPU from them (docs/benchmarks.md, "The loop").
+    pub intra_op_spinning: bool,
 }
 
 impl Default for SessionOptions {
@@ -334,6 +340,7 @@ impl Default for SessionOptions {
             prepacking: true,
             graph_optimizations: true,
             max_batch: None,
+            intra_op_spinning: false,
         }
     }
 }
@@ -377,6 +384,9 @@ pub(crate) fn open_session(
     builder = builder
         .with_prepacking(options.prepacking)
         .map_err(|e| OnnxError::ort(ctx("setting weight pre-packing"), e))?;
+    builder = builder
+        .with_intra_op_spinning(options.intra_op_spinning)
+        .map_err(|e| OnnxError::ort(ctx("setting intra-op spinning"), e))?;
     if let Some(n) = options.intra_threads {
         builder = builder
             .with_intra_threads(n)

@@ -640,10 +640,11 @@ fn low_memory_options_and_split_batches_match_the_whole_batch_call() {
     let want = whole
         .predict(&x, &t, &embs, Some(&labels))
         .expect("whole batch");
-    for max_batch in [1, 2, 7] {
+    for (max_batch, intra_op_spinning) in [(1, false), (2, true), (7, false)] {
         let opts = SessionOptions {
             intra_threads: Some(1),
             max_batch: Some(max_batch),
+            intra_op_spinning,
             ..SessionOptions::low_memory()
         };
         let mut split = OnnxDenoiser::open(&model, Stage::Two, &opts).expect("open low-memory");

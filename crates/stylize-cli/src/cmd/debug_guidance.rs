@@ -74,6 +74,9 @@ pub struct Args {
     /// At most this many samples per UNet call (default: the whole 2B batch in one call).
     #[arg(long)]
     pub max_batch: Option<usize>,
+    /// Let ONNX Runtime's intra-op threads spin between and after calls (its own default; off here).
+    #[arg(long)]
+    pub intra_op_spinning: bool,
     /// Output `.npz`.
     #[arg(long)]
     pub out: PathBuf,
@@ -152,6 +155,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         prepacking: !args.no_prepacking,
         graph_optimizations: !args.no_graph_optimizations,
         max_batch: args.max_batch,
+        intra_op_spinning: args.intra_op_spinning,
         ..SessionOptions::default()
     };
     let cache = match &args.cache {
@@ -296,6 +300,7 @@ mod tests {
             no_prepacking: false,
             no_graph_optimizations: false,
             max_batch: None,
+            intra_op_spinning: false,
             out: dir.join(out),
         }
     }
