@@ -1,52 +1,80 @@
-//! The Cholesky factor `G` (of `P A Pᵀ = G Gᵀ`) in plain compressed-column form, and forward and
-//! backward substitution for three right-hand sides at once.
+//! The Cholesky factor `G` (of `P A Pᵀ = G Gᵀ`) grouped into fundamental supernodes, and forward
+//! and backward substitution for three right-hand sides at once.
 //!
 //! faer computes the factor (simplicial or supernodal, whichever its heuristic picks); this copy
 //! makes the solves independent of that choice. Rows of the right-hand side are `[f64; 3]` in the
-//! factor's (fill-reducing) order, so each factor entry is loaded once for the three columns and
-//! the solve walks memory in order. faer's own solve would permute into scratch space and, for a
-//! supernodal factor, call dense kernels once per supernode (thousands of tiny ones on a mesh).
+//! factor's (fill-reducing) order, padded to four lanes, so each factor entry is loaded once for
+//! the three columns and the solve walks memory in order. faer's own solve would permute into
+//! scratch space and, for a supernodal factor, call dense kernels once per supernode (thousands of
+//! tiny ones on a mesh); here a supernode shares one row-index list among its columns and the
+//! kernels keep its right-hand-side rows in registers.
 
 use crate::CotanError;
 use faer::sparse::linalg::cholesky::{SymbolicCholesky, SymbolicCholeskyRaw};
 use std::cell::Cell;
 
-/// [`CscFactor::substitute`] as a `pulp` kernel: `with_simd` is inlined into the function pulp
+/// [`SupernodalFactor::substitute`] as a `pulp` kernel: `with_simd` is inlined into the function pulp
 /// compiles for the CPU's instruction set (a closure would be compiled for the baseline SSE2).
 struct Substitute<'a> {
-    factor: &'a CscFactor,
+    factor: &'a SupernodalFactor,
     x: &'a mut [[f64; 4]],
 }
 
 impl pulp::WithSimd for Substitute<'_> {
     type Output = ();
     #[inline(always)]
-    fn with_simd<S: pulp::Simd>(self, _simd: S) {
-        self.factor.substitute(self.x);
+    fn with_simd<S: pulp::Simd>(self, simd: S) {
+        // Where one SIMD register holds exactly one padded row (AVX2), rows are registers.
+        match pulp::bytemuck::try_cast_slice_mut::<[f64; 4], S::f64s>(self.x) {
+            Ok(rows) if S::F64_LANES == 4 => self.factor.substitute(VectorRows(simd), rows),
+            _ => self.factor.substitute(ArrayRows, self.x),
+        }
     }
 }
 
 thread_local! {
-    /// Padded rows for [`CscFactor::solve_in_place`], kept between calls (no allocation per solve).
+    /// Padded rows for [`SupernodalFactor::solve_in_place`], kept between calls (no allocation per solve).
     static SCRATCH: Cell<Vec<[f64; 4]>> = const { Cell::new(Vec::new()) };
 }
 
-/// Lower-triangular factor, column by column: the diagonal apart, strictly-lower entries in
-/// compressed columns with `u32` row indices.
+/// Lower-triangular factor `G`, grouped into supernodes: runs of consecutive columns `c0..c1` whose
+/// strictly-lower patterns are nested, so that the diagonal block `G[c0..c1, c0..c1]` is a full
+/// lower triangle and every column of the run has the same rows below `c1` (the supernode's
+/// *pattern*). Those rows are stored once, with their `c1 − c0` values side by side, so a
+/// substitution loads each row index and each right-hand-side row once per supernode instead of once
+/// per column.
 ///
-/// Entries that are exactly zero are not stored: a supernodal factor keeps explicit zeros where
-/// its relaxed supernodes pad the pattern (on fandisk 245k stored entries, of which ~37k are such
-/// zeros), and each would cost a load and three multiply–adds in both substitutions for nothing
-/// (`x − 0·y = x`, so the solution is unchanged).
+/// The supernodes are the *fundamental* ones of the stored pattern (a column joins the previous one's
+/// run exactly when its rows are the previous column's rows without the first): no zero is added,
+/// the stored entries are exactly the simplicial factor's nonzeros.
+///
+/// Entries that are exactly zero are not stored: a supernodal factor from faer keeps explicit zeros
+/// where its relaxed supernodes pad the pattern (on fandisk 245k stored entries, of which ~37k are
+/// such zeros), and each would cost a load and three multiply–adds in both substitutions for
+/// nothing (`x − 0·y = x`, so the solution is unchanged).
 #[derive(Clone, Debug, Default)]
-pub(crate) struct CscFactor {
-    diag: Vec<f64>,
-    col_ptr: Vec<usize>,
-    row: Vec<u32>,
-    val: Vec<f64>,
+pub(crate) struct SupernodalFactor {
+    /// `1 / G_jj`: the substitutions multiply by it (a division's latency would sit on their
+    /// critical path, which runs through every column).
+    inv_diag: Vec<f64>,
+    /// Supernode `s` holds the columns `start[s]..start[s + 1]`.
+    start: Vec<u32>,
+    /// The strictly lower triangle of supernode `s`'s diagonal block, column after column (column
+    /// `k` of the block holds rows `k + 1..w`), at `block_ptr[s]..block_ptr[s + 1]`.
+    block_ptr: Vec<usize>,
+    block: Vec<f64>,
+    /// The rows below supernode `s`, ascending, at `pattern_ptr[s]..pattern_ptr[s + 1]`.
+    pattern_ptr: Vec<usize>,
+    pattern: Vec<u32>,
+    /// Their values row after row, each row's `w` values in column order: row `p` of supernode
+    /// `s` (width `w`) at `below_ptr[s] + p·w ..+ w`.
+    below_ptr: Vec<usize>,
+    below: Vec<f64>,
+    /// Number of stored strictly-lower entries.
+    off_diagonal: usize,
 }
 
-impl CscFactor {
+impl SupernodalFactor {
     /// Copies faer's numeric factor `values` for `symbolic` (either storage).
     pub(crate) fn from_faer(
         symbolic: &SymbolicCholesky<usize>,
@@ -135,22 +163,99 @@ impl CscFactor {
                 }
             }
         }
-        Ok(Self {
-            diag,
-            col_ptr,
-            row,
-            val,
-        })
+        // Rows ascending within each column (what the supernode grouping compares).
+        for j in 0..n {
+            let range = col_ptr[j]..col_ptr[j + 1];
+            if !row[range.clone()].is_sorted() {
+                let mut pairs: Vec<(u32, f64)> = row[range.clone()]
+                    .iter()
+                    .copied()
+                    .zip(val[range.clone()].iter().copied())
+                    .collect();
+                pairs.sort_by_key(|&(i, _)| i);
+                for (k, (i, x)) in range.zip(pairs) {
+                    row[k] = i;
+                    val[k] = x;
+                }
+            }
+        }
+        Ok(Self::from_columns(diag, &col_ptr, &row, &val))
+    }
+
+    /// Groups compressed columns (strictly-lower rows ascending within each column) into
+    /// fundamental supernodes (see the type's docs).
+    fn from_columns(diag: Vec<f64>, col_ptr: &[usize], row: &[u32], val: &[f64]) -> Self {
+        let n = diag.len();
+        let rows = |j: usize| &row[col_ptr[j]..col_ptr[j + 1]];
+        let vals = |j: usize| &val[col_ptr[j]..col_ptr[j + 1]];
+        let mut out = Self {
+            inv_diag: diag.iter().map(|d| 1.0 / d).collect(),
+            start: vec![0],
+            block_ptr: vec![0],
+            pattern_ptr: vec![0],
+            below_ptr: vec![0],
+            off_diagonal: row.len(),
+            ..Self::default()
+        };
+        let mut c0 = 0;
+        while c0 < n {
+            // Extend the run while column j + 1's rows are column j's without its first (= j + 1).
+            let mut c1 = c0 + 1;
+            while c1 < n
+                && rows(c1 - 1).first() == Some(&(c1 as u32))
+                && rows(c1 - 1)[1..] == *rows(c1)
+            {
+                c1 += 1;
+            }
+            let w = c1 - c0;
+            for k in 0..w {
+                out.block.extend_from_slice(&vals(c0 + k)[..w - 1 - k]);
+            }
+            let pattern = &rows(c0)[w - 1..];
+            out.pattern.extend_from_slice(pattern);
+            for p in 0..pattern.len() {
+                for k in 0..w {
+                    out.below.push(vals(c0 + k)[w - 1 - k + p]);
+                }
+            }
+            out.start.push(c1 as u32);
+            out.block_ptr.push(out.block.len());
+            out.pattern_ptr.push(out.pattern.len());
+            out.below_ptr.push(out.below.len());
+            c0 = c1;
+        }
+        out
+    }
+
+    /// Number of supernodes.
+    pub(crate) fn num_supernodes(&self) -> usize {
+        self.start.len() - 1
+    }
+
+    /// Width of the widest supernode (0 for an empty factor).
+    #[cfg(test)]
+    pub(crate) fn widest_supernode(&self) -> usize {
+        self.start
+            .windows(2)
+            .map(|w| (w[1] - w[0]) as usize)
+            .max()
+            .unwrap_or(0)
+    }
+
+    /// The substitutions with the portable row arithmetic, whatever the CPU (for tests).
+    #[cfg(test)]
+    pub(crate) fn substitute_portable(&self, x: &mut [[f64; 4]]) {
+        self.substitute(ArrayRows, x);
     }
 
     /// Number of rows.
     pub(crate) fn size(&self) -> usize {
-        self.diag.len()
+        self.inv_diag.len()
     }
 
     /// Number of stored entries (diagonal included).
     pub(crate) fn nnz(&self) -> usize {
-        self.diag.len() + self.val.len()
+        self.inv_diag.len() + self.off_diagonal
     }
 
     /// Solves `G Gᵀ x = b` in place (`x` holds `b` on entry), rows in the factor's order.
@@ -158,7 +263,7 @@ impl CscFactor {
     /// The rows are copied into a per-thread scratch of `[f64; 4]` rows (the fourth lane stays 0)
     /// so that one row is one 256-bit vector, and the substitutions run compiled for the widest
     /// instruction set the CPU has (AVX2 where available, chosen at run time by `pulp`). Every
-    /// lane operation is an exactly rounded `−`, `×` or `÷` (no fused multiply–add), so the result
+    /// lane operation is an exactly rounded `+`, `−` or `×` (no fused multiply–add), so the result
     /// does not depend on the instruction set.
     pub(crate) fn solve_in_place(&self, x: &mut [[f64; 3]]) {
         assert_eq!(
@@ -181,50 +286,256 @@ impl CscFactor {
         });
     }
 
-    /// Forward then backward substitution on padded rows (see [`CscFactor::solve_in_place`]).
+    /// Forward then backward substitution on padded rows (see [`SupernodalFactor::solve_in_place`]),
+    /// with the row arithmetic `ops`.
+    ///
+    /// Forward (`G y = b`), supernode after supernode: the diagonal block column by column, then
+    /// each pattern row `i` once, `x_i −= Σ_k G[i, c0 + k]·y_{c0 + k}` for up to [`GROUP`]
+    /// columns at a time (the products summed pairwise, a short dependency chain).
+    ///
+    /// Backward (`Gᵀ x = y`), last supernode first: the pattern rows' contributions to all `w`
+    /// columns at once (`w` accumulators, split further into partial sums over the rows when `w`
+    /// is small so that at least four independent chains hide the addition latency), then the
+    /// diagonal block, last column first.
+    ///
+    /// Every sum is taken in a fixed order and every lane operation is an exactly rounded IEEE
+    /// `+`, `−` or `×` (no fused multiply–add), so the result is deterministic and the same for
+    /// every `ops` (see the bit-for-bit test).
     #[inline(always)]
-    fn substitute(&self, x: &mut [[f64; 4]]) {
-        // G y = b: column-oriented forward substitution (independent updates).
-        for (j, &d) in self.diag.iter().enumerate() {
-            let xj = x[j];
-            let yj = [xj[0] / d, xj[1] / d, xj[2] / d, xj[3] / d];
-            x[j] = yj;
-            let range = self.col_ptr[j]..self.col_ptr[j + 1];
-            for (&i, &l) in self.row[range.clone()].iter().zip(&self.val[range]) {
-                let xi = &mut x[i as usize];
-                for c in 0..4 {
-                    xi[c] -= l * yj[c];
+    fn substitute<O: RowOps>(&self, ops: O, x: &mut [O::Row]) {
+        for s in 0..self.num_supernodes() {
+            let (c0, c1) = (self.start[s] as usize, self.start[s + 1] as usize);
+            let block = &self.block[self.block_ptr[s]..self.block_ptr[s + 1]];
+            let pattern = &self.pattern[self.pattern_ptr[s]..self.pattern_ptr[s + 1]];
+            let below = &self.below[self.below_ptr[s]..self.below_ptr[s + 1]];
+            let (head, tail) = x.split_at_mut(c1);
+            let y = &mut head[c0..];
+            let mut off = 0;
+            for k in 0..y.len() {
+                let yk = ops.scale(self.inv_diag[c0 + k], y[k]);
+                y[k] = yk;
+                for yi in &mut y[k + 1..] {
+                    *yi = ops.sub(*yi, ops.scale(block[off], yk));
+                    off += 1;
                 }
             }
+            let w = y.len();
+            let mut k0 = 0;
+            while k0 < w {
+                let g = (w - k0).min(GROUP);
+                let (y, c) = (&y[k0..k0 + g], Cols { k0, w });
+                match g {
+                    1 => forward_group::<O, 1>(ops, y, c, pattern, below, tail, c1),
+                    2 => forward_group::<O, 2>(ops, y, c, pattern, below, tail, c1),
+                    3 => forward_group::<O, 3>(ops, y, c, pattern, below, tail, c1),
+                    4 => forward_group::<O, 4>(ops, y, c, pattern, below, tail, c1),
+                    5 => forward_group::<O, 5>(ops, y, c, pattern, below, tail, c1),
+                    6 => forward_group::<O, 6>(ops, y, c, pattern, below, tail, c1),
+                    7 => forward_group::<O, 7>(ops, y, c, pattern, below, tail, c1),
+                    _ => forward_group::<O, GROUP>(ops, y, c, pattern, below, tail, c1),
+                }
+                k0 += g;
+            }
         }
-        // Gᵀ x = y: row-oriented (dot products over column j of G), last row first. Four partial
-        // sums (entries k mod 4) break the dependency chain of the subtractions; they are added
-        // in a fixed order, so the result is deterministic.
-        for (j, &d) in self.diag.iter().enumerate().rev() {
-            let range = self.col_ptr[j]..self.col_ptr[j + 1];
-            let (rows, vals) = (&self.row[range.clone()], &self.val[range]);
-            let mut acc = [x[j], [0.0; 4], [0.0; 4], [0.0; 4]];
-            let (rows4, vals4) = (rows.chunks_exact(4), vals.chunks_exact(4));
-            let (rows_rest, vals_rest) = (rows4.remainder(), vals4.remainder());
-            for (r, l) in rows4.zip(vals4) {
-                for k in 0..4 {
-                    let xi = x[r[k] as usize];
-                    for c in 0..4 {
-                        acc[k][c] -= l[k] * xi[c];
+        for s in (0..self.num_supernodes()).rev() {
+            let (c0, c1) = (self.start[s] as usize, self.start[s + 1] as usize);
+            let block = &self.block[self.block_ptr[s]..self.block_ptr[s + 1]];
+            let pattern = &self.pattern[self.pattern_ptr[s]..self.pattern_ptr[s + 1]];
+            let below = &self.below[self.below_ptr[s]..self.below_ptr[s + 1]];
+            let (head, tail) = x.split_at_mut(c1);
+            let xs = &mut head[c0..];
+            let w = xs.len();
+            let mut k0 = 0;
+            while k0 < w {
+                let g = (w - k0).min(GROUP);
+                let (xg, c) = (&mut xs[k0..k0 + g], Cols { k0, w });
+                match g {
+                    1 => backward_group::<O, 1, 4>(ops, xg, c, pattern, below, tail, c1),
+                    2 => backward_group::<O, 2, 2>(ops, xg, c, pattern, below, tail, c1),
+                    3 => backward_group::<O, 3, 2>(ops, xg, c, pattern, below, tail, c1),
+                    4 => backward_group::<O, 4, 1>(ops, xg, c, pattern, below, tail, c1),
+                    5 => backward_group::<O, 5, 1>(ops, xg, c, pattern, below, tail, c1),
+                    6 => backward_group::<O, 6, 1>(ops, xg, c, pattern, below, tail, c1),
+                    7 => backward_group::<O, 7, 1>(ops, xg, c, pattern, below, tail, c1),
+                    _ => backward_group::<O, GROUP, 1>(ops, xg, c, pattern, below, tail, c1),
+                }
+                k0 += g;
+            }
+            // Column k of the block holds rows k + 1..w, starting at Σ_{t<k} (w − 1 − t).
+            for k in (0..w).rev() {
+                let first = k * (2 * w - k - 1) / 2;
+                let (rows, vals) = (&xs[k + 1..], &block[first..first + (w - 1 - k)]);
+                // Last row first (see `backward_group`).
+                let mut acc = [ops.zero(); 4];
+                for (r, l) in rows.rchunks_exact(4).zip(vals.rchunks_exact(4)) {
+                    for q in 0..4 {
+                        acc[q] = ops.add(acc[q], ops.scale(l[3 - q], r[3 - q]));
                     }
                 }
-            }
-            for (k, (&i, &l)) in rows_rest.iter().zip(vals_rest).enumerate() {
-                let xi = x[i as usize];
-                for c in 0..4 {
-                    acc[k][c] -= l * xi[c];
+                let rest = rows.len() % 4;
+                for (q, (xi, &l)) in rows[..rest].iter().zip(&vals[..rest]).rev().enumerate() {
+                    acc[q] = ops.add(acc[q], ops.scale(l, *xi));
                 }
+                let sum = ops.add(ops.add(acc[0], acc[1]), ops.add(acc[2], acc[3]));
+                xs[k] = ops.scale(self.inv_diag[c0 + k], ops.sub(xs[k], sum));
             }
-            let mut s = [0.0; 4];
-            for c in 0..4 {
-                s[c] = ((acc[0][c] + acc[1][c]) + (acc[2][c] + acc[3][c])) / d;
-            }
-            x[j] = s;
         }
+    }
+}
+
+/// Arithmetic on one padded right-hand-side row (three columns and a zero), each operation the
+/// exactly rounded IEEE one per lane (no fused multiply–add), so results do not depend on the
+/// implementation.
+trait RowOps: Copy {
+    type Row: Copy;
+    /// `a − b`.
+    fn sub(self, a: Self::Row, b: Self::Row) -> Self::Row;
+    /// `a + b`.
+    fn add(self, a: Self::Row, b: Self::Row) -> Self::Row;
+    /// `l·a`.
+    fn scale(self, l: f64, a: Self::Row) -> Self::Row;
+    /// The zero row.
+    fn zero(self) -> Self::Row;
+}
+
+/// Rows as `[f64; 4]` arrays (any instruction set; the compiler vectorizes what it can).
+#[derive(Clone, Copy)]
+struct ArrayRows;
+
+impl RowOps for ArrayRows {
+    type Row = [f64; 4];
+    #[inline(always)]
+    fn sub(self, a: [f64; 4], b: [f64; 4]) -> [f64; 4] {
+        std::array::from_fn(|c| a[c] - b[c])
+    }
+    #[inline(always)]
+    fn add(self, a: [f64; 4], b: [f64; 4]) -> [f64; 4] {
+        std::array::from_fn(|c| a[c] + b[c])
+    }
+    #[inline(always)]
+    fn scale(self, l: f64, a: [f64; 4]) -> [f64; 4] {
+        a.map(|v| l * v)
+    }
+    #[inline(always)]
+    fn zero(self) -> [f64; 4] {
+        [0.0; 4]
+    }
+}
+
+/// Rows as one SIMD register of an instruction set with four f64 lanes (AVX2): the compiler's
+/// vectorizer is not relied on (it split `[f64; 4]` accumulations into 1 + 2 + 1 lanes).
+#[derive(Clone, Copy)]
+struct VectorRows<S: pulp::Simd>(S);
+
+impl<S: pulp::Simd> RowOps for VectorRows<S> {
+    type Row = S::f64s;
+    #[inline(always)]
+    fn sub(self, a: S::f64s, b: S::f64s) -> S::f64s {
+        self.0.sub_f64s(a, b)
+    }
+    #[inline(always)]
+    fn add(self, a: S::f64s, b: S::f64s) -> S::f64s {
+        self.0.add_f64s(a, b)
+    }
+    #[inline(always)]
+    fn scale(self, l: f64, a: S::f64s) -> S::f64s {
+        self.0.mul_f64s(self.0.splat_f64s(l), a)
+    }
+    #[inline(always)]
+    fn zero(self) -> S::f64s {
+        self.0.splat_f64s(0.0)
+    }
+}
+
+/// Widest supernode slice a substitution kernel keeps in registers; wider supernodes are taken in
+/// groups of this many columns.
+const GROUP: usize = 8;
+
+/// Columns `k0..k0 + G` of a supernode of width `w` (values row `p` at `p·w..(p + 1)·w`).
+#[derive(Clone, Copy)]
+struct Cols {
+    k0: usize,
+    w: usize,
+}
+
+/// The forward substitution's update of the rows below one supernode, columns `cols`:
+/// `tail[i − c1] −= Σ_k below[p·w + k]·y[k]` for pattern row `p` (row index `i`), `k` ascending.
+#[inline(always)]
+fn forward_group<O: RowOps, const G: usize>(
+    ops: O,
+    y: &[O::Row],
+    cols: Cols,
+    pattern: &[u32],
+    below: &[f64],
+    tail: &mut [O::Row],
+    c1: usize,
+) {
+    let ys: [O::Row; G] = std::array::from_fn(|k| y[k]);
+    for (&i, l) in pattern.iter().zip(below.chunks_exact(cols.w)) {
+        let l: &[f64; G] = l[cols.k0..cols.k0 + G].try_into().expect("group width");
+        let xi = &mut tail[i as usize - c1];
+        let mut prod: [O::Row; G] = std::array::from_fn(|k| ops.scale(l[k], ys[k]));
+        let mut width = G;
+        while width > 1 {
+            let half = width / 2;
+            for k in 0..half {
+                prod[k] = ops.add(prod[k], prod[width - half + k]);
+            }
+            width -= half;
+        }
+        *xi = ops.sub(*xi, prod[0]);
+    }
+}
+
+/// The backward substitution's use of the rows below one supernode, columns `cols`:
+/// `xs[k] −= Σ_p below[p·w + k]·tail[i_p − c1]`, with `P` partial sums per column (pattern rows
+/// `p mod P`) added in a fixed order at the end.
+#[inline(always)]
+fn backward_group<O: RowOps, const G: usize, const P: usize>(
+    ops: O,
+    xs: &mut [O::Row],
+    cols: Cols,
+    pattern: &[u32],
+    below: &[f64],
+    tail: &[O::Row],
+    c1: usize,
+) {
+    // Last pattern row first: the first rows (the parent and its nearest ancestors) were solved
+    // last, so adding them last keeps the dependency chain from them to this supernode short.
+    let mut acc = [[ops.zero(); G]; P];
+    let rows = pattern.rchunks_exact(P);
+    let rest = rows.remainder();
+    let mut vals = below.rchunks_exact(cols.w);
+    for r in rows {
+        for (q, &i) in r.iter().rev().enumerate() {
+            let l = vals.next().expect("one value row per pattern row");
+            backward_row(ops, &mut acc[q], tail[i as usize - c1], l, cols);
+        }
+    }
+    for (q, &i) in rest.iter().rev().enumerate() {
+        let l = vals.next().expect("one value row per pattern row");
+        backward_row(ops, &mut acc[q], tail[i as usize - c1], l, cols);
+    }
+    for k in 0..G {
+        let mut sum = acc[0][k];
+        for part in &acc[1..] {
+            sum = ops.add(sum, part[k]);
+        }
+        xs[k] = ops.sub(xs[k], sum);
+    }
+}
+
+/// One pattern row of [`backward_group`]: `acc[k] += l[k0 + k]·x_i`.
+#[inline(always)]
+fn backward_row<O: RowOps, const G: usize>(
+    ops: O,
+    acc: &mut [O::Row; G],
+    xi: O::Row,
+    l: &[f64],
+    cols: Cols,
+) {
+    let l: &[f64; G] = l[cols.k0..cols.k0 + G].try_into().expect("group width");
+    for k in 0..G {
+        acc[k] = ops.add(acc[k], ops.scale(l[k], xi));
     }
 }
