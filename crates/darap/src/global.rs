@@ -151,12 +151,18 @@ impl RhsPrecompute {
 pub(crate) fn rhs_add_into(pre: &RhsPrecompute, rotations: &[Mat3], out: &mut [[f64; 3]]) {
     assert_eq!(rotations.len(), pre.num_cols, "one rotation per vertex");
     assert_eq!(out.len(), pre.num_rows, "one row per entry of b");
+    // Each rotation as three padded columns, so that `R h = h₀ c₀ + h₁ c₁ + h₂ c₂` is three
+    // 4-lane products.
+    let columns: Vec<[[f64; 4]; 3]> = rotations
+        .iter()
+        .map(|r| std::array::from_fn(|j| [r[0][j], r[1][j], r[2][j], 0.0]))
+        .collect();
     out.par_chunks_mut(PAR_MIN_LEN)
         .enumerate()
         .for_each(|(c, rows)| {
             dispatch(RhsRows {
                 pre,
-                rotations,
+                columns: &columns,
                 first: c * PAR_MIN_LEN,
                 rows,
             })
@@ -165,11 +171,12 @@ pub(crate) fn rhs_add_into(pre: &RhsPrecompute, rotations: &[Mat3], out: &mut [[
 
 /// Rows `first..first + rows.len()` of [`rhs_add_into`] as a `pulp` kernel, so the gathers and
 /// 3×3 products are compiled for the CPU's instruction set (see [`crate::lanes::dispatch`]).
-/// Every operation is the scalar IEEE one in the same order (no fused multiply–add), so the
-/// result does not depend on the instruction set.
+/// Row `i` of the update is `(R_i0·h₀ + R_i1·h₁) + R_i2·h₂`, added to the sum — the scalar
+/// expression's operations in its order (no fused multiply–add), so the result does not depend on
+/// the instruction set.
 struct RhsRows<'a> {
     pre: &'a RhsPrecompute,
-    rotations: &'a [Mat3],
+    columns: &'a [[[f64; 4]; 3]],
     first: usize,
     rows: &'a mut [[f64; 3]],
 }
@@ -177,19 +184,42 @@ struct RhsRows<'a> {
 impl pulp::WithSimd for RhsRows<'_> {
     type Output = ();
     #[inline(always)]
-    fn with_simd<S: pulp::Simd>(self, _simd: S) {
+    fn with_simd<S: pulp::Simd>(self, simd: S) {
         let pre = self.pre;
+        // Where one SIMD register holds one padded column (AVX2), columns are registers.
+        let vector_columns =
+            pulp::bytemuck::try_cast_slice::<[[f64; 4]; 3], [S::f64s; 3]>(self.columns)
+                .ok()
+                .filter(|_| S::F64_LANES == 4);
         for (k, acc) in self.rows.iter_mut().enumerate() {
             let a = self.first + k;
             let range = pre.row_ptr[a]..pre.row_ptr[a + 1];
-            let mut s = *acc;
-            for (&v, h) in pre.row_col[range.clone()].iter().zip(&pre.row_h[range]) {
-                let r = &self.rotations[v as usize];
-                s[0] += r[0][0] * h[0] + r[0][1] * h[1] + r[0][2] * h[2];
-                s[1] += r[1][0] * h[0] + r[1][1] * h[1] + r[1][2] * h[2];
-                s[2] += r[2][0] * h[0] + r[2][1] * h[1] + r[2][2] * h[2];
+            let entries = pre.row_col[range.clone()].iter().zip(&pre.row_h[range]);
+            if let Some(columns) = vector_columns {
+                let mut s: S::f64s = pulp::bytemuck::cast([acc[0], acc[1], acc[2], 0.0]);
+                for (&v, h) in entries {
+                    let c = &columns[v as usize];
+                    let t = simd.add_f64s(
+                        simd.mul_f64s(c[0], simd.splat_f64s(h[0])),
+                        simd.mul_f64s(c[1], simd.splat_f64s(h[1])),
+                    );
+                    s = simd.add_f64s(
+                        s,
+                        simd.add_f64s(t, simd.mul_f64s(c[2], simd.splat_f64s(h[2]))),
+                    );
+                }
+                let s: [f64; 4] = pulp::bytemuck::cast(s);
+                *acc = [s[0], s[1], s[2]];
+            } else {
+                let mut s = *acc;
+                for (&v, h) in entries {
+                    let c = &self.columns[v as usize];
+                    for i in 0..3 {
+                        s[i] += c[0][i] * h[0] + c[1][i] * h[1] + c[2][i] * h[2];
+                    }
+                }
+                *acc = s;
             }
-            *acc = s;
         }
     }
 }
@@ -218,22 +248,25 @@ pub(crate) fn rhs_vjp_into(pre: &RhsPrecompute, grad_b: &[[f64; 3]], out: &mut [
         "one gradient row per entry of b"
     );
     assert_eq!(out.len(), pre.num_cols, "one rotation per vertex");
+    let padded: Vec<[f64; 4]> = grad_b.iter().map(|g| [g[0], g[1], g[2], 0.0]).collect();
     out.par_chunks_mut(PAR_MIN_LEN)
         .enumerate()
         .for_each(|(c, cols)| {
             dispatch(RhsVjpCols {
                 pre,
-                grad_b,
+                grad_b: &padded,
                 first: c * PAR_MIN_LEN,
                 cols,
             })
         });
 }
 
-/// Columns `first..first + cols.len()` of [`rhs_vjp_into`] as a `pulp` kernel (see [`RhsRows`]).
+/// Columns `first..first + cols.len()` of [`rhs_vjp_into`] as a `pulp` kernel (see [`RhsRows`]):
+/// column `j` of `∂ℓ/∂R_v` accumulates `h_j·(∂ℓ/∂b_a)` over the entries in order, the scalar
+/// `m_ij += g_i·h_j` lane by lane.
 struct RhsVjpCols<'a> {
     pre: &'a RhsPrecompute,
-    grad_b: &'a [[f64; 3]],
+    grad_b: &'a [[f64; 4]],
     first: usize,
     cols: &'a mut [Mat3],
 }
@@ -241,21 +274,37 @@ struct RhsVjpCols<'a> {
 impl pulp::WithSimd for RhsVjpCols<'_> {
     type Output = ();
     #[inline(always)]
-    fn with_simd<S: pulp::Simd>(self, _simd: S) {
+    fn with_simd<S: pulp::Simd>(self, simd: S) {
         let pre = self.pre;
+        let vector_rows = pulp::bytemuck::try_cast_slice::<[f64; 4], S::f64s>(self.grad_b)
+            .ok()
+            .filter(|_| S::F64_LANES == 4);
         for (k, acc) in self.cols.iter_mut().enumerate() {
             let v = self.first + k;
             let range = pre.col_ptr[v]..pre.col_ptr[v + 1];
-            let mut m = ZERO;
-            for (&a, h) in pre.col_row[range.clone()].iter().zip(&pre.col_h[range]) {
-                let gb = self.grad_b[a as usize];
-                for i in 0..3 {
+            let entries = pre.col_row[range.clone()].iter().zip(&pre.col_h[range]);
+            let m: [[f64; 4]; 3] = if let Some(rows) = vector_rows {
+                let mut m = [simd.splat_f64s(0.0); 3];
+                for (&a, h) in entries {
+                    let g = rows[a as usize];
                     for j in 0..3 {
-                        m[i][j] += gb[i] * h[j];
+                        m[j] = simd.add_f64s(m[j], simd.mul_f64s(g, simd.splat_f64s(h[j])));
                     }
                 }
-            }
-            *acc = m;
+                m.map(pulp::bytemuck::cast)
+            } else {
+                let mut m = [[0.0; 4]; 3];
+                for (&a, h) in entries {
+                    let g = self.grad_b[a as usize];
+                    for j in 0..3 {
+                        for i in 0..3 {
+                            m[j][i] += g[i] * h[j];
+                        }
+                    }
+                }
+                m
+            };
+            *acc = std::array::from_fn(|i| [m[0][i], m[1][i], m[2][i]]);
         }
     }
 }
