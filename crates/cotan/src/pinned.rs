@@ -29,9 +29,9 @@ pub fn component_pins(num_vertices: usize, faces: &[[u32; 3]]) -> Vec<usize> {
 ///
 /// Solving `L x = b` with `x[pins]` prescribed is then `L_pin x_free = b_free − L[free, pins]·x_pins`
 /// ([`PinnedCholesky::solve_pinned`]). The fill-reducing ordering (AMD), the symbolic analysis and
-/// the numeric factorization (faer) run once; the factor is then copied into a compressed-column
-/// form on which the solves run forward and backward substitution for the three coordinates
-/// together, sequentially and deterministically.
+/// the numeric factorization (faer) run once; the factor is then copied into the crate's own form,
+/// grouped by fundamental supernodes, on which the solves run forward and backward substitution
+/// for the three coordinates together, sequentially and deterministically.
 ///
 /// **Solver order.** The factor's rows are the free vertices in the fill-reducing order
 /// ([`PinnedCholesky::solver_order`]). Callers that build their right-hand side directly in that
