@@ -227,6 +227,19 @@ impl SupernodalFactor {
         out
     }
 
+    /// Supernode `s`: its first column `c0`, its end `c1`, the strictly lower triangle of its
+    /// diagonal block, the rows below it and their values (see the fields).
+    #[inline(always)]
+    fn supernode(&self, s: usize) -> (usize, usize, &[f64], &[u32], &[f64]) {
+        (
+            self.start[s] as usize,
+            self.start[s + 1] as usize,
+            &self.block[self.block_ptr[s]..self.block_ptr[s + 1]],
+            &self.pattern[self.pattern_ptr[s]..self.pattern_ptr[s + 1]],
+            &self.below[self.below_ptr[s]..self.below_ptr[s + 1]],
+        )
+    }
+
     /// Number of supernodes.
     pub(crate) fn num_supernodes(&self) -> usize {
         self.start.len() - 1
@@ -304,10 +317,7 @@ impl SupernodalFactor {
     #[inline(always)]
     fn substitute<O: RowOps>(&self, ops: O, x: &mut [O::Row]) {
         for s in 0..self.num_supernodes() {
-            let (c0, c1) = (self.start[s] as usize, self.start[s + 1] as usize);
-            let block = &self.block[self.block_ptr[s]..self.block_ptr[s + 1]];
-            let pattern = &self.pattern[self.pattern_ptr[s]..self.pattern_ptr[s + 1]];
-            let below = &self.below[self.below_ptr[s]..self.below_ptr[s + 1]];
+            let (c0, c1, block, pattern, below) = self.supernode(s);
             let (head, tail) = x.split_at_mut(c1);
             let y = &mut head[c0..];
             let mut off = 0;
@@ -338,10 +348,7 @@ impl SupernodalFactor {
             }
         }
         for s in (0..self.num_supernodes()).rev() {
-            let (c0, c1) = (self.start[s] as usize, self.start[s + 1] as usize);
-            let block = &self.block[self.block_ptr[s]..self.block_ptr[s + 1]];
-            let pattern = &self.pattern[self.pattern_ptr[s]..self.pattern_ptr[s + 1]];
-            let below = &self.below[self.below_ptr[s]..self.below_ptr[s + 1]];
+            let (c0, c1, block, pattern, below) = self.supernode(s);
             let (head, tail) = x.split_at_mut(c1);
             let xs = &mut head[c0..];
             let w = xs.len();
