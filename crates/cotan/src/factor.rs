@@ -242,7 +242,7 @@ impl SupernodalFactor {
 
     /// Number of supernodes.
     pub(crate) fn num_supernodes(&self) -> usize {
-        self.start.len() - 1
+        self.start.len().saturating_sub(1)
     }
 
     /// Width of the widest supernode (0 for an empty factor).
