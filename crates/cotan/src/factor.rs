@@ -507,8 +507,10 @@ fn backward_group<O: RowOps, const G: usize, const P: usize>(
     tail: &[O::Row],
     c1: usize,
 ) {
-    // Last pattern row first: the first rows (the parent and its nearest ancestors) were solved
-    // last, so adding them last keeps the dependency chain from them to this supernode short.
+    // Last pattern row first, so the rows solved most recently (the parent and its nearest
+    // ancestors) are added last. Meant to shorten the dependency chain; measured, it made no
+    // difference (the substitutions are throughput-bound, see docs/benchmarks.md). The order is
+    // fixed either way, so the result is deterministic.
     let mut acc = [[ops.zero(); G]; P];
     let rows = pattern.rchunks_exact(P);
     let rest = rows.remainder();
