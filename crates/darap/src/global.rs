@@ -150,19 +150,41 @@ impl RhsPrecompute {
 /// entry, zero for plain [`rhs`]).
 pub(crate) fn rhs_add_into(pre: &RhsPrecompute, rotations: &[Mat3], out: &mut [[f64; 3]]) {
     assert_eq!(rotations.len(), pre.num_cols, "one rotation per vertex");
+    let columns: Vec<PaddedColumns> = rotations.iter().map(padded_columns).collect();
+    rhs_add_columns_into(pre, &columns, out);
+}
+
+/// A rotation as its three columns, each padded to four lanes: `c[j] = [R_0j, R_1j, R_2j, 0]`, so
+/// that `R h = h₀ c₀ + h₁ c₁ + h₂ c₂` is three 4-lane products.
+pub(crate) type PaddedColumns = [[f64; 4]; 3];
+
+/// `R` as [`PaddedColumns`].
+#[inline]
+pub(crate) fn padded_columns(r: &Mat3) -> PaddedColumns {
+    std::array::from_fn(|j| [r[0][j], r[1][j], r[2][j], 0.0])
+}
+
+/// The rotation that [`padded_columns`] stored.
+#[inline]
+pub(crate) fn from_padded_columns(c: &PaddedColumns) -> Mat3 {
+    std::array::from_fn(|i| [c[0][i], c[1][i], c[2][i]])
+}
+
+/// [`rhs_add_into`] for rotations given as [`PaddedColumns`] (as the layer's local step writes
+/// them).
+pub(crate) fn rhs_add_columns_into(
+    pre: &RhsPrecompute,
+    columns: &[PaddedColumns],
+    out: &mut [[f64; 3]],
+) {
+    assert_eq!(columns.len(), pre.num_cols, "one rotation per vertex");
     assert_eq!(out.len(), pre.num_rows, "one row per entry of b");
-    // Each rotation as three padded columns, so that `R h = h₀ c₀ + h₁ c₁ + h₂ c₂` is three
-    // 4-lane products.
-    let columns: Vec<[[f64; 4]; 3]> = rotations
-        .iter()
-        .map(|r| std::array::from_fn(|j| [r[0][j], r[1][j], r[2][j], 0.0]))
-        .collect();
     out.par_chunks_mut(PAR_MIN_LEN)
         .enumerate()
         .for_each(|(c, rows)| {
             dispatch(RhsRows {
                 pre,
-                columns: &columns,
+                columns,
                 first: c * PAR_MIN_LEN,
                 rows,
             })
@@ -248,7 +270,7 @@ pub(crate) fn rhs_vjp_into(pre: &RhsPrecompute, grad_b: &[[f64; 3]], out: &mut [
         "one gradient row per entry of b"
     );
     assert_eq!(out.len(), pre.num_cols, "one rotation per vertex");
-    let padded: Vec<[f64; 4]> = grad_b.iter().map(|g| [g[0], g[1], g[2], 0.0]).collect();
+    let padded = padded_rows(grad_b);
     out.par_chunks_mut(PAR_MIN_LEN)
         .enumerate()
         .for_each(|(c, cols)| {
@@ -275,36 +297,69 @@ impl pulp::WithSimd for RhsVjpCols<'_> {
     type Output = ();
     #[inline(always)]
     fn with_simd<S: pulp::Simd>(self, simd: S) {
+        let rows = RhsTransposed::new(self.pre, self.grad_b);
+        for (k, acc) in self.cols.iter_mut().enumerate() {
+            *acc = rows.column(simd, self.first + k);
+        }
+    }
+}
+
+/// `∂ℓ/∂b` as padded rows `[g_0, g_1, g_2, 0]` (see [`RhsTransposed`]).
+pub(crate) fn padded_rows(grad_b: &[[f64; 3]]) -> Vec<[f64; 4]> {
+    grad_b.iter().map(|g| [g[0], g[1], g[2], 0.0]).collect()
+}
+
+/// The adjoint of the right-hand side one rotation at a time: [`RhsTransposed::column`] is
+/// `∂ℓ/∂R_v` of [`rhs_vjp`], so a kernel that needs the rotation gradients of a few vertices can
+/// form them where it uses them (the layer's backward pass does, in the local step's adjoint).
+#[derive(Clone, Copy)]
+pub(crate) struct RhsTransposed<'a> {
+    pre: &'a RhsPrecompute,
+    /// `∂ℓ/∂b`, padded rows ([`padded_rows`]).
+    grad_b: &'a [[f64; 4]],
+}
+
+impl<'a> RhsTransposed<'a> {
+    pub(crate) fn new(pre: &'a RhsPrecompute, grad_b: &'a [[f64; 4]]) -> Self {
+        assert_eq!(
+            grad_b.len(),
+            pre.num_rows,
+            "one gradient row per entry of b"
+        );
+        Self { pre, grad_b }
+    }
+
+    /// `∂ℓ/∂R_v`: column `j` accumulates `h_j·(∂ℓ/∂b_a)` over the entries in order, the scalar
+    /// `m_ij += g_i·h_j` lane by lane (4-lane vectors where `S` has them, the same operations).
+    #[inline(always)]
+    pub(crate) fn column<S: pulp::Simd>(self, simd: S, v: usize) -> Mat3 {
         let pre = self.pre;
+        let range = pre.col_ptr[v]..pre.col_ptr[v + 1];
+        let entries = pre.col_row[range.clone()].iter().zip(&pre.col_h[range]);
         let vector_rows = pulp::bytemuck::try_cast_slice::<[f64; 4], S::f64s>(self.grad_b)
             .ok()
             .filter(|_| S::F64_LANES == 4);
-        for (k, acc) in self.cols.iter_mut().enumerate() {
-            let v = self.first + k;
-            let range = pre.col_ptr[v]..pre.col_ptr[v + 1];
-            let entries = pre.col_row[range.clone()].iter().zip(&pre.col_h[range]);
-            let m: [[f64; 4]; 3] = if let Some(rows) = vector_rows {
-                let mut m = [simd.splat_f64s(0.0); 3];
-                for (&a, h) in entries {
-                    let g = rows[a as usize];
-                    for j in 0..3 {
-                        m[j] = simd.add_f64s(m[j], simd.mul_f64s(g, simd.splat_f64s(h[j])));
+        let m: [[f64; 4]; 3] = if let Some(rows) = vector_rows {
+            let mut m = [simd.splat_f64s(0.0); 3];
+            for (&a, h) in entries {
+                let g = rows[a as usize];
+                for j in 0..3 {
+                    m[j] = simd.add_f64s(m[j], simd.mul_f64s(g, simd.splat_f64s(h[j])));
+                }
+            }
+            m.map(pulp::bytemuck::cast)
+        } else {
+            let mut m = [[0.0; 4]; 3];
+            for (&a, h) in entries {
+                let g = self.grad_b[a as usize];
+                for j in 0..3 {
+                    for i in 0..3 {
+                        m[j][i] += g[i] * h[j];
                     }
                 }
-                m.map(pulp::bytemuck::cast)
-            } else {
-                let mut m = [[0.0; 4]; 3];
-                for (&a, h) in entries {
-                    let g = self.grad_b[a as usize];
-                    for j in 0..3 {
-                        for i in 0..3 {
-                            m[j][i] += g[i] * h[j];
-                        }
-                    }
-                }
-                m
-            };
-            *acc = std::array::from_fn(|i| [m[0][i], m[1][i], m[2][i]]);
-        }
+            }
+            m
+        };
+        std::array::from_fn(|i| [m[0][i], m[1][i], m[2][i]])
     }
 }

@@ -38,11 +38,8 @@ mod svd3;
 pub use cotan::CotanError;
 pub use mat3::Mat3;
 
-use global::{RhsPrecompute, rhs_vjp};
-use local::{
-    LocalTape, local_step, local_step_vjp, normalize_target, normalize_targets_vjp,
-    rest_covariances,
-};
+use global::{PaddedColumns, RhsPrecompute, RhsTransposed, from_padded_columns, padded_columns};
+use local::{LocalTape, normalize_target, normalize_target_vjp, rest_covariances};
 use post::{PostTape, post_process, post_process_vjp};
 
 pub mod stages {
@@ -278,6 +275,9 @@ pub struct Darap {
     mass: Vec<f64>,
     /// Internal position → vertex (free vertices in solver order, then the pins).
     order: Vec<usize>,
+    /// Vertex → internal position (the inverse of `order`), so that results are gathered into
+    /// vertex order in one pass instead of zero-filled and scattered.
+    position_of: Vec<usize>,
     /// `covariance_rest`, `mass`, `rest_normals` and the mask in internal order.
     covariance_int: Vec<Mat3>,
     mass_int: Vec<f64>,
@@ -370,6 +370,7 @@ impl Darap {
             weights_int: None,
             feathered_mass_int: None,
             order,
+            position_of,
             rest_positions: rest_positions.to_vec(),
             rest_normals,
             mass,
@@ -531,7 +532,7 @@ impl Darap {
         // Targets gathered into the internal order and normalized in one pass.
         let unit: Vec<[f64; 3]> = self.order.iter().map(|&v| normalize_target(x[v])).collect();
         let mass_int = self.feathered_mass_int.as_ref().unwrap_or(&self.mass_int);
-        let (rotations_int, local) = local_step(
+        let (columns_int, local) = local::local_step_as::<PaddedColumns>(
             &self.covariance_int,
             mass_int,
             self.options.lambda,
@@ -540,12 +541,13 @@ impl Darap {
             self.options.rotation_rule,
             self.free_int.as_deref(),
         );
-        let solved = self.solve_internal(&rotations_int);
+        let solved = self.solve_internal(&columns_int);
         let (positions, post) = post_process(&solved, self.rest_diag, self.options.post_process);
-        let mut rotations = vec![mat3::ZERO; n];
-        for (r, &v) in rotations_int.iter().zip(&self.order) {
-            rotations[v] = *r;
-        }
+        let rotations = self
+            .position_of
+            .iter()
+            .map(|&k| from_padded_columns(&columns_int[k]))
+            .collect();
         Ok(Deformation {
             positions,
             rotations,
@@ -558,18 +560,19 @@ impl Darap {
     }
 
     /// Right-hand side and solve for rotations in internal order; positions in vertex order.
-    fn solve_internal(&self, rotations_int: &[Mat3]) -> Vec<[f64; 3]> {
+    fn solve_internal(&self, columns_int: &[PaddedColumns]) -> Vec<[f64; 3]> {
         let mut b = self.pinned_rhs.clone();
-        global::rhs_add_into(&self.rhs, rotations_int, &mut b);
+        global::rhs_add_columns_into(&self.rhs, columns_int, &mut b);
         self.solver.solve_ordered_in_place(&mut b);
-        let mut solved = vec![[0.0; 3]; self.num_vertices()];
-        for (x, &v) in b.iter().zip(&self.order) {
-            solved[v] = *x;
-        }
-        for (x, &p) in self.pinned_values.iter().zip(self.solver.pins()) {
-            solved[p] = *x;
-        }
-        solved
+        // Internal positions past the free vertices are the pins, in `solver.pins()` order.
+        let num_free = b.len();
+        self.position_of
+            .iter()
+            .map(|&k| match b.get(k) {
+                Some(x) => *x,
+                None => self.pinned_values[k - num_free],
+            })
+            .collect()
     }
 
     /// The global step alone: positions (before post-processing) for given rotations.
@@ -583,8 +586,12 @@ impl Darap {
             self.num_vertices(),
             "one rotation per vertex"
         );
-        let rotations_int: Vec<Mat3> = self.order.iter().map(|&v| rotations[v]).collect();
-        self.solve_internal(&rotations_int)
+        let columns_int: Vec<PaddedColumns> = self
+            .order
+            .iter()
+            .map(|&v| padded_columns(&rotations[v]))
+            .collect();
+        self.solve_internal(&columns_int)
     }
 
     /// `∂ℓ/∂x` for `∂ℓ/∂positions` at the state of a previous [`Darap::forward`].
@@ -628,19 +635,21 @@ impl Darap {
             .map(|&v| grad_solved[v])
             .collect();
         self.solver.solve_ordered_in_place(&mut grad_b);
-        let grad_r = rhs_vjp(&self.rhs, &grad_b);
-        let grad_unit_int = local_step_vjp(
+        // `∂ℓ/∂R_v` is formed inside the local step's adjoint, vertex by vertex.
+        let grad_b = global::padded_rows(&grad_b);
+        let grad_unit_int = local::local_step_vjp_from(
             &state.local,
             state.feathered_mass_int.as_ref().unwrap_or(&self.mass_int),
             state.lambda,
             &self.normals_int,
-            &grad_r,
+            RhsTransposed::new(&self.rhs, &grad_b),
         );
-        let mut grad_unit = vec![[0.0; 3]; n];
-        for (g, &v) in grad_unit_int.iter().zip(&self.order) {
-            grad_unit[v] = *g;
-        }
-        Ok(normalize_targets_vjp(&state.targets, &grad_unit))
+        Ok(state
+            .targets
+            .iter()
+            .zip(&self.position_of)
+            .map(|(&x, &k)| normalize_target_vjp(x, grad_unit_int[k]))
+            .collect())
     }
 }
 

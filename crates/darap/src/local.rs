@@ -3,6 +3,7 @@
 
 use crate::RotationRule;
 use crate::batch::{SvdLanes, d01, rotation_vjp_lanes, rule_lanes, svd3_lanes};
+use crate::global::{PaddedColumns, RhsTransposed};
 use crate::lanes::{F, FALSE, M3, Mask, W, dispatch, lane, mask_bit};
 use crate::mat3::{IDENTITY, Mat3, ZERO, mul_tvec, outer, sub};
 use crate::rotation_rule::RotationSvd;
@@ -30,21 +31,25 @@ pub(crate) fn normalize_target(v: [f64; 3]) -> [f64; 3] {
 pub fn normalize_targets_vjp(x: &[[f64; 3]], grad_unit: &[[f64; 3]]) -> Vec<[f64; 3]> {
     x.iter()
         .zip(grad_unit)
-        .map(|(v, g)| {
-            let n = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-            if n > 1e-12 {
-                let t = [v[0] / n, v[1] / n, v[2] / n];
-                let tg = t[0] * g[0] + t[1] * g[1] + t[2] * g[2];
-                [
-                    (g[0] - t[0] * tg) / n,
-                    (g[1] - t[1] * tg) / n,
-                    (g[2] - t[2] * tg) / n,
-                ]
-            } else {
-                [g[0] / 1e-12, g[1] / 1e-12, g[2] / 1e-12]
-            }
-        })
+        .map(|(&v, &g)| normalize_target_vjp(v, g))
         .collect()
+}
+
+/// One target of [`normalize_targets_vjp`].
+#[inline]
+pub(crate) fn normalize_target_vjp(v: [f64; 3], g: [f64; 3]) -> [f64; 3] {
+    let n = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+    if n > 1e-12 {
+        let t = [v[0] / n, v[1] / n, v[2] / n];
+        let tg = t[0] * g[0] + t[1] * g[1] + t[2] * g[2];
+        [
+            (g[0] - t[0] * tg) / n,
+            (g[1] - t[1] * tg) / n,
+            (g[2] - t[2] * tg) / n,
+        ]
+    } else {
+        [g[0] / 1e-12, g[1] / 1e-12, g[2] / 1e-12]
+    }
 }
 
 /// Rest covariances `K_v = Σ_{(a→b) ∈ N(v)} w_ab e_ab e_abᵀ` (spec §3.1–3.2) with the **full**
@@ -188,6 +193,60 @@ pub fn local_step(
     rule: RotationRule,
     free: Option<&[bool]>,
 ) -> (Vec<Mat3>, LocalTape) {
+    local_step_as::<Mat3>(
+        covariance_rest,
+        mass,
+        lambda,
+        rest_normals,
+        targets_unit,
+        rule,
+        free,
+    )
+}
+
+/// How [`local_step_as`] stores a rotation: as a matrix ([`Mat3`]) or as the right-hand side's
+/// [`PaddedColumns`], which the layer's forward pass uses to skip a conversion pass.
+pub(crate) trait RotationLayout: Copy + Send + Sync {
+    /// The zero matrix (the fill before the kernels write every entry).
+    const ZERO: Self;
+    /// `R = I`.
+    const IDENTITY: Self;
+    /// Lane `l` of `r`.
+    fn from_lane(r: &M3, l: usize) -> Self;
+}
+
+impl RotationLayout for Mat3 {
+    const ZERO: Self = ZERO;
+    const IDENTITY: Self = IDENTITY;
+    #[inline(always)]
+    fn from_lane(r: &M3, l: usize) -> Self {
+        std::array::from_fn(|i| std::array::from_fn(|j| r[i][j][l]))
+    }
+}
+
+impl RotationLayout for PaddedColumns {
+    const ZERO: Self = [[0.0; 4]; 3];
+    const IDENTITY: Self = [
+        [1.0, 0.0, 0.0, 0.0],
+        [0.0, 1.0, 0.0, 0.0],
+        [0.0, 0.0, 1.0, 0.0],
+    ];
+    #[inline(always)]
+    fn from_lane(r: &M3, l: usize) -> Self {
+        std::array::from_fn(|j| [r[0][j][l], r[1][j][l], r[2][j][l], 0.0])
+    }
+}
+
+/// [`local_step`] with the rotations stored as `R`.
+pub(crate) fn local_step_as<R: RotationLayout>(
+    covariance_rest: &[Mat3],
+    mass: &[f64],
+    lambda: f64,
+    rest_normals: &[[f64; 3]],
+    targets_unit: &[[f64; 3]],
+    rule: RotationRule,
+    free: Option<&[bool]>,
+) -> (Vec<R>, LocalTape) {
     let n = covariance_rest.len();
     assert!(
         mass.len() == n
@@ -196,7 +255,7 @@ pub fn local_step(
             && free.is_none_or(|m| m.len() == n),
         "local_step: inputs differ in length"
     );
-    let mut rotations = vec![ZERO; n];
+    let mut rotations = vec![R::ZERO; n];
     let chunks: Vec<TapeChunk> = rotations
         .par_chunks_mut(W)
         .enumerate()
@@ -229,7 +288,7 @@ pub fn local_step(
 /// function compiled for the CPU's instruction set, and everything below it is `inline(always)`,
 /// so the lane loops are vectorized with that instruction set (a closure would be compiled
 /// separately, for the baseline SSE2).
-struct LocalChunk<'a> {
+struct LocalChunk<'a, R> {
     base: usize,
     covariance_rest: &'a [Mat3],
     mass: &'a [f64],
@@ -238,10 +297,10 @@ struct LocalChunk<'a> {
     targets_unit: &'a [[f64; 3]],
     rule: RotationRule,
     free: Option<&'a [bool]>,
-    out: &'a mut [Mat3],
+    out: &'a mut [R],
 }
 
-impl pulp::WithSimd for LocalChunk<'_> {
+impl<R: RotationLayout> pulp::WithSimd for LocalChunk<'_, R> {
     type Output = TapeChunk;
     #[inline(always)]
     fn with_simd<S: pulp::Simd>(self, _simd: S) -> TapeChunk {
@@ -260,22 +319,44 @@ impl pulp::WithSimd for LocalChunk<'_> {
 }
 
 /// One batch of [`local_step_vjp`] as a `pulp` kernel (see [`LocalChunk`]).
-struct LocalVjpChunk<'a> {
+struct LocalVjpChunk<'a, G> {
     base: usize,
     chunk: &'a TapeChunk,
     rule: RotationRule,
     mass: &'a [f64],
     lambda: f64,
     rest_normals: &'a [[f64; 3]],
-    grad_rotations: &'a [Mat3],
+    grad_rotations: G,
     out: &'a mut [[f64; 3]],
 }
 
-impl pulp::WithSimd for LocalVjpChunk<'_> {
+/// Where [`local_step_vjp_from`] reads `∂ℓ/∂R_v`: a slice, or the right-hand side's adjoint
+/// ([`RhsTransposed`]) formed vertex by vertex inside the kernel (no `∂ℓ/∂R` array).
+pub(crate) trait RotationGradients: Copy + Send + Sync {
+    /// `∂ℓ/∂R_v`.
+    fn get<S: pulp::Simd>(self, simd: S, v: usize) -> Mat3;
+}
+
+impl RotationGradients for &[Mat3] {
+    #[inline(always)]
+    fn get<S: pulp::Simd>(self, _simd: S, v: usize) -> Mat3 {
+        self[v]
+    }
+}
+
+impl RotationGradients for RhsTransposed<'_> {
+    #[inline(always)]
+    fn get<S: pulp::Simd>(self, simd: S, v: usize) -> Mat3 {
+        self.column(simd, v)
+    }
+}
+
+impl<G: RotationGradients> pulp::WithSimd for LocalVjpChunk<'_, G> {
     type Output = ();
     #[inline(always)]
-    fn with_simd<S: pulp::Simd>(self, _simd: S) {
+    fn with_simd<S: pulp::Simd>(self, simd: S) {
         local_vjp_chunk(
+            simd,
             self.base,
             self.chunk,
             self.rule,
@@ -289,7 +370,7 @@ impl pulp::WithSimd for LocalVjpChunk<'_> {
 }
 
 #[inline(always)]
-fn local_chunk(
+fn local_chunk<R: RotationLayout>(
     base: usize,
     covariance_rest: &[Mat3],
     mass: &[f64],
@@ -298,7 +379,7 @@ fn local_chunk(
     targets_unit: &[[f64; 3]],
     rule: RotationRule,
     free: Option<&[bool]>,
-    out: &mut [Mat3],
+    out: &mut [R],
 ) -> TapeChunk {
     let mut s: M3 = [[[0.0; W]; 3]; 3];
     let mut is_free: Mask = FALSE;
@@ -322,9 +403,9 @@ fn local_chunk(
     let (r, d2) = rule_lanes(&svd, rule);
     for (l, o) in out.iter_mut().enumerate() {
         *o = if lane(is_free, l) {
-            std::array::from_fn(|i| std::array::from_fn(|j| r[i][j][l]))
+            R::from_lane(&r, l)
         } else {
-            IDENTITY
+            R::IDENTITY
         };
     }
     TapeChunk {
@@ -347,9 +428,26 @@ pub fn local_step_vjp(
     rest_normals: &[[f64; 3]],
     grad_rotations: &[Mat3],
 ) -> Vec<[f64; 3]> {
+    assert_eq!(
+        grad_rotations.len(),
+        tape.len,
+        "local_step_vjp: inputs differ in length from the tape"
+    );
+    local_step_vjp_from(tape, mass, lambda, rest_normals, grad_rotations)
+}
+
+/// [`local_step_vjp`] with `∂ℓ/∂R` read from `grad_rotations` (which must cover the tape's
+/// vertices).
+pub(crate) fn local_step_vjp_from<G: RotationGradients>(
+    tape: &LocalTape,
+    mass: &[f64],
+    lambda: f64,
+    rest_normals: &[[f64; 3]],
+    grad_rotations: G,
+) -> Vec<[f64; 3]> {
     let n = tape.len;
     assert!(
-        mass.len() == n && rest_normals.len() == n && grad_rotations.len() == n,
+        mass.len() == n && rest_normals.len() == n,
         "local_step_vjp: inputs differ in length from the tape"
     );
     let mut out = vec![[0.0; 3]; n];
@@ -373,19 +471,20 @@ pub fn local_step_vjp(
 }
 
 #[inline(always)]
-fn local_vjp_chunk(
+fn local_vjp_chunk<S: pulp::Simd, G: RotationGradients>(
+    simd: S,
     base: usize,
     chunk: &TapeChunk,
     rule: RotationRule,
     mass: &[f64],
     lambda: f64,
     rest_normals: &[[f64; 3]],
-    grad_rotations: &[Mat3],
+    grad_rotations: G,
     out: &mut [[f64; 3]],
 ) {
     let mut g: M3 = [[[0.0; W]; 3]; 3];
     for l in 0..out.len() {
-        let gv = &grad_rotations[base + l];
+        let gv = &grad_rotations.get(simd, base + l);
         for i in 0..3 {
             for j in 0..3 {
                 g[i][j][l] = gv[i][j];

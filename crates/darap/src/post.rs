@@ -116,7 +116,8 @@ pub fn post_process_vjp(tape: &PostTape, grad: &[[f64; 3]]) -> Vec<[f64; 3]> {
         }
     }
     let mean = mean.map(|m| m / n as f64);
-    gq.iter()
-        .map(|g| [g[0] - mean[0], g[1] - mean[1], g[2] - mean[2]])
-        .collect()
+    for g in &mut gq {
+        *g = [g[0] - mean[0], g[1] - mean[1], g[2] - mean[2]];
+    }
+    gq
 }

@@ -2,7 +2,9 @@
 
 use super::*;
 use crate::mat3::IDENTITY;
-use crate::stages::{normalize_targets, rhs};
+use crate::stages::{
+    local_step, local_step_vjp, normalize_targets, normalize_targets_vjp, rhs, rhs_vjp,
+};
 use mesh_core::shapes::{icosphere, obtuse_wavy_grid};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
