@@ -14,7 +14,7 @@ use crate::RotationRule;
 use crate::lanes::{
     F, FALSE, M3, Mask, V3, W, abs, add, all, and, any, col, cross, det, div, dot, eq, ge, gt,
     identity, is_finite, is_nan, le, lt, mask_bit, matmul, mul, neg, not, or, select, select3,
-    signum, splat, sqrt, sub, transpose,
+    splat, sqrt, sub, transpose,
 };
 
 /// `S = U·diag(σ)·Vᵀ` for every lane (see [`crate::stages::Svd3`]).
@@ -99,25 +99,19 @@ pub(crate) fn svd3_lanes(s: &M3) -> SvdLanes {
             let gamma = dot(ap, aq);
             let skip = or(
                 eq(gamma, splat(0.0)),
-                le(abs(gamma), mul(splat(1e-15), sqrt(mul(alpha, beta)))),
+                le(mul(gamma, gamma), mul(splat(1e-30), mul(alpha, beta))),
             );
             if all(skip) {
                 continue;
             }
             rotated = or(rotated, not(skip));
-            let zeta = div(sub(beta, alpha), mul(splat(2.0), gamma));
-            let zeta_abs = abs(zeta);
-            // t = 0.5/ζ where |ζ| > 1e150, else sgn(ζ)/(|ζ| + √(1 + ζ²)): one division of the
-            // selected numerator by the selected denominator (the same IEEE division per lane as
-            // the scalar branch, so bit for bit the same t).
-            let huge = gt(zeta_abs, splat(1e150));
+            // `svd3::rotation_tangent`, its operations in its order.
+            let d = sub(beta, alpha);
+            let q2 = mul(splat(2.0), gamma);
+            let sign = select(lt(d, splat(0.0)), splat(-1.0), splat(1.0));
             let t = div(
-                select(huge, splat(0.5), signum(zeta)),
-                select(
-                    huge,
-                    zeta,
-                    add(zeta_abs, sqrt(add(splat(1.0), mul(zeta, zeta)))),
-                ),
+                mul(sign, q2),
+                add(abs(d), sqrt(add(mul(d, d), mul(q2, q2)))),
             );
             let c = div(splat(1.0), sqrt(add(splat(1.0), mul(t, t))));
             let sn = mul(c, t);
@@ -389,7 +383,11 @@ mod tests {
             .0;
             let sv = [2.0, 2.0, 0.5];
             let sv2 = [1.5, 0.25, 0.25];
-            for sv in [sv, sv2] {
+            // Two columns ~1e-75 and ~1e-160 of the largest: the Jacobi tangent's squares
+            // underflow there (see `svd3::rotation_tangent`).
+            let sv3 = [1.0, 1e-75, 3e-76];
+            let sv4 = [1.0, 2e-160, 1e-160];
+            for sv in [sv, sv2, sv3, sv4] {
                 m.push(std::array::from_fn(|i| {
                     std::array::from_fn(|j| (0..3).map(|k| q[i][k] * sv[k] * p[j][k]).sum())
                 }));

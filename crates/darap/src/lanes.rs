@@ -115,16 +115,6 @@ pub(crate) fn neg(a: F) -> F {
     r
 }
 
-/// `copysign(1, a)`: `f64::signum` for every non-NaN input.
-#[inline(always)]
-pub(crate) fn signum(a: F) -> F {
-    let mut r = a;
-    for i in 0..W {
-        r[i] = 1.0f64.copysign(a[i]);
-    }
-    r
-}
-
 #[inline(always)]
 pub(crate) fn gt(a: F, b: F) -> Mask {
     let mut r = FALSE;

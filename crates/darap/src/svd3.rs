@@ -1,7 +1,7 @@
 //! A dedicated, robust 3×3 singular value decomposition in f64.
 //!
 //! Method: one-sided (Hestenes) Jacobi. The columns of `A = S` are rotated pairwise until they are
-//! mutually orthogonal to working precision (`|a_p·a_q| ≤ 1e-15·|a_p||a_q|`); the same rotations
+//! mutually orthogonal to working precision (`(a_p·a_q)² ≤ 1e-30·|a_p|²|a_q|²`); the same rotations
 //! accumulate into `V`. Then `σ_i = |a_i|`, sorted descending, and `U` is built from the columns by
 //! Gram–Schmidt and a cross product, so it is orthogonal to rounding even when `S` is rank
 //! deficient (a column whose `σ` is below `1e-13·σ_1` is replaced by a unit vector orthogonal to
@@ -50,6 +50,24 @@ fn any_orthogonal(u: [f64; 3]) -> [f64; 3] {
     normalize(cross(u, axis)).unwrap_or([0.0, 0.0, 1.0])
 }
 
+/// The tangent `t = tan θ` of the Jacobi rotation that makes columns `p` and `q` orthogonal,
+/// given `α = |a_p|²`, `β = |a_q|²`, `γ = a_p·a_q ≠ 0`: the smaller root of `t² + 2ζt − 1 = 0`
+/// with `ζ = (β − α)/(2γ)` (Golub & Van Loan, Alg. 8.5.2), written without `ζ`:
+/// `t = sgn(d)·q / (|d| + √(d² + q²))` with `d = β − α`, `q = 2γ` (`sgn(0) = +1`, so `α = β`
+/// gives `t = sgn γ`). One division and one square root instead of two divisions and a root;
+/// `|t| ≤ 1`. The squares cannot overflow: the columns are scaled so that `α, β ≤ 3`. They can
+/// underflow only when `|d|` and `|q|` are both below ~1e-154, i.e. for two columns whose norms are
+/// ~1e-70 of the largest (the rank-deficient part, below the `1e-13·σ_1` threshold); there `t`
+/// loses accuracy but stays finite (`q² ≥ γ² > 0` for a pair that is not skipped) and the
+/// rotation stays orthogonal.
+#[inline]
+fn rotation_tangent(alpha: f64, beta: f64, gamma: f64) -> f64 {
+    let d = beta - alpha;
+    let q = 2.0 * gamma;
+    let sign = if d < 0.0 { -1.0 } else { 1.0 };
+    (sign * q) / (d.abs() + (d * d + q * q).sqrt())
+}
+
 /// The SVD of a 3×3 matrix (see the module docs). Non-finite input gives non-finite output; callers
 /// validate their inputs.
 pub fn svd3(s: &Mat3) -> Svd3 {
@@ -71,16 +89,11 @@ pub fn svd3(s: &Mat3) -> Svd3 {
             let alpha = dot(ap, ap);
             let beta = dot(aq, aq);
             let gamma = dot(ap, aq);
-            if gamma == 0.0 || gamma.abs() <= 1e-15 * (alpha * beta).sqrt() {
+            if gamma == 0.0 || gamma * gamma <= 1e-30 * (alpha * beta) {
                 continue;
             }
             rotated = true;
-            let zeta = (beta - alpha) / (2.0 * gamma);
-            let t = if zeta.abs() > 1e150 {
-                0.5 / zeta
-            } else {
-                zeta.signum() / (zeta.abs() + (1.0 + zeta * zeta).sqrt())
-            };
+            let t = rotation_tangent(alpha, beta, gamma);
             let c = 1.0 / (1.0 + t * t).sqrt();
             let sn = c * t;
             for i in 0..3 {
@@ -213,6 +226,35 @@ mod tests {
         ];
         for s in cases {
             assert_valid(&s, &svd3(&s), 1e-14);
+        }
+    }
+
+    #[test]
+    fn columns_far_below_the_largest_give_orthogonal_factors() {
+        // Rotated diag(1, σ2, σ3) with σ2, σ3 so small that the Jacobi tangent's squares
+        // (d² + q²) underflow for the pair of small columns: the factors stay orthogonal and
+        // finite, and S is reconstructed to the precision of its largest entry.
+        let r = |a: f64, b: f64| {
+            let (ca, sa, cb, sb) = (a.cos(), a.sin(), b.cos(), b.sin());
+            mul(
+                &[[ca, -sa, 0.0], [sa, ca, 0.0], [0.0, 0.0, 1.0]],
+                &[[1.0, 0.0, 0.0], [0.0, cb, -sb], [0.0, sb, cb]],
+            )
+        };
+        for (k, sv) in [
+            [1.0, 1e-75, 3e-76],
+            [1.0, 2e-160, 1e-160],
+            [1.0, 1e-300, 1e-300],
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            let (l, rr) = (r(0.3 + k as f64, 1.1), r(-0.7, 2.0 + k as f64));
+            let dg = [[sv[0], 0.0, 0.0], [0.0, sv[1], 0.0], [0.0, 0.0, sv[2]]];
+            let s = mul(&mul(&l, &dg), &transpose(&rr));
+            let d = svd3(&s);
+            assert_valid(&s, &d, 1e-14);
+            assert!((d.sigma[0] - 1.0).abs() < 1e-14);
         }
     }
 
