@@ -158,7 +158,14 @@ pub(crate) fn svd3_lanes(s: &M3) -> SvdLanes {
         sub(a2[1], mul(d, u1[1])),
         sub(a2[2], mul(d, u1[2])),
     ]);
-    let u2 = select3(and(gt(sigma[1], tau), ok2), w, any_orthogonal(u1));
+    let use_w = and(gt(sigma[1], tau), ok2);
+    // Only rank-deficient lanes need the fallback (a square root and three divisions): skipped
+    // when no lane does, which changes no lane's result.
+    let u2 = if all(use_w) {
+        w
+    } else {
+        select3(use_w, w, any_orthogonal(u1))
+    };
     let u3 = cross(u1, u2);
     let flip = and(gt(sigma[2], tau), lt(dot(u3, col(&a, 2)), zero));
     let u3 = select3(flip, [neg(u3[0]), neg(u3[1]), neg(u3[2])], u3);
