@@ -11,7 +11,9 @@
 //! - Laplacian: `L = diag(Σ_j c_ij) − C`, positive semi-definite, `c_ij = cot α + cot β` (**twice**
 //!   libigl's weights); λ is defined with respect to these weights.
 //! - Matrices act on column vectors: a deformed edge is `R·e`. [`Mat3`] is row-major.
-//! - Positions are used as given: callers normalize to the side-2 cube first (spec §1.1).
+//! - Positions are used as given: callers normalize to the side-2 cube first (spec §1.1,
+//!   `mesh_core::normalize::side2_cube`). The reference's area and normal clamps (`1e-6`) are
+//!   absolute, so a mesh with much smaller faces deforms differently (docs/darap.md).
 //!
 //! ```no_run
 //! # fn main() -> Result<(), darap::DarapError> {
