@@ -21,7 +21,7 @@
 //! weights (a ramp over `K` rings inside the region's boundary).
 
 /// Per-vertex normal weights `w_v·a_v` for the local step (the masses the layer passes to
-/// [`crate::local_step`] and [`crate::local_step_vjp`] for a feathered region).
+/// [`crate::stages::local_step`] and [`crate::stages::local_step_vjp`] for a feathered region).
 ///
 /// # Panics
 /// If the slices differ in length (a programming error).
