@@ -50,6 +50,16 @@ pub enum CotanError {
         /// Its index.
         index: usize,
     },
+    /// A face is so large that its clamped Heron area overflows f64 (edge lengths of about 1e77
+    /// and above); every other quantity of the mesh would be meaningless.
+    #[error(
+        "face {face} is too large for f64: its area formula overflows (edge lengths of about 1e77 \
+         and above); scale the mesh down, e.g. to the side-2 cube (mesh_core::normalize::side2_cube)"
+    )]
+    Overflow {
+        /// The face.
+        face: usize,
+    },
     /// The matrix handed to [`PinnedCholesky::new`] is not square or not symmetric in pattern.
     #[error("invalid matrix: {0}")]
     InvalidMatrix(String),

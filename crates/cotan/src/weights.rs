@@ -50,22 +50,27 @@ pub fn corner_cotangents(
     faces: &[[u32; 3]],
 ) -> Result<Vec<[f64; 3]>, CotanError> {
     validate(positions, faces)?;
-    Ok(faces
+    faces
         .iter()
-        .map(|f| {
+        .enumerate()
+        .map(|(face, f)| {
             let [p0, p1, p2] = f.map(|v| positions[v as usize]);
             let a2 = dist2(p1, p2);
             let b2 = dist2(p0, p2);
             let c2 = dist2(p0, p1);
             let area = heron_area_clamped(a2.sqrt(), b2.sqrt(), c2.sqrt());
+            // Finite positions can still overflow `s⁴` (edges of ~1e77) or the squared lengths.
+            if !area.is_finite() || !(a2 + b2 + c2).is_finite() {
+                return Err(CotanError::Overflow { face });
+            }
             let inv = 1.0 / (4.0 * area);
-            [
+            Ok([
                 (b2 + c2 - a2) * inv,
                 (a2 + c2 - b2) * inv,
                 (a2 + b2 - c2) * inv,
-            ]
+            ])
         })
-        .collect())
+        .collect()
 }
 
 /// Cotangent weights of the undirected edges of a mesh.
@@ -133,6 +138,21 @@ mod tests {
         let c = corner_cotangents(&p, &[[0, 1, 2]]).unwrap();
         for k in 0..3 {
             assert!((c[0][k] - 1.0 / 3f64.sqrt()).abs() < 1e-14);
+        }
+    }
+
+    #[test]
+    fn huge_faces_are_an_overflow_error_and_large_ones_are_exact() {
+        let tri = |k: f64| [[0.0, 0.0, 0.0], [3.0 * k, 0.0, 0.0], [0.0, 4.0 * k, 0.0]];
+        // Heron's s⁴ is about 1e304 here: still finite, cotangents as at unit scale.
+        let c = corner_cotangents(&tri(1e75), &[[0, 1, 2]]).unwrap();
+        assert!((c[0][1] - 3.0 / 4.0).abs() < 1e-14 && (c[0][2] - 4.0 / 3.0).abs() < 1e-14);
+        for k in [1e78, 1e160, 1e300] {
+            assert_eq!(
+                corner_cotangents(&tri(k), &[[0, 1, 2], [0, 2, 1]]),
+                Err(CotanError::Overflow { face: 0 }),
+                "scale {k:e}"
+            );
         }
     }
 

@@ -589,3 +589,33 @@ fn region_weights_of_zero_and_one_are_the_hard_mask() {
     weighted.set_region_weights(None).unwrap();
     assert!(weighted.region_weights().is_none());
 }
+
+#[test]
+fn deformation_scales_with_the_mesh_down_to_a_fiftieth_of_the_normalized_frame() {
+    // The reference's area and normal clamps are absolute (1e-6; docs/darap.md): above about
+    // 0.02 of the side-2 cube the deformation is the unit-scale one times the scale; far larger
+    // meshes are a typed error, not NaN.
+    let m = icosphere(3);
+    let base = Darap::new(&m.positions, &m.faces, DarapOptions::default()).unwrap();
+    let x = random_targets(base.rest_normals(), 0.5, 3);
+    let p0 = base.forward(&x).unwrap().positions;
+    for scale in [0.02, 0.5, 3.0, 1e10, 1e40, 1e70] {
+        let pos: Vec<[f64; 3]> = m.positions.iter().map(|p| p.map(|v| v * scale)).collect();
+        let layer = Darap::new(&pos, &m.faces, DarapOptions::default()).unwrap();
+        let s = layer.forward(&x).unwrap();
+        let scaled: Vec<[f64; 3]> = s.positions.iter().map(|p| p.map(|v| v / scale)).collect();
+        assert!(max_diff(&scaled, &p0) < 1e-12, "scale {scale:e}");
+        let g = layer.backward(&s, &s.positions.clone());
+        assert!(g.iter().flatten().all(|v| v.is_finite()), "scale {scale:e}");
+    }
+    for scale in [1e80, 1e150, 1e300] {
+        let pos: Vec<[f64; 3]> = m.positions.iter().map(|p| p.map(|v| v * scale)).collect();
+        assert!(
+            matches!(
+                Darap::new(&pos, &m.faces, DarapOptions::default()),
+                Err(DarapError::Cotan(CotanError::Overflow { .. }))
+            ),
+            "scale {scale:e}"
+        );
+    }
+}
