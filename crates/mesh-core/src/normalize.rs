@@ -38,14 +38,15 @@ impl Normalization {
 /// A degenerate input (all points equal, or empty) is only centred (`scale = 1`), never divided by 0.
 pub fn side2_cube(positions: &mut [[f64; 3]]) -> Normalization {
     let (lo, hi) = bbox(positions);
-    let centre = [
-        0.5 * (lo[0] + hi[0]),
-        0.5 * (lo[1] + hi[1]),
-        0.5 * (lo[2] + hi[2]),
-    ];
-    let extent = (hi[0] - lo[0]).max(hi[1] - lo[1]).max(hi[2] - lo[2]);
-    let scale = if extent > 0.0 && extent.is_finite() {
-        2.0 / extent
+    // Halved before adding or subtracting, so that finite bounds near f64::MAX cannot overflow
+    // (`hi − lo` does beyond ~9e307). Halving is exact, so for every other input these are the
+    // same numbers as `(lo + hi)/2` and `2 / (hi − lo)`.
+    let centre: [f64; 3] = std::array::from_fn(|k| 0.5 * lo[k] + 0.5 * hi[k]);
+    let half_extent = (0..3)
+        .map(|k| 0.5 * hi[k] - 0.5 * lo[k])
+        .fold(f64::NEG_INFINITY, f64::max);
+    let scale = if half_extent > 0.0 && half_extent.is_finite() {
+        1.0 / half_extent
     } else {
         1.0
     };
@@ -79,6 +80,30 @@ mod tests {
         // The inverse maps back.
         let q = n.invert(p[1]);
         assert!((q[0] - 5.0).abs() < 1e-14 && (q[1] - 11.0).abs() < 1e-14);
+    }
+
+    #[test]
+    fn coordinates_near_the_largest_f64_are_normalized() {
+        // hi − lo and lo + hi overflow here; the longest side must still become [−1, 1].
+        let mut p = vec![
+            [-1.5e308, 0.0, 1e308],
+            [1.5e308, 1e308, -1e308],
+            [0.0, 5e307, 0.0],
+        ];
+        let n = side2_cube(&mut p);
+        assert!(n.scale > 0.0 && n.scale.is_finite() && n.centre == [0.0, 5e307, 0.0]);
+        // The scale 1/1.5e308 is subnormal (two bits short of full precision): ±1 up to rounding.
+        assert!(
+            (p[0][0] + 1.0).abs() < 1e-14 && (p[1][0] - 1.0).abs() < 1e-14,
+            "{p:?}"
+        );
+        assert!(
+            p.iter()
+                .flatten()
+                .all(|v| v.is_finite() && v.abs() < 1.0 + 1e-14)
+        );
+        let q = n.invert(p[2]);
+        assert!(q[0] == 0.0 && (q[1] / 5e307 - 1.0).abs() < 1e-15);
     }
 
     #[test]
