@@ -360,6 +360,6 @@ impl<'a> RhsTransposed<'a> {
             }
             m
         };
-        std::array::from_fn(|i| [m[0][i], m[1][i], m[2][i]])
+        from_padded_columns(&m)
     }
 }

@@ -3,7 +3,7 @@
 
 use crate::RotationRule;
 use crate::batch::{SvdLanes, d01, rotation_vjp_lanes, rule_lanes, svd3_lanes};
-use crate::global::{PaddedColumns, RhsTransposed};
+use crate::global::{PaddedColumns, RhsTransposed, padded_columns};
 use crate::lanes::{F, FALSE, M3, Mask, W, dispatch, lane, mask_bit};
 use crate::mat3::{IDENTITY, Mat3, ZERO, mul_tvec, outer, sub};
 use crate::rotation_rule::RotationSvd;
@@ -233,7 +233,7 @@ impl RotationLayout for PaddedColumns {
     ];
     #[inline(always)]
     fn from_lane(r: &M3, l: usize) -> Self {
-        std::array::from_fn(|j| [r[0][j][l], r[1][j][l], r[2][j][l], 0.0])
+        padded_columns(&Mat3::from_lane(r, l))
     }
 }
 
@@ -484,7 +484,7 @@ fn local_vjp_chunk<S: pulp::Simd, G: RotationGradients>(
 ) {
     let mut g: M3 = [[[0.0; W]; 3]; 3];
     for l in 0..out.len() {
-        let gv = &grad_rotations.get(simd, base + l);
+        let gv = grad_rotations.get(simd, base + l);
         for i in 0..3 {
             for j in 0..3 {
                 g[i][j][l] = gv[i][j];
