@@ -71,7 +71,8 @@ impl From<ImagesError> for RenderError {
 /// The seam between the optimization loop and a rendering backend.
 ///
 /// `backward` is the vector-Jacobian product of the **most recent** `render` call: it may be
-/// called several times for one render (the loop takes two Adam steps per render batch).
+/// called several times for one render. The loop takes two Adam steps per render batch and maps
+/// both sub-steps' image gradients back with one [`backward_many`](Renderer::backward_many).
 pub trait Renderer: Send {
     /// Backend name for logs ("cpu", "wgpu (lavapipe)", …).
     fn name(&self) -> String;
@@ -86,6 +87,13 @@ pub trait Renderer: Send {
     ) -> Result<Images, RenderError>;
     /// Maps dL/dimages (same layout as the last render's output) to dL/dvertices.
     fn backward(&mut self, d_images: &Images) -> Result<Vec<[f64; 3]>, RenderError>;
+    /// [`backward`](Self::backward) for several image gradients of the same render: one
+    /// dL/dvertices per gradient, in order, each equal to what `backward` returns for it alone.
+    /// The default calls `backward` once per gradient; a backend may share the work that does
+    /// not depend on the gradient (the CPU backend visits every pixel once).
+    fn backward_many(&mut self, d_images: &[&Images]) -> Result<Vec<Vec<[f64; 3]>>, RenderError> {
+        d_images.iter().map(|d| self.backward(d)).collect()
+    }
 }
 
 /// Chooses a backend: returns the renderer and a sentence saying what was chosen and why.

@@ -401,3 +401,58 @@ fn backward_state_bytes_counts_ids_colour_and_mesh_and_clears_on_a_failed_render
     assert!(r.render(&v, &[[0, 1, 9]], &[view], w, h).is_err());
     assert_eq!(r.backward_state_bytes(), 0, "a failed render keeps nothing");
 }
+
+/// `backward_many` shares the per-pixel work between gradients; each result must be what the
+/// gradient alone gives, bit for bit — also where one gradient is zero on pixels the other is not
+/// (the skipped pixels of one gradient must not be skipped for the other).
+#[test]
+fn backward_many_is_one_backward_per_gradient_bit_for_bit() {
+    let (v, f) = mesh_core::shapes::icosphere(2).into_parts();
+    let views = [
+        front_view(2.5, [1.0, 2.0, 3.0]),
+        View {
+            eye: [-0.4, 0.3, -2.6],
+            target: [0.0; 3],
+            up: [0.0, 1.0, 0.0],
+            fov_y_deg: 70.0,
+            light_pos: [-2.0, 0.5, -1.0],
+        },
+    ];
+    let (w, h) = (36, 28);
+    let mut r = CpuRenderer::default();
+    let img = r.render(&v, &f, &views, w, h).expect("render");
+    let grad = |k: usize| Images {
+        rgb: (0..img.rgb.len())
+            .map(|i| {
+                // Gradient 1 is zero on every other pixel (all three channels).
+                if k == 1 && (i / 3) % 2 == 0 {
+                    0.0
+                } else {
+                    (((i * (7 + k) * 7919) % 1000) as f32 / 500.0 - 1.0) * 1e-2
+                }
+            })
+            .collect(),
+        ..img.clone()
+    };
+    let (g0, g1) = (grad(0), grad(1));
+    let alone = [
+        r.backward(&g0).expect("backward"),
+        r.backward(&g1).expect("backward"),
+    ];
+    let many = r.backward_many(&[&g0, &g1, &g0]).expect("backward");
+    assert_eq!(many.len(), 3);
+    assert_eq!(many[0], alone[0]);
+    assert_eq!(many[1], alone[1]);
+    assert_eq!(many[2], alone[0]);
+    assert_ne!(alone[0], alone[1]);
+    assert!(alone[1].iter().flatten().any(|x| *x != 0.0));
+    assert!(r.backward_many(&[]).expect("no gradients").is_empty());
+    // A wrongly shaped gradient among them is an error, not a partial result.
+    let short = Images {
+        rgb: vec![0.0; 3],
+        count: 1,
+        height: 1,
+        width: 1,
+    };
+    assert!(r.backward_many(&[&g0, &short]).is_err());
+}

@@ -19,7 +19,6 @@ use rayon::prelude::*;
 use crate::{Images, RenderError, Renderer, View};
 use antialias::Blend;
 use raster::{Camera, NO_TRIANGLE};
-use shading::Fragment;
 
 /// Options of the CPU renderer.
 #[derive(Clone, Debug, PartialEq)]
@@ -173,9 +172,11 @@ impl CpuRenderer {
                 let proj = raster::project_vertices(&camera, vertices);
                 let (ids, depth) = raster::rasterize(faces, &proj, settings.near, width, height);
                 let mut colour = vec![BACKGROUND; width * height];
+                let mut triangle = TriangleCache::default();
                 for (i, (&t, c)) in ids.iter().zip(colour.iter_mut()).enumerate() {
                     if t != NO_TRIANGLE {
-                        *c = shading::shade(&fragment(&camera, vertices, faces, &vnormals, t, i));
+                        let tri = triangle.get(&camera, vertices, faces, &vnormals, t);
+                        *c = shading::shade_ray(tri, pixel_ray(&camera, i));
                     }
                 }
                 let (blends, out) = if settings.antialias {
@@ -218,61 +219,101 @@ impl CpuRenderer {
 
     /// VJP of the most recent [`render_grey`](Self::render_grey): dL/d(grey) → dL/dvertices.
     pub fn backward_grey(&self, d_grey: &[f64]) -> Result<Vec<[f64; 3]>, RenderError> {
+        let mut out = self.backward_grey_many(&[d_grey])?;
+        Ok(out.pop().unwrap_or_default())
+    }
+
+    /// [`backward_grey`](Self::backward_grey) for several gradients of the same render at once:
+    /// one dL/dvertices per entry of `d_greys`, in order. The per-pixel work that does not depend
+    /// on the gradient (the fragment, the shading and its Jacobian) is done once and shared, so
+    /// two gradients cost much less than two calls. Each result is what a call with that gradient
+    /// alone returns, bit for bit.
+    pub fn backward_grey_many(
+        &self,
+        d_greys: &[&[f64]],
+    ) -> Result<Vec<Vec<[f64; 3]>>, RenderError> {
         let st = self.state.as_ref().ok_or(RenderError::NoForwardState)?;
         let npix = st.width * st.height;
-        if d_grey.len() != st.views.len() * npix {
-            return Err(RenderError::InvalidInput(format!(
-                "gradient has {} values, the last render had {}",
-                d_grey.len(),
-                st.views.len() * npix
-            )));
+        for d_grey in d_greys {
+            if d_grey.len() != st.views.len() * npix {
+                return Err(RenderError::InvalidInput(format!(
+                    "gradient has {} values, the last render had {}",
+                    d_grey.len(),
+                    st.views.len() * npix
+                )));
+            }
         }
         let nv = st.vertices.len();
-        let per_view: Vec<(Vec<DVec3>, Vec<DVec3>)> = st
+        // Per view, per gradient: (dL/dx, dL/dn) accumulated over the view's pixels.
+        let per_view: Vec<Vec<(Vec<DVec3>, Vec<DVec3>)>> = st
             .views
             .par_iter()
             .enumerate()
             .map(|(vi, view)| {
-                let d_out = &d_grey[vi * npix..(vi + 1) * npix];
-                let mut dx = vec![DVec3::ZERO; nv];
-                let mut dn = vec![DVec3::ZERO; nv];
-                let d_colour = if view.blends.is_empty() {
-                    d_out.to_vec()
-                } else {
-                    antialias::apply_adjoint(&view.colour, &view.blends, d_out, &mut dx)
-                };
-                for (i, (&t, &dc)) in view.ids.iter().zip(&d_colour).enumerate() {
-                    if t == NO_TRIANGLE || dc == 0.0 {
+                let mut acc: Vec<(Vec<DVec3>, Vec<DVec3>)> = d_greys
+                    .iter()
+                    .map(|_| (vec![DVec3::ZERO; nv], vec![DVec3::ZERO; nv]))
+                    .collect();
+                let d_colours: Vec<std::borrow::Cow<'_, [f64]>> = d_greys
+                    .iter()
+                    .zip(acc.iter_mut())
+                    .map(|(d_grey, (dx, _))| {
+                        let d_out = &d_grey[vi * npix..(vi + 1) * npix];
+                        if view.blends.is_empty() {
+                            d_out.into()
+                        } else {
+                            antialias::apply_adjoint(&view.colour, &view.blends, d_out, dx).into()
+                        }
+                    })
+                    .collect();
+                let mut triangle = TriangleCache::default();
+                for (i, &t) in view.ids.iter().enumerate() {
+                    if t == NO_TRIANGLE || d_colours.iter().all(|d| d[i] == 0.0) {
                         continue;
                     }
-                    let frag = fragment(&view.camera, &st.vertices, &st.faces, &st.normals, t, i);
-                    let (d_pos, d_nrm) = shading::shade_adjoint(&frag, dc);
+                    let tri = triangle.get(&view.camera, &st.vertices, &st.faces, &st.normals, t);
+                    let ray = pixel_ray(&view.camera, i);
+                    let Some((dc_dx, dc_dn)) = shading::shade_jacobian_ray(tri, ray) else {
+                        continue;
+                    };
                     let f = st.faces[t as usize];
-                    for k in 0..3 {
-                        dx[f[k] as usize] += d_pos[k];
-                        dn[f[k] as usize] += d_nrm[k];
+                    for (d_colour, (dx, dn)) in d_colours.iter().zip(acc.iter_mut()) {
+                        let dc = d_colour[i];
+                        if dc == 0.0 {
+                            continue;
+                        }
+                        for k in 0..3 {
+                            dx[f[k] as usize] += dc_dx[k] * dc;
+                            dn[f[k] as usize] += dc_dn[k] * dc;
+                        }
                     }
                 }
-                (dx, dn)
+                acc
             })
             .collect();
-        let mut dx = vec![DVec3::ZERO; nv];
-        let mut dn = vec![DVec3::ZERO; nv];
-        for (x, n) in &per_view {
-            for v in 0..nv {
-                dx[v] += x[v];
-                dn[v] += n[v];
-            }
-        }
-        normals::smooth_normals_adjoint(
-            &st.vertices,
-            &st.faces,
-            &st.normals,
-            &st.normal_sums,
-            &dn,
-            &mut dx,
-        );
-        Ok(dx.into_iter().map(Into::into).collect())
+        let results = (0..d_greys.len())
+            .map(|g| {
+                let mut dx = vec![DVec3::ZERO; nv];
+                let mut dn = vec![DVec3::ZERO; nv];
+                for view in &per_view {
+                    let (x, n) = &view[g];
+                    for v in 0..nv {
+                        dx[v] += x[v];
+                        dn[v] += n[v];
+                    }
+                }
+                normals::smooth_normals_adjoint(
+                    &st.vertices,
+                    &st.faces,
+                    &st.normals,
+                    &st.normal_sums,
+                    &dn,
+                    &mut dx,
+                );
+                dx.into_iter().map(Into::into).collect()
+            })
+            .collect();
+        Ok(results)
     }
 
     /// Bytes of the state kept from the most recent render for `backward` (0 when there is none):
@@ -310,31 +351,45 @@ impl CpuRenderer {
     }
 }
 
-fn fragment(
-    camera: &Camera,
-    vertices: &[[f64; 3]],
-    faces: &[[u32; 3]],
-    vnormals: &[DVec3],
-    t: u32,
-    pixel: usize,
-) -> Fragment {
-    let f = faces[t as usize];
-    let (col, row) = (pixel % camera.width, pixel / camera.width);
-    Fragment {
-        x: [
-            DVec3::from(vertices[f[0] as usize]),
-            DVec3::from(vertices[f[1] as usize]),
-            DVec3::from(vertices[f[2] as usize]),
-        ],
-        n: [
-            vnormals[f[0] as usize],
-            vnormals[f[1] as usize],
-            vnormals[f[2] as usize],
-        ],
-        eye: camera.eye,
-        light: camera.light,
-        ray: camera.pixel_ray(col as f64 + 0.5, row as f64 + 0.5),
+/// The shading's per-triangle part of the triangle last asked for (pixels come in rows, and a
+/// triangle covers runs of neighbouring pixels).
+#[derive(Default)]
+struct TriangleCache {
+    id: u32,
+    triangle: Option<shading::Triangle>,
+}
+
+impl TriangleCache {
+    /// The per-triangle part of triangle `t` seen from `camera`.
+    fn get(
+        &mut self,
+        camera: &Camera,
+        vertices: &[[f64; 3]],
+        faces: &[[u32; 3]],
+        vnormals: &[DVec3],
+        t: u32,
+    ) -> &shading::Triangle {
+        if self.id != t {
+            self.triangle = None;
+            self.id = t;
+        }
+        self.triangle.get_or_insert_with(|| {
+            let f = faces[t as usize];
+            shading::Triangle::new(
+                f.map(|v| DVec3::from(vertices[v as usize])),
+                f.map(|v| vnormals[v as usize]),
+                camera.eye,
+                camera.light,
+            )
+        })
     }
+}
+
+/// World direction of the centre ray of pixel `pixel` (row-major index within the view).
+#[inline]
+fn pixel_ray(camera: &Camera, pixel: usize) -> DVec3 {
+    let (col, row) = (pixel % camera.width, pixel / camera.width);
+    camera.pixel_ray(col as f64 + 0.5, row as f64 + 0.5)
 }
 
 impl Renderer for CpuRenderer {
@@ -358,5 +413,16 @@ impl Renderer for CpuRenderer {
         let st = self.state.as_ref().ok_or(RenderError::NoForwardState)?;
         let d_grey = d_images.grey_gradient(st.views.len(), st.height, st.width)?;
         self.backward_grey(&d_grey)
+    }
+
+    /// One pass over the pixels for all the gradients ([`CpuRenderer::backward_grey_many`]).
+    fn backward_many(&mut self, d_images: &[&Images]) -> Result<Vec<Vec<[f64; 3]>>, RenderError> {
+        let st = self.state.as_ref().ok_or(RenderError::NoForwardState)?;
+        let d_greys = d_images
+            .iter()
+            .map(|d| d.grey_gradient(st.views.len(), st.height, st.width))
+            .collect::<Result<Vec<_>, _>>()?;
+        let refs: Vec<&[f64]> = d_greys.iter().map(Vec::as_slice).collect();
+        self.backward_grey_many(&refs)
     }
 }

@@ -38,18 +38,56 @@ pub struct Fragment {
     pub ray: DVec3,
 }
 
-struct Forward {
+/// The per-triangle part of the shading of one view: everything that does not depend on the
+/// pixel's ray, computed once for the run of pixels a triangle covers (the renderer keeps the
+/// last one). Every pixel's values are computed with the same operations, in the same order, as
+/// from a [`Fragment`], so they are the same bit for bit.
+#[derive(Clone, Copy, Debug)]
+pub struct Triangle {
+    /// P_i = x_i − eye.
     p: [DVec3; 3],
-    s: f64,
-    w: [f64; 3],
-    ns_raw: DVec3,
-    ns: DVec3,
-    ns_inv: f64,
+    /// P_1 × P_2, P_2 × P_0, P_0 × P_1: a_i = d·(P_j × P_k).
+    p_cross: [DVec3; 3],
+    /// Smooth vertex normals at the corners (unit).
+    n: [DVec3; 3],
     e1: DVec3,
     e2: DVec3,
     g: DVec3,
     ng: DVec3,
     ng_inv: f64,
+    eye: DVec3,
+    light: DVec3,
+}
+
+impl Triangle {
+    /// Corners `x` with smooth normals `n`, seen from `eye`, lit from `light`.
+    pub fn new(x: [DVec3; 3], n: [DVec3; 3], eye: DVec3, light: DVec3) -> Self {
+        let p = [x[0] - eye, x[1] - eye, x[2] - eye];
+        let p_cross = [p[1].cross(p[2]), p[2].cross(p[0]), p[0].cross(p[1])];
+        let (e1, e2) = (p[1] - p[0], p[2] - p[0]);
+        let g = e1.cross(e2);
+        let (ng, ng_inv) = normalize(g);
+        Self {
+            p,
+            p_cross,
+            n,
+            e1,
+            e2,
+            g,
+            ng,
+            ng_inv,
+            eye,
+            light,
+        }
+    }
+}
+
+struct Forward {
+    s: f64,
+    w: [f64; 3],
+    ns_raw: DVec3,
+    ns: DVec3,
+    ns_inv: f64,
     vv: DVec3,
     v: DVec3,
     v_inv: f64,
@@ -63,42 +101,35 @@ struct Forward {
     dot: f64,
 }
 
-fn forward(f: &Fragment) -> Forward {
-    let p = [f.x[0] - f.eye, f.x[1] - f.eye, f.x[2] - f.eye];
+#[inline]
+fn forward(t: &Triangle, ray: DVec3) -> Forward {
+    let p = &t.p;
     let a = [
-        f.ray.dot(p[1].cross(p[2])),
-        f.ray.dot(p[2].cross(p[0])),
-        f.ray.dot(p[0].cross(p[1])),
+        ray.dot(t.p_cross[0]),
+        ray.dot(t.p_cross[1]),
+        ray.dot(t.p_cross[2]),
     ];
     let s = a[0] + a[1] + a[2];
     let w = [a[0] / s, a[1] / s, a[2] / s];
     let q = p[0] * w[0] + p[1] * w[1] + p[2] * w[2];
-    let ns_raw = f.n[0] * w[0] + f.n[1] * w[1] + f.n[2] * w[2];
+    let ns_raw = t.n[0] * w[0] + t.n[1] * w[1] + t.n[2] * w[2];
     let (ns, ns_inv) = normalize(ns_raw);
-    let (e1, e2) = (p[1] - p[0], p[2] - p[0]);
-    let g = e1.cross(e2);
-    let (ng, ng_inv) = normalize(g);
+    let ng = t.ng;
     let vv = -q;
     let (v, v_inv) = normalize(vv);
     let sign = if v.dot(ng) < 0.0 { -1.0 } else { 1.0 };
     let tau_raw = v.dot(ns * sign) / BENT_WIDTH;
     let tau = tau_raw.clamp(0.0, 1.0);
     let n = ng * (sign * (1.0 - tau)) + ns * (sign * tau);
-    let ll = f.light - (f.eye + q);
+    let ll = t.light - (t.eye + q);
     let (l, l_inv) = normalize(ll);
     let dot = n.dot(l);
     Forward {
-        p,
         s,
         w,
         ns_raw,
         ns,
         ns_inv,
-        e1,
-        e2,
-        g,
-        ng,
-        ng_inv,
         vv,
         v,
         v_inv,
@@ -118,21 +149,44 @@ pub const RADIANCE_SCALE: f64 = KD * LIGHT_POWER / std::f64::consts::PI;
 
 /// Shaded grey value of the fragment, in [0, kd·light_power/π] ≈ [0, 0.796].
 pub fn shade(f: &Fragment) -> f64 {
-    RADIANCE_SCALE * forward(f).dot.max(0.0)
+    shade_ray(&Triangle::new(f.x, f.n, f.eye, f.light), f.ray)
 }
 
-/// Adjoint of [`shade`]: given dL/dc returns (dL/dx_i, dL/dn_i) for the three corners.
+/// [`shade`] of the pixel whose centre ray is `ray` on triangle `t`.
+#[inline]
+pub fn shade_ray(t: &Triangle, ray: DVec3) -> f64 {
+    RADIANCE_SCALE * forward(t, ray).dot.max(0.0)
+}
+
+/// Adjoint of [`shade`]: given dL/dc returns (dL/dx_i, dL/dn_i) for the three corners, i.e.
+/// [`shade_jacobian`] times `dc` (zero where the diffuse term is clamped).
+pub fn shade_adjoint(f: &Fragment, dc: f64) -> ([DVec3; 3], [DVec3; 3]) {
+    match shade_jacobian(f) {
+        Some((dp, dn)) if dc != 0.0 => (dp.map(|v| v * dc), dn.map(|v| v * dc)),
+        _ => ([DVec3::ZERO; 3], [DVec3::ZERO; 3]),
+    }
+}
+
+/// The gradient of [`shade`]'s colour c with respect to the corners: (dc/dx_i, dc/dn_i), or
+/// `None` where the diffuse term is clamped (n·l ≤ 0) and c does not depend on the geometry.
+/// The renderer's backward computes it once per pixel and scales it by each image gradient's
+/// dL/dc (the map is linear in dL/dc), so several gradients share the per-pixel work.
 ///
 /// Piecewise choices (the two-sided sign, the clamp of τ and the max in the diffuse term) are
 /// treated as constants; their kinks have measure zero.
-pub fn shade_adjoint(f: &Fragment, dc: f64) -> ([DVec3; 3], [DVec3; 3]) {
-    let fw = forward(f);
+pub fn shade_jacobian(f: &Fragment) -> Option<([DVec3; 3], [DVec3; 3])> {
+    shade_jacobian_ray(&Triangle::new(f.x, f.n, f.eye, f.light), f.ray)
+}
+
+/// [`shade_jacobian`] of the pixel whose centre ray is `ray` on triangle `t`.
+pub fn shade_jacobian_ray(t: &Triangle, ray: DVec3) -> Option<([DVec3; 3], [DVec3; 3])> {
+    let fw = forward(t, ray);
     let mut dp = [DVec3::ZERO; 3];
     let mut dn_corner = [DVec3::ZERO; 3];
-    if fw.dot <= 0.0 || dc == 0.0 {
-        return (dp, dn_corner);
+    if fw.dot <= 0.0 {
+        return None;
     }
-    let ddot = dc * RADIANCE_SCALE;
+    let ddot = RADIANCE_SCALE;
     let dn = fw.l * ddot;
     let dl = fw.n * ddot;
     let dll = normalize_adjoint(fw.ll, fw.l, fw.l_inv, dl);
@@ -140,7 +194,7 @@ pub fn shade_adjoint(f: &Fragment, dc: f64) -> ([DVec3; 3], [DVec3; 3]) {
     let mut dq = -dll;
     // n = sign·((1 − τ) n_g + τ n_s)
     let ns_s = fw.ns * fw.sign;
-    let ng_s = fw.ng * fw.sign;
+    let ng_s = t.ng * fw.sign;
     let dtau = dn.dot(ns_s - ng_s);
     let mut dns_s = dn * fw.tau;
     let dng_s = dn * (1.0 - fw.tau);
@@ -155,8 +209,8 @@ pub fn shade_adjoint(f: &Fragment, dc: f64) -> ([DVec3; 3], [DVec3; 3]) {
     // v = normalize(−q)
     dq -= normalize_adjoint(fw.vv, fw.v, fw.v_inv, dv);
     // n_g = normalize(e1 × e2)
-    let dg = normalize_adjoint(fw.g, fw.ng, fw.ng_inv, dng);
-    let (de1, de2) = cross_adjoint(fw.e1, fw.e2, dg);
+    let dg = normalize_adjoint(t.g, t.ng, t.ng_inv, dng);
+    let (de1, de2) = cross_adjoint(t.e1, t.e2, dg);
     dp[1] += de1;
     dp[2] += de2;
     dp[0] -= de1 + de2;
@@ -165,10 +219,10 @@ pub fn shade_adjoint(f: &Fragment, dc: f64) -> ([DVec3; 3], [DVec3; 3]) {
     let mut dw = [0.0; 3];
     for i in 0..3 {
         dn_corner[i] = dns_raw * fw.w[i];
-        dw[i] += f.n[i].dot(dns_raw);
+        dw[i] += t.n[i].dot(dns_raw);
         // q = Σ w_i P_i
         dp[i] += dq * fw.w[i];
-        dw[i] += fw.p[i].dot(dq);
+        dw[i] += t.p[i].dot(dq);
     }
     // w_i = a_i / S
     let wdw = fw.w[0] * dw[0] + fw.w[1] * dw[1] + fw.w[2] * dw[2];
@@ -177,12 +231,12 @@ pub fn shade_adjoint(f: &Fragment, dc: f64) -> ([DVec3; 3], [DVec3; 3]) {
         (dw[1] - wdw) / fw.s,
         (dw[2] - wdw) / fw.s,
     ];
-    let d = f.ray;
+    let d = ray;
     // a_0 = d·(P1 × P2) = P1·(P2 × d) = P2·(d × P1), and cyclically.
     for i in 0..3 {
         let (j, k) = ((i + 1) % 3, (i + 2) % 3);
-        dp[j] += fw.p[k].cross(d) * da[i];
-        dp[k] += d.cross(fw.p[j]) * da[i];
+        dp[j] += t.p[k].cross(d) * da[i];
+        dp[k] += d.cross(t.p[j]) * da[i];
     }
-    (dp, dn_corner)
+    Some((dp, dn_corner))
 }
