@@ -355,6 +355,20 @@ struct Workspace {
     scratch: Vec<Vec<f32>>,
     /// Per-plane scratch for the planar resizes: (resize intermediate, an output plane).
     plane_scratch: Vec<(Vec<f32>, Vec<f32>)>,
+    /// Which of the buffers derived from the renders alone (no random draw) hold the values of
+    /// the renders last encoded, so that [`Guidance::evaluate_many`] computes them once.
+    derived: Derived,
+}
+
+/// Validity of the render-derived workspace buffers (all false until the renders are encoded).
+#[derive(Clone, Copy, Debug, Default)]
+struct Derived {
+    /// `x` holds 2·R(img) − 1 of the last encoded renders.
+    x: bool,
+    /// `z0` holds D(x).
+    z0: bool,
+    /// `x0` and `z_hat` hold U(x) and U₆₄→₂₅₆(z0).
+    upsampled: bool,
 }
 
 /// Noise into `buf`: the injected values (length checked) or `len` fresh samples from `rng`.
@@ -508,6 +522,7 @@ impl Stages<'_> {
         let (b, pr) = (self.views, self.cfg.resolution * self.cfg.resolution);
         let plane_in = images.height * images.width;
         let ops = self.ops;
+        w.derived = Derived::default();
         w.scratch.resize_with(b, Vec::new);
         w.plane_scratch.resize_with(b * CHANNELS, Default::default);
         w.x.resize(b * CHANNELS * pr, 0.0);
@@ -526,6 +541,7 @@ impl Stages<'_> {
                 })
                 .sum();
         if bad_x == 0 {
+            w.derived.x = true;
             return Ok(());
         }
         let count = crate::count_non_finite(&images.rgb);
@@ -558,11 +574,14 @@ impl Stages<'_> {
         let (cfg, ops, b) = (self.cfg, self.ops, self.views);
         let (r, r1) = (cfg.resolution, cfg.stage1_resolution);
         let (pr, p1) = (r * r, r1 * r1);
-        w.z0.resize(b * CHANNELS * p1, 0.0);
-        w.z0.par_chunks_mut(p1)
-            .zip(w.x.par_chunks(pr))
-            .zip(w.plane_scratch.par_iter_mut())
-            .for_each(|((z, xp), (tmp, _))| ops.down1.apply_plane(xp, z, tmp));
+        if !w.derived.z0 {
+            w.z0.resize(b * CHANNELS * p1, 0.0);
+            w.z0.par_chunks_mut(p1)
+                .zip(w.x.par_chunks(pr))
+                .zip(w.plane_scratch.par_iter_mut())
+                .for_each(|((z, xp), (tmp, _))| ops.down1.apply_plane(xp, z, tmp));
+            w.derived.z0 = true;
+        }
         let n1 = b * CHANNELS * p1;
         let t1 = draw_or_inject(&injected.stage1_timesteps, b, "stage-I timesteps", || {
             cfg.timesteps.sample(b, rng)
@@ -641,17 +660,20 @@ impl Stages<'_> {
         let (r, r1, r2) = (cfg.resolution, cfg.stage1_resolution, cfg.stage2_resolution);
         let (pr, p1, p2) = (r * r, r1 * r1, r2 * r2);
         let n2 = b * CHANNELS * p2;
-        w.x0.resize(n2, 0.0);
-        w.z_hat.resize(n2, 0.0);
-        w.x0.par_chunks_mut(p2)
-            .zip(w.x.par_chunks(pr))
-            .zip(w.z_hat.par_chunks_mut(p2))
-            .zip(w.z0.par_chunks(p1))
-            .zip(w.plane_scratch.par_iter_mut())
-            .for_each(|((((o, xp), zh), zp), (tmp, _))| {
-                ops.up.apply_plane(xp, o, tmp);
-                ops.up_low.apply_plane(zp, zh, tmp);
-            });
+        if !w.derived.upsampled {
+            w.x0.resize(n2, 0.0);
+            w.z_hat.resize(n2, 0.0);
+            w.x0.par_chunks_mut(p2)
+                .zip(w.x.par_chunks(pr))
+                .zip(w.z_hat.par_chunks_mut(p2))
+                .zip(w.z0.par_chunks(p1))
+                .zip(w.plane_scratch.par_iter_mut())
+                .for_each(|((((o, xp), zh), zp), (tmp, _))| {
+                    ops.up.apply_plane(xp, o, tmp);
+                    ops.up_low.apply_plane(zp, zh, tmp);
+                });
+            w.derived.upsampled = true;
+        }
         let t2 = draw_or_inject(&injected.stage2_timesteps, b, "stage-II timesteps", || {
             cfg.timesteps.sample(b, rng)
         })?;
@@ -957,6 +979,11 @@ impl<'m> CascadedGuidance<'m> {
     /// One evaluation into the workspace buffers, stage by stage: encode the renders, stage I,
     /// stage II (when its weight is positive), decode the gradient. Returns the output and what a
     /// trace needs; the denoiser outputs are kept only with `keep_outputs`.
+    ///
+    /// With `reuse_encoding`, `images` must be the renders of the previous call (the caller's
+    /// promise; [`Guidance::evaluate_many`] is the only caller that makes it): x = 2·R(img) − 1
+    /// and the buffers derived from it alone (z0, x0, ẑ) are kept instead of recomputed. They
+    /// involve no random draw, so the results are those of a fresh encoding, bit for bit.
     fn evaluate_core(
         &mut self,
         images: &Images,
@@ -964,6 +991,7 @@ impl<'m> CascadedGuidance<'m> {
         rng: &mut dyn RngCore,
         injected: &InjectedDraws,
         keep_outputs: bool,
+        reuse_encoding: bool,
     ) -> Result<(Core, Stages<'_>, &mut Workspace), GuidanceError> {
         self.check_call(images, stage2_weight)?;
         let input_hw = (images.height, images.width);
@@ -995,7 +1023,9 @@ impl<'m> CascadedGuidance<'m> {
             views: images.count,
             keep_outputs,
         };
-        stages.encode_renders(images, work)?;
+        if !(reuse_encoding && work.derived.x) {
+            stages.encode_renders(images, work)?;
+        }
         let stage1 = stages.stage1(stage1.as_mut(), work, rng, injected)?;
         let stage2 = match stage2 {
             Some(model) if stage2_weight > 0.0 => {
@@ -1032,8 +1062,14 @@ impl<'m> CascadedGuidance<'m> {
         stage2_weight: f64,
         rng: &mut dyn RngCore,
     ) -> Result<GuidanceOutput, GuidanceError> {
-        let (core, _, _) =
-            self.evaluate_core(images, stage2_weight, rng, &InjectedDraws::default(), false)?;
+        let (core, _, _) = self.evaluate_core(
+            images,
+            stage2_weight,
+            rng,
+            &InjectedDraws::default(),
+            false,
+            false,
+        )?;
         Ok(core.output)
     }
 
@@ -1047,7 +1083,7 @@ impl<'m> CascadedGuidance<'m> {
         injected: &InjectedDraws,
     ) -> Result<GuidanceTrace, GuidanceError> {
         let (core, stages, work) =
-            self.evaluate_core(images, stage2_weight, rng, injected, true)?;
+            self.evaluate_core(images, stage2_weight, rng, injected, true, false)?;
         let r = stages.cfg.resolution;
         let shape = [images.count, CHANNELS, r, r];
         Ok(GuidanceTrace {
@@ -1074,5 +1110,31 @@ impl Guidance for CascadedGuidance<'_> {
     ) -> Result<GuidanceOutput, GuidanceError> {
         let weight = self.stage2_weight.at(iteration);
         self.evaluate_with_weight(images, weight, rng)
+    }
+
+    /// Encodes the renders once (x = 2·R(img) − 1, z0, x0, ẑ: no random draws) and runs the
+    /// stages and the gradient decoding `count` times; bit-identical to `count` calls of
+    /// [`Guidance::evaluate`].
+    fn evaluate_many(
+        &mut self,
+        images: &Images,
+        iteration: u64,
+        count: usize,
+        rng: &mut dyn RngCore,
+    ) -> Result<Vec<GuidanceOutput>, GuidanceError> {
+        let weight = self.stage2_weight.at(iteration);
+        (0..count)
+            .map(|k| {
+                let (core, _, _) = self.evaluate_core(
+                    images,
+                    weight,
+                    rng,
+                    &InjectedDraws::default(),
+                    false,
+                    k > 0,
+                )?;
+                Ok(core.output)
+            })
+            .collect()
     }
 }

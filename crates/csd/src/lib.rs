@@ -215,4 +215,22 @@ pub trait Guidance: Send {
         iteration: u64,
         rng: &mut dyn rand::RngCore,
     ) -> Result<GuidanceOutput, GuidanceError>;
+
+    /// `count` independent evaluations of the same `images` at `iteration`, drawing their
+    /// randomness from `rng` one evaluation after the other: the same outputs, in the same order,
+    /// as `count` calls of [`Guidance::evaluate`] (the default does exactly that). An
+    /// implementation may share the work that depends on the images alone — [`CascadedGuidance`]
+    /// encodes the renders once. The loop asks for all the sub-steps of an iteration at once
+    /// (they see the same renders), so that the renderer's backward can run them together.
+    fn evaluate_many(
+        &mut self,
+        images: &Images,
+        iteration: u64,
+        count: usize,
+        rng: &mut dyn rand::RngCore,
+    ) -> Result<Vec<GuidanceOutput>, GuidanceError> {
+        (0..count)
+            .map(|_| self.evaluate(images, iteration, rng))
+            .collect()
+    }
 }

@@ -1111,3 +1111,79 @@ fn guidances_can_borrow_their_denoisers_one_after_another() {
     }
     assert_eq!((unet1.calls, unet2.calls), (2, 2));
 }
+
+/// A denoiser whose prediction is half its input's first three channels: its output depends on
+/// everything the guidance feeds it (renders, noise, timesteps through the noised sample).
+fn echo() -> Box<dyn Denoiser> {
+    Fake::boxed(|s: &Tensor, _: &[i64]| {
+        let (c_in, plane) = (s.shape[1], s.shape[2] * s.shape[3]);
+        let data = s.data.clone();
+        output(s, move |n, c, p| 0.5 * data[(n * c_in + c) * plane + p])
+    })
+    .0
+}
+
+#[test]
+fn evaluate_many_is_that_many_evaluations_in_sequence_bit_for_bit() {
+    use csd::Guidance;
+    let (views, h, w) = (2, 40, 36);
+    let a = imgs(&renders(views, h, w), views, h, w);
+    let b = imgs(
+        &renders(views, h, w)
+            .iter()
+            .map(|v| 1.0 - v)
+            .collect::<Vec<_>>(),
+        views,
+        h,
+        w,
+    );
+    let make = || {
+        let (cond, uncond) = embeddings();
+        CascadedGuidance::new(
+            echo(),
+            Some(echo()),
+            cond,
+            uncond,
+            GuidanceConfig::default(),
+        )
+        .expect("valid")
+        .with_stage2_weight(optim::Schedule::constant(0.25))
+    };
+    // Sequence: b once (so that the workspace holds another batch's encoding), then 3 × a, then b.
+    let mut one_by_one = make();
+    let mut rng = ChaCha8Rng::seed_from_u64(11);
+    let mut expected = vec![one_by_one.evaluate(&b, 7, &mut rng).expect("runs")];
+    for _ in 0..3 {
+        expected.push(one_by_one.evaluate(&a, 7, &mut rng).expect("runs"));
+    }
+    expected.push(one_by_one.evaluate(&b, 7, &mut rng).expect("runs"));
+
+    let mut batched = make();
+    let mut rng2 = ChaCha8Rng::seed_from_u64(11);
+    let mut got = batched.evaluate_many(&b, 7, 1, &mut rng2).expect("runs");
+    got.extend(batched.evaluate_many(&a, 7, 3, &mut rng2).expect("runs"));
+    got.extend(batched.evaluate_many(&b, 7, 1, &mut rng2).expect("runs"));
+    assert_eq!(got.len(), expected.len());
+    for (k, (g, e)) in got.iter().zip(&expected).enumerate() {
+        assert_eq!(g.grad_images, e.grad_images, "evaluation {k}");
+        assert_eq!(
+            (g.loss_stage1, g.loss_stage2, g.stage2_weight),
+            (e.loss_stage1, e.loss_stage2, e.stage2_weight),
+            "evaluation {k}"
+        );
+    }
+    // Fresh draws per evaluation: the three evaluations of `a` differ.
+    assert_ne!(got[1].grad_images, got[2].grad_images);
+    assert!(got[1].loss_stage2 > 0.0);
+    // Both generators end in the same state.
+    assert_eq!(
+        rand::RngCore::next_u64(&mut rng),
+        rand::RngCore::next_u64(&mut rng2)
+    );
+    assert!(
+        batched
+            .evaluate_many(&a, 7, 0, &mut rng2)
+            .expect("runs")
+            .is_empty()
+    );
+}
