@@ -57,6 +57,8 @@ fn private_runtime_dir() -> Option<tempfile::TempDir> {
 }
 
 fn main() -> std::process::ExitCode {
+    // Before any thread allocates: the loop's large buffers are reused, not page-faulted in anew.
+    stylize::malloc::retain_freed_buffers();
     let _runtime_dir = private_runtime_dir();
     let cli = Cli::parse();
     let result = match cli.command {

@@ -422,3 +422,118 @@ fn text_path_honours_a_feathered_region_adam_leaves_outside_targets_at_rest() {
         );
     }
 }
+
+/// A denoiser predicting half of its input's first three channels plus a per-channel offset
+/// (IF-shaped output, 6 channels): its output depends on the renders, the noise and the timesteps.
+struct Echo;
+
+impl csd::Denoiser for Echo {
+    fn predict(
+        &mut self,
+        sample: &csd::Tensor,
+        _timesteps: &[i64],
+        _embeddings: &[&csd::Embedding],
+        _class_labels: Option<&[i64]>,
+    ) -> Result<csd::Tensor, GuidanceError> {
+        let (n, c_in) = (sample.shape[0], sample.shape[1]);
+        let plane = sample.shape[2] * sample.shape[3];
+        let mut data = vec![0.0f32; n * 6 * plane];
+        for s in 0..n {
+            for c in 0..3 {
+                for p in 0..plane {
+                    data[(s * 6 + c) * plane + p] =
+                        0.5 * sample.data[(s * c_in + c) * plane + p] + 0.01 * c as f32;
+                }
+            }
+        }
+        Ok(csd::Tensor {
+            shape: vec![n, 6, sample.shape[2], sample.shape[3]],
+            data,
+        })
+    }
+}
+
+/// Forwards `evaluate` only, so the loop takes the trait's default `evaluate_batch`: one
+/// sub-step after the other, each with its own guidance call and renderer backward.
+struct OneByOne(TextObjective<'static>);
+
+impl Objective for OneByOne {
+    fn describe(&self) -> String {
+        self.0.describe()
+    }
+    fn evaluate(
+        &mut self,
+        iteration: u64,
+        substep: u32,
+        deformed: &[[f64; 3]],
+        rng: &mut ChaCha8Rng,
+    ) -> stylize::Result<StepEval> {
+        self.0.evaluate(iteration, substep, deformed, rng)
+    }
+}
+
+/// The loop evaluates an iteration's sub-steps together (one encoding of the renders in
+/// `CascadedGuidance::evaluate_many`, one `CpuRenderer::backward_many` pass): the optimization
+/// must be the sub-step-by-sub-step one, bit for bit, with both guidance stages running.
+#[test]
+fn batched_sub_steps_equal_sub_steps_one_by_one_bit_for_bit() {
+    let darap = layer();
+    let objective = || {
+        let embedding = |sign: f32| csd::Embedding {
+            shape: [2, 3],
+            data: (1..=6).map(|v| sign * v as f32).collect(),
+        };
+        let guidance = ok(csd::CascadedGuidance::new(
+            Box::new(Echo),
+            Some(Box::new(Echo)),
+            embedding(1.0),
+            embedding(-1.0),
+            csd::GuidanceConfig::default(),
+        ))
+        .with_stage2_weight(Schedule::constant(0.25));
+        TextObjective::new(
+            Box::new(CpuRenderer::default()),
+            Box::new(guidance),
+            &faces(),
+            views(),
+        )
+    };
+    let spec = LoopSpec {
+        iterations: 3,
+        steps_per_batch: 2,
+        checkpoint_every: 0,
+        preview_every: 0,
+        halt_after: None,
+    };
+    let run = |obj: &mut dyn Objective| {
+        let mut state = LoopState {
+            iteration: 0,
+            x: darap.rest_normals().to_vec(),
+            adam: ok(Adam::new(
+                3 * darap.num_vertices(),
+                AdamConfig {
+                    lr: 0.05,
+                    ..AdamConfig::default()
+                },
+            )),
+            rng: ChaCha8Rng::seed_from_u64(8),
+        };
+        let mut records = Records::default();
+        ok(run_loop(&darap, &spec, &mut state, obj, &mut records));
+        (state, records)
+    };
+    let (batched, batched_records) = run(&mut objective());
+    let (one_by_one, one_by_one_records) = run(&mut OneByOne(objective()));
+    assert!(batched.x == one_by_one.x, "x differs");
+    assert!(batched.adam == one_by_one.adam, "Adam state differs");
+    assert!(batched.x != darap.rest_normals(), "x did not move");
+    let terms = |r: &Records| r.0.iter().map(|r| r.terms.clone()).collect::<Vec<_>>();
+    assert_eq!(terms(&batched_records), terms(&one_by_one_records));
+    assert!(
+        batched_records.0[0]
+            .terms
+            .iter()
+            .any(|t| t.0 == "loss_stage2" && t.1 > 0.0),
+        "stage II ran"
+    );
+}

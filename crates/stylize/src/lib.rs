@@ -12,7 +12,9 @@
 //! - [`saved`]: the reference's saved-deformation `.npz`; [`snapshots`]: the deformed mesh along
 //!   the run, for replay; [`run_pictures`]: the before/after sheet and the turntable (PNG, GIF);
 //! - [`models`]: DeepFloyd IF guidance from a model directory; [`eval`]: metrics of finished runs;
-//! - [`error`]: the typed [`Error`] every public function returns.
+//! - [`error`]: the typed [`Error`] every public function returns;
+//! - [`malloc`]: the C allocator's policy that keeps the loop's large per-iteration buffers from
+//!   being page-faulted in anew every iteration (for programs that run the loop).
 //!
 //! The command line (`stylize-cli`) adds argument parsing, config files, progress display and
 //! batches; this crate depends on nothing of that kind (`cargo xtask check-deps`).
@@ -24,6 +26,7 @@ pub mod error;
 pub mod eval;
 pub mod identity;
 pub mod lock;
+pub mod malloc;
 pub mod models;
 pub mod pipeline;
 pub mod run_pictures;

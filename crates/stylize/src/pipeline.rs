@@ -7,6 +7,11 @@
 //! two steps: step 1 uses `g1`, step 2 uses `g1 + g2`, both evaluated at the pre-step `x` (spec §5,
 //! `n_accum = 2`). Adam's step counter therefore advances by `steps_per_batch` per iteration.
 //!
+//! Since every sub-step sees the same deformed mesh, the loop asks for all of an iteration's
+//! `∂ℓ_s/∂positions` at once ([`Objective::evaluate_batch`]) before its first Adam step: the text
+//! objective then runs the guidance for every sub-step on one encoding of the renders and maps the
+//! image gradients back in one renderer pass, and an error in any sub-step leaves `x` untouched.
+//!
 //! Everything random (views, lights, timesteps, noise) comes from one `ChaCha8Rng` that is saved
 //! in checkpoints, so a resumed run continues bit-identically.
 
@@ -45,6 +50,21 @@ pub trait Objective {
         deformed: &[[f64; 3]],
         rng: &mut ChaCha8Rng,
     ) -> Result<StepEval>;
+    /// Sub-steps `0..count` of `iteration`, all at the same `deformed` positions, in order: the
+    /// same results as `count` calls of [`Objective::evaluate`] with sub-steps 0, 1, … (the
+    /// default makes exactly those calls). [`run_loop`] calls this once per iteration, before any
+    /// Adam step, so that an objective can share work between the sub-steps.
+    fn evaluate_batch(
+        &mut self,
+        iteration: u64,
+        count: u32,
+        deformed: &[[f64; 3]],
+        rng: &mut ChaCha8Rng,
+    ) -> Result<Vec<StepEval>> {
+        (0..count)
+            .map(|substep| self.evaluate(iteration, substep, deformed, rng))
+            .collect()
+    }
     /// The images of the current iteration, if the objective renders any (for previews).
     fn current_images(&self) -> Option<&Images> {
         None
@@ -184,11 +204,23 @@ pub fn run_loop(
         record
             .timings
             .push(("darap_forward", start.elapsed().as_secs_f64()));
+        let evals = objective
+            .evaluate_batch(
+                iteration,
+                spec.steps_per_batch,
+                &deformation.positions,
+                &mut state.rng,
+            )
+            .with_context(|| format!("objective at iteration {iteration}"))?;
+        if evals.len() != spec.steps_per_batch as usize {
+            invalid!(
+                "the objective returned {} sub-step gradients for {} sub-steps",
+                evals.len(),
+                spec.steps_per_batch
+            );
+        }
         let mut grad = vec![[0.0; 3]; n];
-        for substep in 0..spec.steps_per_batch {
-            let ev = objective
-                .evaluate(iteration, substep, &deformation.positions, &mut state.rng)
-                .with_context(|| format!("objective at iteration {iteration}"))?;
+        for ev in evals {
             for &(name, v) in &ev.terms {
                 add_term(&mut record.terms, name, v, name.starts_with("loss"));
             }
@@ -359,6 +391,105 @@ impl<'g> TextObjective<'g> {
             images: None,
         }
     }
+
+    /// Samples the iteration's views (distance × [`raster_diff::adapt_multiplier`] of the deformed
+    /// mesh from iteration 2 on) and renders them.
+    fn render(
+        &mut self,
+        iteration: u64,
+        deformed: &[[f64; 3]],
+        rng: &mut ChaCha8Rng,
+        timings: &mut Vec<(&'static str, f64)>,
+    ) -> Result<()> {
+        let t = Instant::now();
+        let v = &self.views;
+        let multiplier = if v.adapt_distance && iteration >= 2 {
+            raster_diff::adapt_multiplier(deformed)
+        } else {
+            1.0
+        };
+        let views = raster_diff::sample_views(&v.camera, v.views, multiplier, rng);
+        self.images = None;
+        let images = self
+            .renderer
+            .render(deformed, &self.faces, &views, v.width, v.height)
+            .context("render")?;
+        self.images = Some(images);
+        timings.push(("render", t.elapsed().as_secs_f64()));
+        Ok(())
+    }
+
+    /// `count` guidance evaluations on the current renders and their position gradients;
+    /// `timings` (the render's, if any) and the shared work's go with the first result.
+    fn guide(
+        &mut self,
+        iteration: u64,
+        count: u32,
+        rng: &mut ChaCha8Rng,
+        mut timings: Vec<(&'static str, f64)>,
+    ) -> Result<Vec<StepEval>> {
+        let Some(images) = &self.images else {
+            invalid!("no renders")
+        };
+        let t = Instant::now();
+        let outs = self
+            .guidance
+            .evaluate_many(images, iteration, count as usize, rng)
+            .context("guidance")?;
+        timings.push(("guidance", t.elapsed().as_secs_f64()));
+        timings.push((
+            "guidance_denoiser",
+            outs.iter().map(|o| o.denoiser_seconds).sum(),
+        ));
+        if outs.len() != count as usize {
+            invalid!(
+                "guidance returned {} evaluations for {count} sub-steps",
+                outs.len()
+            );
+        }
+        for out in &outs {
+            if !out.grad_images.same_shape(images) {
+                invalid!(
+                    "guidance returned {} gradient values for {} image values",
+                    out.grad_images.rgb.len(),
+                    images.rgb.len()
+                );
+            }
+        }
+        let t = Instant::now();
+        let d_images: Vec<&Images> = outs.iter().map(|o| &o.grad_images).collect();
+        let grads = self
+            .renderer
+            .backward_many(&d_images)
+            .context("renderer backward")?;
+        timings.push(("render_backward", t.elapsed().as_secs_f64()));
+        if grads.len() != outs.len() {
+            invalid!(
+                "the renderer returned {} gradients for {} image gradients",
+                grads.len(),
+                outs.len()
+            );
+        }
+        Ok(outs
+            .iter()
+            .zip(grads)
+            .enumerate()
+            .map(|(k, (out, grad_positions))| StepEval {
+                terms: vec![
+                    ("loss", out.loss_stage1 + out.loss_stage2),
+                    ("loss_stage1", out.loss_stage1),
+                    ("loss_stage2", out.loss_stage2),
+                    ("stage2_weight", out.stage2_weight),
+                ],
+                timings: if k == 0 {
+                    std::mem::take(&mut timings)
+                } else {
+                    Vec::new()
+                },
+                grad_positions,
+            })
+            .collect())
+    }
 }
 
 impl Objective for TextObjective<'_> {
@@ -378,55 +509,32 @@ impl Objective for TextObjective<'_> {
         rng: &mut ChaCha8Rng,
     ) -> Result<StepEval> {
         let mut timings = Vec::new();
-        let v = &self.views;
         if substep == 0 || self.images.is_none() {
-            let t = Instant::now();
-            let multiplier = if v.adapt_distance && iteration >= 2 {
-                raster_diff::adapt_multiplier(deformed)
-            } else {
-                1.0
-            };
-            let views = raster_diff::sample_views(&v.camera, v.views, multiplier, rng);
-            let images = self
-                .renderer
-                .render(deformed, &self.faces, &views, v.width, v.height)
-                .context("render")?;
-            self.images = Some(images);
-            timings.push(("render", t.elapsed().as_secs_f64()));
+            self.render(iteration, deformed, rng, &mut timings)?;
         }
-        let Some(images) = &self.images else {
-            invalid!("no renders")
+        let Some(ev) = self.guide(iteration, 1, rng, timings)?.pop() else {
+            invalid!("the guidance evaluated no sub-step")
         };
-        let t = Instant::now();
-        let out = self
-            .guidance
-            .evaluate(images, iteration, rng)
-            .context("guidance")?;
-        timings.push(("guidance", t.elapsed().as_secs_f64()));
-        timings.push(("guidance_denoiser", out.denoiser_seconds));
-        if !out.grad_images.same_shape(images) {
-            invalid!(
-                "guidance returned {} gradient values for {} image values",
-                out.grad_images.rgb.len(),
-                images.rgb.len()
-            );
+        Ok(ev)
+    }
+
+    /// Renders once, evaluates the guidance `count` times on those renders
+    /// ([`Guidance::evaluate_many`]: one encoding of the renders) and maps all the image
+    /// gradients back in one renderer pass ([`Renderer::backward_many`]). The timings of the
+    /// shared work are reported with sub-step 0.
+    fn evaluate_batch(
+        &mut self,
+        iteration: u64,
+        count: u32,
+        deformed: &[[f64; 3]],
+        rng: &mut ChaCha8Rng,
+    ) -> Result<Vec<StepEval>> {
+        if count == 0 {
+            return Ok(Vec::new());
         }
-        let t = Instant::now();
-        let grad_positions = self
-            .renderer
-            .backward(&out.grad_images)
-            .context("renderer backward")?;
-        timings.push(("render_backward", t.elapsed().as_secs_f64()));
-        Ok(StepEval {
-            terms: vec![
-                ("loss", out.loss_stage1 + out.loss_stage2),
-                ("loss_stage1", out.loss_stage1),
-                ("loss_stage2", out.loss_stage2),
-                ("stage2_weight", out.stage2_weight),
-            ],
-            timings,
-            grad_positions,
-        })
+        let mut timings = Vec::new();
+        self.render(iteration, deformed, rng, &mut timings)?;
+        self.guide(iteration, count, rng, timings)
     }
 
     fn current_images(&self) -> Option<&Images> {
