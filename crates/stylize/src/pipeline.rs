@@ -10,7 +10,8 @@
 //! Since every sub-step sees the same deformed mesh, the loop asks for all of an iteration's
 //! `∂ℓ_s/∂positions` at once ([`Objective::evaluate_batch`]) before its first Adam step: the text
 //! objective then runs the guidance for every sub-step on one encoding of the renders and maps the
-//! image gradients back in one renderer pass, and an error in any sub-step leaves `x` untouched.
+//! image gradients back in one renderer pass, and an objective error in any sub-step leaves `x`
+//! untouched (a dARAP backward error can still come after an earlier sub-step's Adam step).
 //!
 //! Everything random (views, lights, timesteps, noise) comes from one `ChaCha8Rng` that is saved
 //! in checkpoints, so a resumed run continues bit-identically.
