@@ -176,7 +176,7 @@ impl CpuRenderer {
                 for (i, (&t, c)) in ids.iter().zip(colour.iter_mut()).enumerate() {
                     if t != NO_TRIANGLE {
                         let tri = triangle.get(&camera, vertices, faces, &vnormals, t);
-                        *c = shading::shade_ray(tri, pixel_ray(&camera, i));
+                        *c = shading::shade(tri, pixel_ray(&camera, i));
                     }
                 }
                 let (blends, out) = if settings.antialias {
@@ -273,7 +273,7 @@ impl CpuRenderer {
                     }
                     let tri = triangle.get(&view.camera, &st.vertices, &st.faces, &st.normals, t);
                     let ray = pixel_ray(&view.camera, i);
-                    let Some((dc_dx, dc_dn)) = shading::shade_jacobian_ray(tri, ray) else {
+                    let Some((dc_dx, dc_dn)) = shading::shade_jacobian(tri, ray) else {
                         continue;
                     };
                     let f = st.faces[t as usize];

@@ -23,25 +23,9 @@ pub const LIGHT_POWER: f64 = 5.0;
 /// Width of the bent-normal blend in v·n_s.
 pub const BENT_WIDTH: f64 = 0.1;
 
-/// Geometry of one shaded pixel.
-#[derive(Clone, Copy, Debug)]
-pub struct Fragment {
-    /// Face corner positions.
-    pub x: [DVec3; 3],
-    /// Smooth vertex normals at the corners (unit).
-    pub n: [DVec3; 3],
-    /// Camera position.
-    pub eye: DVec3,
-    /// Light position.
-    pub light: DVec3,
-    /// World direction of the pixel-centre ray (any length).
-    pub ray: DVec3,
-}
-
 /// The per-triangle part of the shading of one view: everything that does not depend on the
-/// pixel's ray, computed once for the run of pixels a triangle covers (the renderer keeps the
-/// last one). Every pixel's values are computed with the same operations, in the same order, as
-/// from a [`Fragment`], so they are the same bit for bit.
+/// pixel's ray (P_i, their cross products, the face normal), computed once for the run of pixels
+/// a triangle covers (the renderer keeps the last one).
 #[derive(Clone, Copy, Debug)]
 pub struct Triangle {
     /// P_i = x_i − eye.
@@ -147,39 +131,22 @@ fn forward(t: &Triangle, ray: DVec3) -> Forward {
 /// Scale from max(n·l, 0) to colour: kd · light_power / π.
 pub const RADIANCE_SCALE: f64 = KD * LIGHT_POWER / std::f64::consts::PI;
 
-/// Shaded grey value of the fragment, in [0, kd·light_power/π] ≈ [0, 0.796].
-pub fn shade(f: &Fragment) -> f64 {
-    shade_ray(&Triangle::new(f.x, f.n, f.eye, f.light), f.ray)
-}
-
-/// [`shade`] of the pixel whose centre ray is `ray` on triangle `t`.
+/// Shaded grey value, in [0, kd·light_power/π] ≈ [0, 0.796], of the pixel whose centre ray
+/// (world direction, any length) is `ray` on triangle `t`.
 #[inline]
-pub fn shade_ray(t: &Triangle, ray: DVec3) -> f64 {
+pub fn shade(t: &Triangle, ray: DVec3) -> f64 {
     RADIANCE_SCALE * forward(t, ray).dot.max(0.0)
-}
-
-/// Adjoint of [`shade`]: given dL/dc returns (dL/dx_i, dL/dn_i) for the three corners, i.e.
-/// [`shade_jacobian`] times `dc` (zero where the diffuse term is clamped).
-pub fn shade_adjoint(f: &Fragment, dc: f64) -> ([DVec3; 3], [DVec3; 3]) {
-    match shade_jacobian(f) {
-        Some((dp, dn)) if dc != 0.0 => (dp.map(|v| v * dc), dn.map(|v| v * dc)),
-        _ => ([DVec3::ZERO; 3], [DVec3::ZERO; 3]),
-    }
 }
 
 /// The gradient of [`shade`]'s colour c with respect to the corners: (dc/dx_i, dc/dn_i), or
 /// `None` where the diffuse term is clamped (n·l ≤ 0) and c does not depend on the geometry.
-/// The renderer's backward computes it once per pixel and scales it by each image gradient's
-/// dL/dc (the map is linear in dL/dc), so several gradients share the per-pixel work.
+/// The adjoint for dL/dc is this times dL/dc (the map is linear in it): the renderer's backward
+/// computes it once per pixel and scales it by each image gradient's dL/dc, so several
+/// gradients share the per-pixel work.
 ///
 /// Piecewise choices (the two-sided sign, the clamp of τ and the max in the diffuse term) are
 /// treated as constants; their kinks have measure zero.
-pub fn shade_jacobian(f: &Fragment) -> Option<([DVec3; 3], [DVec3; 3])> {
-    shade_jacobian_ray(&Triangle::new(f.x, f.n, f.eye, f.light), f.ray)
-}
-
-/// [`shade_jacobian`] of the pixel whose centre ray is `ray` on triangle `t`.
-pub fn shade_jacobian_ray(t: &Triangle, ray: DVec3) -> Option<([DVec3; 3], [DVec3; 3])> {
+pub fn shade_jacobian(t: &Triangle, ray: DVec3) -> Option<([DVec3; 3], [DVec3; 3])> {
     let fw = forward(t, ray);
     let mut dp = [DVec3::ZERO; 3];
     let mut dn_corner = [DVec3::ZERO; 3];

@@ -24,7 +24,7 @@
 //! Per `backward` (the VJP of the most recent `render`, repeatable):
 //! - **GPU**: `antialias_backward` over the boundary list (dL/d(colour) by gather, and the
 //!   visibility gradient dL/dα · dα/dx of each blend, added by its target pixel), then
-//!   `shade_backward` over the covered list (port of `shading::shade_adjoint`), both adding into per-vertex dL/dx and dL/dn (smooth normal)
+//!   `shade_backward` over the covered list (port of `shading::shade_jacobian` times dL/dc), both adding into per-vertex dL/dx and dL/dn (smooth normal)
 //!   buffers with f32 atomic adds (compare-exchange loops on the bit patterns, `grad.wgsl`).
 //! - **CPU (f64)**: the adjoint of the smooth normals, which turns dL/dn into dL/dx.
 //!

@@ -1,5 +1,5 @@
 //! Host side of `shade.wgsl`: `shade` over the covered list (the CPU `shading::shade` math per
-//! pixel) and `shade_backward` (port of `shading::shade_adjoint`), which adds into the per-vertex
+//! pixel) and `shade_backward` (port of `shading::shade_jacobian` times dL/dc), which adds into the per-vertex
 //! dL/dx and dL/dn buffers.
 
 use super::buffers::{

@@ -1,5 +1,5 @@
 // Shading pass and its adjoint (prefixed with common.wgsl and grad.wgsl), one invocation per
-// pixel — gid.x column, gid.y row, gid.z view — the math of cpu::shading::shade / shade_adjoint
+// pixel — gid.x column, gid.y row, gid.z view — the math of cpu::shading::shade / shade_jacobian (times dL/dc)
 // in f32: ray barycentrics a_i = d·(P_j × P_k) with P_i = x_i − eye, w_i = a_i / Σa;
 // q = Σ w_i P_i; n_s = normalize(Σ w_i n_i); n_g = normalize((x_1 − x_0) × (x_2 − x_0));
 // v = normalize(−q); two-sided flip when v·n_g < 0; τ = clamp(v·n_s / 0.1, 0, 1);
