@@ -121,10 +121,8 @@ impl Images {
     /// RGB images from grey values laid out `(view, row, column)`: each grey value fills all three
     /// channels (the reference shading is grey: kd is the same in every channel).
     pub fn from_grey(count: usize, height: usize, width: usize, grey: &[f64]) -> Self {
-        let mut rgb = Vec::with_capacity(grey.len() * CHANNELS);
-        for &g in grey {
-            rgb.extend_from_slice(&[g as f32; CHANNELS]);
-        }
+        let mut rgb = vec![0.0; grey.len() * CHANNELS];
+        grey_to_rgb(grey, &mut rgb);
         Self {
             count,
             height,
@@ -142,6 +140,18 @@ impl Images {
         height: usize,
         width: usize,
     ) -> Result<Vec<f64>, ImagesError> {
+        self.check_gradient_shape(count, height, width)?;
+        Ok(grey_sums(&self.rgb))
+    }
+
+    /// Checks that these dL/d(RGB) images have the shape of the render they belong to (`count`
+    /// views of `height`×`width`), as [`Images::grey_gradient`] does.
+    pub fn check_gradient_shape(
+        &self,
+        count: usize,
+        height: usize,
+        width: usize,
+    ) -> Result<(), ImagesError> {
         if (self.count, self.height, self.width) != (count, height, width) {
             return Err(ImagesError::ShapeMismatch {
                 got: (self.count, self.height, self.width),
@@ -151,12 +161,30 @@ impl Images {
         if self.rgb.len() != count * height * width * CHANNELS {
             return Err(ImagesError::GradientLength);
         }
-        Ok(self
-            .rgb
-            .chunks_exact(CHANNELS)
-            .map(|c| f64::from(c[0]) + f64::from(c[1]) + f64::from(c[2]))
-            .collect())
+        Ok(())
     }
+
+    /// dL/d(grey) of view `index` alone, `(row, column)`: the part of
+    /// [`Images::grey_gradient`] that belongs to that view (empty when `index` is out of range).
+    pub fn view_grey_gradient(&self, index: usize) -> Vec<f64> {
+        grey_sums(self.view(index))
+    }
+}
+
+/// Writes grey values into RGB pixels, `rgb[3i + c] = grey[i] as f32` for every channel `c`
+/// (what [`Images::from_grey`] does, for a caller that owns the destination, e.g. one view's
+/// slice of a batch filled in parallel). Stops at the shorter of the two.
+pub fn grey_to_rgb(grey: &[f64], rgb: &mut [f32]) {
+    for (&g, px) in grey.iter().zip(rgb.chunks_exact_mut(CHANNELS)) {
+        px.fill(g as f32);
+    }
+}
+
+/// Per pixel, the sum of its three channels in f64.
+fn grey_sums(rgb: &[f32]) -> Vec<f64> {
+    rgb.chunks_exact(CHANNELS)
+        .map(|c| f64::from(c[0]) + f64::from(c[1]) + f64::from(c[2]))
+        .collect()
 }
 
 #[cfg(test)]

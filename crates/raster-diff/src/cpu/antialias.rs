@@ -93,16 +93,27 @@ pub fn find_blends(
     ids: &[u32],
     depth: &[f64],
 ) -> Vec<Blend> {
-    let facing = |f: u32| {
-        let x0 = DVec3::from(vertices[faces[f as usize][0] as usize]);
-        front_facing(face_raw[f as usize], x0, camera.eye)
-    };
-    let silhouette = |f: u32, k: usize| -> bool {
-        match adjacency[f as usize][k] {
-            BOUNDARY_EDGE | NON_MANIFOLD_EDGE => true,
-            other => facing(f) != facing(other),
-        }
-    };
+    // Per face, which of its edges are silhouettes from this eye (bit k: edge f[k] → f[k+1]),
+    // decided once per view: most pixel pairs with different ids lie inside the surface, on
+    // triangles without a silhouette edge, and are skipped on one load.
+    let facing: Vec<bool> = faces
+        .iter()
+        .zip(face_raw)
+        .map(|(f, &g)| front_facing(g, DVec3::from(vertices[f[0] as usize]), camera.eye))
+        .collect();
+    let silhouettes: Vec<u8> = adjacency
+        .iter()
+        .zip(&facing)
+        .map(|(adj, &front)| {
+            (0..3).fold(0u8, |mask, k| {
+                let silhouette = match adj[k] {
+                    BOUNDARY_EDGE | NON_MANIFOLD_EDGE => true,
+                    other => front != facing[other as usize],
+                };
+                mask | (u8::from(silhouette) << k)
+            })
+        })
+        .collect();
     let (w, h) = (camera.width, camera.height);
     let mut blends = Vec::new();
     // Candidate pairs (pixel a, axis): axis 0 pairs a with its right neighbour, axis 1 with the
@@ -130,11 +141,15 @@ pub fn find_blends(
         let a_front = ib == NO_TRIANGLE || (ia != NO_TRIANGLE && depth[a] <= depth[b]);
         let (front, other) = if a_front { (a, b) } else { (b, a) };
         let tri = ids[front];
+        let mask = silhouettes[tri as usize];
+        if mask == 0 {
+            continue;
+        }
         let centre = |p: usize| [(p % w) as f64 + 0.5, (p / w) as f64 + 0.5];
         let (cf, co) = (centre(front), centre(other));
         let face = faces[tri as usize];
         for k in 0..3 {
-            if !silhouette(tri, k) {
+            if mask & (1 << k) == 0 {
                 continue;
             }
             let (va, vb) = (face[k], face[(k + 1) % 3]);

@@ -13,6 +13,8 @@ pub mod normals;
 pub mod raster;
 pub mod shading;
 
+use std::borrow::Cow;
+
 use glam::DVec3;
 use rayon::prelude::*;
 
@@ -152,7 +154,36 @@ impl CpuRenderer {
         width: usize,
         height: usize,
     ) -> Result<Vec<f64>, RenderError> {
+        let mut grey = Vec::new();
+        self.render_into(
+            vertices,
+            faces,
+            views,
+            (width, height),
+            1,
+            &mut grey,
+            |g, d| d.copy_from_slice(g),
+        )?;
+        Ok(grey)
+    }
+
+    /// The render, written view by view (in parallel) into `out`: `values_per_pixel` values of
+    /// type `T` per pixel, `(view, row, column, value)`, which `write` makes from one view's
+    /// antialiased grey values. `out` is replaced (left empty on error); keeps the state for
+    /// `backward`.
+    #[allow(clippy::too_many_arguments)]
+    fn render_into<T: Copy + Default + Send + Sync>(
+        &mut self,
+        vertices: &[[f64; 3]],
+        faces: &[[u32; 3]],
+        views: &[View],
+        (width, height): (usize, usize),
+        values_per_pixel: usize,
+        out: &mut Vec<T>,
+        write: impl Fn(&[f64], &mut [T]) + Sync,
+    ) -> Result<(), RenderError> {
         self.state = None;
+        out.clear();
         validate(vertices, faces, width, height)?;
         let cameras = views
             .iter()
@@ -166,9 +197,13 @@ impl CpuRenderer {
         let face_raw = normals::face_normals_raw(vertices, faces);
         let (vnormals, sums) = normals::smooth_normals(vertices, faces, &face_raw);
         let settings = &self.settings;
-        let results: Vec<(ViewState, Vec<f64>)> = cameras
+        let per_view = width * height * values_per_pixel;
+        // Sized (and zeroed) in parallel; every value is then written by its view.
+        out.par_extend(rayon::iter::repeat_n(T::default(), views.len() * per_view));
+        let states: Vec<ViewState> = cameras
             .into_par_iter()
-            .map(|camera| {
+            .zip(out.par_chunks_mut(per_view))
+            .map(|(camera, dst)| {
                 let proj = raster::project_vertices(&camera, vertices);
                 let (ids, depth) = raster::rasterize(faces, &proj, settings.near, width, height);
                 let mut colour = vec![BACKGROUND; width * height];
@@ -179,32 +214,24 @@ impl CpuRenderer {
                         *c = shading::shade(tri, pixel_ray(&camera, i));
                     }
                 }
-                let (blends, out) = if settings.antialias {
+                let blends = if settings.antialias {
                     let blends = antialias::find_blends(
                         vertices, faces, &adjacency, &face_raw, &camera, &proj, &ids, &depth,
                     );
-                    let out = antialias::apply(&colour, &blends);
-                    (blends, out)
+                    write(&antialias::apply(&colour, &blends), dst);
+                    blends
                 } else {
-                    (Vec::new(), colour.clone())
+                    write(&colour, dst);
+                    Vec::new()
                 };
-                (
-                    ViewState {
-                        camera,
-                        ids,
-                        colour,
-                        blends,
-                    },
-                    out,
-                )
+                ViewState {
+                    camera,
+                    ids,
+                    colour,
+                    blends,
+                }
             })
             .collect();
-        let mut grey = Vec::with_capacity(views.len() * width * height);
-        let mut states = Vec::with_capacity(views.len());
-        for (s, out) in results {
-            grey.extend_from_slice(&out);
-            states.push(s);
-        }
         self.state = Some(ForwardState {
             vertices: vertices.to_vec(),
             faces: faces.to_vec(),
@@ -214,7 +241,7 @@ impl CpuRenderer {
             width,
             height,
         });
-        Ok(grey)
+        Ok(())
     }
 
     /// VJP of the most recent [`render_grey`](Self::render_grey): dL/d(grey) → dL/dvertices.
@@ -243,79 +270,10 @@ impl CpuRenderer {
                 )));
             }
         }
-        let nv = st.vertices.len();
-        // Per view, per gradient: (dL/dx, dL/dn) accumulated over the view's pixels.
-        let per_view: Vec<Vec<(Vec<DVec3>, Vec<DVec3>)>> = st
-            .views
-            .par_iter()
-            .enumerate()
-            .map(|(vi, view)| {
-                let mut acc: Vec<(Vec<DVec3>, Vec<DVec3>)> = d_greys
-                    .iter()
-                    .map(|_| (vec![DVec3::ZERO; nv], vec![DVec3::ZERO; nv]))
-                    .collect();
-                let d_colours: Vec<std::borrow::Cow<'_, [f64]>> = d_greys
-                    .iter()
-                    .zip(acc.iter_mut())
-                    .map(|(d_grey, (dx, _))| {
-                        let d_out = &d_grey[vi * npix..(vi + 1) * npix];
-                        if view.blends.is_empty() {
-                            d_out.into()
-                        } else {
-                            antialias::apply_adjoint(&view.colour, &view.blends, d_out, dx).into()
-                        }
-                    })
-                    .collect();
-                let mut triangle = TriangleCache::default();
-                for (i, &t) in view.ids.iter().enumerate() {
-                    if t == NO_TRIANGLE || d_colours.iter().all(|d| d[i] == 0.0) {
-                        continue;
-                    }
-                    let tri = triangle.get(&view.camera, &st.vertices, &st.faces, &st.normals, t);
-                    let ray = pixel_ray(&view.camera, i);
-                    let Some((dc_dx, dc_dn)) = shading::shade_jacobian(tri, ray) else {
-                        continue;
-                    };
-                    let f = st.faces[t as usize];
-                    for (d_colour, (dx, dn)) in d_colours.iter().zip(acc.iter_mut()) {
-                        let dc = d_colour[i];
-                        if dc == 0.0 {
-                            continue;
-                        }
-                        for k in 0..3 {
-                            dx[f[k] as usize] += dc_dx[k] * dc;
-                            dn[f[k] as usize] += dc_dn[k] * dc;
-                        }
-                    }
-                }
-                acc
-            })
-            .collect();
-        let results = (0..d_greys.len())
-            .map(|g| {
-                let mut dx = vec![DVec3::ZERO; nv];
-                let mut dn = vec![DVec3::ZERO; nv];
-                for view in &per_view {
-                    let (x, n) = &view[g];
-                    for v in 0..nv {
-                        dx[v] += x[v];
-                        dn[v] += n[v];
-                    }
-                }
-                normals::smooth_normals_adjoint(
-                    &st.vertices,
-                    &st.faces,
-                    &st.normals,
-                    &st.normal_sums,
-                    &dn,
-                    &mut dx,
-                );
-                dx.into_iter().map(Into::into).collect()
-            })
-            .collect();
-        Ok(results)
+        Ok(backward_views(st, d_greys.len(), |g, vi| {
+            Cow::Borrowed(&d_greys[g][vi * npix..(vi + 1) * npix])
+        }))
     }
-
     /// Bytes of the state kept from the most recent render for `backward` (0 when there is none):
     /// the vertex and face copies, smooth normals and their unnormalized sums, and per view the
     /// triangle ids (4 B per pixel), the colour before antialiasing (8 B per pixel) and the
@@ -351,12 +309,103 @@ impl CpuRenderer {
     }
 }
 
-/// The shading's per-triangle part of the triangle last asked for (pixels come in rows, and a
-/// triangle covers runs of neighbouring pixels).
-#[derive(Default)]
+/// The backward pass of the render kept in `st` for `count` gradients: `d_view(g, v)` is
+/// gradient `g`'s dL/d(grey) on view `v`, `(row, column)`, asked for inside the view's parallel
+/// task. Per view, the per-pixel work that does not depend on the gradient (the fragment, the
+/// shading and its Jacobian) is done once for all of them.
+fn backward_views<'a>(
+    st: &ForwardState,
+    count: usize,
+    d_view: impl Fn(usize, usize) -> Cow<'a, [f64]> + Sync,
+) -> Vec<Vec<[f64; 3]>> {
+    let nv = st.vertices.len();
+    // Per view, per gradient: (dL/dx, dL/dn) accumulated over the view's pixels.
+    let per_view: Vec<Vec<(Vec<DVec3>, Vec<DVec3>)>> = st
+        .views
+        .par_iter()
+        .enumerate()
+        .map(|(vi, view)| {
+            let mut acc: Vec<(Vec<DVec3>, Vec<DVec3>)> = (0..count)
+                .map(|_| (vec![DVec3::ZERO; nv], vec![DVec3::ZERO; nv]))
+                .collect();
+            let d_colours: Vec<Cow<'_, [f64]>> = acc
+                .iter_mut()
+                .enumerate()
+                .map(|(g, (dx, _))| {
+                    let d_out = d_view(g, vi);
+                    if view.blends.is_empty() {
+                        d_out
+                    } else {
+                        antialias::apply_adjoint(&view.colour, &view.blends, &d_out, dx).into()
+                    }
+                })
+                .collect();
+            let mut triangle = TriangleCache::default();
+            for (i, &t) in view.ids.iter().enumerate() {
+                if t == NO_TRIANGLE || d_colours.iter().all(|d| d[i] == 0.0) {
+                    continue;
+                }
+                let tri = triangle.get(&view.camera, &st.vertices, &st.faces, &st.normals, t);
+                let ray = pixel_ray(&view.camera, i);
+                let Some((dc_dx, dc_dn)) = shading::shade_jacobian(tri, ray) else {
+                    continue;
+                };
+                let f = st.faces[t as usize];
+                for (d_colour, (dx, dn)) in d_colours.iter().zip(acc.iter_mut()) {
+                    let dc = d_colour[i];
+                    if dc == 0.0 {
+                        continue;
+                    }
+                    for k in 0..3 {
+                        dx[f[k] as usize] += dc_dx[k] * dc;
+                        dn[f[k] as usize] += dc_dn[k] * dc;
+                    }
+                }
+            }
+            acc
+        })
+        .collect();
+    (0..count)
+        .map(|g| {
+            let mut dx = vec![DVec3::ZERO; nv];
+            let mut dn = vec![DVec3::ZERO; nv];
+            for view in &per_view {
+                let (x, n) = &view[g];
+                for v in 0..nv {
+                    dx[v] += x[v];
+                    dn[v] += n[v];
+                }
+            }
+            normals::smooth_normals_adjoint(
+                &st.vertices,
+                &st.faces,
+                &st.normals,
+                &st.normal_sums,
+                &dn,
+                &mut dx,
+            );
+            dx.into_iter().map(Into::into).collect()
+        })
+        .collect()
+}
+
+/// Slots of a [`TriangleCache`] (a power of two).
+const TRIANGLE_SLOTS: usize = 512;
+
+/// The shading's per-triangle part of recently asked-for triangles, direct-mapped by triangle id
+/// (`id mod TRIANGLE_SLOTS`). Pixels come in rows and a triangle covers short runs of
+/// neighbouring pixels on several rows, so most of a row's triangles were already met on the row
+/// above; a collision only means computing the part again.
 struct TriangleCache {
-    id: u32,
-    triangle: Option<shading::Triangle>,
+    slots: Vec<Option<(u32, shading::Triangle)>>,
+}
+
+impl Default for TriangleCache {
+    fn default() -> Self {
+        Self {
+            slots: vec![None; TRIANGLE_SLOTS],
+        }
+    }
 }
 
 impl TriangleCache {
@@ -369,19 +418,24 @@ impl TriangleCache {
         vnormals: &[DVec3],
         t: u32,
     ) -> &shading::Triangle {
-        if self.id != t {
-            self.triangle = None;
-            self.id = t;
+        let slot = &mut self.slots[t as usize % TRIANGLE_SLOTS];
+        if slot.is_some_and(|(id, _)| id != t) {
+            *slot = None;
         }
-        self.triangle.get_or_insert_with(|| {
-            let f = faces[t as usize];
-            shading::Triangle::new(
-                f.map(|v| DVec3::from(vertices[v as usize])),
-                f.map(|v| vnormals[v as usize]),
-                camera.eye,
-                camera.light,
-            )
-        })
+        &slot
+            .get_or_insert_with(|| {
+                let f = faces[t as usize];
+                (
+                    t,
+                    shading::Triangle::new(
+                        f.map(|v| DVec3::from(vertices[v as usize])),
+                        f.map(|v| vnormals[v as usize]),
+                        camera.eye,
+                        camera.light,
+                    ),
+                )
+            })
+            .1
     }
 }
 
@@ -405,24 +459,33 @@ impl Renderer for CpuRenderer {
         width: usize,
         height: usize,
     ) -> Result<Images, RenderError> {
-        let grey = self.render_grey(vertices, faces, views, width, height)?;
-        Ok(Images::from_grey(views.len(), height, width, &grey))
+        let mut rgb = Vec::new();
+        self.render_into(
+            vertices,
+            faces,
+            views,
+            (width, height),
+            image_batch::CHANNELS,
+            &mut rgb,
+            image_batch::grey_to_rgb,
+        )?;
+        Ok(Images::new(views.len(), height, width, rgb)?)
     }
 
     fn backward(&mut self, d_images: &Images) -> Result<Vec<[f64; 3]>, RenderError> {
-        let st = self.state.as_ref().ok_or(RenderError::NoForwardState)?;
-        let d_grey = d_images.grey_gradient(st.views.len(), st.height, st.width)?;
-        self.backward_grey(&d_grey)
+        let mut out = self.backward_many(&[d_images])?;
+        Ok(out.pop().unwrap_or_default())
     }
 
-    /// One pass over the pixels for all the gradients ([`CpuRenderer::backward_grey_many`]).
+    /// One pass over the pixels for all the gradients (see [`CpuRenderer::backward_grey_many`]);
+    /// each image's dL/d(grey) is formed view by view inside the parallel pass.
     fn backward_many(&mut self, d_images: &[&Images]) -> Result<Vec<Vec<[f64; 3]>>, RenderError> {
         let st = self.state.as_ref().ok_or(RenderError::NoForwardState)?;
-        let d_greys = d_images
-            .iter()
-            .map(|d| d.grey_gradient(st.views.len(), st.height, st.width))
-            .collect::<Result<Vec<_>, _>>()?;
-        let refs: Vec<&[f64]> = d_greys.iter().map(Vec::as_slice).collect();
-        self.backward_grey_many(&refs)
+        for d in d_images {
+            d.check_gradient_shape(st.views.len(), st.height, st.width)?;
+        }
+        Ok(backward_views(st, d_images.len(), |g, vi| {
+            Cow::Owned(d_images[g].view_grey_gradient(vi))
+        }))
     }
 }

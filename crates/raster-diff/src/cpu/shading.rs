@@ -85,7 +85,7 @@ struct Forward {
     dot: f64,
 }
 
-#[inline]
+#[inline(always)]
 fn forward(t: &Triangle, ray: DVec3) -> Forward {
     let p = &t.p;
     let a = [
