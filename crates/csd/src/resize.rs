@@ -385,7 +385,7 @@ impl Gather1d {
         self.weights.len()
     }
 
-    #[inline]
+    #[inline(always)]
     fn row(&self, i: usize) -> (usize, &[f32]) {
         (
             self.start[i],
@@ -395,6 +395,7 @@ impl Gather1d {
 
     /// Along the height: `src` is `in_len × width`, `dst` is `out_len × width`. Each output row is an
     /// `f32` sum of whole input rows (vectorizes over the width).
+    #[inline(always)]
     fn vertical(&self, src: &[f32], width: usize, dst: &mut [f32]) {
         for (i, d) in dst.chunks_exact_mut(width).enumerate() {
             let (start, weights) = self.row(i);
@@ -414,6 +415,7 @@ impl Gather1d {
     }
 
     /// Along the width: `src` is `height × in_len`, `dst` is `height × out_len`.
+    #[inline(always)]
     fn horizontal(&self, src: &[f32], dst: &mut [f32]) {
         let out_len = self.out_len();
         for (s, d) in src
@@ -463,6 +465,7 @@ impl Gather1d {
     /// [`ROW_BLOCK`] rows are transposed into lanes (`block[pixel·3 + c][row]`), so every tap is one
     /// vector multiply–add over 8 rows, and each lane performs exactly the scalar sum's operations in
     /// the same order (bit-identical to the one-row-at-a-time loop; tested).
+    #[inline(always)]
     fn rgb_rows_to_planes(&self, src: &[f32], out: [&mut [f32]; 3]) {
         let (iw, ow) = (self.in_len, self.out_len());
         let row = 3 * iw;
@@ -507,6 +510,7 @@ impl Gather1d {
     /// rows (`dst`: rows of `out_len` pixels × 3): `dst[i][j][c] = Σ_k w_jk · planes[c][i][start_j + k]`,
     /// summed from 0 in tap order; blocked over [`ROW_BLOCK`] rows like
     /// [`Gather1d::rgb_rows_to_planes`] (bit-identical to the one-row-at-a-time loop; tested).
+    #[inline(always)]
     fn planes_to_rgb_rows(&self, planes: [&[f32]; 3], dst: &mut [f32]) {
         let (iw, ow) = (self.in_len, self.out_len());
         let row = 3 * ow;
@@ -539,6 +543,71 @@ impl Gather1d {
             }
         }
     }
+}
+
+/// [`PlaneResize::apply_plane`]'s arguments, as a [`dispatch`] kernel. (A struct, not a
+/// closure: a closure's body is compiled as a function of its own, for the baseline instruction
+/// set, and need not be inlined into the dispatched function.)
+struct PlaneOp<'a> {
+    op: &'a PlaneResize,
+    input: &'a [f32],
+    out: &'a mut [f32],
+    tmp: &'a mut Vec<f32>,
+}
+
+impl pulp::WithSimd for PlaneOp<'_> {
+    type Output = ();
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _simd: S) {
+        self.op.plane_kernel(self.input, self.out, self.tmp)
+    }
+}
+
+/// [`PlaneResize::apply_from_interleaved`]'s arguments, as a [`dispatch`] kernel.
+struct FromInterleavedOp<'a> {
+    op: &'a PlaneResize,
+    src: &'a [f32],
+    channels: usize,
+    out: &'a mut [f32],
+    tmp: &'a mut Vec<f32>,
+}
+
+impl pulp::WithSimd for FromInterleavedOp<'_> {
+    type Output = ();
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _simd: S) {
+        self.op
+            .interleaved_in_kernel(self.src, self.channels, self.out, self.tmp)
+    }
+}
+
+/// [`PlaneResize::apply_to_interleaved`]'s arguments, as a [`dispatch`] kernel.
+struct ToInterleavedOp<'a, F> {
+    op: &'a PlaneResize,
+    planes: &'a [f32],
+    channels: usize,
+    out: &'a mut [f32],
+    tmp: &'a mut Vec<f32>,
+    finish: F,
+}
+
+impl<F: Fn(f32) -> f32> pulp::WithSimd for ToInterleavedOp<'_, F> {
+    type Output = ();
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _simd: S) {
+        self.op
+            .interleaved_out_kernel(self.planes, self.channels, self.out, self.tmp, self.finish)
+    }
+}
+
+/// Runs `op` compiled for the widest SIMD instruction set the CPU has (AVX2 on x86-64 where
+/// present, detected at run time, safely, by `pulp`; SSE2 otherwise). The results do not depend
+/// on which: the kernels are lane-wise IEEE multiplies and adds, never contracted into fused
+/// multiply–adds. The kernels' helpers are `#[inline(always)]`, so that they are compiled inside
+/// the dispatched function rather than once for the baseline instruction set.
+#[inline(always)]
+fn dispatch<Op: pulp::WithSimd>(op: Op) -> Op::Output {
+    pulp::Arch::new().dispatch(op)
 }
 
 /// A separable 2-D resize (or the adjoint of one) on single `f32` planes with `f32` weights and
@@ -593,13 +662,9 @@ impl PlaneResize {
         (self.rows.out_len(), self.cols.out_len())
     }
 
-    /// Resizes the `channels` interleaved planes of `src` (in_h × in_w × channels, e.g. RGB pixels)
-    /// into planar `out` (channels × out_h × out_w). Height first, over whole interleaved rows (the
-    /// channels ride along in the vectorized pass), then the width per channel.
-    ///
-    /// # Panics
-    /// If the slices are shorter than the sizes.
-    pub fn apply_from_interleaved(
+    /// The body of [`Self::apply_from_interleaved`] (compiled inside [`dispatch`]).
+    #[inline(always)]
+    fn interleaved_in_kernel(
         &self,
         src: &[f32],
         channels: usize,
@@ -632,13 +697,9 @@ impl PlaneResize {
         }
     }
 
-    /// Resizes planar `planes` (channels × in_h × in_w) into interleaved `out` (out_h × out_w ×
-    /// channels), applying `finish` to every output value. Width first per channel (written
-    /// interleaved), then the height over whole interleaved rows.
-    ///
-    /// # Panics
-    /// If the slices are shorter than the sizes.
-    pub fn apply_to_interleaved(
+    /// The body of [`Self::apply_to_interleaved`] (compiled inside [`dispatch`]).
+    #[inline(always)]
+    fn interleaved_out_kernel(
         &self,
         planes: &[f32],
         channels: usize,
@@ -663,6 +724,7 @@ impl PlaneResize {
     }
 
     /// The width pass of [`Self::apply_to_interleaved`] for any channel count.
+    #[inline(always)]
     fn width_to_interleaved(&self, planes: &[f32], channels: usize, tmp: &mut [f32]) {
         let (ih, iw) = self.in_hw();
         let ow = self.cols.out_len();
@@ -681,12 +743,9 @@ impl PlaneResize {
         }
     }
 
-    /// Resizes one plane `input` (in_h × in_w) into `out` (out_h × out_w); `tmp` holds the
-    /// intermediate (grown as needed, reused across calls).
-    ///
-    /// # Panics
-    /// If the slices are shorter than the plane sizes (callers size them from `in_hw`/`out_hw`).
-    pub fn apply_plane(&self, input: &[f32], out: &mut [f32], tmp: &mut Vec<f32>) {
+    /// The body of [`Self::apply_plane`] (compiled inside [`dispatch`]).
+    #[inline(always)]
+    fn plane_kernel(&self, input: &[f32], out: &mut [f32], tmp: &mut Vec<f32>) {
         let (ih, iw) = self.in_hw();
         let (oh, ow) = self.out_hw();
         let input = &input[..ih * iw];
@@ -700,6 +759,66 @@ impl PlaneResize {
             self.cols.horizontal(input, tmp);
             self.rows.vertical(tmp, ow, out);
         }
+    }
+
+    /// Resizes the `channels` interleaved planes of `src` (in_h × in_w × channels, e.g. RGB pixels)
+    /// into planar `out` (channels × out_h × out_w). Height first, over whole interleaved rows (the
+    /// channels ride along in the vectorized pass), then the width per channel.
+    ///
+    /// # Panics
+    /// If the slices are shorter than the sizes.
+    pub fn apply_from_interleaved(
+        &self,
+        src: &[f32],
+        channels: usize,
+        out: &mut [f32],
+        tmp: &mut Vec<f32>,
+    ) {
+        dispatch(FromInterleavedOp {
+            op: self,
+            src,
+            channels,
+            out,
+            tmp,
+        });
+    }
+
+    /// Resizes planar `planes` (channels × in_h × in_w) into interleaved `out` (out_h × out_w ×
+    /// channels), applying `finish` to every output value. Width first per channel (written
+    /// interleaved), then the height over whole interleaved rows.
+    ///
+    /// # Panics
+    /// If the slices are shorter than the sizes.
+    pub fn apply_to_interleaved(
+        &self,
+        planes: &[f32],
+        channels: usize,
+        out: &mut [f32],
+        tmp: &mut Vec<f32>,
+        finish: impl Fn(f32) -> f32,
+    ) {
+        dispatch(ToInterleavedOp {
+            op: self,
+            planes,
+            channels,
+            out,
+            tmp,
+            finish,
+        });
+    }
+
+    /// Resizes one plane `input` (in_h × in_w) into `out` (out_h × out_w); `tmp` holds the
+    /// intermediate (grown as needed, reused across calls).
+    ///
+    /// # Panics
+    /// If the slices are shorter than the plane sizes (callers size them from `in_hw`/`out_hw`).
+    pub fn apply_plane(&self, input: &[f32], out: &mut [f32], tmp: &mut Vec<f32>) {
+        dispatch(PlaneOp {
+            op: self,
+            input,
+            out,
+            tmp,
+        });
     }
 }
 
@@ -805,6 +924,39 @@ mod tests {
                         }
                     }
                 }
+            }
+        }
+    }
+
+    /// The public entry points run the kernels under [`dispatch`] (AVX2 where the CPU has it);
+    /// calling a kernel directly from this test compiles it for the baseline instruction set.
+    /// Both must give the same bits (no contraction into fused multiply–adds, no reordering).
+    #[test]
+    fn dispatched_kernels_equal_the_baseline_ones_bit_for_bit() {
+        let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        for (in_hw, out_hw) in [
+            ((61, 53), (24, 29)),
+            ((24, 29), (61, 53)),
+            ((64, 64), (256, 256)),
+        ] {
+            let op = Resize2d::cubic_antialias(in_hw, out_hw).expect("sizes");
+            for r in [PlaneResize::forward(&op), PlaneResize::adjoint(&op)] {
+                let ((ih, iw), (oh, ow)) = (r.in_hw(), r.out_hw());
+                let (mut t1, mut t2) = (Vec::new(), Vec::new());
+                let plane: Vec<f32> = random(ih * iw, 31).iter().map(|&v| v as f32).collect();
+                let (mut a, mut b) = (vec![0.0f32; oh * ow], vec![0.0f32; oh * ow]);
+                r.apply_plane(&plane, &mut a, &mut t1);
+                r.plane_kernel(&plane, &mut b, &mut t2);
+                assert_eq!(bits(&a), bits(&b));
+                let rgb: Vec<f32> = random(3 * ih * iw, 32).iter().map(|&v| v as f32).collect();
+                let (mut a, mut b) = (vec![0.0f32; 3 * oh * ow], vec![0.0f32; 3 * oh * ow]);
+                r.apply_from_interleaved(&rgb, 3, &mut a, &mut t1);
+                r.interleaved_in_kernel(&rgb, 3, &mut b, &mut t2);
+                assert_eq!(bits(&a), bits(&b));
+                let (mut a, mut b) = (vec![0.0f32; 3 * oh * ow], vec![0.0f32; 3 * oh * ow]);
+                r.apply_to_interleaved(&rgb, 3, &mut a, &mut t1, |v| 2.0 * v - 1.0);
+                r.interleaved_out_kernel(&rgb, 3, &mut b, &mut t2, |v| 2.0 * v - 1.0);
+                assert_eq!(bits(&a), bits(&b));
             }
         }
     }
