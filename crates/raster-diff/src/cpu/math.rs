@@ -6,7 +6,7 @@ pub use glam::DVec3;
 pub const NORMALIZE_EPS2: f64 = 1e-20;
 
 /// Guarded normalization y = x / sqrt(max(|x|², 1e-20)); returns (y, 1/sqrt(max(|x|², 1e-20))).
-#[inline]
+#[inline(always)]
 pub fn normalize(x: DVec3) -> (DVec3, f64) {
     let inv = 1.0 / x.length_squared().max(NORMALIZE_EPS2).sqrt();
     (x * inv, inv)
@@ -14,7 +14,7 @@ pub fn normalize(x: DVec3) -> (DVec3, f64) {
 
 /// Adjoint of [`normalize`]: given y, its `inv` and dL/dy, returns dL/dx.
 /// Where the floor is active the map is x·const and the adjoint is dy·inv.
-#[inline]
+#[inline(always)]
 pub fn normalize_adjoint(x: DVec3, y: DVec3, inv: f64, dy: DVec3) -> DVec3 {
     if x.length_squared() > NORMALIZE_EPS2 {
         (dy - y * y.dot(dy)) * inv
@@ -24,13 +24,13 @@ pub fn normalize_adjoint(x: DVec3, y: DVec3, inv: f64, dy: DVec3) -> DVec3 {
 }
 
 /// Adjoint of g = e1 × e2: returns (dL/de1, dL/de2) from dL/dg.
-#[inline]
+#[inline(always)]
 pub fn cross_adjoint(e1: DVec3, e2: DVec3, dg: DVec3) -> (DVec3, DVec3) {
     (e2.cross(dg), dg.cross(e1))
 }
 
 /// Loads vertex `i` of a slice of triples.
-#[inline]
+#[inline(always)]
 pub fn v3(p: &[[f64; 3]], i: u32) -> DVec3 {
     DVec3::from(p[i as usize])
 }

@@ -12,6 +12,7 @@ pub mod math;
 pub mod normals;
 pub mod raster;
 pub mod shading;
+mod simd;
 
 use std::borrow::Cow;
 
@@ -206,14 +207,13 @@ impl CpuRenderer {
             .map(|(camera, dst)| {
                 let proj = raster::project_vertices(&camera, vertices);
                 let (ids, depth) = raster::rasterize(faces, &proj, settings.near, width, height);
-                let mut colour = vec![BACKGROUND; width * height];
-                let mut triangle = TriangleCache::default();
-                for (i, (&t, c)) in ids.iter().zip(colour.iter_mut()).enumerate() {
-                    if t != NO_TRIANGLE {
-                        let tri = triangle.get(&camera, vertices, faces, &vnormals, t);
-                        *c = shading::shade(tri, pixel_ray(&camera, i));
-                    }
-                }
+                let colour = simd::dispatch(ShadeView {
+                    camera: &camera,
+                    vertices,
+                    faces,
+                    vnormals: &vnormals,
+                    ids: &ids,
+                });
                 let blends = if settings.antialias {
                     let blends = antialias::find_blends(
                         vertices, faces, &adjacency, &face_raw, &camera, &proj, &ids, &depth,
@@ -340,28 +340,12 @@ fn backward_views<'a>(
                     }
                 })
                 .collect();
-            let mut triangle = TriangleCache::default();
-            for (i, &t) in view.ids.iter().enumerate() {
-                if t == NO_TRIANGLE || d_colours.iter().all(|d| d[i] == 0.0) {
-                    continue;
-                }
-                let tri = triangle.get(&view.camera, &st.vertices, &st.faces, &st.normals, t);
-                let ray = pixel_ray(&view.camera, i);
-                let Some((dc_dx, dc_dn)) = shading::shade_jacobian(tri, ray) else {
-                    continue;
-                };
-                let f = st.faces[t as usize];
-                for (d_colour, (dx, dn)) in d_colours.iter().zip(acc.iter_mut()) {
-                    let dc = d_colour[i];
-                    if dc == 0.0 {
-                        continue;
-                    }
-                    for k in 0..3 {
-                        dx[f[k] as usize] += dc_dx[k] * dc;
-                        dn[f[k] as usize] += dc_dn[k] * dc;
-                    }
-                }
-            }
+            simd::dispatch(AccumulateView {
+                st,
+                view,
+                d_colours: &d_colours,
+                acc: &mut acc,
+            });
             acc
         })
         .collect();
@@ -389,6 +373,77 @@ fn backward_views<'a>(
         .collect()
 }
 
+/// One view's shading, as a [`simd::dispatch`] kernel: the colour of every pixel before
+/// antialiasing ([`BACKGROUND`] where no triangle is visible).
+struct ShadeView<'a> {
+    camera: &'a Camera,
+    vertices: &'a [[f64; 3]],
+    faces: &'a [[u32; 3]],
+    vnormals: &'a [DVec3],
+    ids: &'a [u32],
+}
+
+impl pulp::WithSimd for ShadeView<'_> {
+    type Output = Vec<f64>;
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _simd: S) -> Vec<f64> {
+        let mut colour = vec![BACKGROUND; self.ids.len()];
+        let mut triangle = TriangleCache::default();
+        for (i, (&t, c)) in self.ids.iter().zip(colour.iter_mut()).enumerate() {
+            if t != NO_TRIANGLE {
+                let tri = triangle.get(self.camera, self.vertices, self.faces, self.vnormals, t);
+                *c = shading::shade(tri, pixel_ray(self.camera, i));
+            }
+        }
+        colour
+    }
+}
+
+/// One view's share of the backward pass, as a [`simd::dispatch`] kernel: per covered pixel the
+/// shading's Jacobian, scaled by each gradient's dL/dc and added to that gradient's
+/// (dL/dx, dL/dn) of the triangle's corners.
+struct AccumulateView<'a, 'b> {
+    st: &'a ForwardState,
+    view: &'a ViewState,
+    d_colours: &'a [Cow<'b, [f64]>],
+    acc: &'a mut [(Vec<DVec3>, Vec<DVec3>)],
+}
+
+impl pulp::WithSimd for AccumulateView<'_, '_> {
+    type Output = ();
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _simd: S) {
+        let Self {
+            st,
+            view,
+            d_colours,
+            acc,
+        } = self;
+        let mut triangle = TriangleCache::default();
+        for (i, &t) in view.ids.iter().enumerate() {
+            if t == NO_TRIANGLE || d_colours.iter().all(|d| d[i] == 0.0) {
+                continue;
+            }
+            let tri = triangle.get(&view.camera, &st.vertices, &st.faces, &st.normals, t);
+            let ray = pixel_ray(&view.camera, i);
+            let Some((dc_dx, dc_dn)) = shading::shade_jacobian(tri, ray) else {
+                continue;
+            };
+            let f = st.faces[t as usize];
+            for (d_colour, (dx, dn)) in d_colours.iter().zip(acc.iter_mut()) {
+                let dc = d_colour[i];
+                if dc == 0.0 {
+                    continue;
+                }
+                for k in 0..3 {
+                    dx[f[k] as usize] += dc_dx[k] * dc;
+                    dn[f[k] as usize] += dc_dn[k] * dc;
+                }
+            }
+        }
+    }
+}
+
 /// Slots of a [`TriangleCache`] (a power of two).
 const TRIANGLE_SLOTS: usize = 512;
 
@@ -410,6 +465,7 @@ impl Default for TriangleCache {
 
 impl TriangleCache {
     /// The per-triangle part of triangle `t` seen from `camera`.
+    #[inline(always)]
     fn get(
         &mut self,
         camera: &Camera,
@@ -440,7 +496,7 @@ impl TriangleCache {
 }
 
 /// World direction of the centre ray of pixel `pixel` (row-major index within the view).
-#[inline]
+#[inline(always)]
 fn pixel_ray(camera: &Camera, pixel: usize) -> DVec3 {
     let (col, row) = (pixel % camera.width, pixel / camera.width);
     camera.pixel_ray(col as f64 + 0.5, row as f64 + 0.5)
@@ -487,5 +543,82 @@ impl Renderer for CpuRenderer {
         Ok(backward_views(st, d_images.len(), |g, vi| {
             Cow::Owned(d_images[g].view_grey_gradient(vi))
         }))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use pulp::WithSimd;
+
+    /// The per-pixel loops run under [`simd::dispatch`] (AVX2 where the CPU has it); calling a
+    /// kernel with `pulp::Scalar` compiles it for the baseline instruction set. Same bits.
+    #[test]
+    fn dispatched_pixel_loops_equal_the_baseline_ones_bit_for_bit() {
+        let (mut v, f) = mesh_core::shapes::icosphere(3).into_parts();
+        for (i, p) in v.iter_mut().enumerate() {
+            p[1] *= 1.0 + 0.05 * (i % 7) as f64;
+        }
+        let views = crate::orbit_views(3, 20.0, 3.0, 50.0);
+        let mut r = CpuRenderer::default();
+        let img = r.render(&v, &f, &views, 96, 80).expect("render");
+        let d: Vec<f64> = (0..img.rgb.len() / 3)
+            .map(|i| ((i % 13) as f64 - 6.0) * 1e-2)
+            .collect();
+        let dispatched = r.backward_grey(&d).expect("backward");
+        let st = r.state.as_ref().expect("state");
+        let bits = |x: &[DVec3]| {
+            x.iter()
+                .map(|p| p.to_array().map(f64::to_bits))
+                .collect::<Vec<_>>()
+        };
+        let npix = st.width * st.height;
+        let mut total = (vec![DVec3::ZERO; v.len()], vec![DVec3::ZERO; v.len()]);
+        for (vi, view) in st.views.iter().enumerate() {
+            assert!(view.ids.iter().filter(|&&t| t != NO_TRIANGLE).count() > npix / 10);
+            let colour = ShadeView {
+                camera: &view.camera,
+                vertices: &st.vertices,
+                faces: &st.faces,
+                vnormals: &st.normals,
+                ids: &view.ids,
+            }
+            .with_simd(pulp::Scalar);
+            assert_eq!(
+                colour.iter().map(|c| c.to_bits()).collect::<Vec<_>>(),
+                view.colour.iter().map(|c| c.to_bits()).collect::<Vec<_>>()
+            );
+            let mut acc = vec![(vec![DVec3::ZERO; v.len()], vec![DVec3::ZERO; v.len()])];
+            let d_colour = antialias::apply_adjoint(
+                &view.colour,
+                &view.blends,
+                &d[vi * npix..(vi + 1) * npix],
+                &mut acc[0].0,
+            );
+            AccumulateView {
+                st,
+                view,
+                d_colours: &[Cow::Owned(d_colour)],
+                acc: &mut acc,
+            }
+            .with_simd(pulp::Scalar);
+            for k in 0..v.len() {
+                total.0[k] += acc[0].0[k];
+                total.1[k] += acc[0].1[k];
+            }
+        }
+        normals::smooth_normals_adjoint(
+            &st.vertices,
+            &st.faces,
+            &st.normals,
+            &st.normal_sums,
+            &total.1,
+            &mut total.0,
+        );
+        let dispatched: Vec<DVec3> = dispatched.into_iter().map(DVec3::from).collect();
+        assert!(
+            dispatched.iter().all(|g| g.is_finite()) && dispatched.iter().any(|g| g.length() > 0.0)
+        );
+        assert_eq!(bits(&total.0), bits(&dispatched));
     }
 }

@@ -108,7 +108,7 @@ impl Camera {
     }
 
     /// World direction of the ray through screen point (sx, sy) (unit depth along `forward`).
-    #[inline]
+    #[inline(always)]
     pub fn pixel_ray(&self, sx: f64, sy: f64) -> DVec3 {
         self.right * ((sx - self.cx) / self.k) - self.up * ((sy - self.cy) / self.k) + self.forward
     }

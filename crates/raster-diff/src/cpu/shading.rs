@@ -45,6 +45,7 @@ pub struct Triangle {
 
 impl Triangle {
     /// Corners `x` with smooth normals `n`, seen from `eye`, lit from `light`.
+    #[inline(always)]
     pub fn new(x: [DVec3; 3], n: [DVec3; 3], eye: DVec3, light: DVec3) -> Self {
         let p = [x[0] - eye, x[1] - eye, x[2] - eye];
         let p_cross = [p[1].cross(p[2]), p[2].cross(p[0]), p[0].cross(p[1])];
@@ -133,7 +134,7 @@ pub const RADIANCE_SCALE: f64 = KD * LIGHT_POWER / std::f64::consts::PI;
 
 /// Shaded grey value, in [0, kd·light_power/π] ≈ [0, 0.796], of the pixel whose centre ray
 /// (world direction, any length) is `ray` on triangle `t`.
-#[inline]
+#[inline(always)]
 pub fn shade(t: &Triangle, ray: DVec3) -> f64 {
     RADIANCE_SCALE * forward(t, ray).dot.max(0.0)
 }
@@ -146,6 +147,7 @@ pub fn shade(t: &Triangle, ray: DVec3) -> f64 {
 ///
 /// Piecewise choices (the two-sided sign, the clamp of τ and the max in the diffuse term) are
 /// treated as constants; their kinks have measure zero.
+#[inline(always)]
 pub fn shade_jacobian(t: &Triangle, ray: DVec3) -> Option<([DVec3; 3], [DVec3; 3])> {
     let fw = forward(t, ray);
     let mut dp = [DVec3::ZERO; 3];
