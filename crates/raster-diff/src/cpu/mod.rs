@@ -452,13 +452,15 @@ const TRIANGLE_SLOTS: usize = 512;
 /// neighbouring pixels on several rows, so most of a row's triangles were already met on the row
 /// above; a collision only means computing the part again.
 struct TriangleCache {
-    slots: Vec<Option<(u32, shading::Triangle)>>,
+    /// (triangle id, its per-triangle part); [`NO_TRIANGLE`] marks an empty slot (the renderer
+    /// never asks for it).
+    slots: Vec<(u32, shading::Triangle)>,
 }
 
 impl Default for TriangleCache {
     fn default() -> Self {
         Self {
-            slots: vec![None; TRIANGLE_SLOTS],
+            slots: vec![(NO_TRIANGLE, shading::Triangle::default()); TRIANGLE_SLOTS],
         }
     }
 }
@@ -474,24 +476,18 @@ impl TriangleCache {
         vnormals: &[DVec3],
         t: u32,
     ) -> &shading::Triangle {
-        let slot = &mut self.slots[t as usize % TRIANGLE_SLOTS];
-        if slot.is_some_and(|(id, _)| id != t) {
-            *slot = None;
+        let (id, triangle) = &mut self.slots[t as usize % TRIANGLE_SLOTS];
+        if *id != t {
+            let f = faces[t as usize];
+            *triangle = shading::Triangle::new(
+                f.map(|v| DVec3::from(vertices[v as usize])),
+                f.map(|v| vnormals[v as usize]),
+                camera.eye,
+                camera.light,
+            );
+            *id = t;
         }
-        &slot
-            .get_or_insert_with(|| {
-                let f = faces[t as usize];
-                (
-                    t,
-                    shading::Triangle::new(
-                        f.map(|v| DVec3::from(vertices[v as usize])),
-                        f.map(|v| vnormals[v as usize]),
-                        camera.eye,
-                        camera.light,
-                    ),
-                )
-            })
-            .1
+        triangle
     }
 }
 

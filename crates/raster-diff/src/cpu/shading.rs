@@ -25,8 +25,9 @@ pub const BENT_WIDTH: f64 = 0.1;
 
 /// The per-triangle part of the shading of one view: everything that does not depend on the
 /// pixel's ray (P_i, their cross products, the face normal), computed once for the run of pixels
-/// a triangle covers (the renderer keeps the last one).
-#[derive(Clone, Copy, Debug)]
+/// a triangle covers (the renderer keeps recently used ones). `Default` is all zeros, a placeholder
+/// that shades nothing meaningful.
+#[derive(Clone, Copy, Debug, Default)]
 pub struct Triangle {
     /// P_i = x_i − eye.
     p: [DVec3; 3],
