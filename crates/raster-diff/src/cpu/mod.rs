@@ -12,7 +12,7 @@ pub mod math;
 pub mod normals;
 pub mod raster;
 pub mod shading;
-mod simd;
+pub(crate) mod simd;
 
 use std::borrow::Cow;
 
