@@ -76,14 +76,73 @@ pub struct Blend {
 }
 
 /// Is face `f` front-facing from `eye` (its normal g_f points towards the eye)?
-#[inline]
+#[inline(always)]
 fn front_facing(g: DVec3, x0: DVec3, eye: DVec3) -> bool {
     g.dot(eye - x0) > 0.0
 }
 
 /// Finds the blends of one view. `ids` and `depth` come from the rasterizer, `face_raw` are the
-/// unnormalized face normals, `proj` the projected vertices.
+/// unnormalized face normals, `proj` the projected vertices. Runs under the run-time SIMD
+/// dispatch (the same results on every instruction set).
+#[allow(clippy::too_many_arguments)]
 pub fn find_blends(
+    vertices: &[[f64; 3]],
+    faces: &[[u32; 3]],
+    adjacency: &[[u32; 3]],
+    face_raw: &[DVec3],
+    camera: &Camera,
+    proj: &[Projected],
+    ids: &[u32],
+    depth: &[f64],
+) -> Vec<Blend> {
+    super::simd::dispatch(FindBlends {
+        vertices,
+        faces,
+        adjacency,
+        face_raw,
+        camera,
+        proj,
+        ids,
+        depth,
+    })
+}
+
+/// [`find_blends`]'s arguments, as a dispatch kernel.
+pub(super) struct FindBlends<'a> {
+    pub(super) vertices: &'a [[f64; 3]],
+    pub(super) faces: &'a [[u32; 3]],
+    pub(super) adjacency: &'a [[u32; 3]],
+    pub(super) face_raw: &'a [DVec3],
+    pub(super) camera: &'a Camera,
+    pub(super) proj: &'a [Projected],
+    pub(super) ids: &'a [u32],
+    pub(super) depth: &'a [f64],
+}
+
+impl pulp::WithSimd for FindBlends<'_> {
+    type Output = Vec<Blend>;
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _simd: S) -> Vec<Blend> {
+        let Self {
+            vertices,
+            faces,
+            adjacency,
+            face_raw,
+            camera,
+            proj,
+            ids,
+            depth,
+        } = self;
+        find_blends_kernel(
+            vertices, faces, adjacency, face_raw, camera, proj, ids, depth,
+        )
+    }
+}
+
+/// The body of [`find_blends`].
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn find_blends_kernel(
     vertices: &[[f64; 3]],
     faces: &[[u32; 3]],
     adjacency: &[[u32; 3]],

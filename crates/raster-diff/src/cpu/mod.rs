@@ -584,6 +584,32 @@ mod tests {
                 colour.iter().map(|c| c.to_bits()).collect::<Vec<_>>(),
                 view.colour.iter().map(|c| c.to_bits()).collect::<Vec<_>>()
             );
+            let proj = raster::project_vertices(&view.camera, &st.vertices);
+            let near = RenderSettings::default().near;
+            let (ids, depth) = raster::rasterize(&st.faces, &proj, near, st.width, st.height);
+            assert_eq!(ids, view.ids);
+            let face_raw = normals::face_normals_raw(&st.vertices, &st.faces);
+            let blends = antialias::FindBlends {
+                vertices: &st.vertices,
+                faces: &st.faces,
+                adjacency: &antialias::face_adjacency(&st.faces),
+                face_raw: &face_raw,
+                camera: &view.camera,
+                proj: &proj,
+                ids: &ids,
+                depth: &depth,
+            }
+            .with_simd(pulp::Scalar);
+            assert!(!blends.is_empty());
+            let key = |b: &[Blend]| {
+                b.iter()
+                    .map(|b| {
+                        let d = b.d_alpha.map(|d| d.to_array().map(f64::to_bits));
+                        (b.target, b.source, b.edge, b.alpha.to_bits(), d)
+                    })
+                    .collect::<Vec<_>>()
+            };
+            assert_eq!(key(&blends), key(&view.blends));
             let mut acc = vec![(vec![DVec3::ZERO; v.len()], vec![DVec3::ZERO; v.len()])];
             let d_colour = antialias::apply_adjoint(
                 &view.colour,

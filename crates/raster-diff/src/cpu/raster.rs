@@ -98,7 +98,7 @@ impl Camera {
     }
 
     /// Gradients of (sx, sy) with respect to the world point whose camera coordinates are `c`.
-    #[inline]
+    #[inline(always)]
     pub fn screen_jacobian(&self, c: DVec3) -> [DVec3; 2] {
         let iz = 1.0 / c.z;
         [
