@@ -133,135 +133,117 @@ impl pulp::WithSimd for FindBlends<'_> {
             ids,
             depth,
         } = self;
-        find_blends_kernel(
-            vertices, faces, adjacency, face_raw, camera, proj, ids, depth,
-        )
-    }
-}
-
-/// The body of [`find_blends`].
-#[allow(clippy::too_many_arguments)]
-#[inline(always)]
-fn find_blends_kernel(
-    vertices: &[[f64; 3]],
-    faces: &[[u32; 3]],
-    adjacency: &[[u32; 3]],
-    face_raw: &[DVec3],
-    camera: &Camera,
-    proj: &[Projected],
-    ids: &[u32],
-    depth: &[f64],
-) -> Vec<Blend> {
-    // Per face, which of its edges are silhouettes from this eye (bit k: edge f[k] → f[k+1]),
-    // decided once per view: most pixel pairs with different ids lie inside the surface, on
-    // triangles without a silhouette edge, and are skipped on one load.
-    let facing: Vec<bool> = faces
-        .iter()
-        .zip(face_raw)
-        .map(|(f, &g)| front_facing(g, DVec3::from(vertices[f[0] as usize]), camera.eye))
-        .collect();
-    let silhouettes: Vec<u8> = adjacency
-        .iter()
-        .zip(&facing)
-        .map(|(adj, &front)| {
-            (0..3).fold(0u8, |mask, k| {
-                let silhouette = match adj[k] {
-                    BOUNDARY_EDGE | NON_MANIFOLD_EDGE => true,
-                    other => front != facing[other as usize],
-                };
-                mask | (u8::from(silhouette) << k)
+        // Per face, which of its edges are silhouettes from this eye (bit k: edge f[k] → f[k+1]),
+        // decided once per view: most pixel pairs with different ids lie inside the surface, on
+        // triangles without a silhouette edge, and are skipped on one load.
+        let facing: Vec<bool> = faces
+            .iter()
+            .zip(face_raw)
+            .map(|(f, &g)| front_facing(g, DVec3::from(vertices[f[0] as usize]), camera.eye))
+            .collect();
+        let silhouettes: Vec<u8> = adjacency
+            .iter()
+            .zip(&facing)
+            .map(|(adj, &front)| {
+                (0..3).fold(0u8, |mask, k| {
+                    let silhouette = match adj[k] {
+                        BOUNDARY_EDGE | NON_MANIFOLD_EDGE => true,
+                        other => front != facing[other as usize],
+                    };
+                    mask | (u8::from(silhouette) << k)
+                })
             })
-        })
-        .collect();
-    let (w, h) = (camera.width, camera.height);
-    let mut blends = Vec::new();
-    // Candidate pairs (pixel a, axis): axis 0 pairs a with its right neighbour, axis 1 with the
-    // pixel below. Gathered in a tight scan first; almost all pairs have equal ids.
-    let mut pairs = Vec::new();
-    for row in 0..h {
-        let r = &ids[row * w..(row + 1) * w];
-        for col in 0..w.saturating_sub(1) {
-            if r[col] != r[col + 1] {
-                pairs.push((row * w + col, 0usize));
+            .collect();
+        let (w, h) = (camera.width, camera.height);
+        let mut blends = Vec::new();
+        // Candidate pairs (pixel a, axis): axis 0 pairs a with its right neighbour, axis 1 with the
+        // pixel below. Gathered in a tight scan first; almost all pairs have equal ids.
+        let mut pairs = Vec::new();
+        for row in 0..h {
+            let r = &ids[row * w..(row + 1) * w];
+            for col in 0..w.saturating_sub(1) {
+                if r[col] != r[col + 1] {
+                    pairs.push((row * w + col, 0usize));
+                }
             }
-        }
-        if row + 1 < h {
-            let below = &ids[(row + 1) * w..(row + 2) * w];
-            for col in 0..w {
-                if r[col] != below[col] {
-                    pairs.push((row * w + col, 1usize));
+            if row + 1 < h {
+                let below = &ids[(row + 1) * w..(row + 2) * w];
+                for col in 0..w {
+                    if r[col] != below[col] {
+                        pairs.push((row * w + col, 1usize));
+                    }
                 }
             }
         }
-    }
-    for (a, axis) in pairs {
-        let b = if axis == 0 { a + 1 } else { a + w };
-        let (ia, ib) = (ids[a], ids[b]);
-        let a_front = ib == NO_TRIANGLE || (ia != NO_TRIANGLE && depth[a] <= depth[b]);
-        let (front, other) = if a_front { (a, b) } else { (b, a) };
-        let tri = ids[front];
-        let mask = silhouettes[tri as usize];
-        if mask == 0 {
-            continue;
+        for (a, axis) in pairs {
+            let b = if axis == 0 { a + 1 } else { a + w };
+            let (ia, ib) = (ids[a], ids[b]);
+            let a_front = ib == NO_TRIANGLE || (ia != NO_TRIANGLE && depth[a] <= depth[b]);
+            let (front, other) = if a_front { (a, b) } else { (b, a) };
+            let tri = ids[front];
+            let mask = silhouettes[tri as usize];
+            if mask == 0 {
+                continue;
+            }
+            let centre = |p: usize| [(p % w) as f64 + 0.5, (p / w) as f64 + 0.5];
+            let (cf, co) = (centre(front), centre(other));
+            let face = faces[tri as usize];
+            for k in 0..3 {
+                if mask & (1 << k) == 0 {
+                    continue;
+                }
+                let (va, vb) = (face[k], face[(k + 1) % 3]);
+                if proj[va as usize].cam.z <= 0.0 || proj[vb as usize].cam.z <= 0.0 {
+                    continue; // only reachable with externally supplied visibility
+                }
+                let (sa, sb) = (proj[va as usize].screen, proj[vb as usize].screen);
+                // The segment runs along `axis`; the crossing line is coordinate `o` = const.
+                let o = 1 - axis;
+                let line = cf[o];
+                let (da, db) = (sa[o] - line, sb[o] - line);
+                if da * db >= 0.0 {
+                    continue;
+                }
+                let den = sb[o] - sa[o];
+                let s = (line - sa[o]) / den;
+                let cross = sa[axis] + s * (sb[axis] - sa[axis]);
+                let step = co[axis] - cf[axis]; // ±1
+                let t = (cross - cf[axis]) / step;
+                if !(0.0..=1.0).contains(&t) {
+                    continue;
+                }
+                // d cross / d(screen of a, b) along `axis` and `o`.
+                let slope = (sb[axis] - sa[axis]) / den;
+                let mut ds_a = [0.0; 2];
+                let mut ds_b = [0.0; 2];
+                ds_a[axis] = 1.0 - s;
+                ds_b[axis] = s;
+                ds_a[o] = slope * (s - 1.0);
+                ds_b[o] = -slope * s;
+                let (target, source, alpha, dalpha_dt) = if t > 0.5 {
+                    (other, front, t - 0.5, 1.0)
+                } else {
+                    (front, other, 0.5 - t, -1.0)
+                };
+                let scale = dalpha_dt / step;
+                let ja = camera.screen_jacobian(proj[va as usize].cam);
+                let jb = camera.screen_jacobian(proj[vb as usize].cam);
+                let d_alpha = [
+                    (ja[0] * ds_a[0] + ja[1] * ds_a[1]) * scale,
+                    (jb[0] * ds_b[0] + jb[1] * ds_b[1]) * scale,
+                ];
+                blends.push(Blend {
+                    target: target as u32,
+                    source: source as u32,
+                    edge: [va, vb],
+                    alpha,
+                    d_alpha,
+                });
+                break;
+            }
         }
-        let centre = |p: usize| [(p % w) as f64 + 0.5, (p / w) as f64 + 0.5];
-        let (cf, co) = (centre(front), centre(other));
-        let face = faces[tri as usize];
-        for k in 0..3 {
-            if mask & (1 << k) == 0 {
-                continue;
-            }
-            let (va, vb) = (face[k], face[(k + 1) % 3]);
-            if proj[va as usize].cam.z <= 0.0 || proj[vb as usize].cam.z <= 0.0 {
-                continue; // only reachable with externally supplied visibility
-            }
-            let (sa, sb) = (proj[va as usize].screen, proj[vb as usize].screen);
-            // The segment runs along `axis`; the crossing line is coordinate `o` = const.
-            let o = 1 - axis;
-            let line = cf[o];
-            let (da, db) = (sa[o] - line, sb[o] - line);
-            if da * db >= 0.0 {
-                continue;
-            }
-            let den = sb[o] - sa[o];
-            let s = (line - sa[o]) / den;
-            let cross = sa[axis] + s * (sb[axis] - sa[axis]);
-            let step = co[axis] - cf[axis]; // ±1
-            let t = (cross - cf[axis]) / step;
-            if !(0.0..=1.0).contains(&t) {
-                continue;
-            }
-            // d cross / d(screen of a, b) along `axis` and `o`.
-            let slope = (sb[axis] - sa[axis]) / den;
-            let mut ds_a = [0.0; 2];
-            let mut ds_b = [0.0; 2];
-            ds_a[axis] = 1.0 - s;
-            ds_b[axis] = s;
-            ds_a[o] = slope * (s - 1.0);
-            ds_b[o] = -slope * s;
-            let (target, source, alpha, dalpha_dt) = if t > 0.5 {
-                (other, front, t - 0.5, 1.0)
-            } else {
-                (front, other, 0.5 - t, -1.0)
-            };
-            let scale = dalpha_dt / step;
-            let ja = camera.screen_jacobian(proj[va as usize].cam);
-            let jb = camera.screen_jacobian(proj[vb as usize].cam);
-            let d_alpha = [
-                (ja[0] * ds_a[0] + ja[1] * ds_a[1]) * scale,
-                (jb[0] * ds_b[0] + jb[1] * ds_b[1]) * scale,
-            ];
-            blends.push(Blend {
-                target: target as u32,
-                source: source as u32,
-                edge: [va, vb],
-                alpha,
-                d_alpha,
-            });
-            break;
-        }
+        blends
     }
-    blends
 }
 
 /// Applies the blends to one view's colours: returns the antialiased colours.
