@@ -11,7 +11,7 @@ use rand::{Rng, RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use raster_diff::{CameraConfig, CpuRenderer, Images, RenderError, Renderer, View};
 use stylize_cli::pipeline::{
-    IterationRecord, LoopSpec, LoopState, Objective, Observer, StepEval, TextObjective,
+    LoopSpec, LoopState, Objective, RecordIterations, StepEval, SubStepsOneByOne, TextObjective,
     ViewSettings, run_loop,
 };
 
@@ -78,22 +78,6 @@ impl Renderer for CountingRenderer {
     }
     fn backward(&mut self, d_images: &Images) -> Result<Vec<[f64; 3]>, RenderError> {
         self.inner.backward(d_images)
-    }
-}
-
-#[derive(Default)]
-struct Records(Vec<IterationRecord>);
-
-impl Observer for Records {
-    fn iteration(&mut self, record: &IterationRecord) -> stylize::Result<()> {
-        self.0.push(record.clone());
-        Ok(())
-    }
-    fn checkpoint(&mut self, _state: &LoopState) -> stylize::Result<()> {
-        Ok(())
-    }
-    fn preview(&mut self, _: u64, _: &[[f64; 3]], _: Option<&Images>) -> stylize::Result<()> {
-        Ok(())
     }
 }
 
@@ -209,7 +193,7 @@ fn one_render_and_two_guidance_calls_per_iteration() {
         preview_every: 0,
         halt_after: None,
     };
-    let mut records = Records::default();
+    let mut records = RecordIterations::default();
     ok(run_loop(&darap, &spec, &mut state, &mut obj, &mut records));
     assert_eq!(renders.load(Ordering::SeqCst), 3);
     assert_eq!(calls.load(Ordering::SeqCst), 6);
@@ -305,7 +289,7 @@ fn second_step_uses_accumulated_gradient_at_the_pre_step_x() {
         &spec,
         &mut state,
         &mut Scaled(v),
-        &mut Records::default(),
+        &mut RecordIterations::default(),
     ));
     assert!(
         state.x == x_hand,
@@ -401,7 +385,7 @@ fn text_path_honours_a_feathered_region_adam_leaves_outside_targets_at_rest() {
         &spec,
         &mut state,
         &mut obj,
-        &mut Records::default(),
+        &mut RecordIterations::default(),
     ));
     let rest = darap.rest_normals();
     for v in 0..p.len() {
@@ -453,25 +437,6 @@ impl csd::Denoiser for Echo {
     }
 }
 
-/// Forwards `evaluate` only, so the loop takes the trait's default `evaluate_batch`: one
-/// sub-step after the other, each with its own guidance call and renderer backward.
-struct OneByOne(TextObjective<'static>);
-
-impl Objective for OneByOne {
-    fn describe(&self) -> String {
-        self.0.describe()
-    }
-    fn evaluate(
-        &mut self,
-        iteration: u64,
-        substep: u32,
-        deformed: &[[f64; 3]],
-        rng: &mut ChaCha8Rng,
-    ) -> stylize::Result<StepEval> {
-        self.0.evaluate(iteration, substep, deformed, rng)
-    }
-}
-
 /// The loop evaluates an iteration's sub-steps together (one encoding of the renders in
 /// `CascadedGuidance::evaluate_many`, one `CpuRenderer::backward_many` pass): the optimization
 /// must be the sub-step-by-sub-step one, bit for bit, with both guidance stages running.
@@ -518,16 +483,16 @@ fn batched_sub_steps_equal_sub_steps_one_by_one_bit_for_bit() {
             )),
             rng: ChaCha8Rng::seed_from_u64(8),
         };
-        let mut records = Records::default();
+        let mut records = RecordIterations::default();
         ok(run_loop(&darap, &spec, &mut state, obj, &mut records));
         (state, records)
     };
     let (batched, batched_records) = run(&mut objective());
-    let (one_by_one, one_by_one_records) = run(&mut OneByOne(objective()));
+    let (one_by_one, one_by_one_records) = run(&mut SubStepsOneByOne(objective()));
     assert!(batched.x == one_by_one.x, "x differs");
     assert!(batched.adam == one_by_one.adam, "Adam state differs");
     assert!(batched.x != darap.rest_normals(), "x did not move");
-    let terms = |r: &Records| r.0.iter().map(|r| r.terms.clone()).collect::<Vec<_>>();
+    let terms = |r: &RecordIterations| r.0.iter().map(|r| r.terms.clone()).collect::<Vec<_>>();
     assert_eq!(terms(&batched_records), terms(&one_by_one_records));
     assert!(
         batched_records.0[0]

@@ -15,9 +15,9 @@ use darap::{Darap, DarapOptions};
 use optim::{Adam, AdamConfig, Schedule};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use raster_diff::{CameraConfig, CpuRenderer, Images};
+use raster_diff::{CameraConfig, CpuRenderer};
 use stylize::pipeline::{
-    IterationRecord, LoopSpec, LoopState, Objective, Observer, StepEval, TextObjective,
+    LoopSpec, LoopState, Objective, RecordIterations, SubStepsOneByOne, TextObjective,
     ViewSettings, run_loop,
 };
 
@@ -38,40 +38,6 @@ impl Denoiser for Instant0 {
             shape: vec![s[0], 6, s[2], s[3]],
             data: vec![0.0; s[0] * 6 * s[2] * s[3]],
         })
-    }
-}
-
-/// The same objective, one sub-step at a time (the trait's default `evaluate_batch`).
-struct OneByOne(TextObjective<'static>);
-
-impl Objective for OneByOne {
-    fn describe(&self) -> String {
-        self.0.describe()
-    }
-    fn evaluate(
-        &mut self,
-        iteration: u64,
-        substep: u32,
-        deformed: &[[f64; 3]],
-        rng: &mut ChaCha8Rng,
-    ) -> stylize::Result<StepEval> {
-        self.0.evaluate(iteration, substep, deformed, rng)
-    }
-}
-
-#[derive(Default)]
-struct Records(Vec<IterationRecord>);
-
-impl Observer for Records {
-    fn iteration(&mut self, record: &IterationRecord) -> stylize::Result<()> {
-        self.0.push(record.clone());
-        Ok(())
-    }
-    fn checkpoint(&mut self, _: &LoopState) -> stylize::Result<()> {
-        Ok(())
-    }
-    fn preview(&mut self, _: u64, _: &[[f64; 3]], _: Option<&Images>) -> stylize::Result<()> {
-        Ok(())
     }
 }
 
@@ -153,9 +119,9 @@ fn main() -> anyhow::Result<()> {
                 adam: Adam::new(3 * darap.num_vertices(), AdamConfig::default())?,
                 rng: ChaCha8Rng::seed_from_u64(1),
             };
-            let mut records = Records::default();
+            let mut records = RecordIterations::default();
             let mut text = objective(&f)?;
-            let mut one = OneByOne(objective(&f)?);
+            let mut one = SubStepsOneByOne(objective(&f)?);
             let obj: &mut dyn Objective = if mode == 0 { &mut text } else { &mut one };
             run_loop(&darap, &spec, &mut state, obj, &mut records)?;
             for r in records.0.iter().skip(1) {

@@ -137,6 +137,49 @@ pub trait Observer {
     fn warning(&mut self, _message: &str) {}
 }
 
+/// An [`Observer`] that keeps every iteration's record in memory and ignores checkpoints and
+/// previews: for a program that drives [`run_loop`] itself and wants the records, not files.
+#[derive(Clone, Debug, Default)]
+pub struct RecordIterations(pub Vec<IterationRecord>);
+
+impl Observer for RecordIterations {
+    fn iteration(&mut self, record: &IterationRecord) -> Result<()> {
+        self.0.push(record.clone());
+        Ok(())
+    }
+    fn checkpoint(&mut self, _state: &LoopState) -> Result<()> {
+        Ok(())
+    }
+    fn preview(&mut self, _: u64, _: &[[f64; 3]], _: Option<&Images>) -> Result<()> {
+        Ok(())
+    }
+}
+
+/// The wrapped objective evaluated one sub-step at a time: it forwards
+/// [`Objective::evaluate`] (and `describe`, `current_images`) and keeps the trait's default
+/// [`Objective::evaluate_batch`]. The reference an objective's own `evaluate_batch` must equal,
+/// and the way to measure what sharing work between sub-steps saves.
+#[derive(Debug)]
+pub struct SubStepsOneByOne<O>(pub O);
+
+impl<O: Objective> Objective for SubStepsOneByOne<O> {
+    fn describe(&self) -> String {
+        self.0.describe()
+    }
+    fn evaluate(
+        &mut self,
+        iteration: u64,
+        substep: u32,
+        deformed: &[[f64; 3]],
+        rng: &mut ChaCha8Rng,
+    ) -> Result<StepEval> {
+        self.0.evaluate(iteration, substep, deformed, rng)
+    }
+    fn current_images(&self) -> Option<&Images> {
+        self.0.current_images()
+    }
+}
+
 fn add_term(terms: &mut Vec<(&'static str, f64)>, name: &'static str, value: f64, sum: bool) {
     match terms.iter_mut().find(|(n, _)| *n == name) {
         Some(t) if sum => t.1 += value,
@@ -577,22 +620,6 @@ mod tests {
         }
     }
 
-    #[derive(Default)]
-    struct Records(Vec<IterationRecord>);
-
-    impl Observer for Records {
-        fn iteration(&mut self, record: &IterationRecord) -> Result<()> {
-            self.0.push(record.clone());
-            Ok(())
-        }
-        fn checkpoint(&mut self, _: &LoopState) -> Result<()> {
-            Ok(())
-        }
-        fn preview(&mut self, _: u64, _: &[[f64; 3]], _: Option<&Images>) -> Result<()> {
-            Ok(())
-        }
-    }
-
     #[test]
     fn zero_gradient_watch_warns_once_per_streak() {
         let mut w = ZeroGradientWatch::default();
@@ -625,7 +652,7 @@ mod tests {
             preview_every: 0,
             halt_after: None,
         };
-        let mut records = Records::default();
+        let mut records = RecordIterations::default();
         run_loop(
             &darap,
             &spec,
