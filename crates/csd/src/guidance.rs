@@ -1068,13 +1068,25 @@ impl<'m> CascadedGuidance<'m> {
         stage2_weight: f64,
         rng: &mut dyn RngCore,
     ) -> Result<GuidanceOutput, GuidanceError> {
+        self.evaluate_untraced(images, stage2_weight, rng, false)
+    }
+
+    /// One evaluation with fresh draws and no trace; `reuse_encoding` as in
+    /// [`Self::evaluate_core`] (the renders' encoding from the previous call on the same renders).
+    fn evaluate_untraced(
+        &mut self,
+        images: &Images,
+        stage2_weight: f64,
+        rng: &mut dyn RngCore,
+        reuse_encoding: bool,
+    ) -> Result<GuidanceOutput, GuidanceError> {
         let (core, _, _) = self.evaluate_core(
             images,
             stage2_weight,
             rng,
             &InjectedDraws::default(),
             false,
-            false,
+            reuse_encoding,
         )?;
         Ok(core.output)
     }
@@ -1130,17 +1142,7 @@ impl Guidance for CascadedGuidance<'_> {
     ) -> Result<Vec<GuidanceOutput>, GuidanceError> {
         let weight = self.stage2_weight.at(iteration);
         (0..count)
-            .map(|k| {
-                let (core, _, _) = self.evaluate_core(
-                    images,
-                    weight,
-                    rng,
-                    &InjectedDraws::default(),
-                    false,
-                    k > 0,
-                )?;
-                Ok(core.output)
-            })
+            .map(|k| self.evaluate_untraced(images, weight, rng, k > 0))
             .collect()
     }
 }

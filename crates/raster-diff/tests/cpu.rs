@@ -15,6 +15,17 @@ fn front_view(eye_z: f64, light: [f64; 3]) -> View {
     }
 }
 
+/// A view from behind and to the left, lit from its side (the second view of the multi-view tests).
+fn back_left_view() -> View {
+    View {
+        eye: [-0.4, 0.3, -2.6],
+        target: [0.0; 3],
+        up: [0.0, 1.0, 0.0],
+        fov_y_deg: 70.0,
+        light_pos: [-2.0, 0.5, -1.0],
+    }
+}
+
 fn no_aa() -> CpuRenderer {
     CpuRenderer::new(RenderSettings {
         antialias: false,
@@ -213,13 +224,7 @@ fn sphere_gradient_matches_central_differences() {
             fov_y_deg: 90.0,
             light_pos: [1.5, 2.0, 0.3],
         },
-        View {
-            eye: [-0.4, 0.3, -2.6],
-            target: [0.0; 3],
-            up: [0.0, 1.0, 0.0],
-            fov_y_deg: 70.0,
-            light_pos: [-2.0, 0.5, -1.0],
-        },
+        back_left_view(),
     ];
     let (w, h) = (40, 32);
     let n = views.len() * w * h;
@@ -408,16 +413,7 @@ fn backward_state_bytes_counts_ids_colour_and_mesh_and_clears_on_a_failed_render
 #[test]
 fn backward_many_is_one_backward_per_gradient_bit_for_bit() {
     let (v, f) = mesh_core::shapes::icosphere(2).into_parts();
-    let views = [
-        front_view(2.5, [1.0, 2.0, 3.0]),
-        View {
-            eye: [-0.4, 0.3, -2.6],
-            target: [0.0; 3],
-            up: [0.0, 1.0, 0.0],
-            fov_y_deg: 70.0,
-            light_pos: [-2.0, 0.5, -1.0],
-        },
-    ];
+    let views = [front_view(2.5, [1.0, 2.0, 3.0]), back_left_view()];
     let (w, h) = (36, 28);
     let mut r = CpuRenderer::default();
     let img = r.render(&v, &f, &views, w, h).expect("render");
