@@ -1,8 +1,13 @@
 # Everyday commands. `just --list` shows them. (Install just with `cargo install just`.)
 
-# Stylize the bundled bunny with the model-free cube style (writes runs/demo).
+# Stylize the bundled bunny with the model-free cube style (writes runs/demo), with the README's
+# quick-start build (no text path, no GPU backend; docs/cli.md "Builds and features").
 demo:
-    cargo run --release --bin stylize -- run fixtures/meshes/bunny.obj --style cube --out runs/demo
+    cargo run --release --no-default-features --bin stylize -- run fixtures/meshes/bunny.obj --style cube --out runs/demo
+
+# The full command line on PATH (every feature: text path, GPU backend, viewer).
+install:
+    cargo install --locked --path crates/stylize-cli
 
 # Everything CI runs: setup, fmt, clippy, tests, check-deps, gradcheck, fuzz.
 test:

@@ -13,6 +13,9 @@ step "cargo fmt --check (xtask)";  cargo fmt --manifest-path xtask/Cargo.toml --
 step "cargo clippy -D warnings";   cargo clippy --workspace --all-targets --locked -- -D warnings
 step "cargo clippy (xtask)";       cargo clippy --manifest-path xtask/Cargo.toml --target-dir target --locked -- -D warnings
 step "cargo test";                 cargo test --workspace --locked
+# The README's quick-start build (docs/cli.md, "Builds and features"): lints, and its own test.
+step "quick-start build: clippy";  cargo clippy -p stylize-cli --no-default-features --all-targets --locked -- -D warnings
+step "quick-start build: test";    cargo test -p stylize-cli --no-default-features --locked --test features
 step "cargo build (xtask)";      cargo build --manifest-path xtask/Cargo.toml --target-dir target --locked   # visible progress; `cargo xtask` runs quietly
 step "cargo xtask check-deps";     cargo xtask check-deps
 step "cargo xtask gradcheck";      cargo xtask gradcheck

@@ -80,14 +80,44 @@ const RULES: &[(&str, &[&str])] = &[
     ),
 ];
 
+/// (crate, its feature selection, forbidden dependencies): the builds without the heavy features
+/// must really leave them out (docs/cli.md, "Builds and features").
+const FEATURE_RULES: &[(&str, &[&str], &[&str])] = &[
+    // The README's quick-start build: no ONNX Runtime, tokenizer, wgpu stack or HTTP server.
+    (
+        "stylize-cli",
+        &["--no-default-features"],
+        &[
+            "diffusion-onnx",
+            "ort",
+            "tokenizers",
+            "onig_sys",
+            "wgpu",
+            "naga",
+            "axum",
+            "tokio",
+        ],
+    ),
+    (
+        "stylize",
+        &["--no-default-features"],
+        &["diffusion-onnx", "ort", "tokenizers", "wgpu", "naga"],
+    ),
+];
+
 pub fn run() -> anyhow::Result<()> {
     let mut violations = Vec::new();
-    for (krate, forbidden) in RULES {
+    let rules = RULES
+        .iter()
+        .map(|&(krate, forbidden)| (krate, &[][..], forbidden))
+        .chain(FEATURE_RULES.iter().copied());
+    for (krate, features, forbidden) in rules {
         let out = Command::new(env!("CARGO"))
             .args([
                 "tree", "--quiet", "--edges", "normal", "--prefix", "none", "--format", "{p}",
                 "-p", krate,
             ])
+            .args(features)
             .output()?;
         anyhow::ensure!(
             out.status.success(),
@@ -103,16 +133,21 @@ pub fn run() -> anyhow::Result<()> {
         names.dedup();
         // Guard against a vacuous pass (an empty or unexpected `cargo tree` output).
         anyhow::ensure!(
-            names.contains(krate),
+            names.contains(&krate),
             "cargo tree -p {krate} did not list {krate} itself; output format changed?"
         );
-        for f in *forbidden {
+        let build = if features.is_empty() {
+            String::new()
+        } else {
+            format!(" ({})", features.join(" "))
+        };
+        for f in forbidden {
             if names.contains(f) {
-                violations.push(format!("{krate} depends on {f}"));
+                violations.push(format!("{krate}{build} depends on {f}"));
             }
         }
         println!(
-            "{krate}: {} distinct crates in its normal dependency tree, none forbidden: {}",
+            "{krate}{build}: {} distinct crates in its normal dependency tree, none forbidden: {}",
             names.len(),
             !names.iter().any(|n| forbidden.contains(n))
         );

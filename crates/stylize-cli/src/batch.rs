@@ -432,6 +432,9 @@ fn run_row(
             )?
         }
         (None, Some(prompt)) => {
+            if !cfg!(feature = "text") {
+                return Err(crate::features::not_built("text", "a prompt row"));
+            }
             let Some(model) = &options.model else {
                 bail!("prompt rows need --model DIR (docs/models.md)");
             };

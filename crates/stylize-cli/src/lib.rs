@@ -5,6 +5,7 @@
 pub mod batch;
 pub mod cmd;
 pub mod config;
+pub mod features;
 pub mod input;
 pub mod open_hint;
 pub mod progress;
@@ -14,6 +15,10 @@ pub mod sanity;
 pub mod signals;
 pub mod view;
 
+#[cfg(not(feature = "text"))]
+pub use features::models;
+#[cfg(feature = "text")]
+pub use stylize::models;
 pub use stylize::{
-    checkpoint, durable, eval, identity, lock, models, pipeline, run_pictures, rundir, style,
+    checkpoint, durable, eval, identity, lock, pipeline, run_pictures, rundir, style,
 };

@@ -2,6 +2,8 @@
 
 use clap::{Parser, Subcommand};
 use stylize_cli::cmd;
+#[cfg(not(all(feature = "text", feature = "view")))]
+use stylize_cli::features::not_built;
 
 /// Text-guided, identity-preserving stylization of triangle meshes (Geometry in Style).
 #[derive(Parser, Debug)]
@@ -56,21 +58,50 @@ fn private_runtime_dir() -> Option<tempfile::TempDir> {
     Some(dir)
 }
 
+/// Parses the arguments; `--version` also names the features this binary was built with
+/// (`stylize 0.1.0 (features: text, gpu, view)`).
+fn parse_cli() -> Cli {
+    use clap::{CommandFactory, FromArgMatches};
+    let features: Vec<&str> = stylize_cli::features::ENABLED
+        .iter()
+        .filter_map(|&(name, on)| on.then_some(name))
+        .collect();
+    let features = if features.is_empty() {
+        "none".to_owned()
+    } else {
+        features.join(", ")
+    };
+    // Leaked once: clap keeps a `'static` version string.
+    let version: &'static str =
+        format!("{} (features: {features})", env!("CARGO_PKG_VERSION")).leak();
+    let matches = Cli::command().version(version).get_matches();
+    Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit())
+}
+
 fn main() -> std::process::ExitCode {
     // Before any thread allocates: the loop's large buffers are reused, not page-faulted in anew.
     stylize::malloc::retain_freed_buffers();
     let _runtime_dir = private_runtime_dir();
-    let cli = Cli::parse();
+    let cli = parse_cli();
     let result = match cli.command {
         Command::Apply(a) => cmd::apply::run(a),
         Command::Mesh(a) => cmd::mesh::run(a),
         Command::Render(a) => cmd::render::run(a),
+        #[cfg(feature = "text")]
         Command::Embed(a) => cmd::embed::run(a),
+        #[cfg(not(feature = "text"))]
+        Command::Embed(_) => Err(not_built("text", "stylize embed")),
         Command::Run(a) => cmd::run::run(a),
         Command::Batch(a) => cmd::batch::run(a),
         Command::Eval(a) => cmd::eval::run(a),
+        #[cfg(feature = "view")]
         Command::View(a) => cmd::view::run(a),
+        #[cfg(not(feature = "view"))]
+        Command::View(_) => Err(not_built("view", "stylize view")),
+        #[cfg(feature = "text")]
         Command::DebugGuidance(a) => cmd::debug_guidance::run(a),
+        #[cfg(not(feature = "text"))]
+        Command::DebugGuidance(_) => Err(not_built("text", "stylize debug-guidance")),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -1,7 +1,7 @@
 //! The last lines of a finished `stylize run`: which files of the run directory to open, and the
 //! `stylize view` command that shows the run with a live λ slider.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use crate::signals::shell_quote;
 
@@ -17,8 +17,34 @@ const TO_OPEN: &[(&str, &str)] = &[
     ),
 ];
 
-/// The closing lines for the run directory `dir` (only files that exist are named).
-pub fn lines(dir: &Path) -> Vec<String> {
+/// How to call this binary again from the current directory: `stylize` when that name on `PATH`
+/// is this executable (`cargo install`), else its path (`target/release/stylize` after the
+/// README's `cargo run`: the same build, so nothing is compiled again), relative to the current
+/// directory when it lies below it. Not shell-quoted.
+pub fn program() -> String {
+    let Ok(exe) = std::env::current_exe().and_then(std::fs::canonicalize) else {
+        return "stylize".to_string();
+    };
+    let on_path = std::env::var_os("PATH").is_some_and(|paths| {
+        std::env::split_paths(&paths)
+            .filter_map(|d| std::fs::canonicalize(d.join("stylize")).ok())
+            .next()
+            .is_some_and(|found| found == exe)
+    });
+    if on_path {
+        return "stylize".to_string();
+    }
+    let shown: PathBuf = std::env::current_dir()
+        .and_then(std::fs::canonicalize)
+        .ok()
+        .and_then(|cwd| exe.strip_prefix(cwd).ok().map(Path::to_path_buf))
+        .unwrap_or(exe);
+    shown.display().to_string()
+}
+
+/// The closing lines for the run directory `dir` (only files that exist are named); `program`
+/// is how to call `stylize` ([`program`], quoted here).
+pub fn lines(dir: &Path, program: &str) -> Vec<String> {
     let mut out = vec!["open:".to_string()];
     for (name, what) in TO_OPEN {
         let path = dir.join(name);
@@ -26,11 +52,19 @@ pub fn lines(dir: &Path) -> Vec<String> {
             out.push(format!("  {}  ({what})", path.display()));
         }
     }
-    out.push("view it, with a live λ slider:".to_string());
-    out.push(format!(
-        "  stylize view {}",
-        shell_quote(&dir.display().to_string())
-    ));
+    let dir = shell_quote(&dir.display().to_string());
+    if cfg!(feature = "view") {
+        out.push("view it, with a live λ slider:".to_string());
+        out.push(format!("  {} view {dir}", shell_quote(program)));
+    } else {
+        // A quick-start build (docs/cli.md, "Builds and features"): the viewer is in the full one.
+        out.push(
+            "view it, with a live λ slider (this command builds the full stylize first; this one \
+             has no `view`):"
+                .to_string(),
+        );
+        out.push(format!("  cargo run --release --bin stylize -- view {dir}"));
+    }
     out
 }
 
@@ -44,10 +78,27 @@ mod tests {
         let run = dir.path().join("my run");
         std::fs::create_dir_all(&run).unwrap_or_else(|e| panic!("{e}"));
         std::fs::write(run.join("turntable.png"), b"x").unwrap_or_else(|e| panic!("{e}"));
-        let text = lines(&run).join("\n");
+        let text = lines(&run, "stylize").join("\n");
         assert!(text.contains("turntable.png"), "{text}");
         assert!(!text.contains("mesh.obj"), "{text}");
-        assert!(text.contains("stylize view '"), "{text}");
         assert!(text.lines().last().is_some_and(|l| l.contains("my run")));
+        let text = lines(&run, "target/release/stylize").join("\n");
+        if cfg!(feature = "view") {
+            assert!(text.contains("  target/release/stylize view '"), "{text}");
+        } else {
+            assert!(
+                text.contains("  cargo run --release --bin stylize -- view '"),
+                "{text}"
+            );
+        }
+    }
+
+    #[test]
+    fn program_is_this_executable() {
+        // The test binary is not `stylize` on PATH: its path comes back, and it names this file.
+        let p = program();
+        let exe = std::env::current_exe().unwrap_or_else(|e| panic!("{e}"));
+        let name = exe.file_name().map(|n| n.to_string_lossy().into_owned());
+        assert!(name.is_some_and(|n| p.contains(&n)), "{p}");
     }
 }

@@ -185,7 +185,9 @@ impl Default for GuidanceSection {
             stage2_weight: csd::REFERENCE_STAGE2_WEIGHT.to_string(),
             negative_prompt: String::new(),
             grad_clip: csd.grad_clip.map_or(0.0, f64::from),
-            onnx_memory_arena: diffusion_onnx::SessionOptions::default().cpu_memory_arena,
+            // ONNX Runtime's own default (`diffusion_onnx::SessionOptions::default()`; a test
+            // under the `text` feature keeps the two equal).
+            onnx_memory_arena: true,
             onnx_low_memory: false,
         }
     }
@@ -548,6 +550,15 @@ mod tests {
         let w = ok(c.stage2_schedule());
         assert!((w.at(1500) - 0.26662).abs() < 5e-6);
         ok(c.validate());
+    }
+
+    #[cfg(feature = "text")]
+    #[test]
+    fn onnx_memory_arena_defaults_to_onnx_runtimes_own_default() {
+        assert_eq!(
+            GuidanceSection::default().onnx_memory_arena,
+            diffusion_onnx::SessionOptions::default().cpu_memory_arena
+        );
     }
 
     #[test]

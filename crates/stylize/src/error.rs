@@ -88,6 +88,7 @@ pub enum Error {
     Guidance(#[from] csd::GuidanceError),
     /// Loading or running a model (IF UNets, T5, CLIP) failed (boxed: the ONNX error is large, and
     /// every `Result` of the library carries this enum).
+    #[cfg(feature = "text")]
     #[error(transparent)]
     Model(Box<diffusion_onnx::OnnxError>),
     /// The optimizer refused a step.
@@ -126,6 +127,7 @@ pub enum Error {
     },
 }
 
+#[cfg(feature = "text")]
 impl From<diffusion_onnx::OnnxError> for Error {
     fn from(e: diffusion_onnx::OnnxError) -> Self {
         Error::Model(Box::new(e))

@@ -27,7 +27,8 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::error::{Context, Error, Result, invalid};
+use crate::error::{Context, Result, invalid};
+#[cfg(feature = "text")]
 use diffusion_onnx::{ClipModel, cosine_similarity};
 use mesh_core::TriMesh;
 use mesh_core::geometry::{bbox_diagonal, face_areas, signed_volume, vertex_centroid};
@@ -221,6 +222,7 @@ pub fn evaluate(pairs: &[(String, TriMesh, TriMesh)]) -> Result<EvalReport> {
     })
 }
 
+#[cfg(feature = "text")]
 /// `(1/N) Σ_v cos(image_v, text)`: the paper's CLIP similarity of one mesh from its view embeddings.
 pub fn mean_view_similarity(views: &[Vec<f32>], text: &[f32]) -> f64 {
     if views.is_empty() {
@@ -233,6 +235,7 @@ pub fn mean_view_similarity(views: &[Vec<f32>], text: &[f32]) -> f64 {
         / views.len() as f64
 }
 
+#[cfg(feature = "text")]
 /// Image embeddings of `settings.views` orbit renders of `mesh` (normalized to the side-2 cube);
 /// adds the time spent to `timings`.
 pub fn view_embeddings(
@@ -283,6 +286,7 @@ pub struct ClipTimings {
     pub meshes: usize,
 }
 
+#[cfg(feature = "text")]
 /// Adds the CLIP similarity of every pair to `report` (`pairs` and `prompts` in the order the report
 /// was made from). Each distinct prompt is embedded once; pairs without a prompt get an empty score
 /// with the reason. Also fills the report's means over the scored pairs.
@@ -331,7 +335,7 @@ pub fn add_clip_scores(
                     .with_context(|| format!("CLIP text embedding of {text:?}"))?
                     .pop()
                     .ok_or_else(|| {
-                        Error::Invalid("the CLIP text encoder returned nothing".into())
+                        crate::Error::Invalid("the CLIP text encoder returned nothing".into())
                     })?;
                 texts.push((text.clone(), e.clone()));
                 timings.embed_texts_s += start.elapsed().as_secs_f64();
@@ -601,6 +605,7 @@ mod tests {
         ));
     }
 
+    #[cfg(feature = "text")]
     #[test]
     fn mean_view_similarity_is_the_mean_of_per_view_cosines() {
         let text = [1.0f32, 0.0];

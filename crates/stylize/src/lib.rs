@@ -11,13 +11,20 @@
 //!   resume;
 //! - [`saved`]: the reference's saved-deformation `.npz`; [`snapshots`]: the deformed mesh along
 //!   the run, for replay; [`run_pictures`]: the before/after sheet and the turntable (PNG, GIF);
-//! - [`models`]: DeepFloyd IF guidance from a model directory; [`eval`]: metrics of finished runs;
+//! - `models`: DeepFloyd IF guidance from a model directory (feature `text`); [`eval`]: metrics
+//!   of finished runs (CLIP similarity with `text`);
 //! - [`error`]: the typed [`Error`] every public function returns;
 //! - [`malloc`]: the C allocator's policy that keeps the loop's large per-iteration buffers from
 //!   being page-faulted in anew every iteration (for programs that run the loop).
 //!
 //! The command line (`stylize-cli`) adds argument parsing, config files, progress display and
 //! batches; this crate depends on nothing of that kind (`cargo xtask check-deps`).
+//!
+//! Features (both default): `text`, the text-guided path through ONNX Runtime (`models`, CLIP in
+//! [`eval`]); `gpu`, raster-diff's wgpu backend ([`config::Backend::Auto`]/`Gpu` use the CPU
+//! renderer without it). Without them the crate builds in a fraction of the time (no ONNX
+//! Runtime, tokenizers or wgpu) and keeps the model-free styles, apply, render and the geometric
+//! metrics.
 
 pub mod checkpoint;
 pub mod config;
@@ -27,6 +34,7 @@ pub mod eval;
 pub mod identity;
 pub mod lock;
 pub mod malloc;
+#[cfg(feature = "text")]
 pub mod models;
 pub mod pipeline;
 pub mod run_pictures;

@@ -18,15 +18,24 @@
 //! | `seed` | () i64 | the RNG seed |
 //! | `embedding_cond`, `embedding_uncond` | (tokens, dim) | the text conditioning |
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
+#[cfg(feature = "text")]
+use std::path::Path;
+
+#[cfg(feature = "text")]
 use anyhow::{Context, bail};
+#[cfg(feature = "text")]
 use csd::{CascadedGuidance, Denoiser, GuidanceConfig, InjectedDraws};
+#[cfg(feature = "text")]
 use diffusion_onnx::{
     EmbeddingCache, ModelDir, OnnxDenoiser, SessionOptions, Stage, prompt_embeddings,
 };
+#[cfg(feature = "text")]
 use npy::npz::NpzWriter;
+#[cfg(feature = "text")]
 use npy::{NpyArray, NpyData, parse_npy};
+#[cfg(feature = "text")]
 use rand::SeedableRng;
 
 /// Arguments of `stylize debug-guidance`.
@@ -82,6 +91,7 @@ pub struct Args {
     pub out: PathBuf,
 }
 
+#[cfg(feature = "text")]
 /// Reads renders as (views, H, W, 3) f32 in [0, 1].
 fn read_images(path: &Path) -> anyhow::Result<(usize, usize, usize, Vec<f32>)> {
     match path.extension().and_then(|e| e.to_str()) {
@@ -123,26 +133,31 @@ fn read_images(path: &Path) -> anyhow::Result<(usize, usize, usize, Vec<f32>)> {
     Ok((v, h, w, data))
 }
 
+#[cfg(feature = "text")]
 fn f32_array(shape: &[usize], data: &[f32]) -> anyhow::Result<NpyArray> {
     NpyArray::new(shape.to_vec(), NpyData::F32(data.to_vec())).map_err(|e| anyhow::anyhow!(e))
 }
 
+#[cfg(feature = "text")]
 fn tensor(w: &mut NpzWriter, key: &str, t: &csd::Tensor) -> anyhow::Result<()> {
     w.add(key, &f32_array(&t.shape, &t.data)?)
         .with_context(|| format!("writing {key}"))
 }
 
+#[cfg(feature = "text")]
 fn ints(w: &mut NpzWriter, key: &str, v: &[i64]) -> anyhow::Result<()> {
     let a =
         NpyArray::new(vec![v.len()], NpyData::I64(v.to_vec())).map_err(|e| anyhow::anyhow!(e))?;
     w.add(key, &a).with_context(|| format!("writing {key}"))
 }
 
+#[cfg(feature = "text")]
 fn scalar(w: &mut NpzWriter, key: &str, v: f64) -> anyhow::Result<()> {
     let a = NpyArray::new(vec![], NpyData::F64(vec![v])).map_err(|e| anyhow::anyhow!(e))?;
     w.add(key, &a).with_context(|| format!("writing {key}"))
 }
 
+#[cfg(feature = "text")]
 /// Runs `stylize debug-guidance`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     let (views, height, width, images) = read_images(&args.images)?;
@@ -266,7 +281,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     Ok(())
 }
 
-#[cfg(test)]
+#[cfg(all(test, feature = "text"))]
 mod tests {
     use super::*;
     use npy::npz::NpzReader;

@@ -3,7 +3,9 @@
 
 use std::path::PathBuf;
 
+#[cfg(feature = "text")]
 use anyhow::{Context, bail};
+#[cfg(feature = "text")]
 use diffusion_onnx::{EmbeddingCache, ModelDir, SessionOptions, T5Encoder, T5Tokenizer};
 
 /// Arguments of `stylize embed`.
@@ -27,6 +29,7 @@ pub struct Args {
     pub threads: Option<usize>,
 }
 
+#[cfg(feature = "text")]
 /// Runs `stylize embed`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     let model = ModelDir::open(&args.model)
@@ -82,7 +85,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     Ok(())
 }
 
-#[cfg(test)]
+#[cfg(all(test, feature = "text"))]
 mod tests {
     use super::*;
 

@@ -1,13 +1,17 @@
 //! `stylize eval`: identity-preservation metrics (spec §9) for run directories or mesh pairs, and the
 //! CLIP similarity when a CLIP model directory is given.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
+#[cfg(feature = "text")]
 use std::time::Instant;
 
-use anyhow::{Context, bail};
+#[cfg(feature = "text")]
+use anyhow::Context;
+use anyhow::bail;
+use mesh_core::TriMesh;
 
 use crate::eval::{
-    ClipSettings, Prompt, add_clip_scores, evaluate, label, load_file_pair, load_run, table,
+    ClipSettings, EvalReport, Prompt, evaluate, label, load_file_pair, load_run, table,
 };
 
 /// Arguments of `stylize eval`.
@@ -79,28 +83,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         if !(1..=4096).contains(&args.clip_render_size) {
             bail!("--clip-render-size must be in 1..=4096");
         }
-        let start = Instant::now();
-        let mut clip =
-            diffusion_onnx::ClipModel::open(dir, &diffusion_onnx::SessionOptions::default())
-                .with_context(|| format!("--clip {}", dir.display()))?;
         let settings = ClipSettings {
             views: args.clip_views,
             render_size: args.clip_render_size,
             ..ClipSettings::default()
         };
-        let opened = start.elapsed().as_secs_f64();
-        let t = add_clip_scores(&mut report, &pairs, &prompts, &mut clip, &settings)?;
-        eprintln!(
-            "CLIP ({}): {} mesh(es) × {} views at {} px; open {opened:.3} s, render {:.3} s, \
-             image embedding {:.3} s, text embedding {:.3} s",
-            clip.manifest().name,
-            t.meshes,
-            settings.views,
-            settings.render_size,
-            t.render_s,
-            t.embed_images_s,
-            t.embed_texts_s
-        );
+        add_clip(dir, &settings, &mut report, &pairs, &prompts)?;
     }
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
@@ -108,4 +96,45 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         print!("{}", table(&report));
     }
     Ok(())
+}
+
+/// Adds the CLIP similarity of every pair to `report` with the CLIP export in `dir`, and reports
+/// where the time went on stderr.
+#[cfg(feature = "text")]
+fn add_clip(
+    dir: &Path,
+    settings: &ClipSettings,
+    report: &mut EvalReport,
+    pairs: &[(String, TriMesh, TriMesh)],
+    prompts: &[Prompt],
+) -> anyhow::Result<()> {
+    let start = Instant::now();
+    let mut clip = diffusion_onnx::ClipModel::open(dir, &diffusion_onnx::SessionOptions::default())
+        .with_context(|| format!("--clip {}", dir.display()))?;
+    let opened = start.elapsed().as_secs_f64();
+    let t = crate::eval::add_clip_scores(report, pairs, prompts, &mut clip, settings)?;
+    eprintln!(
+        "CLIP ({}): {} mesh(es) × {} views at {} px; open {opened:.3} s, render {:.3} s, \
+         image embedding {:.3} s, text embedding {:.3} s",
+        clip.manifest().name,
+        t.meshes,
+        settings.views,
+        settings.render_size,
+        t.render_s,
+        t.embed_images_s,
+        t.embed_texts_s
+    );
+    Ok(())
+}
+
+/// `--clip` in a build without the `text` feature: refused (no ONNX Runtime).
+#[cfg(not(feature = "text"))]
+fn add_clip(
+    _dir: &Path,
+    _settings: &ClipSettings,
+    _report: &mut EvalReport,
+    _pairs: &[(String, TriMesh, TriMesh)],
+    _prompts: &[Prompt],
+) -> anyhow::Result<()> {
+    Err(crate::features::not_built("text", "--clip"))
 }

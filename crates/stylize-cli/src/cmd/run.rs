@@ -85,8 +85,7 @@ pub fn resolve_config(
 /// The command that continues this run: the same mesh, run directory and objective with
 /// `--resume` (the run's own `config.toml` holds the resolved settings).
 pub fn resume_command(args: &Args) -> String {
-    let program = std::env::args().next().unwrap_or_else(|| "stylize".into());
-    let mut parts: Vec<String> = vec![program, "run".into()];
+    let mut parts: Vec<String> = vec![crate::open_hint::program(), "run".into()];
     parts.push(args.mesh.display().to_string());
     parts.push("--out".into());
     parts.push(args.out.display().to_string());
@@ -167,6 +166,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             )
         }
         (None, Some(prompt)) => {
+            if !cfg!(feature = "text") {
+                return Err(crate::features::not_built("text", "--prompt"));
+            }
             let Some(model) = &args.settings.model else {
                 bail!(
                     "--prompt needs --model DIR: an ONNX export of DeepFloyd IF (see docs/models.md for how to export it). \
@@ -225,7 +227,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             if let Some((before, after)) = outcome.alignment {
                 eprintln!("normal alignment (area-weighted mean n·t): {before:.4} → {after:.4}");
             }
-            crate::open_hint::lines(&args.out)
+            crate::open_hint::lines(&args.out, &crate::open_hint::program())
                 .iter()
                 .for_each(|l| eprintln!("{l}"));
         } else {

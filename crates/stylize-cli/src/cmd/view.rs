@@ -4,14 +4,13 @@
 //! the page's URL — which carries a fresh random token every request must present — and serves
 //! until Ctrl-C. Without `--port`, the first free port of 8765–8774 is used (then any free port).
 
-use std::io::Write;
-use std::net::{IpAddr, SocketAddr, TcpListener};
+use std::net::IpAddr;
+#[cfg(feature = "view")]
+use std::net::{SocketAddr, TcpListener};
 use std::path::PathBuf;
-use std::sync::Arc;
 
+#[cfg(feature = "view")]
 use anyhow::Context;
-
-use crate::view::{Viewer, random_token};
 
 /// Arguments of `stylize view`.
 #[derive(clap::Args, Debug)]
@@ -35,6 +34,7 @@ pub struct Args {
 /// The first default port tried.
 pub const DEFAULT_PORT: u16 = 8765;
 
+#[cfg(feature = "view")]
 fn bind(host: IpAddr, port: Option<u16>) -> anyhow::Result<TcpListener> {
     match port {
         Some(p) => TcpListener::bind(SocketAddr::new(host, p))
@@ -52,7 +52,13 @@ fn bind(host: IpAddr, port: Option<u16>) -> anyhow::Result<TcpListener> {
 }
 
 /// Runs `stylize view`.
+#[cfg(feature = "view")]
 pub fn run(args: Args) -> anyhow::Result<()> {
+    use std::io::Write;
+    use std::sync::Arc;
+
+    use crate::view::{Viewer, random_token};
+
     let viewer = Arc::new(Viewer::open(&args.paths, random_token())?);
     let listener = bind(args.host, args.port)?;
     let addr = listener

@@ -14,6 +14,7 @@
 pub mod assets;
 pub mod metrics;
 pub mod replay;
+#[cfg(feature = "view")]
 pub mod server;
 
 use std::path::{Component, Path, PathBuf};

@@ -1,0 +1,72 @@
+//! What this binary was built with: the crate features `text`, `gpu` and `view` (all default).
+//!
+//! A quick-start build (the README's first command: `--no-default-features`)
+//! keeps every subcommand and option, so scripts and `--help` read the same; what needs a missing
+//! feature fails before any work with [`not_built`], which names the command that builds the full
+//! binary. `gpu` has no such error: without it `render.backend = "auto"`/`"gpu"` uses the CPU
+//! renderer and says so in the run's log, as on a machine without a GPU.
+
+/// The features this binary was built with, for `stylize --version`-like reports.
+pub const ENABLED: &[(&str, bool)] = &[
+    ("text", cfg!(feature = "text")),
+    ("gpu", cfg!(feature = "gpu")),
+    ("view", cfg!(feature = "view")),
+];
+
+/// The error of a command or option (`what`) that needs `feature`, in a binary built without it.
+pub fn not_built(feature: &str, what: &str) -> anyhow::Error {
+    anyhow::anyhow!(
+        "{what} needs the `{feature}` feature, and this stylize was built without it (a quick-start \
+         build, as the README's first command makes). Build the full command line with \
+         `cargo install --locked --path crates/stylize-cli`, or run it in place with \
+         `cargo run --release --bin stylize -- …` (default features: text, gpu, view; \
+         docs/cli.md, \"Builds and features\")"
+    )
+}
+
+/// Stands in for `stylize::models` in a build without the `text` feature: [`ModelSet::open`]
+/// fails with [`not_built`], so `run` and `batch` keep one code path for prompts, and refuse
+/// them at the point where the models would load.
+#[cfg(not(feature = "text"))]
+pub mod models {
+    use std::path::Path;
+
+    use csd::CascadedGuidance;
+    use stylize::config::Config;
+
+    /// No model set can exist without the `text` feature (an empty enum); the signatures are
+    /// `stylize::models::ModelSet`'s.
+    #[derive(Debug)]
+    pub enum ModelSet {}
+
+    impl ModelSet {
+        /// Always fails: this build has no ONNX Runtime.
+        pub fn open(_model: &Path, _config: &Config) -> stylize::Result<Self> {
+            let e = super::not_built("text", "a text prompt (--prompt, a prompt row)");
+            Err(stylize::Error::External(e.into()))
+        }
+
+        /// Unreachable (no value exists).
+        pub fn cpu_time_warning(&self, _config: &Config) -> Option<String> {
+            match *self {}
+        }
+
+        /// Unreachable (no value exists).
+        pub fn guidance_for(
+            &mut self,
+            _prompt: &str,
+            _config: &Config,
+        ) -> stylize::Result<CascadedGuidance<'_>> {
+            match *self {}
+        }
+
+        /// Unreachable (no value exists).
+        pub fn into_guidance(
+            self,
+            _prompt: &str,
+            _config: &Config,
+        ) -> stylize::Result<CascadedGuidance<'static>> {
+            match self {}
+        }
+    }
+}

@@ -1,0 +1,189 @@
+//! The binary's build features (`text`, `gpu`, `view`; docs/cli.md, "Builds and features"):
+//! `--version` names them, and in a build without one (the README's quick-start build, CI's
+//! `cargo test -p stylize-cli --no-default-features --test features`) whatever
+//! needs it fails at once, with the command that builds the full binary, before it touches the
+//! output directory, while the model-free path still runs.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn ok<T, E: std::fmt::Debug>(r: Result<T, E>) -> T {
+    r.unwrap_or_else(|e| panic!("{e:?}"))
+}
+
+fn stylize(args: &[&str]) -> Output {
+    ok(Command::new(env!("CARGO_BIN_EXE_stylize"))
+        .args(args)
+        .output())
+}
+
+fn stderr(out: &Output) -> String {
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str()
+        .unwrap_or_else(|| panic!("non-UTF-8 path {}", p.display()))
+}
+
+fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+#[test]
+fn version_names_the_features_of_this_build() {
+    let out = stylize(&["--version"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let text = String::from_utf8_lossy(&out.stdout);
+    let on: Vec<&str> = [
+        ("text", cfg!(feature = "text")),
+        ("gpu", cfg!(feature = "gpu")),
+        ("view", cfg!(feature = "view")),
+    ]
+    .iter()
+    .filter_map(|&(n, on)| on.then_some(n))
+    .collect();
+    let want = if on.is_empty() {
+        "none".to_owned()
+    } else {
+        on.join(", ")
+    };
+    assert!(
+        text.trim_end()
+            .ends_with(&format!("{} (features: {want})", env!("CARGO_PKG_VERSION"))),
+        "{text}"
+    );
+}
+
+/// Asserts that `out` failed with the missing-feature message for `feature`.
+#[cfg(not(all(feature = "text", feature = "view")))]
+fn refused_for(out: &Output, feature: &str) {
+    let e = stderr(out);
+    assert_eq!(out.status.code(), Some(1), "{e}");
+    assert!(
+        e.contains(&format!("needs the `{feature}` feature"))
+            && e.contains("cargo install --locked --path crates/stylize-cli")
+            && !e.contains("panicked"),
+        "{e}"
+    );
+}
+
+#[cfg(not(feature = "text"))]
+#[test]
+fn without_text_every_text_command_is_refused_before_any_work() {
+    let tmp = ok(tempfile::tempdir());
+    let model = repo().join("fixtures/models/tiny-if");
+    let mesh = repo().join("fixtures/meshes/bunny.obj");
+    let out_dir = tmp.path().join("run");
+    let run = stylize(&[
+        "run",
+        s(&mesh),
+        "--prompt",
+        "a lego bunny",
+        "--model",
+        s(&model),
+        "--out",
+        s(&out_dir),
+    ]);
+    refused_for(&run, "text");
+    assert!(!out_dir.exists(), "nothing was written");
+    // Without --model the missing feature, not the missing model, is what the user learns.
+    refused_for(
+        &stylize(&["run", s(&mesh), "--prompt", "x", "--out", s(&out_dir)]),
+        "text",
+    );
+    refused_for(
+        &stylize(&["embed", "--model", s(&model), "--prompt", "a chair"]),
+        "text",
+    );
+    refused_for(
+        &stylize(&[
+            "debug-guidance",
+            "--model",
+            s(&model),
+            "--images",
+            s(&tmp.path().join("x.npy")),
+            "--prompt",
+            "x",
+            "--out",
+            s(&tmp.path().join("y.npz")),
+        ]),
+        "text",
+    );
+    refused_for(
+        &stylize(&[
+            "eval",
+            "--pair",
+            s(&mesh),
+            s(&mesh),
+            "--clip",
+            s(&tmp.path().join("clip")),
+        ]),
+        "text",
+    );
+    let manifest = tmp.path().join("batch.toml");
+    ok(std::fs::write(
+        &manifest,
+        format!(
+            "[[run]]\nmesh = {:?}\nprompt = \"a chair\"\nout = {:?}\n",
+            s(&mesh),
+            s(&tmp.path().join("row"))
+        ),
+    ));
+    let batch = stylize(&["batch", s(&manifest), "--model", s(&model)]);
+    assert!(!batch.status.success(), "{}", stderr(&batch));
+    assert!(
+        stderr(&batch).contains("needs the `text` feature"),
+        "{}",
+        stderr(&batch)
+    );
+}
+
+#[cfg(not(feature = "view"))]
+#[test]
+fn without_view_the_viewer_is_refused() {
+    refused_for(&stylize(&["view", "--port", "0", "."]), "view");
+}
+
+/// What the quick-start build is for: the README's first command (fewer iterations) runs and
+/// writes the pictures; its closing hint calls this very binary for `view` when it has the
+/// feature, else the command that builds the full one.
+#[test]
+fn the_model_free_demo_runs_and_points_at_this_binary() {
+    let tmp = ok(tempfile::tempdir());
+    let out_dir = tmp.path().join("demo");
+    let mesh = repo().join("fixtures/meshes/bunny.obj");
+    let out = stylize(&[
+        "run",
+        s(&mesh),
+        "--style",
+        "cube",
+        "--out",
+        s(&out_dir),
+        "--set",
+        "optim.iterations=4",
+    ]);
+    let e = stderr(&out);
+    assert!(out.status.success(), "{e}");
+    for f in ["mesh.obj", "mesh.glb", "before_after.png", "turntable.png"] {
+        assert!(out_dir.join(f).is_file(), "{f} missing: {e}");
+    }
+    let view_line = e
+        .lines()
+        .skip_while(|l| !l.starts_with("view it"))
+        .nth(1)
+        .unwrap_or_default()
+        .trim()
+        .to_string();
+    let program = view_line.split(" view ").next().unwrap_or_default();
+    if cfg!(feature = "view") {
+        let exe = ok(std::fs::canonicalize(env!("CARGO_BIN_EXE_stylize")));
+        let called = ok(std::fs::canonicalize(program.trim_matches('\'')));
+        assert_eq!(called, exe, "{view_line}");
+    } else {
+        assert_eq!(
+            program, "cargo run --release --bin stylize --",
+            "{view_line}"
+        );
+    }
+}
