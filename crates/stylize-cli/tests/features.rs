@@ -161,7 +161,7 @@ fn the_model_free_demo_runs_and_points_at_this_binary() {
         "--out",
         s(&out_dir),
         "--set",
-        "optim.iterations=4",
+        "style.iterations=4",
     ]);
     let e = stderr(&out);
     assert!(out.status.success(), "{e}");
