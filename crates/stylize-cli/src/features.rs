@@ -13,14 +13,34 @@ pub const ENABLED: &[(&str, bool)] = &[
     ("view", cfg!(feature = "view")),
 ];
 
+/// The `cargo run` prefix (ending in `--`) that builds, in the repository, this binary's features
+/// plus `feature`: `cargo run --release --no-default-features --features view --bin stylize --`
+/// from the quick-start build; the plain `cargo run --release --bin stylize --` once that is every
+/// feature.
+pub fn cargo_run_adding(feature: &str) -> String {
+    let wanted: Vec<&str> = ENABLED
+        .iter()
+        .filter_map(|&(name, on)| (on || name == feature).then_some(name))
+        .collect();
+    if wanted.len() == ENABLED.len() {
+        "cargo run --release --bin stylize --".to_owned()
+    } else {
+        format!(
+            "cargo run --release --no-default-features --features {} --bin stylize --",
+            wanted.join(",")
+        )
+    }
+}
+
 /// The error of a command or option (`what`) that needs `feature`, in a binary built without it.
 pub fn not_built(feature: &str, what: &str) -> anyhow::Error {
     anyhow::anyhow!(
         "{what} needs the `{feature}` feature, and this stylize was built without it (a quick-start \
          build, as the README's first command makes). Build the full command line with \
          `cargo install --locked --path crates/stylize-cli`, or run it in place with \
-         `cargo run --release --bin stylize -- …` (default features: text, gpu, view; \
-         docs/cli.md, \"Builds and features\")"
+         `cargo run --release --bin stylize -- …` (default features: text, gpu, view), or add just \
+         this feature to this build with `{} …` (docs/cli.md, \"Builds and features\")",
+        cargo_run_adding(feature)
     )
 }
 
@@ -67,6 +87,29 @@ pub mod models {
             _config: &Config,
         ) -> stylize::Result<CascadedGuidance<'static>> {
             match self {}
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cargo_run_adding_keeps_this_builds_features_and_adds_one() {
+        let command = cargo_run_adding("view");
+        let wanted: Vec<&str> = ENABLED
+            .iter()
+            .filter_map(|&(n, on)| (on || n == "view").then_some(n))
+            .collect();
+        if wanted.len() == ENABLED.len() {
+            assert_eq!(command, "cargo run --release --bin stylize --");
+        } else {
+            let list = format!("--features {} --bin", wanted.join(","));
+            assert!(
+                command.contains("--no-default-features") && command.contains(&list),
+                "{command}"
+            );
         }
     }
 }

@@ -57,13 +57,17 @@ pub fn lines(dir: &Path, program: &str) -> Vec<String> {
         out.push("view it, with a live λ slider:".to_string());
         out.push(format!("  {} view {dir}", shell_quote(program)));
     } else {
-        // A quick-start build (docs/cli.md, "Builds and features"): the viewer is in the full one.
+        // A quick-start build (docs/cli.md, "Builds and features"): this command adds the viewer
+        // to the same features (axum and tokio, about 80 s after the quick-start build), then
+        // opens the run.
         out.push(
-            "view it, with a live λ slider (this command builds the full stylize first; this one \
-             has no `view`):"
+            "view it, with a live λ slider (this binary has no `view`; the command adds it first):"
                 .to_string(),
         );
-        out.push(format!("  cargo run --release --bin stylize -- view {dir}"));
+        out.push(format!(
+            "  {} view {dir}",
+            crate::features::cargo_run_adding("view")
+        ));
     }
     out
 }
@@ -87,7 +91,7 @@ mod tests {
             assert!(text.contains("  target/release/stylize view '"), "{text}");
         } else {
             assert!(
-                text.contains("  cargo run --release --bin stylize -- view '"),
+                text.contains(" --features ") && text.contains("view --bin stylize -- view '"),
                 "{text}"
             );
         }

@@ -9,9 +9,8 @@ use stylize_cli::config::Config;
 use stylize_cli::runner::{LogMode, RunRequest, Task, execute};
 use stylize_cli::style::Style;
 
-fn ok<T, E: std::fmt::Debug>(r: Result<T, E>) -> T {
-    r.unwrap_or_else(|e| panic!("{e:?}"))
-}
+mod common;
+use common::ok;
 
 fn setup(dir: &Path) -> Config {
     let (p, f) = mesh_core::shapes::icosphere(1).into_parts();

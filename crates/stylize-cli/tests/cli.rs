@@ -6,9 +6,8 @@ use std::process::{Command, Output};
 
 use mesh_core::TriMesh;
 
-fn ok<T, E: std::fmt::Debug>(r: Result<T, E>) -> T {
-    r.unwrap_or_else(|e| panic!("{e:?}"))
-}
+mod common;
+use common::{ok, s};
 
 fn stylize(args: &[&str], cache: &Path) -> Output {
     ok(Command::new(env!("CARGO_BIN_EXE_stylize"))
@@ -32,10 +31,6 @@ fn small_mesh(dir: &Path) -> PathBuf {
     let path = dir.join("blob.obj");
     ok(mesh_core::io::write_mesh(&path, &TriMesh::new(p, f), None));
     path
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap_or_default()
 }
 
 #[test]

@@ -5,19 +5,8 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-fn ok<T, E: std::fmt::Debug>(r: Result<T, E>) -> T {
-    r.unwrap_or_else(|e| panic!("{e:?}"))
-}
-
-fn stylize(args: &[&str]) -> Output {
-    ok(Command::new(env!("CARGO_BIN_EXE_stylize"))
-        .args(args)
-        .output())
-}
-
-fn stderr(out: &Output) -> String {
-    String::from_utf8_lossy(&out.stderr).into_owned()
-}
+mod common;
+use common::{ok, s, stderr, stylize};
 
 fn must(out: &Output) {
     assert!(
@@ -26,10 +15,6 @@ fn must(out: &Output) {
         String::from_utf8_lossy(&out.stdout),
         stderr(out)
     );
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap_or_default()
 }
 
 /// An octahedron; with `stray`, one extra vertex no face uses (repair drops it, with a warning).

@@ -9,15 +9,8 @@ use std::process::{Command, Output};
 use mesh_core::TriMesh;
 use stylize::saved::SavedDeformation;
 
-fn ok<T, E: std::fmt::Debug>(r: Result<T, E>) -> T {
-    r.unwrap_or_else(|e| panic!("{e:?}"))
-}
-
-fn stylize(args: &[&str]) -> Output {
-    ok(Command::new(env!("CARGO_BIN_EXE_stylize"))
-        .args(args)
-        .output())
-}
+mod common;
+use common::{ok, s, stylize};
 
 fn must(out: &Output) -> serde_json::Value {
     assert!(
@@ -36,10 +29,6 @@ fn fails(out: &Output) -> String {
         String::from_utf8_lossy(&out.stdout)
     );
     String::from_utf8_lossy(&out.stderr).into_owned()
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap_or_default()
 }
 
 fn fixtures() -> PathBuf {

@@ -4,27 +4,10 @@
 //! needs it fails at once, with the command that builds the full binary, before it touches the
 //! output directory, while the model-free path still runs.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::path::PathBuf;
 
-fn ok<T, E: std::fmt::Debug>(r: Result<T, E>) -> T {
-    r.unwrap_or_else(|e| panic!("{e:?}"))
-}
-
-fn stylize(args: &[&str]) -> Output {
-    ok(Command::new(env!("CARGO_BIN_EXE_stylize"))
-        .args(args)
-        .output())
-}
-
-fn stderr(out: &Output) -> String {
-    String::from_utf8_lossy(&out.stderr).into_owned()
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str()
-        .unwrap_or_else(|| panic!("non-UTF-8 path {}", p.display()))
-}
+mod common;
+use common::{ok, s, stderr, stylize};
 
 fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
@@ -57,7 +40,7 @@ fn version_names_the_features_of_this_build() {
 
 /// Asserts that `out` failed with the missing-feature message for `feature`.
 #[cfg(not(all(feature = "text", feature = "view")))]
-fn refused_for(out: &Output, feature: &str) {
+fn refused_for(out: &std::process::Output, feature: &str) {
     let e = stderr(out);
     assert_eq!(out.status.code(), Some(1), "{e}");
     assert!(
@@ -142,7 +125,15 @@ fn without_text_every_text_command_is_refused_before_any_work() {
 #[cfg(not(feature = "view"))]
 #[test]
 fn without_view_the_viewer_is_refused() {
-    refused_for(&stylize(&["view", "--port", "0", "."]), "view");
+    let out = stylize(&["view", "--port", "0", "."]);
+    refused_for(&out, "view");
+    // … and names the command that adds just the viewer to this build.
+    let e = stderr(&out);
+    assert!(
+        e.contains("cargo run --release --no-default-features --features ")
+            && e.contains("view --bin stylize -- …"),
+        "{e}"
+    );
 }
 
 /// What the quick-start build is for: the README's first command (fewer iterations) runs and
@@ -175,14 +166,16 @@ fn the_model_free_demo_runs_and_points_at_this_binary() {
         .unwrap_or_default()
         .trim()
         .to_string();
-    let program = view_line.split(" view ").next().unwrap_or_default();
+    let program = view_line.rsplit_once(" view ").map_or("", |(p, _)| p);
     if cfg!(feature = "view") {
         let exe = ok(std::fs::canonicalize(env!("CARGO_BIN_EXE_stylize")));
         let called = ok(std::fs::canonicalize(program.trim_matches('\'')));
         assert_eq!(called, exe, "{view_line}");
     } else {
-        assert_eq!(
-            program, "cargo run --release --bin stylize --",
+        // The quick-start build's features plus `view` (none + view for the README's).
+        assert!(
+            program.starts_with("cargo run --release --no-default-features --features ")
+                && program.ends_with("view --bin stylize --"),
             "{view_line}"
         );
     }

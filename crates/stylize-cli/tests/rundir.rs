@@ -9,13 +9,8 @@ use mesh_core::TriMesh;
 use stylize::saved::SavedDeformation;
 use stylize_cli::checkpoint::Checkpoint;
 
-fn ok<T, E: std::fmt::Debug>(r: Result<T, E>) -> T {
-    r.unwrap_or_else(|e| panic!("{e:?}"))
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap_or_default()
-}
+mod common;
+use common::{ok, s, stderr};
 
 fn command(args: &[&str], env: &[(&str, &str)]) -> Command {
     let mut c = Command::new(env!("CARGO_BIN_EXE_stylize"));
@@ -32,10 +27,6 @@ fn stylize(args: &[&str]) -> Output {
 
 fn stylize_env(args: &[&str], env: &[(&str, &str)]) -> Output {
     ok(command(args, env).output())
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
 fn must(o: &Output) {

@@ -11,9 +11,8 @@ use stylize_cli::config::Config;
 use stylize_cli::runner::{LogMode, RunOutcome, RunRequest, Task, execute};
 use stylize_cli::style::Style;
 
-fn ok<T, E: std::fmt::Debug>(r: Result<T, E>) -> T {
-    r.unwrap_or_else(|e| panic!("{e:?}"))
-}
+mod common;
+use common::ok;
 
 /// An icosphere (2 subdivisions, 162 vertices) stretched into an ellipsoid, as an OBJ file.
 fn small_mesh(dir: &Path) -> PathBuf {

@@ -15,9 +15,8 @@ use stylize_cli::pipeline::{
     ViewSettings, run_loop,
 };
 
-fn ok<T, E: std::fmt::Debug>(r: Result<T, E>) -> T {
-    r.unwrap_or_else(|e| panic!("{e:?}"))
-}
+mod common;
+use common::ok;
 
 /// Loss = mean pixel value (pushes pixels darker); its gradient is 1/N everywhere, scaled by a
 /// factor drawn from the RNG (so two sub-steps give different gradients, like fresh noise). Its

@@ -8,19 +8,14 @@ use std::process::{Command, Output};
 use diffusion_onnx::npy::{NpyArray, NpyData, write_npy};
 use mesh_core::TriMesh;
 
-fn ok<T, E: std::fmt::Debug>(r: Result<T, E>) -> T {
-    r.unwrap_or_else(|e| panic!("{e:?}"))
-}
+mod common;
+use common::{ok, s};
 
 fn stylize(args: &[&str], cache: &Path) -> Output {
     ok(Command::new(env!("CARGO_BIN_EXE_stylize"))
         .args(args)
         .env(diffusion_onnx::CACHE_ENV, cache)
         .output())
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap_or_default()
 }
 
 fn tiny_if() -> PathBuf {
