@@ -2,26 +2,41 @@
 //!
 //! A quick-start build (the README's first command: `--no-default-features`)
 //! keeps every subcommand and option, so scripts and `--help` read the same; what needs a missing
-//! feature fails before any work with [`not_built`], which names the command that builds the full
-//! binary. `gpu` has no such error: without it `render.backend = "auto"`/`"gpu"` uses the CPU
+//! feature fails before any work with [`not_built`], which names the commands that build the full
+//! binary or add just that feature ([`cargo_run_adding`]). `gpu` has no such error: without it `render.backend = "auto"`/`"gpu"` uses the CPU
 //! renderer and says so in the run's log, as on a machine without a GPU.
 
-/// The features this binary was built with, for `stylize --version`-like reports.
+/// Every feature, and whether this binary was built with it.
 pub const ENABLED: &[(&str, bool)] = &[
     ("text", cfg!(feature = "text")),
     ("gpu", cfg!(feature = "gpu")),
     ("view", cfg!(feature = "view")),
 ];
 
+/// The names of this binary's features plus `extra` (if any), in [`ENABLED`]'s order.
+fn names_with(extra: Option<&str>) -> Vec<&'static str> {
+    ENABLED
+        .iter()
+        .filter_map(|&(name, on)| (on || extra == Some(name)).then_some(name))
+        .collect()
+}
+
+/// This binary's features for `stylize --version`: `text, gpu, view`, or `none`.
+pub fn summary() -> String {
+    let names = names_with(None);
+    if names.is_empty() {
+        "none".to_owned()
+    } else {
+        names.join(", ")
+    }
+}
+
 /// The `cargo run` prefix (ending in `--`) that builds, in the repository, this binary's features
 /// plus `feature`: `cargo run --release --no-default-features --features view --bin stylize --`
 /// from the quick-start build; the plain `cargo run --release --bin stylize --` once that is every
 /// feature.
 pub fn cargo_run_adding(feature: &str) -> String {
-    let wanted: Vec<&str> = ENABLED
-        .iter()
-        .filter_map(|&(name, on)| (on || name == feature).then_some(name))
-        .collect();
+    let wanted = names_with(Some(feature));
     if wanted.len() == ENABLED.len() {
         "cargo run --release --bin stylize --".to_owned()
     } else {
@@ -98,18 +113,39 @@ mod tests {
     #[test]
     fn cargo_run_adding_keeps_this_builds_features_and_adds_one() {
         let command = cargo_run_adding("view");
-        let wanted: Vec<&str> = ENABLED
-            .iter()
-            .filter_map(|&(n, on)| (on || n == "view").then_some(n))
-            .collect();
-        if wanted.len() == ENABLED.len() {
+        if cfg!(all(feature = "text", feature = "gpu")) {
+            // The default build (CI's workspace tests): adding `view` is every feature.
             assert_eq!(command, "cargo run --release --bin stylize --");
+        } else if cfg!(not(any(
+            feature = "text",
+            feature = "gpu",
+            feature = "view"
+        ))) {
+            // The quick-start build (CI's `--no-default-features` test).
+            assert_eq!(
+                command,
+                "cargo run --release --no-default-features --features view --bin stylize --"
+            );
         } else {
-            let list = format!("--features {} --bin", wanted.join(","));
+            let list = format!("--features {} --bin", names_with(Some("view")).join(","));
             assert!(
                 command.contains("--no-default-features") && command.contains(&list),
                 "{command}"
             );
+        }
+    }
+
+    #[test]
+    fn summary_names_this_builds_features() {
+        let s = summary();
+        if cfg!(all(feature = "text", feature = "gpu", feature = "view")) {
+            assert_eq!(s, "text, gpu, view");
+        } else if cfg!(not(any(
+            feature = "text",
+            feature = "gpu",
+            feature = "view"
+        ))) {
+            assert_eq!(s, "none");
         }
     }
 }

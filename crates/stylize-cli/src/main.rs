@@ -62,18 +62,13 @@ fn private_runtime_dir() -> Option<tempfile::TempDir> {
 /// (`stylize 0.1.0 (features: text, gpu, view)`).
 fn parse_cli() -> Cli {
     use clap::{CommandFactory, FromArgMatches};
-    let features: Vec<&str> = stylize_cli::features::ENABLED
-        .iter()
-        .filter_map(|&(name, on)| on.then_some(name))
-        .collect();
-    let features = if features.is_empty() {
-        "none".to_owned()
-    } else {
-        features.join(", ")
-    };
     // Leaked once: clap keeps a `'static` version string.
-    let version: &'static str =
-        format!("{} (features: {features})", env!("CARGO_PKG_VERSION")).leak();
+    let version: &'static str = format!(
+        "{} (features: {})",
+        env!("CARGO_PKG_VERSION"),
+        stylize_cli::features::summary()
+    )
+    .leak();
     let matches = Cli::command().version(version).get_matches();
     Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit())
 }
