@@ -69,6 +69,43 @@ fn permute_columns(m: &M3, slot: [[Mask; 2]; 3]) -> M3 {
     out
 }
 
+/// One Jacobi rotation of the sweep in [`svd3_lanes`]: columns `P` and `Q` of `a` made orthogonal,
+/// the same rotation applied to `v`; lanes whose pair is already orthogonal are left unchanged and
+/// the others are marked in `rotated`.
+#[inline(always)]
+fn jacobi_pair<const P: usize, const Q: usize>(a: &mut M3, v: &mut M3, rotated: &mut Mask) {
+    let ap = col(a, P);
+    let aq = col(a, Q);
+    let alpha = dot(ap, ap);
+    let beta = dot(aq, aq);
+    let gamma = dot(ap, aq);
+    let skip = or(
+        eq(gamma, splat(0.0)),
+        le(mul(gamma, gamma), mul(splat(1e-30), mul(alpha, beta))),
+    );
+    if all(skip) {
+        return;
+    }
+    *rotated = or(*rotated, not(skip));
+    // `svd3::rotation_tangent`, its operations in its order.
+    let d = sub(beta, alpha);
+    let q2 = mul(splat(2.0), gamma);
+    let sign = select(lt(d, splat(0.0)), splat(-1.0), splat(1.0));
+    let t = div(
+        mul(sign, q2),
+        add(abs(d), sqrt(add(mul(d, d), mul(q2, q2)))),
+    );
+    let c = div(splat(1.0), sqrt(add(splat(1.0), mul(t, t))));
+    let sn = mul(c, t);
+    for m in [a, v] {
+        for row in m.iter_mut() {
+            let (x, y) = (row[P], row[Q]);
+            row[P] = select(skip, x, sub(mul(c, x), mul(sn, y)));
+            row[Q] = select(skip, y, add(mul(sn, x), mul(c, y)));
+        }
+    }
+}
+
 /// The one-sided Jacobi SVD of [`crate::stages::svd3`], lane by lane.
 #[inline(always)]
 pub(crate) fn svd3_lanes(s: &M3) -> SvdLanes {
@@ -88,41 +125,13 @@ pub(crate) fn svd3_lanes(s: &M3) -> SvdLanes {
         }
     }
     let mut v = identity();
-    const PAIRS: [(usize, usize); 3] = [(0, 1), (0, 2), (1, 2)];
     for _sweep in 0..32 {
+        // The pairs (0, 1), (0, 2), (1, 2) as separate instances, so that every column index is a
+        // constant and the columns can stay in registers.
         let mut rotated: Mask = FALSE;
-        for (p, q) in PAIRS {
-            let ap = col(&a, p);
-            let aq = col(&a, q);
-            let alpha = dot(ap, ap);
-            let beta = dot(aq, aq);
-            let gamma = dot(ap, aq);
-            let skip = or(
-                eq(gamma, splat(0.0)),
-                le(mul(gamma, gamma), mul(splat(1e-30), mul(alpha, beta))),
-            );
-            if all(skip) {
-                continue;
-            }
-            rotated = or(rotated, not(skip));
-            // `svd3::rotation_tangent`, its operations in its order.
-            let d = sub(beta, alpha);
-            let q2 = mul(splat(2.0), gamma);
-            let sign = select(lt(d, splat(0.0)), splat(-1.0), splat(1.0));
-            let t = div(
-                mul(sign, q2),
-                add(abs(d), sqrt(add(mul(d, d), mul(q2, q2)))),
-            );
-            let c = div(splat(1.0), sqrt(add(splat(1.0), mul(t, t))));
-            let sn = mul(c, t);
-            for m in [&mut a, &mut v] {
-                for row in m.iter_mut() {
-                    let (x, y) = (row[p], row[q]);
-                    row[p] = select(skip, x, sub(mul(c, x), mul(sn, y)));
-                    row[q] = select(skip, y, add(mul(sn, x), mul(c, y)));
-                }
-            }
-        }
+        jacobi_pair::<0, 1>(&mut a, &mut v, &mut rotated);
+        jacobi_pair::<0, 2>(&mut a, &mut v, &mut rotated);
+        jacobi_pair::<1, 2>(&mut a, &mut v, &mut rotated);
         if !any(rotated) {
             break;
         }
