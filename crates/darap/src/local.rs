@@ -10,6 +10,7 @@ use crate::rotation_rule::RotationSvd;
 use crate::svd3::Svd3;
 use cotan::CotWeights;
 use rayon::prelude::*;
+use std::mem::MaybeUninit;
 
 /// Minimum number of vertices per rayon task.
 pub(crate) const PAR_MIN_LEN: usize = 1024;
@@ -39,16 +40,18 @@ pub fn normalize_targets_vjp(x: &[[f64; 3]], grad_unit: &[[f64; 3]]) -> Vec<[f64
 #[inline]
 pub(crate) fn normalize_target_vjp(v: [f64; 3], g: [f64; 3]) -> [f64; 3] {
     let n = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+    // One division: `t̂` exactly as [`normalize_target`] forms it, then the products by `1/|x|`.
+    let inv = 1.0 / n.max(1e-12);
     if n > 1e-12 {
-        let t = [v[0] / n, v[1] / n, v[2] / n];
+        let t = [v[0] * inv, v[1] * inv, v[2] * inv];
         let tg = t[0] * g[0] + t[1] * g[1] + t[2] * g[2];
         [
-            (g[0] - t[0] * tg) / n,
-            (g[1] - t[1] * tg) / n,
-            (g[2] - t[2] * tg) / n,
+            (g[0] - t[0] * tg) * inv,
+            (g[1] - t[1] * tg) * inv,
+            (g[2] - t[2] * tg) * inv,
         ]
     } else {
-        [g[0] / 1e-12, g[1] / 1e-12, g[2] / 1e-12]
+        [g[0] * inv, g[1] * inv, g[2] * inv]
     }
 }
 
@@ -207,8 +210,6 @@ pub fn local_step(
 /// How [`local_step_as`] stores a rotation: as a matrix ([`Mat3`]) or as the right-hand side's
 /// [`PaddedColumns`], which the layer's forward pass uses to skip a conversion pass.
 pub(crate) trait RotationLayout: Copy + Send + Sync {
-    /// The zero matrix (the fill before the kernels write every entry).
-    const ZERO: Self;
     /// `R = I`.
     const IDENTITY: Self;
     /// Lane `l` of `r`.
@@ -216,7 +217,6 @@ pub(crate) trait RotationLayout: Copy + Send + Sync {
 }
 
 impl RotationLayout for Mat3 {
-    const ZERO: Self = ZERO;
     const IDENTITY: Self = IDENTITY;
     #[inline(always)]
     fn from_lane(r: &M3, l: usize) -> Self {
@@ -225,7 +225,6 @@ impl RotationLayout for Mat3 {
 }
 
 impl RotationLayout for PaddedColumns {
-    const ZERO: Self = [[0.0; 4]; 3];
     const IDENTITY: Self = [
         [1.0, 0.0, 0.0, 0.0],
         [0.0, 1.0, 0.0, 0.0],
@@ -255,12 +254,17 @@ pub(crate) fn local_step_as<R: RotationLayout>(
             && free.is_none_or(|m| m.len() == n),
         "local_step: inputs differ in length"
     );
-    let mut rotations = vec![R::ZERO; n];
-    let chunks: Vec<TapeChunk> = rotations
+    // Every rotation and tape chunk is written exactly once, in place, by the batch kernels
+    // (no zero fill before, no copy of each 1.5 kB chunk out of the kernel's return value).
+    let num_chunks = n.div_ceil(W);
+    let mut rotations: Vec<R> = Vec::with_capacity(n);
+    let mut chunks: Vec<TapeChunk> = Vec::with_capacity(num_chunks);
+    rotations.spare_capacity_mut()[..n]
         .par_chunks_mut(W)
+        .zip(chunks.spare_capacity_mut()[..num_chunks].par_iter_mut())
         .enumerate()
         .with_min_len(PAR_MIN_LEN / W)
-        .map(|(c, out)| {
+        .for_each(|(c, (out, tape))| {
             dispatch(LocalChunk {
                 base: c * W,
                 covariance_rest,
@@ -271,9 +275,18 @@ pub(crate) fn local_step_as<R: RotationLayout>(
                 rule,
                 free,
                 out,
+                tape,
             })
-        })
-        .collect();
+        });
+    // SAFETY: the loop above ran `local_chunk` on every batch, which writes each element of its
+    // `out` slice and its `tape` slot; together the batches cover the first `n` rotations and the
+    // first `num_chunks` chunks exactly. (Were a batch to panic, the lengths would stay 0; both
+    // element types are `Copy`, so nothing would be dropped.)
+    #[allow(unsafe_code)]
+    unsafe {
+        rotations.set_len(n);
+        chunks.set_len(num_chunks);
+    }
     (
         rotations,
         LocalTape {
@@ -297,13 +310,14 @@ struct LocalChunk<'a, R> {
     targets_unit: &'a [[f64; 3]],
     rule: RotationRule,
     free: Option<&'a [bool]>,
-    out: &'a mut [R],
+    out: &'a mut [MaybeUninit<R>],
+    tape: &'a mut MaybeUninit<TapeChunk>,
 }
 
 impl<R: RotationLayout> pulp::WithSimd for LocalChunk<'_, R> {
-    type Output = TapeChunk;
+    type Output = ();
     #[inline(always)]
-    fn with_simd<S: pulp::Simd>(self, _simd: S) -> TapeChunk {
+    fn with_simd<S: pulp::Simd>(self, _simd: S) {
         local_chunk(
             self.base,
             self.covariance_rest,
@@ -314,6 +328,7 @@ impl<R: RotationLayout> pulp::WithSimd for LocalChunk<'_, R> {
             self.rule,
             self.free,
             self.out,
+            self.tape,
         )
     }
 }
@@ -379,8 +394,9 @@ fn local_chunk<R: RotationLayout>(
     targets_unit: &[[f64; 3]],
     rule: RotationRule,
     free: Option<&[bool]>,
-    out: &mut [R],
-) -> TapeChunk {
+    out: &mut [MaybeUninit<R>],
+    tape: &mut MaybeUninit<TapeChunk>,
+) {
     let mut s: M3 = [[[0.0; W]; 3]; 3];
     let mut is_free: Mask = FALSE;
     for l in 0..out.len() {
@@ -402,17 +418,17 @@ fn local_chunk<R: RotationLayout>(
     let svd = svd3_lanes(&s);
     let (r, d2) = rule_lanes(&svd, rule);
     for (l, o) in out.iter_mut().enumerate() {
-        *o = if lane(is_free, l) {
+        o.write(if lane(is_free, l) {
             R::from_lane(&r, l)
         } else {
             R::IDENTITY
-        };
+        });
     }
-    TapeChunk {
+    tape.write(TapeChunk {
         svd,
         d2,
         free: is_free,
-    }
+    });
 }
 
 /// Adjoint of [`local_step`] with respect to the unit targets:

@@ -48,13 +48,19 @@ pub fn post_process(
         .collect();
     let mut argmax = [0usize; 3];
     let mut argmin = [0usize; 3];
-    for (i, p) in centred.iter().enumerate() {
-        for c in 0..3 {
-            if p[c] > centred[argmax[c]][c] {
-                argmax[c] = i;
-            }
-            if p[c] < centred[argmin[c]][c] {
-                argmin[c] = i;
+    // The running extremes in registers (the same comparisons as against `centred[argmax[c]]`).
+    if let Some(&first) = centred.first() {
+        let (mut hi, mut lo) = (first, first);
+        for (i, p) in centred.iter().enumerate() {
+            for c in 0..3 {
+                if p[c] > hi[c] {
+                    hi[c] = p[c];
+                    argmax[c] = i;
+                }
+                if p[c] < lo[c] {
+                    lo[c] = p[c];
+                    argmin[c] = i;
+                }
             }
         }
     }
