@@ -288,15 +288,25 @@ impl SupernodalFactor {
             let mut work = cell.take();
             work.clear();
             work.extend(x.iter().map(|r| [r[0], r[1], r[2], 0.0]));
-            pulp::Arch::new().dispatch(Substitute {
-                factor: self,
-                x: &mut work,
-            });
+            self.solve_padded_in_place(&mut work);
             for (o, r) in x.iter_mut().zip(&work) {
                 *o = [r[0], r[1], r[2]];
             }
             cell.set(work);
         });
+    }
+
+    /// [`SupernodalFactor::solve_in_place`] on rows already padded to `[f64; 4]` (no copy in or
+    /// out). Every operation is lane-wise, so the fourth lane is solved as a fourth right-hand side
+    /// and the first three come out bit for bit as from [`SupernodalFactor::solve_in_place`],
+    /// whatever the fourth holds.
+    pub(crate) fn solve_padded_in_place(&self, x: &mut [[f64; 4]]) {
+        assert_eq!(
+            x.len(),
+            self.size(),
+            "right-hand side has the wrong number of rows"
+        );
+        pulp::Arch::new().dispatch(Substitute { factor: self, x });
     }
 
     /// Forward then backward substitution on padded rows (see [`SupernodalFactor::solve_in_place`]),

@@ -160,6 +160,24 @@ impl PinnedCholesky {
         }
     }
 
+    /// [`PinnedCholesky::solve_ordered_in_place`] on rows padded to four lanes, `[b_0, b_1, b_2, ·]`
+    /// (no copy in or out of the solver's own padded layout). The fourth lane is solved as a fourth
+    /// right-hand side; the first three are bit for bit those of
+    /// [`PinnedCholesky::solve_ordered_in_place`].
+    ///
+    /// # Panics
+    /// If `rhs.len()` is not the number of free vertices (a programming error).
+    pub fn solve_ordered_padded_in_place(&self, rhs: &mut [[f64; 4]]) {
+        assert_eq!(
+            rhs.len(),
+            self.free.len(),
+            "right-hand side has the wrong number of rows"
+        );
+        if !rhs.is_empty() {
+            self.factor.solve_padded_in_place(rhs);
+        }
+    }
+
     /// `−L[v, pins]·pinned_values` for every free vertex `v`, in solver order: what the pinned
     /// values add to the right-hand side of the free rows (see [`PinnedCholesky::solve_pinned`]).
     ///
@@ -510,9 +528,17 @@ mod tests {
         chol.factor.substitute_portable(&mut portable);
         let mut dispatched: Vec<[f64; 3]> = padded.iter().map(|r| [r[0], r[1], r[2]]).collect();
         chol.solve_ordered_in_place(&mut dispatched);
-        for (a, b) in portable.iter().zip(&dispatched) {
+        // The padded entry point, with something else than 0 in the fourth lane.
+        let mut padded_solve: Vec<[f64; 4]> = padded
+            .iter()
+            .enumerate()
+            .map(|(i, r)| [r[0], r[1], r[2], 1.0 + i as f64])
+            .collect();
+        chol.solve_ordered_padded_in_place(&mut padded_solve);
+        for ((a, b), c) in portable.iter().zip(&dispatched).zip(&padded_solve) {
             for d in 0..3 {
                 assert_eq!(a[d].to_bits(), b[d].to_bits());
+                assert_eq!(a[d].to_bits(), c[d].to_bits());
             }
         }
     }

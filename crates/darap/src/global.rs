@@ -146,14 +146,6 @@ impl RhsPrecompute {
     }
 }
 
-/// `b_a = Σ_v R_v h_{a,v}` for the rows `out` covers, added to `out` (`out[a]` holds an offset on
-/// entry, zero for plain [`rhs`]).
-pub(crate) fn rhs_add_into(pre: &RhsPrecompute, rotations: &[Mat3], out: &mut [[f64; 3]]) {
-    assert_eq!(rotations.len(), pre.num_cols, "one rotation per vertex");
-    let columns: Vec<PaddedColumns> = rotations.iter().map(padded_columns).collect();
-    rhs_add_columns_into(pre, &columns, out);
-}
-
 /// A rotation as its three columns, each padded to four lanes: `c[j] = [R_0j, R_1j, R_2j, 0]`, so
 /// that `R h = h₀ c₀ + h₁ c₁ + h₂ c₂` is three 4-lane products.
 pub(crate) type PaddedColumns = [[f64; 4]; 3];
@@ -170,12 +162,14 @@ pub(crate) fn from_padded_columns(c: &PaddedColumns) -> Mat3 {
     std::array::from_fn(|i| [c[0][i], c[1][i], c[2][i]])
 }
 
-/// [`rhs_add_into`] for rotations given as [`PaddedColumns`] (as the layer's local step writes
-/// them).
+/// `b_a = Σ_v R_v h_{a,v}` added to the rows `out` covers, for rotations given as
+/// [`PaddedColumns`] (as the layer's local step writes them). Rows are padded,
+/// `[b_0, b_1, b_2, ·]` (the solver's layout); `out[a]` holds an offset on entry (zero for plain
+/// [`rhs`]) and the fourth lane is left as it is.
 pub(crate) fn rhs_add_columns_into(
     pre: &RhsPrecompute,
     columns: &[PaddedColumns],
-    out: &mut [[f64; 3]],
+    out: &mut [[f64; 4]],
 ) {
     assert_eq!(columns.len(), pre.num_cols, "one rotation per vertex");
     assert_eq!(out.len(), pre.num_rows, "one row per entry of b");
@@ -191,7 +185,7 @@ pub(crate) fn rhs_add_columns_into(
         });
 }
 
-/// Rows `first..first + rows.len()` of [`rhs_add_into`] as a `pulp` kernel, so the gathers and
+/// Rows `first..first + rows.len()` of [`rhs_add_columns_into`] as a `pulp` kernel, so the gathers and
 /// 3×3 products are compiled for the CPU's instruction set (see [`crate::lanes::dispatch`]).
 /// Row `i` of the update is `(R_i0·h₀ + R_i1·h₁) + R_i2·h₂`, added to the sum — the scalar
 /// expression's operations in its order (no fused multiply–add), so the result does not depend on
@@ -200,7 +194,7 @@ struct RhsRows<'a> {
     pre: &'a RhsPrecompute,
     columns: &'a [[[f64; 4]; 3]],
     first: usize,
-    rows: &'a mut [[f64; 3]],
+    rows: &'a mut [[f64; 4]],
 }
 
 impl pulp::WithSimd for RhsRows<'_> {
@@ -231,7 +225,7 @@ impl pulp::WithSimd for RhsRows<'_> {
                     );
                 }
                 let s: [f64; 4] = pulp::bytemuck::cast(s);
-                *acc = [s[0], s[1], s[2]];
+                *acc = [s[0], s[1], s[2], acc[3]];
             } else {
                 let mut s = *acc;
                 for (&v, h) in entries {
@@ -249,9 +243,11 @@ impl pulp::WithSimd for RhsRows<'_> {
 /// The right-hand side `b` of the global step (spec §4.1), one row per row of `pre`. With every
 /// `R = I`, `b = L p` up to rounding. Deterministic (a gather per row in a fixed order).
 pub fn rhs(pre: &RhsPrecompute, rotations: &[Mat3]) -> Vec<[f64; 3]> {
-    let mut b = vec![[0.0; 3]; pre.num_rows];
-    rhs_add_into(pre, rotations, &mut b);
-    b
+    assert_eq!(rotations.len(), pre.num_cols, "one rotation per vertex");
+    let columns: Vec<PaddedColumns> = rotations.iter().map(padded_columns).collect();
+    let mut b = vec![[0.0; 4]; pre.num_rows];
+    rhs_add_columns_into(pre, &columns, &mut b);
+    b.iter().map(|r| [r[0], r[1], r[2]]).collect()
 }
 
 /// Adjoint of [`rhs`]: given `∂ℓ/∂b` (one row per row of `pre`), returns

@@ -291,8 +291,8 @@ pub struct Darap {
     feathered_mass_int: Option<Vec<f64>>,
     /// Rows: free vertices in solver order; columns: internal order.
     rhs: RhsPrecompute,
-    /// `−L[free, pins]·x_pins` in solver order (the pins stay at rest).
-    pinned_rhs: Vec<[f64; 3]>,
+    /// `−L[free, pins]·x_pins` in solver order (the pins stay at rest), rows padded to four lanes.
+    pinned_rhs: Vec<[f64; 4]>,
     solver: PinnedCholesky,
     pinned_values: Vec<[f64; 3]>,
     rest_diag: f64,
@@ -362,7 +362,11 @@ impl Darap {
             num_free,
             &position_of,
         );
-        let pinned_rhs = solver.pinned_rhs_ordered(&pinned_values);
+        let pinned_rhs = solver
+            .pinned_rhs_ordered(&pinned_values)
+            .iter()
+            .map(|r| [r[0], r[1], r[2], 0.0])
+            .collect();
         let rest_diag = mesh_core::geometry::bbox_diagonal(rest_positions);
         Ok(Darap {
             covariance_int: order.iter().map(|&v| covariance_rest[v]).collect(),
@@ -563,15 +567,16 @@ impl Darap {
 
     /// Right-hand side and solve for rotations in internal order; positions in vertex order.
     fn solve_internal(&self, columns_int: &[PaddedColumns]) -> Vec<[f64; 3]> {
+        // Rows padded to four lanes, the solver's own layout: no copy into or out of it.
         let mut b = self.pinned_rhs.clone();
         global::rhs_add_columns_into(&self.rhs, columns_int, &mut b);
-        self.solver.solve_ordered_in_place(&mut b);
+        self.solver.solve_ordered_padded_in_place(&mut b);
         // Internal positions past the free vertices are the pins, in `solver.pins()` order.
         let num_free = b.len();
         self.position_of
             .iter()
             .map(|&k| match b.get(k) {
-                Some(x) => *x,
+                Some(x) => [x[0], x[1], x[2]],
                 None => self.pinned_values[k - num_free],
             })
             .collect()
@@ -632,13 +637,15 @@ impl Darap {
         let grad_solved = post_process_vjp(&state.post, grad_positions);
         // The solve is self-adjoint; the pinned rows of b do not enter it (zero gradient).
         let num_free = self.solver.solver_order().len();
-        let mut grad_b: Vec<[f64; 3]> = self.order[..num_free]
+        let mut grad_b: Vec<[f64; 4]> = self.order[..num_free]
             .iter()
-            .map(|&v| grad_solved[v])
+            .map(|&v| {
+                let g = grad_solved[v];
+                [g[0], g[1], g[2], 0.0]
+            })
             .collect();
-        self.solver.solve_ordered_in_place(&mut grad_b);
+        self.solver.solve_ordered_padded_in_place(&mut grad_b);
         // `∂ℓ/∂R_v` is formed inside the local step's adjoint, vertex by vertex.
-        let grad_b = global::padded_rows(&grad_b);
         let grad_unit_int = local::local_step_vjp_from(
             &state.local,
             state.feathered_mass_int.as_ref().unwrap_or(&self.mass_int),
