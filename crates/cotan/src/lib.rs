@@ -21,6 +21,7 @@
 mod factor;
 mod laplacian;
 mod mass;
+mod ordering;
 mod pinned;
 mod weights;
 

@@ -5,6 +5,7 @@ use crate::{CotanError, SymmetricCsr};
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt::factor::LltError;
 use faer::linalg::cholesky::llt::factor::LltRegularization;
+use faer::perm::PermRef;
 use faer::sparse::linalg::cholesky::{
     CholeskySymbolicParams, SymbolicCholesky, SymmetricOrdering, factorize_symbolic_cholesky,
 };
@@ -28,8 +29,9 @@ pub fn component_pins(num_vertices: usize, faces: &[[u32; 3]]) -> Vec<usize> {
 /// rows and columns of the pinned vertices removed.
 ///
 /// Solving `L x = b` with `x[pins]` prescribed is then `L_pin x_free = b_free − L[free, pins]·x_pins`
-/// ([`PinnedCholesky::solve_pinned`]). The fill-reducing ordering (AMD), the symbolic analysis and
-/// the numeric factorization (faer) run once; the factor is then copied into the crate's own form,
+/// ([`PinnedCholesky::solve_pinned`]). The fill-reducing ordering (AMD or nested dissection,
+/// whichever leaves fewer factor entries), the symbolic analysis and the numeric factorization
+/// (faer) run once; the factor is then copied into the crate's own form,
 /// grouped by fundamental supernodes, on which the solves run forward and backward substitution
 /// for the three coordinates together, sequentially and deterministically.
 ///
@@ -405,17 +407,39 @@ fn reduce(l: &SymmetricCsr, split: &PinSplit) -> Reduced {
     r
 }
 
-/// Stage 4: fill-reducing ordering (AMD) and symbolic analysis of the reduced pattern.
+/// Stage 4: fill-reducing ordering and symbolic analysis of the reduced pattern. Two orderings
+/// are analysed, AMD and nested dissection ([`crate::ordering`]), and the one whose factor stores
+/// fewer entries is kept (AMD on a tie). On meshes of a few thousand vertices and on irregular
+/// ones AMD usually wins; on large, evenly meshed surfaces nested dissection leaves 15–25 % fewer
+/// entries (icospheres of 41k and 164k vertices), which the substitutions pay for at every solve.
 fn symbolic(
     pattern: SymbolicSparseColMatRef<'_, usize>,
 ) -> Result<SymbolicCholesky<usize>, CotanError> {
-    factorize_symbolic_cholesky(
-        pattern,
-        Side::Lower,
-        SymmetricOrdering::Amd,
-        CholeskySymbolicParams::default(),
-    )
-    .map_err(|e| CotanError::Factorization(format!("{e:?}")))
+    let analyse = |ordering| {
+        factorize_symbolic_cholesky(
+            pattern,
+            Side::Lower,
+            ordering,
+            CholeskySymbolicParams::default(),
+        )
+        .map_err(|e| CotanError::Factorization(format!("{e:?}")))
+    };
+    let amd = analyse(SymmetricOrdering::Amd)?;
+    let fwd = crate::ordering::nested_dissection(pattern.col_ptr(), pattern.row_idx());
+    let mut inv = vec![0; fwd.len()];
+    for (new, &old) in fwd.iter().enumerate() {
+        inv[old] = new;
+    }
+    let nd = analyse(SymmetricOrdering::Custom(PermRef::new_checked(
+        &fwd,
+        &inv,
+        fwd.len(),
+    )))?;
+    Ok(if nd.len_val() < amd.len_val() {
+        nd
+    } else {
+        amd
+    })
 }
 
 /// Stage 5: the numeric `L L^T` factorization (sequential), as faer's factor values; a
