@@ -410,7 +410,7 @@ fn reduce(l: &SymmetricCsr, split: &PinSplit) -> Reduced {
 /// Stage 4: fill-reducing ordering and symbolic analysis of the reduced pattern. Two orderings
 /// are analysed, AMD and nested dissection ([`crate::ordering`]), and the one whose factor stores
 /// fewer entries is kept (AMD on a tie). On meshes of a few thousand vertices and on irregular
-/// ones AMD usually wins; on large, evenly meshed surfaces nested dissection leaves 15–25 % fewer
+/// ones AMD usually wins; on large, evenly meshed surfaces nested dissection leaves 16–26 % fewer
 /// entries (icospheres of 41k and 164k vertices), which the substitutions pay for at every solve.
 fn symbolic(
     pattern: SymbolicSparseColMatRef<'_, usize>,
