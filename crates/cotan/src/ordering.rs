@@ -20,7 +20,7 @@ const LEAF: usize = 8;
 /// Each side of a separator holds at least this fraction of the part's vertices (when some level
 /// allows it; otherwise the level holding the median vertex is taken).
 const BALANCE: f64 = 0.35;
-/// Breadth-first searches per part to find a pseudo-peripheral start vertex.
+/// Moves per part to a farther start vertex (a pseudo-peripheral one) before the levels are taken.
 const PERIPHERAL_SEARCHES: usize = 3;
 
 /// What the work stack holds: a part to split (its vertices and its label) or vertices to emit.
@@ -87,20 +87,21 @@ pub(crate) fn nested_dissection(col_ptr: &[usize], row_idx: &[usize]) -> Vec<usi
                 continue;
             }
         };
+        // Search from the part's first vertex, then up to PERIPHERAL_SEARCHES times again from
+        // the last vertex reached; the last search's levels are the ones used.
         let mut start = verts[0];
-        for _ in 0..PERIPHERAL_SEARCHES {
+        for hop in 0..=PERIPHERAL_SEARCHES {
+            if hop > 0 {
+                let far = queue[queue.len() - 1];
+                if level[far] <= level[start] {
+                    break;
+                }
+                start = far;
+            }
             search(
                 start, lab, &verts, col_ptr, row_idx, &label, &mut level, &mut queue,
             );
-            let far = queue[queue.len() - 1];
-            if level[far] <= level[start] {
-                break;
-            }
-            start = far;
         }
-        search(
-            start, lab, &verts, col_ptr, row_idx, &label, &mut level, &mut queue,
-        );
         let mut new_label = || {
             next_label += 1;
             next_label - 1
