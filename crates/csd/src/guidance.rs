@@ -416,7 +416,8 @@ fn noise_coefficients(
 /// every value of the 3 ε channels, ε̂ = ε_c + g·(ε_c − ε_u), grad = clip(nan_to_num(w_b·(ε̂ − ε)))
 /// (exactly [`classifier_free_guidance`] then [`sds_gradient`]), written to `grad`; non-finite ε in
 /// either branch is an error naming the stage, the branch and `model`. Returns L = ½‖grad‖²/B
-/// (summed in `f64` per plane, planes added in order: deterministic for any thread count).
+/// (summed in `f64`: per plane in [`SDS_LANES`] interleaved partial sums, see [`sds_plane`];
+/// planes added in order; deterministic for any thread count).
 #[allow(clippy::too_many_arguments)]
 fn fused_sds(
     out: &Tensor,
@@ -444,20 +445,7 @@ fn fused_sds(
             let w = weights[b] as f32;
             let cond = &out.data[(b * c_out + c) * plane..][..plane];
             let uncond = &out.data[((batch + b) * c_out + c) * plane..][..plane];
-            let (mut sum, mut bad_c, mut bad_u) = (0.0f64, 0usize, 0usize);
-            for (((o, &ce), &ue), &e) in gr.iter_mut().zip(cond).zip(uncond).zip(eps) {
-                bad_c += usize::from(!ce.is_finite());
-                bad_u += usize::from(!ue.is_finite());
-                let e_hat = ce + g * (ce - ue);
-                let v = nan_to_num(w * (e_hat - e));
-                let v = match clip {
-                    Some(k) => v.clamp(-k, k),
-                    None => v,
-                };
-                *o = v;
-                sum += f64::from(v) * f64::from(v);
-            }
-            (sum, bad_c, bad_u)
+            sds_plane(gr, cond, uncond, eps, w, g, clip)
         })
         .collect();
     let (mut sum, mut bad_c, mut bad_u) = (0.0f64, 0usize, 0usize);
@@ -473,6 +461,51 @@ fn fused_sds(
     }
     Ok(0.5 * sum / batch.max(1) as f64)
 }
+
+/// [`fused_sds`] on one plane: writes `grad` and returns (Σ grad² in `f64`, non-finite conditional
+/// ε, non-finite unconditional ε). Two passes that both vectorize: the gradient without branches,
+/// then the sum, where value m goes to partial sum m mod [`SDS_LANES`] (independent chains of
+/// additions instead of one) and the partial sums are added in lane order: the same bits for any
+/// thread count.
+fn sds_plane(
+    grad: &mut [f32],
+    cond: &[f32],
+    uncond: &[f32],
+    noise: &[f32],
+    w: f32,
+    g: f32,
+    clip: Option<f32>,
+) -> (f64, usize, usize) {
+    let n = grad.len();
+    let (cond, uncond, noise) = (&cond[..n], &uncond[..n], &noise[..n]);
+    let (mut bad_c, mut bad_u) = (0usize, 0usize);
+    for (((o, &ce), &ue), &e) in grad.iter_mut().zip(cond).zip(uncond).zip(noise) {
+        bad_c += usize::from(!ce.is_finite());
+        bad_u += usize::from(!ue.is_finite());
+        let e_hat = ce + g * (ce - ue);
+        // nan_to_num without branches: ±∞ → ±MAX by the clamp, NaN (which the clamp keeps) → 0.
+        let v = (w * (e_hat - e)).clamp(f32::MIN, f32::MAX);
+        let v = if v.is_nan() { 0.0 } else { v };
+        *o = match clip {
+            Some(k) => v.clamp(-k, k),
+            None => v,
+        };
+    }
+    let mut sums = [0.0f64; SDS_LANES];
+    let mut chunks = grad.chunks_exact(SDS_LANES);
+    for c in &mut chunks {
+        for (s, &v) in sums.iter_mut().zip(c) {
+            *s += f64::from(v) * f64::from(v);
+        }
+    }
+    for (s, &v) in sums.iter_mut().zip(chunks.remainder()) {
+        *s += f64::from(v) * f64::from(v);
+    }
+    (sums.iter().sum(), bad_c, bad_u)
+}
+
+/// Partial sums per plane in [`sds_plane`].
+const SDS_LANES: usize = 8;
 
 /// What stage I leaves besides the workspace buffers.
 struct Stage1Core {
@@ -1144,5 +1177,56 @@ impl Guidance for CascadedGuidance<'_> {
         (0..count)
             .map(|k| self.evaluate_untraced(images, weight, rng, k > 0))
             .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sds::{classifier_free_guidance, sds_gradient};
+
+    /// `sds_plane` (branch-free, partial sums) against the spec's steps one after the other:
+    /// CFG, then `sds_gradient`, then Σ grad² in one sequential `f64` sum. Values include ones whose
+    /// guided prediction overflows to ±∞ (→ ±MAX), a zero weight times ∞ (NaN → 0), and a length
+    /// that leaves a remainder after the partial-sum lanes.
+    #[test]
+    fn sds_plane_equals_cfg_then_sds_gradient() {
+        let n = 8 * 37 + 5;
+        let cond: Vec<f32> = (0..n)
+            .map(|i| match i % 11 {
+                0 => 3.0e38,
+                1 => -3.0e38,
+                _ => ((i * 7919) % 1000) as f32 * 1e-3 - 0.5,
+            })
+            .collect();
+        let uncond: Vec<f32> = (0..n)
+            .map(|i| ((i * 104_729) % 1000) as f32 * 1e-3 - 0.5)
+            .collect();
+        let noise: Vec<f32> = (0..n)
+            .map(|i| ((i * 31) % 997) as f32 * 2e-3 - 1.0)
+            .collect();
+        let g = 100.0;
+        for (w, clip) in [(0.7f64, None), (0.0, None), (1.5, Some(2.0f32))] {
+            let eps_hat = classifier_free_guidance(&cond, &uncond, g);
+            let want = sds_gradient(&eps_hat, &noise, &[w], clip).expect("valid");
+            let want_sum: f64 = want.iter().map(|&v| f64::from(v) * f64::from(v)).sum();
+            let mut got = vec![0.0f32; n];
+            let (sum, bad_c, bad_u) =
+                sds_plane(&mut got, &cond, &uncond, &noise, w as f32, g, clip);
+            let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&got), bits(&want), "w {w}, clip {clip:?}");
+            assert!(want.contains(&f32::MAX) || w == 0.0 || clip.is_some());
+            assert!(
+                (sum - want_sum).abs() <= 1e-12 * want_sum.abs(),
+                "{sum} vs {want_sum}"
+            );
+            assert_eq!((bad_c, bad_u), (0, 0));
+        }
+        let mut bad = cond.clone();
+        bad[3] = f32::NAN;
+        bad[n - 1] = f32::INFINITY;
+        let mut got = vec![0.0f32; n];
+        let (_, bad_c, bad_u) = sds_plane(&mut got, &bad, &uncond, &noise, 0.5, g, None);
+        assert_eq!((bad_c, bad_u), (2, 0));
     }
 }

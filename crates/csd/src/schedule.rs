@@ -172,10 +172,56 @@ pub fn fill_standard_normal(out: &mut [f32], rng: &mut dyn RngCore) {
         .for_each(|(k, chunk)| {
             let mut stream = ChaCha8Rng::from_seed(key);
             stream.set_stream(k as u64);
-            for v in chunk.iter_mut() {
-                *v = zig.sample(&mut stream) as f32;
-            }
+            zig.fill(chunk, &mut WordBuffer::new(stream));
         });
+}
+
+/// A ChaCha8 stream read one `u64` at a time out of a block of [`WordBuffer::WORDS`] words
+/// generated at once: the same words, in the same order, as successive `next_u64` calls on the
+/// stream (both read the key stream's 32-bit words in order, low word first), without the
+/// generator's per-call bookkeeping.
+struct WordBuffer {
+    stream: ChaCha8Rng,
+    words: [u64; Self::WORDS],
+    /// Index of the next unread word; `WORDS` when the block is used up.
+    next: usize,
+}
+
+impl WordBuffer {
+    const WORDS: usize = 128;
+
+    fn new(stream: ChaCha8Rng) -> Self {
+        Self {
+            stream,
+            words: [0; Self::WORDS],
+            next: Self::WORDS,
+        }
+    }
+
+    /// Generates the next block.
+    fn refill(&mut self) {
+        // `Rng::fill` on `[u64]`: the stream's bytes, each word read little-endian.
+        self.stream.fill(&mut self.words[..]);
+        self.next = 0;
+    }
+
+    /// The unread words of the current block, refilled first when it is used up.
+    fn unread(&mut self) -> &[u64] {
+        if self.next == Self::WORDS {
+            self.refill();
+        }
+        &self.words[self.next..]
+    }
+
+    #[inline]
+    fn next_u64(&mut self) -> u64 {
+        if self.next == Self::WORDS {
+            self.refill();
+        }
+        let w = self.words[self.next];
+        self.next += 1;
+        w
+    }
 }
 
 /// A vector of `len` standard normal samples (see [`fill_standard_normal`]).
@@ -242,31 +288,78 @@ impl Ziggurat {
     /// One standard normal sample.
     #[inline]
     pub fn sample(&self, rng: &mut ChaCha8Rng) -> f64 {
+        self.sample_from(|| rng.next_u64())
+    }
+
+    /// One sample from a source of random words.
+    #[inline]
+    fn sample_from(&self, mut next: impl FnMut() -> u64) -> f64 {
         loop {
-            let bits = rng.next_u64();
-            let j = (bits >> 32) as u32 as i32;
-            let i = (bits & 127) as usize;
-            if j.unsigned_abs() < self.k[i] {
-                return f64::from(j) * self.w[i];
+            let bits = next();
+            if let Some(x) = self.accept_at_once(bits) {
+                return x;
             }
-            if let Some(x) = self.slow(rng, j, i) {
+            let (j, i) = Self::split(bits);
+            if let Some(x) = self.slow(&mut next, j, i) {
                 return x;
             }
         }
     }
 
-    /// The rare cases: the tail (layer 0) and the wedges; None means "draw again".
+    /// Fills `out` with samples, rounded to `f32`, drawn from `words`: the values that
+    /// [`Ziggurat::sample`] would draw, in order, from the same stream of words.
+    fn fill(&self, out: &mut [f32], words: &mut WordBuffer) {
+        let mut filled = 0;
+        while filled < out.len() {
+            // The common case, in a loop over the block's unread words: each accepted at once
+            // gives the next sample.
+            let unread = words.unread();
+            let take = unread.len().min(out.len() - filled);
+            let mut used = 0;
+            for (o, &bits) in out[filled..filled + take].iter_mut().zip(unread) {
+                match self.accept_at_once(bits) {
+                    Some(x) => *o = x as f32,
+                    None => break,
+                }
+                used += 1;
+            }
+            filled += used;
+            words.next += used;
+            if used < take {
+                // A word not accepted at once (still unread): that sample from the words on.
+                let x = self.sample_from(|| words.next_u64());
+                out[filled] = x as f32;
+                filled += 1;
+            }
+        }
+    }
+
+    /// (j, i): the signed abscissa (high 32 bits) and the layer (low 7 bits) of one word.
+    #[inline]
+    fn split(bits: u64) -> (i32, usize) {
+        ((bits >> 32) as u32 as i32, (bits & 127) as usize)
+    }
+
+    /// x = j · w_i when |j| < k_i (about 99 % of words), else None.
+    #[inline]
+    fn accept_at_once(&self, bits: u64) -> Option<f64> {
+        let (j, i) = Self::split(bits);
+        (j.unsigned_abs() < self.k[i]).then(|| f64::from(j) * self.w[i])
+    }
+
+    /// The rare cases: the tail (layer 0) and the wedges, drawing further words from `next`; None
+    /// means "draw again".
     #[cold]
-    fn slow(&self, rng: &mut ChaCha8Rng, j: i32, i: usize) -> Option<f64> {
-        let uniform = |rng: &mut ChaCha8Rng| {
+    fn slow(&self, mut next: impl FnMut() -> u64, j: i32, i: usize) -> Option<f64> {
+        let mut uniform = || {
             // (0, 1]: never 0, so ln is finite.
-            ((rng.next_u64() >> 11) as f64 + 1.0) * (1.0 / (1u64 << 53) as f64)
+            ((next() >> 11) as f64 + 1.0) * (1.0 / (1u64 << 53) as f64)
         };
         if i == 0 {
             // Marsaglia (1964): x = −ln(U₁)/R, y = −ln(U₂), accept when 2y ≥ x².
             loop {
-                let x = -uniform(rng).ln() / ZIG_R;
-                let y = -uniform(rng).ln();
+                let x = -uniform().ln() / ZIG_R;
+                let y = -uniform().ln();
                 if y + y >= x * x {
                     return Some(if j > 0 { ZIG_R + x } else { -ZIG_R - x });
                 }
@@ -274,7 +367,7 @@ impl Ziggurat {
         }
         let x = f64::from(j) * self.w[i];
         let fx = (-0.5 * x * x).exp();
-        (self.f[i] + uniform(rng) * (self.f[i - 1] - self.f[i]) < fx).then_some(x)
+        (self.f[i] + uniform() * (self.f[i - 1] - self.f[i]) < fx).then_some(x)
     }
 }
 
@@ -395,6 +488,36 @@ mod tests {
         assert!((kurt - 3.0).abs() < 0.06, "kurtosis {kurt}");
         let tail = v.iter().filter(|&&x| x.abs() > 1.959_964).count() as f64 / n as f64;
         assert!((tail - 0.05).abs() < 0.0025, "two-sided 5% tail {tail}");
+    }
+
+    #[test]
+    fn buffered_fill_draws_what_sample_draws_from_each_stream() {
+        // `fill_standard_normal` reads its words through `WordBuffer` and `Ziggurat::fill`; the
+        // reference is `Ziggurat::sample` called on each chunk's ChaCha8 stream directly. Three
+        // chunks and a remainder: ~2k rejected words (tail and wedges), many of them at block ends.
+        let n = 3 * NOISE_CHUNK + 1000;
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        let mut key = [0u8; 32];
+        rng.clone().fill_bytes(&mut key);
+        let got = standard_normal(n, &mut rng);
+        let zig = Ziggurat::get();
+        let mut rejected = 0;
+        for (k, chunk) in got.chunks(NOISE_CHUNK).enumerate() {
+            let mut stream = ChaCha8Rng::from_seed(key);
+            stream.set_stream(k as u64);
+            let mut probe = stream.clone();
+            for (m, &v) in chunk.iter().enumerate() {
+                assert_eq!(
+                    v.to_bits(),
+                    (zig.sample(&mut stream) as f32).to_bits(),
+                    "chunk {k}, {m}"
+                );
+            }
+            rejected += (0..chunk.len())
+                .filter(|_| zig.accept_at_once(probe.next_u64()).is_none())
+                .count();
+        }
+        assert!(rejected > 1000, "{rejected} rejected words");
     }
 
     /// Φ(x) for the CDF test (Abramowitz–Stegun 7.1.26 erf, |error| < 1.5e-7).
