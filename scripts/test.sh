@@ -9,22 +9,22 @@ step "setup (scripts/setup.sh)";   bash scripts/setup.sh
 export XDG_RUNTIME_DIR="${XDG_RUNTIME_DIR:-/tmp}"   # silences Mesa's warnings under lavapipe
 
 step "cargo fmt --check";          cargo fmt --all -- --check
-step "cargo fmt --check (xtask)";  cargo fmt --manifest-path xtask/Cargo.toml -- --check
 step "cargo clippy -D warnings";   cargo clippy --workspace --all-targets --locked -- -D warnings
-step "cargo clippy (xtask)";       cargo clippy --manifest-path xtask/Cargo.toml --target-dir target --locked -- -D warnings
 step "cargo test";                 cargo test --workspace --locked
 # The README's quick-start build (docs/cli.md, "Builds and features"): lints, and its own test.
 # Its dependencies get fewer features than in the workspace's build, so Cargo recompiles them (the
-# faer tree, the proc-macros); one compilation serves both checks: clippy's driver as the rustc of
-# our crates (what `cargo clippy` itself sets up) while `cargo test` builds every target, with
-# warnings denied, then the features test runs on those artifacts (docs/benchmarks.md, "Build time").
+# faer tree, the proc-macros); one compilation serves both checks: clippy's driver compiles our
+# crates (scripts/clippy-rustc.sh, what `cargo clippy -- -D warnings` sets up) while `cargo test`
+# builds every target, then the features test runs on those artifacts (docs/benchmarks.md,
+# "Build time").
 quick_start() {
-    RUSTC_WORKSPACE_WRAPPER="$(rustc --print sysroot)/bin/clippy-driver" RUSTFLAGS="-D warnings" \
+    CLIPPY_DRIVER="$(rustc --print sysroot)/bin/clippy-driver" \
+        RUSTC_WORKSPACE_WRAPPER="$PWD/scripts/clippy-rustc.sh" \
         cargo test -p stylize-cli --no-default-features --locked "$@"
 }
 step "quick-start build: clippy, all targets"; quick_start --all-targets --no-run
 step "quick-start build: test";    quick_start --test features
-step "cargo build (xtask)";      cargo build --manifest-path xtask/Cargo.toml --target-dir target --locked   # visible progress; `cargo xtask` runs quietly
+step "cargo build (xtask)";        cargo build -p xtask --locked   # visible progress; `cargo xtask` runs quietly
 step "cargo xtask check-deps";     cargo xtask check-deps
 step "cargo xtask gradcheck";      cargo xtask gradcheck
 # --- Python bindings (crates/darap-py): build into .venv (dev profile, shared target/), pytest ---
