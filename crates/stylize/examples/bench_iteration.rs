@@ -6,9 +6,10 @@
 //! driven one sub-step at a time (the trait's default `evaluate_batch`), and prints the median
 //! per part of the iterations after each run's first.
 //!
-//! `cargo run --release -p stylize --example bench_iteration [-- ROUNDS ITERATIONS]`
-//! (defaults 3 and 6; pin it with `taskset -c 0,1`, `RAYON_NUM_THREADS=2`). Like the command
-//! line it calls `stylize::malloc::retain_freed_buffers` first.
+//! `cargo run --release -p stylize --example bench_iteration [-- ROUNDS ITERATIONS [LOOPS]]`
+//! (defaults 3, 6 and `both`; LOOPS `together` runs only the loop as it is, e.g. under `perf`;
+//! pin it with `taskset -c 0,1`, `RAYON_NUM_THREADS=2`). Like the command line it calls
+//! `stylize::malloc::retain_freed_buffers` first.
 
 use csd::{CascadedGuidance, Denoiser, Embedding, GuidanceConfig, GuidanceError, Tensor};
 use darap::{Darap, DarapOptions};
@@ -88,12 +89,20 @@ fn main() -> anyhow::Result<()> {
     // As the command line does (skipped when GLIBC_TUNABLES is set: any value, e.g.
     // `GLIBC_TUNABLES=glibc.malloc.check=0`, measures glibc's default policy).
     let retained = stylize::malloc::retain_freed_buffers();
-    let args: Vec<usize> = std::env::args()
-        .skip(1)
-        .map(|a| a.parse())
-        .collect::<Result<_, _>>()?;
-    let rounds = args.first().copied().unwrap_or(3);
-    let iterations = args.get(1).copied().unwrap_or(6).max(2) as u64;
+    let raw: Vec<String> = std::env::args().skip(1).collect();
+    let number = |k: usize, default: usize| -> anyhow::Result<usize> {
+        raw.get(k).map_or(Ok(default), |a| {
+            a.parse()
+                .map_err(|e| anyhow::anyhow!("argument {}: {a:?}: {e}", k + 1))
+        })
+    };
+    let rounds = number(0, 3)?;
+    let iterations = number(1, 6)?.max(2) as u64;
+    let loops = match raw.get(2).map(String::as_str) {
+        None | Some("both") => 2,
+        Some("together") => 1,
+        Some(other) => anyhow::bail!("LOOPS is `both` or `together`, not {other:?}"),
+    };
     let (p, f) = mesh_core::shapes::icosphere(5).into_parts();
     let darap = Darap::new(&p, &f, DarapOptions::default())?;
     let spec = LoopSpec {
@@ -112,7 +121,7 @@ fn main() -> anyhow::Result<()> {
     );
     let mut samples: [Vec<Vec<f64>>; 2] = Default::default();
     for _ in 0..rounds {
-        for (mode, samples) in samples.iter_mut().enumerate() {
+        for (mode, samples) in samples.iter_mut().enumerate().take(loops) {
             let mut state = LoopState {
                 iteration: 0,
                 x: darap.rest_normals().to_vec(),
@@ -137,7 +146,7 @@ fn main() -> anyhow::Result<()> {
         PARTS.map(|p| p.to_string()).join(" | ")
     );
     println!("|---|{}---:|", "---:|".repeat(PARTS.len()));
-    for (mode, rows) in samples.iter().enumerate() {
+    for (mode, rows) in samples.iter().enumerate().take(loops) {
         let name = ["sub-steps together", "one sub-step at a time"][mode];
         let cols: Vec<String> = (0..=PARTS.len())
             .map(|c| format!("{:.1}", median(rows.iter().map(|r| r[c]).collect())))
