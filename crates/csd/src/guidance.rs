@@ -463,8 +463,8 @@ fn fused_sds(
 }
 
 /// [`fused_sds`] on one plane: writes `grad` and returns (Σ grad² in `f64`, non-finite conditional
-/// ε, non-finite unconditional ε). Two passes that both vectorize: the gradient without branches,
-/// then the sum, where value m goes to partial sum m mod [`SDS_LANES`] (independent chains of
+/// ε, non-finite unconditional ε). Two passes that both vectorize: the gradient (branch-free
+/// [`nan_to_num`]), then the sum, where value m goes to partial sum m mod [`SDS_LANES`] (independent chains of
 /// additions instead of one) and the partial sums are added in lane order: the same bits for any
 /// thread count.
 fn sds_plane(
@@ -483,9 +483,7 @@ fn sds_plane(
         bad_c += usize::from(!ce.is_finite());
         bad_u += usize::from(!ue.is_finite());
         let e_hat = ce + g * (ce - ue);
-        // nan_to_num without branches: ±∞ → ±MAX by the clamp, NaN (which the clamp keeps) → 0.
-        let v = (w * (e_hat - e)).clamp(f32::MIN, f32::MAX);
-        let v = if v.is_nan() { 0.0 } else { v };
+        let v = nan_to_num(w * (e_hat - e));
         *o = match clip {
             Some(k) => v.clamp(-k, k),
             None => v,

@@ -68,16 +68,12 @@ pub fn classifier_free_guidance(
 }
 
 /// `torch.nan_to_num` for `f32`: NaN → 0, +∞ → `f32::MAX`, −∞ → `f32::MIN`; finite values unchanged.
+/// Without branches (a clamp, which maps ±∞ to ±MAX and keeps NaN, then a select), so loops that
+/// call it vectorize.
+#[inline]
 pub fn nan_to_num(v: f32) -> f32 {
-    if v.is_nan() {
-        0.0
-    } else if v == f32::INFINITY {
-        f32::MAX
-    } else if v == f32::NEG_INFINITY {
-        f32::MIN
-    } else {
-        v
-    }
+    let c = v.clamp(f32::MIN, f32::MAX);
+    if c.is_nan() { 0.0 } else { c }
 }
 
 /// The SDS gradient per sample `b`: `grad = nan_to_num(w(t_b) · (ε̂ − ε))`, optionally clamped to
