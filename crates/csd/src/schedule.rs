@@ -156,13 +156,16 @@ pub const NOISE_CHUNK: usize = 1 << 16;
 /// Method: 32 bytes are taken from `rng` as the key of a ChaCha8 generator; chunk `k` of
 /// [`NOISE_CHUNK`] samples is filled from that generator's stream `k` (so chunks are filled in parallel
 /// and the result does not depend on the number of threads). Within a chunk, each sample is drawn with
-/// Marsaglia and Tsang's ziggurat ([`Ziggurat`]: 128 layers, one `u64` per sample: the high 32 bits
-/// are the signed abscissa, the low 7 bits the layer, so the two are independent — the fix of
-/// Doornik (2005) for the original's correlated bits), rounded to `f32`.
+/// Marsaglia and Tsang's ziggurat ([`Ziggurat`]: 128 layers, one 32-bit word of the key stream per
+/// sample: the high 25 bits are the signed abscissa, the low 7 bits the layer, so the two are
+/// independent — the fix of Doornik (2005) for the original's correlated bits), rounded to `f32`.
 /// Deterministic for a given RNG state; the caller's RNG advances by exactly 32 bytes per call.
 ///
-/// The stream differs from the Marsaglia polar method used before 2026-11-30 (same distribution,
-/// about 3× faster); nothing stores or compares noise values across versions.
+/// The stream changed twice: from the Marsaglia polar method to the ziggurat on 2026-11-30 (same
+/// distribution, about 3× faster), and from one 64-bit word per sample (32-bit abscissa) to one
+/// 32-bit word on 2026-12-01 (half the key stream; a 24-bit abscissa magnitude is still finer than
+/// the `f32` the samples are rounded to near each layer's edge). Nothing stores or compares noise
+/// values across versions; a seed reproduces a run only with the same version.
 pub fn fill_standard_normal(out: &mut [f32], rng: &mut dyn RngCore) {
     let mut key = [0u8; 32];
     rng.fill_bytes(&mut key);
@@ -176,19 +179,19 @@ pub fn fill_standard_normal(out: &mut [f32], rng: &mut dyn RngCore) {
         });
 }
 
-/// A ChaCha8 stream read one `u64` at a time out of a block of [`WordBuffer::WORDS`] words
-/// generated at once: the same words, in the same order, as successive `next_u64` calls on the
-/// stream (both read the key stream's 32-bit words in order, low word first), without the
-/// generator's per-call bookkeeping.
+/// A ChaCha8 stream read one 32-bit word at a time out of a block of [`WordBuffer::WORDS`] words
+/// generated at once: the same words, in the same order, as successive `next_u32` calls on the
+/// stream (both read the key stream's 32-bit words in order), without the generator's per-call
+/// bookkeeping.
 struct WordBuffer {
     stream: ChaCha8Rng,
-    words: [u64; Self::WORDS],
+    words: [u32; Self::WORDS],
     /// Index of the next unread word; `WORDS` when the block is used up.
     next: usize,
 }
 
 impl WordBuffer {
-    const WORDS: usize = 128;
+    const WORDS: usize = 256;
 
     fn new(stream: ChaCha8Rng) -> Self {
         Self {
@@ -200,13 +203,13 @@ impl WordBuffer {
 
     /// Generates the next block.
     fn refill(&mut self) {
-        // `Rng::fill` on `[u64]`: the stream's bytes, each word read little-endian.
+        // `Rng::fill` on `[u32]`: the stream's bytes, each word read little-endian.
         self.stream.fill(&mut self.words[..]);
         self.next = 0;
     }
 
     /// The unread words of the current block, refilled first when it is used up.
-    fn unread(&mut self) -> &[u64] {
+    fn unread(&mut self) -> &[u32] {
         if self.next == Self::WORDS {
             self.refill();
         }
@@ -214,7 +217,7 @@ impl WordBuffer {
     }
 
     #[inline]
-    fn next_u64(&mut self) -> u64 {
+    fn next_u32(&mut self) -> u32 {
         if self.next == Self::WORDS {
             self.refill();
         }
@@ -237,15 +240,16 @@ pub fn standard_normal(len: usize, rng: &mut dyn RngCore) -> Vec<f32> {
 ///
 /// With f(x) = exp(−x²/2): layers 1…127 are rectangles of half-width x_i, x_127 = R and
 /// x_{i−1} = f⁻¹(v / x_i + f(x_i)) (narrower towards the peak; layer 1 is the top); layer 0 is the base
-/// strip plus the tail, of virtual half-width x_0 = v / f(R). A sample takes j = 32 signed random bits
-/// and a layer i: x = j · x_i / 2³¹ is accepted at once when |j| < k_i = 2³¹ · x_{i−1} / x_i (k_0 =
-/// 2³¹ · R / x_0, k_1 = 0; ~99 % of draws); otherwise the wedge test `f_i + U·(f_{i−1} − f_i) < f(x)`
+/// strip plus the tail, of virtual half-width x_0 = v / f(R). A sample takes one 32-bit word: j = its
+/// high 25 bits, signed (−2²⁴ ≤ j < 2²⁴), and the layer i = its low 7 bits; x = j · x_i / 2²⁴ is
+/// accepted at once when |j| < k_i = 2²⁴ · x_{i−1} / x_i (k_0 = 2²⁴ · R / x_0, k_1 = 0; ~99 % of
+/// draws); otherwise the wedge test `f_i + U·(f_{i−1} − f_i) < f(x)`
 /// (f_0 = 1), or for layer 0 Marsaglia's tail algorithm, decides.
 #[derive(Debug)]
 pub struct Ziggurat {
     /// k_i: acceptance bounds on |j|.
     k: [u32; 128],
-    /// w_i = x_i / 2³¹.
+    /// w_i = x_i / 2²⁴.
     w: [f64; 128],
     /// f_i = f(x_i).
     f: [f64; 128],
@@ -256,7 +260,7 @@ const ZIG_V: f64 = 9.912_563_035_262_17e-3;
 
 impl Ziggurat {
     fn build() -> Self {
-        let m = 2_147_483_648.0_f64; // 2³¹
+        let m = 16_777_216.0_f64; // 2²⁴
         let mut k = [0u32; 128];
         let mut w = [0.0f64; 128];
         let mut f = [0.0f64; 128];
@@ -288,12 +292,12 @@ impl Ziggurat {
     /// One standard normal sample.
     #[inline]
     pub fn sample(&self, rng: &mut ChaCha8Rng) -> f64 {
-        self.sample_from(|| rng.next_u64())
+        self.sample_from(|| rng.next_u32())
     }
 
     /// One sample from a source of random words.
     #[inline]
-    fn sample_from(&self, mut next: impl FnMut() -> u64) -> f64 {
+    fn sample_from(&self, mut next: impl FnMut() -> u32) -> f64 {
         loop {
             let bits = next();
             if let Some(x) = self.accept_at_once(bits) {
@@ -327,22 +331,23 @@ impl Ziggurat {
             words.next += used;
             if used < take {
                 // A word not accepted at once (still unread): that sample from the words on.
-                let x = self.sample_from(|| words.next_u64());
+                let x = self.sample_from(|| words.next_u32());
                 out[filled] = x as f32;
                 filled += 1;
             }
         }
     }
 
-    /// (j, i): the signed abscissa (high 32 bits) and the layer (low 7 bits) of one word.
+    /// (j, i): the signed abscissa (high 25 bits, −2²⁴ ≤ j < 2²⁴) and the layer (low 7 bits) of
+    /// one word.
     #[inline]
-    fn split(bits: u64) -> (i32, usize) {
-        ((bits >> 32) as u32 as i32, (bits & 127) as usize)
+    fn split(bits: u32) -> (i32, usize) {
+        ((bits as i32) >> 7, (bits & 127) as usize)
     }
 
     /// x = j · w_i when |j| < k_i (about 99 % of words), else None.
     #[inline]
-    fn accept_at_once(&self, bits: u64) -> Option<f64> {
+    fn accept_at_once(&self, bits: u32) -> Option<f64> {
         let (j, i) = Self::split(bits);
         (j.unsigned_abs() < self.k[i]).then(|| f64::from(j) * self.w[i])
     }
@@ -350,10 +355,11 @@ impl Ziggurat {
     /// The rare cases: the tail (layer 0) and the wedges, drawing further words from `next`; None
     /// means "draw again".
     #[cold]
-    fn slow(&self, mut next: impl FnMut() -> u64, j: i32, i: usize) -> Option<f64> {
+    fn slow(&self, mut next: impl FnMut() -> u32, j: i32, i: usize) -> Option<f64> {
         let mut uniform = || {
-            // (0, 1]: never 0, so ln is finite.
-            ((next() >> 11) as f64 + 1.0) * (1.0 / (1u64 << 53) as f64)
+            // 53 random bits from two words (32 + the high 21): (0, 1], never 0, so ln is finite.
+            let bits = (u64::from(next()) << 21) | u64::from(next() >> 11);
+            (bits as f64 + 1.0) * (1.0 / (1u64 << 53) as f64)
         };
         if i == 0 {
             // Marsaglia (1964): x = −ln(U₁)/R, y = −ln(U₂), accept when 2y ≥ x².
@@ -514,7 +520,7 @@ mod tests {
                 );
             }
             rejected += (0..chunk.len())
-                .filter(|_| zig.accept_at_once(probe.next_u64()).is_none())
+                .filter(|_| zig.accept_at_once(probe.next_u32()).is_none())
                 .count();
         }
         assert!(rejected > 1000, "{rejected} rejected words");
