@@ -156,16 +156,17 @@ pub const NOISE_CHUNK: usize = 1 << 16;
 /// Method: 32 bytes are taken from `rng` as the key of a ChaCha8 generator; chunk `k` of
 /// [`NOISE_CHUNK`] samples is filled from that generator's stream `k` (so chunks are filled in parallel
 /// and the result does not depend on the number of threads). Within a chunk, each sample is drawn with
-/// Marsaglia and Tsang's ziggurat ([`Ziggurat`]: 128 layers, one 32-bit word of the key stream per
-/// sample: the high 25 bits are the signed abscissa, the low 7 bits the layer, so the two are
+/// Marsaglia and Tsang's ziggurat ([`Ziggurat`]: 256 layers, one 32-bit word of the key stream per
+/// sample: the high 24 bits are the signed abscissa, the low 8 bits the layer, so the two are
 /// independent — the fix of Doornik (2005) for the original's correlated bits), rounded to `f32`.
 /// Deterministic for a given RNG state; the caller's RNG advances by exactly 32 bytes per call.
 ///
 /// The stream changed twice: from the Marsaglia polar method to the ziggurat on 2026-11-30 (same
-/// distribution, about 3× faster), and from one 64-bit word per sample (32-bit abscissa) to one
-/// 32-bit word on 2026-12-01 (half the key stream; a 24-bit abscissa magnitude is still finer than
-/// the `f32` the samples are rounded to near each layer's edge). Nothing stores or compares noise
-/// values across versions; a seed reproduces a run only with the same version.
+/// distribution, about 3× faster), and from 128 layers and one 64-bit word per sample (32-bit
+/// abscissa) to 256 layers and one 32-bit word on 2026-12-01 (half the key stream, half the slow
+/// path's wedge tests; the samples lie on a grid of x_i / 2²³, at most two `f32` ulps at the widest
+/// layer, x_i ≤ 3.65, before the rounding to `f32`). Nothing stores or compares noise values across
+/// versions; a seed reproduces a run only with the same version.
 pub fn fill_standard_normal(out: &mut [f32], rng: &mut dyn RngCore) {
     let mut key = [0u8; 32];
     rng.fill_bytes(&mut key);
@@ -235,45 +236,51 @@ pub fn standard_normal(len: usize, rng: &mut dyn RngCore) -> Vec<f32> {
 }
 
 /// Marsaglia and Tsang's ziggurat for the standard normal ("The Ziggurat Method for Generating Random
-/// Variables", J. Stat. Software 5(8), 2000), 128 layers, tables built in `f64` from the paper's
-/// constants: R = 3.442619855899 (start of the tail) and v = 9.91256303526217e-3 (area of each layer).
+/// Variables", J. Stat. Software 5(8), 2000) with 256 layers, tables built in `f64` from
+/// R = 3.6541528853610088 (start of the tail) and v = 4.928673233974658e-3 (area of each layer:
+/// R·f(R) + ∫_R^∞ f, so that the top layer closes, x_1·(1 − f(x_1)) = v, to 1.4e-13 relative).
 ///
-/// With f(x) = exp(−x²/2): layers 1…127 are rectangles of half-width x_i, x_127 = R and
+/// With f(x) = exp(−x²/2): layers 1…255 are rectangles of half-width x_i, x_255 = R and
 /// x_{i−1} = f⁻¹(v / x_i + f(x_i)) (narrower towards the peak; layer 1 is the top); layer 0 is the base
 /// strip plus the tail, of virtual half-width x_0 = v / f(R). A sample takes one 32-bit word: j = its
-/// high 25 bits, signed (−2²⁴ ≤ j < 2²⁴), and the layer i = its low 7 bits; x = j · x_i / 2²⁴ is
-/// accepted at once when |j| < k_i = 2²⁴ · x_{i−1} / x_i (k_0 = 2²⁴ · R / x_0, k_1 = 0; ~99 % of
-/// draws); otherwise the wedge test `f_i + U·(f_{i−1} − f_i) < f(x)`
+/// high 24 bits, signed (−2²³ ≤ j < 2²³), and the layer i = its low 8 bits; x = j · x_i / 2²³ is
+/// accepted at once when |j| < k_i = 2²³ · x_{i−1} / x_i (k_0 = 2²³ · R / x_0, k_1 = 0; 98.5 % of
+/// draws, against 97.2 % with 128 layers); otherwise the wedge test `f_i + U·(f_{i−1} − f_i) < f(x)`
 /// (f_0 = 1), or for layer 0 Marsaglia's tail algorithm, decides.
 #[derive(Debug)]
 pub struct Ziggurat {
     /// k_i: acceptance bounds on |j|.
-    k: [u32; 128],
-    /// w_i = x_i / 2²⁴.
-    w: [f64; 128],
+    k: [u32; ZIG_LAYERS],
+    /// w_i = x_i / 2²³.
+    w: [f64; ZIG_LAYERS],
     /// f_i = f(x_i).
-    f: [f64; 128],
+    f: [f64; ZIG_LAYERS],
 }
 
-const ZIG_R: f64 = 3.442_619_855_899;
-const ZIG_V: f64 = 9.912_563_035_262_17e-3;
+/// Layers of the [`Ziggurat`]; a word's low [`ZIG_LAYER_BITS`] bits pick one.
+const ZIG_LAYERS: usize = 256;
+const ZIG_LAYER_BITS: u32 = 8;
+const ZIG_R: f64 = 3.654_152_885_361_009;
+const ZIG_V: f64 = 4.928_673_233_974_658e-3;
 
 impl Ziggurat {
     fn build() -> Self {
-        let m = 16_777_216.0_f64; // 2²⁴
-        let mut k = [0u32; 128];
-        let mut w = [0.0f64; 128];
-        let mut f = [0.0f64; 128];
+        // 2²³: the abscissa's magnitude bits.
+        let m = f64::from(1u32 << (31 - ZIG_LAYER_BITS));
+        let last = ZIG_LAYERS - 1;
+        let mut k = [0u32; ZIG_LAYERS];
+        let mut w = [0.0f64; ZIG_LAYERS];
+        let mut f = [0.0f64; ZIG_LAYERS];
         let mut d = ZIG_R;
         let mut t = d;
         let q = ZIG_V / (-0.5 * d * d).exp();
         k[0] = ((d / q) * m) as u32;
         k[1] = 0;
         w[0] = q / m;
-        w[127] = d / m;
+        w[last] = d / m;
         f[0] = 1.0;
-        f[127] = (-0.5 * d * d).exp();
-        for i in (1..=126).rev() {
+        f[last] = (-0.5 * d * d).exp();
+        for i in (1..last).rev() {
             d = (-2.0 * (ZIG_V / d + (-0.5 * d * d).exp()).ln()).sqrt();
             k[i + 1] = ((d / t) * m) as u32;
             t = d;
@@ -338,14 +345,17 @@ impl Ziggurat {
         }
     }
 
-    /// (j, i): the signed abscissa (high 25 bits, −2²⁴ ≤ j < 2²⁴) and the layer (low 7 bits) of
+    /// (j, i): the signed abscissa (high 24 bits, −2²³ ≤ j < 2²³) and the layer (low 8 bits) of
     /// one word.
     #[inline]
     fn split(bits: u32) -> (i32, usize) {
-        ((bits as i32) >> 7, (bits & 127) as usize)
+        (
+            (bits as i32) >> ZIG_LAYER_BITS,
+            (bits % ZIG_LAYERS as u32) as usize,
+        )
     }
 
-    /// x = j · w_i when |j| < k_i (about 99 % of words), else None.
+    /// x = j · w_i when |j| < k_i (98.5 % of words), else None.
     #[inline]
     fn accept_at_once(&self, bits: u32) -> Option<f64> {
         let (j, i) = Self::split(bits);
@@ -526,6 +536,22 @@ mod tests {
         assert!(rejected > 1000, "{rejected} rejected words");
     }
 
+    #[test]
+    fn ziggurat_tables_close_at_the_top_layer() {
+        // R and v fix every layer through x_{i−1} = f⁻¹(v / x_i + f(x_i)); they are consistent when
+        // the top layer, a rectangle of half-width x_1 under f = 1, has area v: x_1 (1 − f(x_1)) = v.
+        let zig = Ziggurat::get();
+        let x1 = zig.w[1] * f64::from(1u32 << (31 - ZIG_LAYER_BITS));
+        let area = x1 * (1.0 - (-0.5 * x1 * x1).exp());
+        assert!(
+            (area / ZIG_V - 1.0).abs() < 1e-11,
+            "top layer area {area}, v {ZIG_V}"
+        );
+        // Widths grow towards the tail, and every acceptance bound is below the abscissa's range.
+        assert!(zig.w[1..].windows(2).all(|w| w[0] < w[1]));
+        assert!(zig.k.iter().all(|&k| k < 1 << (31 - ZIG_LAYER_BITS)));
+    }
+
     /// Φ(x) for the CDF test (Abramowitz–Stegun 7.1.26 erf, |error| < 1.5e-7).
     fn normal_cdf(x: f64) -> f64 {
         let z = x.abs() / std::f64::consts::SQRT_2;
@@ -541,7 +567,7 @@ mod tests {
     #[test]
     fn standard_normal_matches_the_normal_cdf_everywhere_including_the_tails() {
         // 4M samples: the empirical CDF at each point, including the ziggurat's layer edges, its
-        // tail start R = 3.44 and beyond, agrees with Φ within 5 standard errors √(p(1−p)/n).
+        // tail start R = 3.65 and beyond, agrees with Φ within 5 standard errors √(p(1−p)/n).
         let n = 1usize << 22;
         let mut rng = ChaCha8Rng::seed_from_u64(11);
         let mut v = standard_normal(n, &mut rng);
