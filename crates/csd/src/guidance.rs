@@ -736,24 +736,27 @@ impl Stages<'_> {
         w.sample2.shape = vec![2 * b, 2 * CHANNELS, r2, r2];
         w.sample2.data.resize(4 * n2, 0.0);
         let (x0, eps_t, z_hat, eps_s) = (&w.x0, &w.eps_t, &w.z_hat, &w.eps_s);
+        // The unconditional half is the same samples: each plane is copied there while it is in
+        // cache.
         let (cond_half, uncond_half) = w.sample2.data.split_at_mut(2 * n2);
-        cond_half.par_chunks_mut(p2).enumerate().for_each(|(q, o)| {
-            let (v, ch) = (q / (2 * CHANNELS), q % (2 * CHANNELS));
-            let (clean, noise, (a, s)) = if ch < CHANNELS {
-                let i = (v * CHANNELS + ch) * p2;
-                (&x0[i..i + p2], &eps_t[i..i + p2], coef_t[v])
-            } else {
-                let i = (v * CHANNELS + ch - CHANNELS) * p2;
-                (&z_hat[i..i + p2], &eps_s[i..i + p2], coef_s[v])
-            };
-            for ((o, &z), &e) in o.iter_mut().zip(clean).zip(noise) {
-                *o = a * z + s * e;
-            }
-        });
-        uncond_half
+        cond_half
             .par_chunks_mut(p2)
-            .zip(cond_half.par_chunks(p2))
-            .for_each(|(u, c)| u.copy_from_slice(c));
+            .zip(uncond_half.par_chunks_mut(p2))
+            .enumerate()
+            .for_each(|(q, (o, u))| {
+                let (v, ch) = (q / (2 * CHANNELS), q % (2 * CHANNELS));
+                let (clean, noise, (a, s)) = if ch < CHANNELS {
+                    let i = (v * CHANNELS + ch) * p2;
+                    (&x0[i..i + p2], &eps_t[i..i + p2], coef_t[v])
+                } else {
+                    let i = (v * CHANNELS + ch - CHANNELS) * p2;
+                    (&z_hat[i..i + p2], &eps_s[i..i + p2], coef_s[v])
+                };
+                for ((o, &z), &e) in o.iter_mut().zip(clean).zip(noise) {
+                    *o = a * z + s * e;
+                }
+                u.copy_from_slice(o);
+            });
         let ts: Vec<i64> = t2.iter().chain(&t2).copied().collect();
         let labels: Vec<i64> = s2.iter().chain(&s2).copied().collect();
         let embeddings = batch_embeddings(self.cond, self.uncond, b);
