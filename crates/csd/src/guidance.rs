@@ -353,6 +353,10 @@ struct Workspace {
     grad_x: Vec<f32>,
     /// Per-view scratch for the interleaved resizes (one per view, so views run in parallel).
     scratch: Vec<Vec<f32>>,
+    /// Per view, whether the last encoded render's three channels are equal bit for bit (a grey
+    /// renderer's output): then the three planes of x, z0, x0 and ẑ are equal too, and each is
+    /// computed once and copied.
+    grey: Vec<bool>,
     /// Per-plane scratch for the planar resizes: (resize intermediate, an output plane).
     plane_scratch: Vec<(Vec<f32>, Vec<f32>)>,
     /// Which of the buffers derived from the renders alone (no random draw) hold the values of
@@ -369,6 +373,35 @@ struct Derived {
     z0: bool,
     /// `x0` and `z_hat` hold U(x) and U₆₄→₂₅₆(z0).
     upsampled: bool,
+}
+
+/// Copies the first channel of interleaved RGB pixels `src` into `plane` when the three channels
+/// are equal bit for bit (a grey render) and returns true; returns false at the first pixel
+/// whose channels differ (then `plane` holds a partial copy and is not to be used).
+fn first_channel_if_grey(src: &[f32], plane: &mut Vec<f32>) -> bool {
+    plane.resize(src.len() / CHANNELS, 0.0);
+    for (o, px) in plane.iter_mut().zip(src.chunks_exact(CHANNELS)) {
+        let bits = px[0].to_bits();
+        if px[1].to_bits() != bits || px[2].to_bits() != bits {
+            return false;
+        }
+        *o = px[0];
+    }
+    true
+}
+
+/// Fills the `CHANNELS` planes of `out` (each `plane` values) with `f(c, plane c)`; for a grey
+/// view (equal channel planes in, so equal planes out) computes plane 0 only and copies it.
+fn per_plane(grey: bool, out: &mut [f32], plane: usize, mut f: impl FnMut(usize, &mut [f32])) {
+    let (first, rest) = out.split_at_mut(plane);
+    f(0, first);
+    for (c, o) in rest.chunks_exact_mut(plane).enumerate() {
+        if grey {
+            o.copy_from_slice(first);
+        } else {
+            f(c + 1, o);
+        }
+    }
 }
 
 /// Noise into `buf`: the injected values (length checked) or `len` fresh samples from `rng`.
@@ -548,7 +581,9 @@ struct Stages<'a> {
 
 impl Stages<'_> {
     /// x = 2·R(img) − 1: renders (view, row, col, channel) straight into planar x; the height pass
-    /// runs over whole interleaved rows. Non-finite renders show up as non-finite x (an error).
+    /// runs over whole interleaved rows. A grey view (three equal channels) is resized once, from
+    /// its first channel, and the plane copied: the same values, since R acts on each channel
+    /// alone with the same operations. Non-finite renders show up as non-finite x (an error).
     fn encode_renders(&self, images: &Images, w: &mut Workspace) -> Result<(), GuidanceError> {
         let (b, pr) = (self.views, self.cfg.resolution * self.cfg.resolution);
         let plane_in = images.height * images.width;
@@ -556,13 +591,26 @@ impl Stages<'_> {
         w.derived = Derived::default();
         w.scratch.resize_with(b, Vec::new);
         w.plane_scratch.resize_with(b * CHANNELS, Default::default);
+        w.grey.resize(b, false);
         w.x.resize(b * CHANNELS * pr, 0.0);
         let bad_x: usize =
             w.x.par_chunks_mut(CHANNELS * pr)
                 .zip(images.rgb.par_chunks(CHANNELS * plane_in))
                 .zip(w.scratch.par_iter_mut())
-                .map(|((xv, src), tmp)| {
-                    ops.resize.apply_from_interleaved(src, CHANNELS, xv, tmp);
+                .zip(w.plane_scratch.par_chunks_mut(CHANNELS))
+                .zip(w.grey.par_iter_mut())
+                .map(|((((xv, src), tmp), planes), grey)| {
+                    let (first, _) = &mut planes[0];
+                    *grey = first_channel_if_grey(src, first);
+                    if *grey && ops.resize.height_first() {
+                        ops.resize.apply_plane(first, &mut xv[..pr], tmp);
+                        let (x_first, rest) = xv.split_at_mut(pr);
+                        rest.chunks_exact_mut(pr)
+                            .for_each(|p| p.copy_from_slice(x_first));
+                    } else {
+                        *grey = false;
+                        ops.resize.apply_from_interleaved(src, CHANNELS, xv, tmp);
+                    }
                     let mut bad = 0;
                     for v in xv.iter_mut() {
                         *v = 2.0 * *v - 1.0;
@@ -607,10 +655,16 @@ impl Stages<'_> {
         let (pr, p1) = (r * r, r1 * r1);
         if !w.derived.z0 {
             w.z0.resize(b * CHANNELS * p1, 0.0);
-            w.z0.par_chunks_mut(p1)
-                .zip(w.x.par_chunks(pr))
-                .zip(w.plane_scratch.par_iter_mut())
-                .for_each(|((z, xp), (tmp, _))| ops.down1.apply_plane(xp, z, tmp));
+            w.z0.par_chunks_mut(CHANNELS * p1)
+                .zip(w.x.par_chunks(CHANNELS * pr))
+                .zip(w.plane_scratch.par_chunks_mut(CHANNELS))
+                .zip(w.grey.par_iter())
+                .for_each(|(((z, x), scratch), &grey)| {
+                    per_plane(grey, z, p1, |c, z| {
+                        ops.down1
+                            .apply_plane(&x[c * pr..(c + 1) * pr], z, &mut scratch[c].0);
+                    });
+                });
             w.derived.z0 = true;
         }
         let n1 = b * CHANNELS * p1;
@@ -694,14 +748,21 @@ impl Stages<'_> {
         if !w.derived.upsampled {
             w.x0.resize(n2, 0.0);
             w.z_hat.resize(n2, 0.0);
-            w.x0.par_chunks_mut(p2)
-                .zip(w.x.par_chunks(pr))
-                .zip(w.z_hat.par_chunks_mut(p2))
-                .zip(w.z0.par_chunks(p1))
-                .zip(w.plane_scratch.par_iter_mut())
-                .for_each(|((((o, xp), zh), zp), (tmp, _))| {
-                    ops.up.apply_plane(xp, o, tmp);
-                    ops.up_low.apply_plane(zp, zh, tmp);
+            w.x0.par_chunks_mut(CHANNELS * p2)
+                .zip(w.x.par_chunks(CHANNELS * pr))
+                .zip(w.z_hat.par_chunks_mut(CHANNELS * p2))
+                .zip(w.z0.par_chunks(CHANNELS * p1))
+                .zip(w.plane_scratch.par_chunks_mut(CHANNELS))
+                .zip(w.grey.par_iter())
+                .for_each(|(((((x0, x), z_hat), z0), scratch), &grey)| {
+                    per_plane(grey, x0, p2, |c, o| {
+                        ops.up
+                            .apply_plane(&x[c * pr..(c + 1) * pr], o, &mut scratch[c].0);
+                    });
+                    per_plane(grey, z_hat, p2, |c, o| {
+                        ops.up_low
+                            .apply_plane(&z0[c * p1..(c + 1) * p1], o, &mut scratch[c].0);
+                    });
                 });
             w.derived.upsampled = true;
         }

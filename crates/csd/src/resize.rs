@@ -687,6 +687,13 @@ impl PlaneResize {
         (self.rows.in_len(), self.cols.in_len())
     }
 
+    /// Whether [`Self::apply_plane`] runs the height pass first, as
+    /// [`Self::apply_from_interleaved`] always does: then the two compute each channel with the
+    /// same operations in the same order (the same bits).
+    pub fn height_first(&self) -> bool {
+        self.rows_first
+    }
+
     /// Output plane size `(h, w)`.
     pub fn out_hw(&self) -> (usize, usize) {
         (self.rows.out_len(), self.cols.out_len())

@@ -1187,3 +1187,67 @@ fn evaluate_many_is_that_many_evaluations_in_sequence_bit_for_bit() {
             .is_empty()
     );
 }
+
+#[test]
+fn grey_renders_take_the_shortcut_with_the_same_bits_as_the_rgb_path() {
+    // A grey view (three equal channels, what the renderers produce) is resized once and its
+    // planes copied. R and the later resizes act on each channel alone, so the RGB path gives
+    // channel c of x, z0, x0 and ẑ from channel c of the input: a batch whose channels 0 and 1
+    // are the grey values and whose channel 2 differs takes the RGB path and must give, in its
+    // channels 0 and 1, the grey batch's planes bit for bit. 512² renders: the guidance's size,
+    // where the resize to 224 runs height first as the interleaved path does.
+    let (views, h, w) = (2, 512, 512);
+    let rgb = renders(views, h, w);
+    let grey: Vec<f32> = rgb.chunks_exact(3).flat_map(|p| [p[0]; 3]).collect();
+    let mixed: Vec<f32> = rgb
+        .chunks_exact(3)
+        .flat_map(|p| [p[0], p[0], p[1]])
+        .collect();
+    let trace = |img: &[f32]| {
+        let (stage1, _) = Fake::boxed(|s: &Tensor, _: &[i64]| output(s, |_, _, _| 0.0));
+        let (stage2, _) = Fake::boxed(|s: &Tensor, _: &[i64]| output(s, |_, _, _| 0.0));
+        let (cond, uncond) = embeddings();
+        let mut g = CascadedGuidance::new(
+            stage1,
+            Some(stage2),
+            cond,
+            uncond,
+            GuidanceConfig::default(),
+        )
+        .expect("valid");
+        g.evaluate_traced(
+            &imgs(img, views, h, w),
+            0.3,
+            &mut ChaCha8Rng::seed_from_u64(2),
+            &InjectedDraws::default(),
+        )
+        .expect("runs")
+    };
+    let (a, b) = (trace(&grey), trace(&mixed));
+    let st2 = |t: &csd::GuidanceTrace| t.stage2.clone().expect("stage II ran");
+    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    for (name, grey_t, mixed_t) in [
+        ("x", &a.x, &b.x),
+        ("z0", &a.stage1.z0, &b.stage1.z0),
+        ("x0", &st2(&a).x0, &st2(&b).x0),
+        ("ẑ", &st2(&a).z_hat, &st2(&b).z_hat),
+    ] {
+        let plane = grey_t.shape[2] * grey_t.shape[3];
+        for v in 0..views {
+            let at = |t: &Tensor, c: usize| {
+                let i = (v * 3 + c) * plane;
+                bits(&t.data[i..i + plane])
+            };
+            let want = at(mixed_t, 0);
+            assert_eq!(
+                at(mixed_t, 1),
+                want,
+                "{name}, view {v}: mixed channels 0 and 1"
+            );
+            assert_ne!(at(mixed_t, 2), want, "{name}, view {v}: channel 2 differs");
+            for c in 0..3 {
+                assert_eq!(at(grey_t, c), want, "{name}, view {v}, channel {c}");
+            }
+        }
+    }
+}
