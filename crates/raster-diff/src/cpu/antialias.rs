@@ -81,6 +81,17 @@ fn front_facing(g: DVec3, x0: DVec3, eye: DVec3) -> bool {
     g.dot(eye - x0) > 0.0
 }
 
+/// The silhouette-edge mask of triangle `t` (0 for the background). A function, not a closure:
+/// it is called inside the dispatched kernel.
+#[inline(always)]
+fn silhouette_mask(silhouettes: &[u8], t: u32) -> u8 {
+    if t == NO_TRIANGLE {
+        0
+    } else {
+        silhouettes[t as usize]
+    }
+}
+
 /// Finds the blends of one view. `ids` and `depth` come from the rasterizer, `face_raw` are the
 /// unnormalized face normals, `proj` the projected vertices. Runs under the run-time SIMD
 /// dispatch (the same results on every instruction set).
@@ -157,19 +168,30 @@ impl pulp::WithSimd for FindBlends<'_> {
         let (w, h) = (camera.width, camera.height);
         let mut blends = Vec::new();
         // Candidate pairs (pixel a, axis): axis 0 pairs a with its right neighbour, axis 1 with the
-        // pixel below. Gathered in a tight scan first; almost all pairs have equal ids.
+        // pixel below. Gathered in a tight scan first; almost all pairs have equal ids, and of
+        // those that differ, most lie between triangles without a silhouette edge: the triangle
+        // the pair is tested against (the front one, below) is one of the two, so a pair where
+        // neither has one is dropped here, without the depth test.
         let mut pairs = Vec::new();
         for row in 0..h {
             let r = &ids[row * w..(row + 1) * w];
             for col in 0..w.saturating_sub(1) {
-                if r[col] != r[col + 1] {
+                if r[col] != r[col + 1]
+                    && silhouette_mask(&silhouettes, r[col])
+                        | silhouette_mask(&silhouettes, r[col + 1])
+                        != 0
+                {
                     pairs.push((row * w + col, 0usize));
                 }
             }
             if row + 1 < h {
                 let below = &ids[(row + 1) * w..(row + 2) * w];
                 for col in 0..w {
-                    if r[col] != below[col] {
+                    if r[col] != below[col]
+                        && silhouette_mask(&silhouettes, r[col])
+                            | silhouette_mask(&silhouettes, below[col])
+                            != 0
+                    {
                         pairs.push((row * w + col, 1usize));
                     }
                 }
