@@ -79,6 +79,29 @@ fn output(sample: &Tensor, value: impl Fn(usize, usize, usize) -> f32) -> Tensor
     }
 }
 
+/// Stage I and II both predicting ε̂ = 0 (both halves), default configuration.
+fn zero_prediction_guidance() -> CascadedGuidance<'static> {
+    let (stage1, _) = Fake::boxed(|s: &Tensor, _: &[i64]| output(s, |_, _, _| 0.0));
+    let (stage2, _) = Fake::boxed(|s: &Tensor, _: &[i64]| output(s, |_, _, _| 0.0));
+    default_guidance(stage1, stage2)
+}
+
+/// A guidance with both stages, the test embeddings and the default configuration.
+fn default_guidance(
+    stage1: Box<dyn Denoiser>,
+    stage2: Box<dyn Denoiser>,
+) -> CascadedGuidance<'static> {
+    let (cond, uncond) = embeddings();
+    CascadedGuidance::new(
+        stage1,
+        Some(stage2),
+        cond,
+        uncond,
+        GuidanceConfig::default(),
+    )
+    .expect("valid")
+}
+
 /// Cond rows [1, 2, 3, ...], uncond rows [−1, −2, ...] in a (2, 3) embedding: distinguishable halves.
 fn embeddings() -> (Embedding, Embedding) {
     let cond = Embedding {
@@ -212,17 +235,7 @@ fn denoiser_returning_the_true_noise_gives_zero_gradient() {
 fn zero_prediction_gives_minus_weighted_noise() {
     // ε_c = ε_u = 0 ⇒ ε̂ = 0 ⇒ grad = w(t_b)·(0 − ε) = −w(t_b)·ε, per view b, in both stages.
     let (views, h, w) = (2, 64, 64);
-    let (stage1, _) = Fake::boxed(|s: &Tensor, _: &[i64]| output(s, |_, _, _| 0.0));
-    let (stage2, _) = Fake::boxed(|s: &Tensor, _: &[i64]| output(s, |_, _, _| 0.0));
-    let (cond, uncond) = embeddings();
-    let mut g = CascadedGuidance::new(
-        stage1,
-        Some(stage2),
-        cond,
-        uncond,
-        GuidanceConfig::default(),
-    )
-    .expect("valid");
+    let mut g = zero_prediction_guidance();
     let mut rng = ChaCha8Rng::seed_from_u64(5);
     let trace = g
         .evaluate_traced(
@@ -785,15 +798,7 @@ fn evaluate_is_deterministic_per_seed_and_matches_the_trace() {
         let (stage2, _) = Fake::boxed(|s: &Tensor, _: &[i64]| {
             output(s, |n, _, p| 0.05 * n as f32 - 1e-3 * (p % 5) as f32)
         });
-        let (cond, uncond) = embeddings();
-        CascadedGuidance::new(
-            stage1,
-            Some(stage2),
-            cond,
-            uncond,
-            GuidanceConfig::default(),
-        )
-        .expect("valid")
+        default_guidance(stage1, stage2)
     };
     let eval = |seed: u64| {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
@@ -1204,24 +1209,14 @@ fn grey_renders_take_the_shortcut_with_the_same_bits_as_the_rgb_path() {
         .flat_map(|p| [p[0], p[0], p[1]])
         .collect();
     let trace = |img: &[f32]| {
-        let (stage1, _) = Fake::boxed(|s: &Tensor, _: &[i64]| output(s, |_, _, _| 0.0));
-        let (stage2, _) = Fake::boxed(|s: &Tensor, _: &[i64]| output(s, |_, _, _| 0.0));
-        let (cond, uncond) = embeddings();
-        let mut g = CascadedGuidance::new(
-            stage1,
-            Some(stage2),
-            cond,
-            uncond,
-            GuidanceConfig::default(),
-        )
-        .expect("valid");
-        g.evaluate_traced(
-            &imgs(img, views, h, w),
-            0.3,
-            &mut ChaCha8Rng::seed_from_u64(2),
-            &InjectedDraws::default(),
-        )
-        .expect("runs")
+        zero_prediction_guidance()
+            .evaluate_traced(
+                &imgs(img, views, h, w),
+                0.3,
+                &mut ChaCha8Rng::seed_from_u64(2),
+                &InjectedDraws::default(),
+            )
+            .expect("runs")
     };
     let (a, b) = (trace(&grey), trace(&mixed));
     let st2 = |t: &csd::GuidanceTrace| t.stage2.clone().expect("stage II ran");
