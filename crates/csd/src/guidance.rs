@@ -601,14 +601,15 @@ impl Stages<'_> {
                 .zip(w.grey.par_iter_mut())
                 .map(|((((xv, src), tmp), planes), grey)| {
                     let (first, _) = &mut planes[0];
-                    *grey = first_channel_if_grey(src, first);
-                    if *grey && ops.resize.height_first() {
+                    // The shortcut has the per-channel path's bits only when the plane resize
+                    // runs height first too; otherwise the channels are not even compared.
+                    *grey = ops.resize.height_first() && first_channel_if_grey(src, first);
+                    if *grey {
                         ops.resize.apply_plane(first, &mut xv[..pr], tmp);
                         let (x_first, rest) = xv.split_at_mut(pr);
                         rest.chunks_exact_mut(pr)
                             .for_each(|p| p.copy_from_slice(x_first));
                     } else {
-                        *grey = false;
                         ops.resize.apply_from_interleaved(src, CHANNELS, xv, tmp);
                     }
                     let mut bad = 0;

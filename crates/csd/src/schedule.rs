@@ -257,16 +257,17 @@ pub struct Ziggurat {
     f: [f64; ZIG_LAYERS],
 }
 
-/// Layers of the [`Ziggurat`]; a word's low [`ZIG_LAYER_BITS`] bits pick one.
-const ZIG_LAYERS: usize = 256;
+/// A word's low `ZIG_LAYER_BITS` bits pick one of the [`Ziggurat`]'s `ZIG_LAYERS` layers; its
+/// other bits are the signed abscissa j, |j| ≤ `ZIG_ABSCISSA_SCALE`.
 const ZIG_LAYER_BITS: u32 = 8;
+const ZIG_LAYERS: usize = 1 << ZIG_LAYER_BITS;
+const ZIG_ABSCISSA_SCALE: u32 = 1 << (31 - ZIG_LAYER_BITS);
 const ZIG_R: f64 = 3.654_152_885_361_009;
 const ZIG_V: f64 = 4.928_673_233_974_658e-3;
 
 impl Ziggurat {
     fn build() -> Self {
-        // 2²³: the abscissa's magnitude bits.
-        let m = f64::from(1u32 << (31 - ZIG_LAYER_BITS));
+        let m = f64::from(ZIG_ABSCISSA_SCALE); // 2²³
         let last = ZIG_LAYERS - 1;
         let mut k = [0u32; ZIG_LAYERS];
         let mut w = [0.0f64; ZIG_LAYERS];
@@ -541,7 +542,7 @@ mod tests {
         // R and v fix every layer through x_{i−1} = f⁻¹(v / x_i + f(x_i)); they are consistent when
         // the top layer, a rectangle of half-width x_1 under f = 1, has area v: x_1 (1 − f(x_1)) = v.
         let zig = Ziggurat::get();
-        let x1 = zig.w[1] * f64::from(1u32 << (31 - ZIG_LAYER_BITS));
+        let x1 = zig.w[1] * f64::from(ZIG_ABSCISSA_SCALE);
         let area = x1 * (1.0 - (-0.5 * x1 * x1).exp());
         assert!(
             (area / ZIG_V - 1.0).abs() < 1e-11,
@@ -549,7 +550,7 @@ mod tests {
         );
         // Widths grow towards the tail, and every acceptance bound is below the abscissa's range.
         assert!(zig.w[1..].windows(2).all(|w| w[0] < w[1]));
-        assert!(zig.k.iter().all(|&k| k < 1 << (31 - ZIG_LAYER_BITS)));
+        assert!(zig.k.iter().all(|&k| k < ZIG_ABSCISSA_SCALE));
     }
 
     /// Φ(x) for the CDF test (Abramowitz–Stegun 7.1.26 erf, |error| < 1.5e-7).

@@ -1219,13 +1219,16 @@ fn grey_renders_take_the_shortcut_with_the_same_bits_as_the_rgb_path() {
             .expect("runs")
     };
     let (a, b) = (trace(&grey), trace(&mixed));
-    let st2 = |t: &csd::GuidanceTrace| t.stage2.clone().expect("stage II ran");
+    let (a2, b2) = (
+        a.stage2.as_ref().expect("stage II ran"),
+        b.stage2.as_ref().expect("stage II ran"),
+    );
     let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
     for (name, grey_t, mixed_t) in [
         ("x", &a.x, &b.x),
         ("z0", &a.stage1.z0, &b.stage1.z0),
-        ("x0", &st2(&a).x0, &st2(&b).x0),
-        ("ẑ", &st2(&a).z_hat, &st2(&b).z_hat),
+        ("x0", &a2.x0, &b2.x0),
+        ("ẑ", &a2.z_hat, &b2.z_hat),
     ] {
         let plane = grey_t.shape[2] * grey_t.shape[3];
         for v in 0..views {
