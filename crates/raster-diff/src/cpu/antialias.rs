@@ -20,6 +20,8 @@
 //! function of the edge's screen end points; t follows the screen end points through the line
 //! crossing, and those follow the two edge vertices through the perspective projection.
 
+use std::borrow::Cow;
+
 use glam::DVec3;
 
 use super::raster::{Camera, NO_TRIANGLE, Projected};
@@ -271,30 +273,143 @@ impl pulp::WithSimd for FindBlends<'_> {
 /// Applies the blends to one view's colours: returns the antialiased colours.
 pub fn apply(colour: &[f64], blends: &[Blend]) -> Vec<f64> {
     let mut out = colour.to_vec();
-    for b in blends {
+    for (t, value) in blended_pixels(colour, blends) {
+        out[t as usize] = value;
+    }
+    out
+}
+
+/// The pixels the blends change, each once and in increasing order, with their antialiased
+/// colour: `colour[t]` plus each of its blends' `α·(colour[s] − colour[t])`, added in the blends'
+/// order (the values [`apply`] gives them). Every other pixel keeps its colour, so a caller that
+/// already holds the colours writes these few values instead of copying the whole view.
+pub fn blended_pixels(colour: &[f64], blends: &[Blend]) -> Vec<(u32, f64)> {
+    let mut order: Vec<u32> = (0..blends.len() as u32).collect();
+    // Stable: a pixel's blends stay in their order.
+    order.sort_by_key(|&k| blends[k as usize].target);
+    let mut out: Vec<(u32, f64)> = Vec::with_capacity(order.len());
+    for k in order {
+        let b = &blends[k as usize];
         let (t, s) = (b.target as usize, b.source as usize);
-        out[t] += b.alpha * (colour[s] - colour[t]);
+        let delta = b.alpha * (colour[s] - colour[t]);
+        match out.last_mut() {
+            Some((last, value)) if *last == b.target => *value += delta,
+            _ => out.push((b.target, colour[t] + delta)),
+        }
     }
     out
 }
 
 /// Adjoint of [`apply`]: from dL/d(out) returns dL/d(colour) and adds the visibility gradient
-/// dL/dα · dα/dx to `d_vertices`.
-pub fn apply_adjoint(
+/// dL/dα · dα/dx to `d_vertices`. Works in `d_out`'s buffer when it owns one (no copy).
+pub fn apply_adjoint<'a>(
     colour: &[f64],
     blends: &[Blend],
-    d_out: &[f64],
+    d_out: Cow<'a, [f64]>,
     d_vertices: &mut [DVec3],
-) -> Vec<f64> {
-    let mut d_colour = d_out.to_vec();
-    for b in blends {
+) -> Cow<'a, [f64]> {
+    if blends.is_empty() {
+        return d_out;
+    }
+    // Every blend reads dL/d(out) at its target before any blend writes: gather those first,
+    // then update in place.
+    let g_target: Vec<f64> = blends.iter().map(|b| d_out[b.target as usize]).collect();
+    let mut d_colour = d_out.into_owned();
+    for (b, &g) in blends.iter().zip(&g_target) {
         let (t, s) = (b.target as usize, b.source as usize);
-        let g = d_out[t];
         d_colour[s] += g * b.alpha;
         d_colour[t] -= g * b.alpha;
         let d_alpha = g * (colour[s] - colour[t]);
         d_vertices[b.edge[0] as usize] += b.d_alpha[0] * d_alpha;
         d_vertices[b.edge[1] as usize] += b.d_alpha[1] * d_alpha;
     }
-    d_colour
+    d_colour.into()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Blends with repeated targets, pixels that are both a target and a source, in no order.
+    fn tangled_blends(pixels: u32) -> Vec<Blend> {
+        (0..3 * pixels)
+            .map(|k| {
+                let target = (k * 7 + 3) % pixels;
+                Blend {
+                    target,
+                    source: (target + 1 + k % 5) % pixels,
+                    edge: [k % pixels, (k * 3 + 1) % pixels],
+                    alpha: 0.5 * f64::from((k * 37) % 101) / 101.0,
+                    d_alpha: [
+                        DVec3::new(f64::from(k) * 0.1, -0.3, 0.7),
+                        DVec3::new(0.2, f64::from(k % 9) - 4.0, 1.3),
+                    ],
+                }
+            })
+            .collect()
+    }
+
+    fn colours(pixels: u32) -> Vec<f64> {
+        (0..pixels)
+            .map(|i| (f64::from(i) * 0.618).fract() * 0.8)
+            .collect()
+    }
+
+    #[test]
+    fn blended_pixels_are_the_plain_blend_loop_bit_for_bit() {
+        let pixels = 23;
+        let colour = colours(pixels);
+        let blends = tangled_blends(pixels);
+        // The definition: every blend adds to its target, reading the unblended colours.
+        let mut want = colour.clone();
+        for b in &blends {
+            let (t, s) = (b.target as usize, b.source as usize);
+            want[t] += b.alpha * (colour[s] - colour[t]);
+        }
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&apply(&colour, &blends)), bits(&want));
+        let changed = blended_pixels(&colour, &blends);
+        assert!(changed.windows(2).all(|w| w[0].0 < w[1].0));
+        let mut targets: Vec<u32> = blends.iter().map(|b| b.target).collect();
+        targets.sort_unstable();
+        targets.dedup();
+        assert_eq!(changed.iter().map(|c| c.0).collect::<Vec<_>>(), targets);
+    }
+
+    #[test]
+    fn in_place_adjoint_is_the_copying_one_bit_for_bit() {
+        let pixels = 23;
+        let colour = colours(pixels);
+        let blends = tangled_blends(pixels);
+        let d_out: Vec<f64> = (0..pixels).map(|i| f64::from(i % 7) - 2.5).collect();
+        // The definition, reading dL/d(out) from a buffer no blend writes.
+        let mut want = d_out.clone();
+        let mut want_dx = vec![DVec3::ZERO; pixels as usize];
+        for b in &blends {
+            let (t, s) = (b.target as usize, b.source as usize);
+            let g = d_out[t];
+            want[s] += g * b.alpha;
+            want[t] -= g * b.alpha;
+            let d_alpha = g * (colour[s] - colour[t]);
+            want_dx[b.edge[0] as usize] += b.d_alpha[0] * d_alpha;
+            want_dx[b.edge[1] as usize] += b.d_alpha[1] * d_alpha;
+        }
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        let dbits = |v: &[DVec3]| {
+            v.iter()
+                .map(|x| x.to_array().map(f64::to_bits))
+                .collect::<Vec<_>>()
+        };
+        for owned in [false, true] {
+            let mut dx = vec![DVec3::ZERO; pixels as usize];
+            let input = if owned {
+                Cow::Owned(d_out.clone())
+            } else {
+                Cow::Borrowed(&d_out[..])
+            };
+            let got = apply_adjoint(&colour, &blends, input, &mut dx);
+            assert_eq!(bits(&got), bits(&want));
+            assert_eq!(dbits(&dx), dbits(&want_dx));
+        }
+    }
 }

@@ -218,7 +218,12 @@ impl CpuRenderer {
                     let blends = antialias::find_blends(
                         vertices, faces, &adjacency, &face_raw, &camera, &proj, &ids, &depth,
                     );
-                    write(&antialias::apply(&colour, &blends), dst);
+                    // Most pixels keep their colour: write the view, then the blended few.
+                    write(&colour, dst);
+                    for (t, value) in antialias::blended_pixels(&colour, &blends) {
+                        let at = t as usize * values_per_pixel;
+                        write(&[value], &mut dst[at..at + values_per_pixel]);
+                    }
                     blends
                 } else {
                     write(&colour, dst);
@@ -332,12 +337,7 @@ fn backward_views<'a>(
                 .iter_mut()
                 .enumerate()
                 .map(|(g, (dx, _))| {
-                    let d_out = d_view(g, vi);
-                    if view.blends.is_empty() {
-                        d_out
-                    } else {
-                        antialias::apply_adjoint(&view.colour, &view.blends, &d_out, dx).into()
-                    }
+                    antialias::apply_adjoint(&view.colour, &view.blends, d_view(g, vi), dx)
                 })
                 .collect();
             simd::dispatch(AccumulateView {
@@ -670,13 +670,13 @@ mod tests {
             let d_colour = antialias::apply_adjoint(
                 &view.colour,
                 &view.blends,
-                &d[vi * npix..(vi + 1) * npix],
+                Cow::Borrowed(&d[vi * npix..(vi + 1) * npix]),
                 &mut acc[0].0,
             );
             AccumulateView {
                 st,
                 view,
-                d_colours: &[Cow::Owned(d_colour)],
+                d_colours: &[d_colour],
                 acc: &mut acc,
             }
             .with_simd(pulp::Scalar);
