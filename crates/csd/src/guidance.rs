@@ -16,7 +16,10 @@
 use crate::resize::{PlaneResize, Resize2d};
 use crate::schedule::{NoiseSchedule, TimestepRange, fill_standard_normal};
 use crate::sds::{check_denoiser_output, classifier_free_guidance, nan_to_num, split_cond_uncond};
-use crate::{Denoiser, Embedding, Guidance, GuidanceError, GuidanceOutput, Images, Tensor};
+use crate::{
+    Denoiser, Embedding, GreyGuidanceOutput, Guidance, GuidanceError, GuidanceOutput, Images,
+    Tensor,
+};
 use optim::Schedule;
 use rand::RngCore;
 use rayon::prelude::*;
@@ -359,6 +362,9 @@ struct Workspace {
     grey: Vec<bool>,
     /// Per-plane scratch for the planar resizes: (resize intermediate, an output plane).
     plane_scratch: Vec<(Vec<f32>, Vec<f32>)>,
+    /// 2·Rᵀ(Σ_c ∂L/∂x_c) per view at the render's size, before the final guard (kept across
+    /// calls, so it is zeroed only when it grows).
+    grey_grad: Vec<f32>,
     /// Which of the buffers derived from the renders alone (no random draw) hold the values of
     /// the renders last encoded, so that [`Guidance::evaluate_many`] computes them once.
     derived: Derived,
@@ -882,6 +888,39 @@ impl Stages<'_> {
         grad
     }
 
+    /// dL/d(grey) = Σ_c ∂L/∂img_c = 2·Rᵀ(Σ_c ∂L/∂x_c) (Rᵀ is linear): the channels are summed at
+    /// the guidance's resolution (in `f32`, in channel order) and one plane per view is mapped
+    /// back, with the same final NaN/∞ guard as [`Self::decode_gradient`]; widened to `f64`.
+    fn decode_grey_gradient(&self, images: &Images, w: &mut Workspace) -> Vec<f64> {
+        let pr = self.cfg.resolution * self.cfg.resolution;
+        let plane_in = images.height * images.width;
+        w.grey_grad.resize(images.count * plane_in, 0.0);
+        w.grey_grad
+            .par_chunks_mut(plane_in)
+            .zip(w.grad_x.par_chunks(CHANNELS * pr))
+            .zip(w.plane_scratch.par_chunks_mut(CHANNELS))
+            .for_each(|((out, gx), planes)| {
+                let (tmp, sum) = &mut planes[0];
+                sum.clear();
+                sum.extend(
+                    gx[..pr]
+                        .iter()
+                        .zip(&gx[pr..2 * pr])
+                        .zip(&gx[2 * pr..])
+                        .map(|((&a, &b), &c)| a + b + c),
+                );
+                self.ops.resize_t.apply_plane(sum, out, tmp);
+            });
+        // Written in place by the indexed parallel extend (no zeroing first).
+        let mut grey = Vec::with_capacity(w.grey_grad.len());
+        grey.par_extend(
+            w.grey_grad
+                .par_iter()
+                .map(|&v| f64::from(nan_to_num(2.0 * v))),
+        );
+        grey
+    }
+
     /// The shared part of a stage's trace from its UNet output and workspace buffers.
     #[allow(clippy::too_many_arguments)]
     fn score_trace(
@@ -1143,7 +1182,11 @@ impl<'m> CascadedGuidance<'m> {
             stage2_weight,
             denoiser_seconds: stage1.denoiser_seconds
                 + stage2.as_ref().map_or(0.0, |s| s.denoiser_seconds),
-            grad_images: stages.decode_gradient(images, work),
+            // Decoded by the caller, as RGB or as channel sums.
+            grad_images: Images {
+                rgb: Vec::new(),
+                ..*images
+            },
         };
         Ok((
             Core {
@@ -1176,7 +1219,7 @@ impl<'m> CascadedGuidance<'m> {
         rng: &mut dyn RngCore,
         reuse_encoding: bool,
     ) -> Result<GuidanceOutput, GuidanceError> {
-        let (core, _, _) = self.evaluate_core(
+        let (mut core, stages, work) = self.evaluate_core(
             images,
             stage2_weight,
             rng,
@@ -1184,7 +1227,35 @@ impl<'m> CascadedGuidance<'m> {
             false,
             reuse_encoding,
         )?;
+        core.output.grad_images = stages.decode_gradient(images, work);
         Ok(core.output)
+    }
+
+    /// [`Self::evaluate_untraced`] with the gradient decoded as channel sums
+    /// ([`Guidance::evaluate_many_grey`]).
+    fn evaluate_untraced_grey(
+        &mut self,
+        images: &Images,
+        stage2_weight: f64,
+        rng: &mut dyn RngCore,
+        reuse_encoding: bool,
+    ) -> Result<GreyGuidanceOutput, GuidanceError> {
+        let (core, stages, work) = self.evaluate_core(
+            images,
+            stage2_weight,
+            rng,
+            &InjectedDraws::default(),
+            false,
+            reuse_encoding,
+        )?;
+        let out = core.output;
+        Ok(GreyGuidanceOutput {
+            loss_stage1: out.loss_stage1,
+            loss_stage2: out.loss_stage2,
+            stage2_weight: out.stage2_weight,
+            denoiser_seconds: out.denoiser_seconds,
+            grad_grey: stages.decode_grey_gradient(images, work),
+        })
     }
 
     /// Like [`Self::evaluate_with_weight`], returning every intermediate; `injected` replaces chosen
@@ -1196,8 +1267,9 @@ impl<'m> CascadedGuidance<'m> {
         rng: &mut dyn RngCore,
         injected: &InjectedDraws,
     ) -> Result<GuidanceTrace, GuidanceError> {
-        let (core, stages, work) =
+        let (mut core, stages, work) =
             self.evaluate_core(images, stage2_weight, rng, injected, true, false)?;
+        core.output.grad_images = stages.decode_gradient(images, work);
         let r = stages.cfg.resolution;
         let shape = [images.count, CHANNELS, r, r];
         Ok(GuidanceTrace {
@@ -1239,6 +1311,21 @@ impl Guidance for CascadedGuidance<'_> {
         let weight = self.stage2_weight.at(iteration);
         (0..count)
             .map(|k| self.evaluate_untraced(images, weight, rng, k > 0))
+            .collect()
+    }
+
+    /// [`Guidance::evaluate_many`]'s evaluations with one plane per view mapped back to the
+    /// render's size: the channels of ∂L/∂x are summed first.
+    fn evaluate_many_grey(
+        &mut self,
+        images: &Images,
+        iteration: u64,
+        count: usize,
+        rng: &mut dyn RngCore,
+    ) -> Result<Vec<GreyGuidanceOutput>, GuidanceError> {
+        let weight = self.stage2_weight.at(iteration);
+        (0..count)
+            .map(|k| self.evaluate_untraced_grey(images, weight, rng, k > 0))
             .collect()
     }
 }

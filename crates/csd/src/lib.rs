@@ -203,6 +203,41 @@ pub struct GuidanceOutput {
     pub grad_images: Images,
 }
 
+/// What the loop receives from [`Guidance::evaluate_many_grey`]: a [`GuidanceOutput`]'s terms, with
+/// the image gradient summed over the channels.
+#[derive(Clone, Debug, Default)]
+pub struct GreyGuidanceOutput {
+    /// As [`GuidanceOutput::loss_stage1`].
+    pub loss_stage1: f64,
+    /// As [`GuidanceOutput::loss_stage2`].
+    pub loss_stage2: f64,
+    /// As [`GuidanceOutput::stage2_weight`].
+    pub stage2_weight: f64,
+    /// As [`GuidanceOutput::denoiser_seconds`].
+    pub denoiser_seconds: f64,
+    /// dL/d(grey) = Σ_c dL/d(channel c) per pixel, `(view, row, column)`: the whole gradient of a
+    /// render whose three channels are one grey value.
+    pub grad_grey: Vec<f64>,
+}
+
+impl GreyGuidanceOutput {
+    /// The channel sums of `out`'s gradient (in `f64`, channels in order), checked against the
+    /// renders `images` it belongs to.
+    pub fn from_rgb(out: GuidanceOutput, images: &Images) -> Result<Self, GuidanceError> {
+        let grad_grey = out
+            .grad_images
+            .grey_gradient(images.count, images.height, images.width)
+            .map_err(|e| GuidanceError::InvalidInput(format!("image gradient: {e}")))?;
+        Ok(Self {
+            loss_stage1: out.loss_stage1,
+            loss_stage2: out.loss_stage2,
+            stage2_weight: out.stage2_weight,
+            denoiser_seconds: out.denoiser_seconds,
+            grad_grey,
+        })
+    }
+}
+
 /// The seam between the loop and the semantic loss: renders in, dL/drenders out.
 pub trait Guidance: Send {
     /// Evaluates the loss and its image gradient at optimization iteration `iteration` (1-based;
@@ -231,6 +266,25 @@ pub trait Guidance: Send {
     ) -> Result<Vec<GuidanceOutput>, GuidanceError> {
         (0..count)
             .map(|_| self.evaluate(images, iteration, rng))
+            .collect()
+    }
+
+    /// [`Guidance::evaluate_many`] with each gradient summed over the channels: dL/d(grey) per
+    /// pixel, all that the backward of a renderer whose output is grey needs. The same losses,
+    /// from the same draws; the gradient is the channel sum of `evaluate_many`'s up to rounding
+    /// (the default computes exactly that sum, in `f64`). [`CascadedGuidance`] sums the channels
+    /// before its last resize's adjoint, which is linear, and so maps one plane per view back to
+    /// the render's size instead of three.
+    fn evaluate_many_grey(
+        &mut self,
+        images: &Images,
+        iteration: u64,
+        count: usize,
+        rng: &mut dyn rand::RngCore,
+    ) -> Result<Vec<GreyGuidanceOutput>, GuidanceError> {
+        self.evaluate_many(images, iteration, count, rng)?
+            .into_iter()
+            .map(|out| GreyGuidanceOutput::from_rgb(out, images))
             .collect()
     }
 }

@@ -1249,3 +1249,63 @@ fn grey_renders_take_the_shortcut_with_the_same_bits_as_the_rgb_path() {
         }
     }
 }
+
+#[test]
+fn evaluate_many_grey_gives_the_channel_sums_of_evaluate_many() {
+    // The same draws and losses; dL/d(grey) = Σ_c dL/d(channel c), which the grey decoding forms
+    // before the last resize's adjoint instead of after (equal up to f32 rounding). Two render
+    // sizes: 512² (the resize to 224 runs height first) and 40×36 (width first).
+    use csd::Guidance;
+    for (views, h, w) in [(2, 512, 512), (3, 40, 36)] {
+        let a = imgs(&renders(views, h, w), views, h, w);
+        let make = || {
+            let (cond, uncond) = embeddings();
+            CascadedGuidance::new(
+                echo(),
+                Some(echo()),
+                cond,
+                uncond,
+                GuidanceConfig::default(),
+            )
+            .expect("valid")
+            .with_stage2_weight(optim::Schedule::constant(0.25))
+        };
+        let (mut rgb_guidance, mut grey_guidance) = (make(), make());
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let mut rng2 = ChaCha8Rng::seed_from_u64(5);
+        let want = rgb_guidance
+            .evaluate_many(&a, 7, 2, &mut rng)
+            .expect("runs");
+        let got = grey_guidance
+            .evaluate_many_grey(&a, 7, 2, &mut rng2)
+            .expect("runs");
+        assert_eq!(got.len(), 2);
+        for (k, (g, e)) in got.iter().zip(&want).enumerate() {
+            assert_eq!(
+                (g.loss_stage1, g.loss_stage2, g.stage2_weight),
+                (e.loss_stage1, e.loss_stage2, e.stage2_weight),
+                "{h}×{w}, evaluation {k}"
+            );
+            let sums = e.grad_images.grey_gradient(views, h, w).expect("shape");
+            assert_eq!(g.grad_grey.len(), sums.len());
+            let scale = sums.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            assert!(scale > 0.0);
+            let worst = g
+                .grad_grey
+                .iter()
+                .zip(&sums)
+                .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+            assert!(
+                worst <= 1e-6 * scale,
+                "{h}×{w}, evaluation {k}: {worst:e} against max {scale:e}"
+            );
+            // The trait's default (channel sums of evaluate_many, in f64) gives exactly `sums`.
+            let default = csd::GreyGuidanceOutput::from_rgb(e.clone(), &a).expect("shape");
+            assert_eq!(default.grad_grey, sums);
+        }
+        assert_eq!(
+            rand::RngCore::next_u64(&mut rng),
+            rand::RngCore::next_u64(&mut rng2)
+        );
+    }
+}

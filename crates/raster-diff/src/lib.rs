@@ -72,7 +72,8 @@ impl From<ImagesError> for RenderError {
 ///
 /// `backward` is the vector-Jacobian product of the **most recent** `render` call: it may be
 /// called several times for one render. The loop takes two Adam steps per render batch and maps
-/// both sub-steps' image gradients back with one [`backward_many`](Renderer::backward_many).
+/// both sub-steps' image gradients back with one [`backward_many`](Renderer::backward_many)
+/// ([`backward_many_grey`](Renderer::backward_many_grey) when the backend's output is grey).
 pub trait Renderer: Send {
     /// Backend name for logs ("cpu", "wgpu (lavapipe)", …).
     fn name(&self) -> String;
@@ -93,6 +94,26 @@ pub trait Renderer: Send {
     /// not depend on the gradient (the CPU backend visits every pixel once).
     fn backward_many(&mut self, d_images: &[&Images]) -> Result<Vec<Vec<[f64; 3]>>, RenderError> {
         d_images.iter().map(|d| self.backward(d)).collect()
+    }
+    /// Whether this backend's renders are grey (the three channels of every pixel one value),
+    /// so that [`backward_many_grey`](Self::backward_many_grey) is available and a gradient
+    /// need only be dL/d(grey). The default is `false`.
+    fn output_is_grey(&self) -> bool {
+        false
+    }
+    /// [`backward_many`](Self::backward_many) from dL/d(grey) = Σ_c dL/d(channel c) per pixel,
+    /// `(view, row, column)`, for a backend whose [`output_is_grey`](Self::output_is_grey): the
+    /// same dL/dvertices as `backward_many` with RGB gradients whose channel sums (in `f64`) are
+    /// these values. The default is an error (a backend without grey output).
+    fn backward_many_grey(
+        &mut self,
+        d_greys: &[&[f64]],
+    ) -> Result<Vec<Vec<[f64; 3]>>, RenderError> {
+        let _ = d_greys;
+        Err(RenderError::InvalidInput(format!(
+            "the {} renderer takes RGB image gradients, not dL/d(grey)",
+            self.name()
+        )))
     }
 }
 

@@ -501,3 +501,58 @@ fn batched_sub_steps_equal_sub_steps_one_by_one_bit_for_bit() {
         "stage II ran"
     );
 }
+
+#[test]
+fn a_grey_renderer_takes_grey_gradients_with_the_rgb_paths_results() {
+    // The CPU renderer's output is grey, so the loop asks the guidance for dL/d(grey) and the
+    // renderer maps it back (`evaluate_many_grey`, `backward_many_grey`); `CountingRenderer`
+    // does not say so and takes the RGB path. With a guidance that only implements `evaluate`,
+    // dL/d(grey) is the default's channel sums in f64 — what the RGB path's backward sums — so
+    // the two runs agree bit for bit.
+    let darap = layer();
+    let objective = |grey: bool| {
+        let renderer: Box<dyn Renderer> = if grey {
+            Box::new(CpuRenderer::default())
+        } else {
+            Box::new(CountingRenderer {
+                inner: CpuRenderer::default(),
+                renders: Arc::new(AtomicUsize::new(0)),
+            })
+        };
+        assert_eq!(renderer.output_is_grey(), grey);
+        TextObjective::new(
+            renderer,
+            Box::new(DarkerGuidance {
+                calls: Arc::new(AtomicUsize::new(0)),
+                random_scale: true,
+                stage2_weight: Schedule::constant(0.0),
+            }),
+            &faces(),
+            views(),
+        )
+    };
+    let spec = LoopSpec {
+        iterations: 3,
+        steps_per_batch: 2,
+        checkpoint_every: 0,
+        preview_every: 0,
+        halt_after: None,
+    };
+    let run = |obj: &mut dyn Objective| {
+        let mut state = LoopState {
+            iteration: 0,
+            x: darap.rest_normals().to_vec(),
+            adam: ok(Adam::new(3 * darap.num_vertices(), AdamConfig::default())),
+            rng: ChaCha8Rng::seed_from_u64(3),
+        };
+        let mut records = RecordIterations::default();
+        ok(run_loop(&darap, &spec, &mut state, obj, &mut records));
+        (state, records)
+    };
+    let (grey, grey_records) = run(&mut objective(true));
+    let (rgb, rgb_records) = run(&mut objective(false));
+    assert!(grey.x == rgb.x, "x differs");
+    assert!(grey.x != darap.rest_normals(), "x did not move");
+    let terms = |r: &RecordIterations| r.0.iter().map(|r| r.terms.clone()).collect::<Vec<_>>();
+    assert_eq!(terms(&grey_records), terms(&rgb_records));
+}

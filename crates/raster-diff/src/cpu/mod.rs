@@ -578,6 +578,19 @@ impl Renderer for CpuRenderer {
             Cow::Owned(d_images[g].view_grey_gradient(vi))
         }))
     }
+
+    /// All three channels are the shaded grey value.
+    fn output_is_grey(&self) -> bool {
+        true
+    }
+
+    /// [`CpuRenderer::backward_grey_many`].
+    fn backward_many_grey(
+        &mut self,
+        d_greys: &[&[f64]],
+    ) -> Result<Vec<Vec<[f64; 3]>>, RenderError> {
+        self.backward_grey_many(d_greys)
+    }
 }
 
 #[cfg(test)]
@@ -601,6 +614,30 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn grey_gradients_give_the_rgb_backward_bit_for_bit() {
+        let (v, f) = mesh_core::shapes::icosphere(2).into_parts();
+        let views = crate::orbit_views(2, 20.0, 3.0, 50.0);
+        let mut r = CpuRenderer::default();
+        assert!(r.output_is_grey());
+        let img = r.render(&v, &f, &views, 48, 40).expect("render");
+        let gradient = |k: usize| {
+            let mut d = img.zeros_like();
+            for (i, x) in d.rgb.iter_mut().enumerate() {
+                *x = ((i * (k + 3)) % 17) as f32 * 0.01 - 0.08;
+            }
+            d
+        };
+        let (d1, d2) = (gradient(1), gradient(2));
+        let want = r.backward_many(&[&d1, &d2]).expect("backward");
+        let sums = |d: &Images| d.grey_gradient(2, 40, 48).expect("shape");
+        let (g1, g2) = (sums(&d1), sums(&d2));
+        let got = r.backward_many_grey(&[&g1, &g2]).expect("backward");
+        assert_eq!(got, want);
+        assert!(want[0].iter().any(|g| g != &[0.0; 3]));
+        assert!(r.backward_many_grey(&[&g1[1..]]).is_err());
     }
 
     /// The per-pixel loops run under [`simd::dispatch`] (AVX2 where the CPU has it); calling a
