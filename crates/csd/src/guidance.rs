@@ -362,9 +362,6 @@ struct Workspace {
     grey: Vec<bool>,
     /// Per-plane scratch for the planar resizes: (resize intermediate, an output plane).
     plane_scratch: Vec<(Vec<f32>, Vec<f32>)>,
-    /// 2·Rᵀ(Σ_c ∂L/∂x_c) per view at the render's size, before the final guard (kept across
-    /// calls, so it is zeroed only when it grows).
-    grey_grad: Vec<f32>,
     /// Which of the buffers derived from the renders alone (no random draw) hold the values of
     /// the renders last encoded, so that [`Guidance::evaluate_many`] computes them once.
     derived: Derived,
@@ -890,13 +887,14 @@ impl Stages<'_> {
 
     /// dL/d(grey) = Σ_c ∂L/∂img_c = 2·Rᵀ(Σ_c ∂L/∂x_c) (Rᵀ is linear): the channels are summed at
     /// the guidance's resolution (in `f32`, in channel order) and one plane per view is mapped
-    /// back, with the same final NaN/∞ guard as [`Self::decode_gradient`]; widened to `f64`.
-    fn decode_grey_gradient(&self, images: &Images, w: &mut Workspace) -> Vec<f64> {
+    /// back, with the same final NaN/∞ guard as [`Self::decode_gradient`].
+    fn decode_grey_gradient(&self, images: &Images, w: &mut Workspace) -> Vec<f32> {
         let pr = self.cfg.resolution * self.cfg.resolution;
         let plane_in = images.height * images.width;
-        w.grey_grad.resize(images.count * plane_in, 0.0);
-        w.grey_grad
-            .par_chunks_mut(plane_in)
+        // Zeroed in parallel (every value is overwritten below).
+        let mut grey = Vec::new();
+        grey.par_extend(rayon::iter::repeat_n(0.0f32, images.count * plane_in));
+        grey.par_chunks_mut(plane_in)
             .zip(w.grad_x.par_chunks(CHANNELS * pr))
             .zip(w.plane_scratch.par_chunks_mut(CHANNELS))
             .for_each(|((out, gx), planes)| {
@@ -910,14 +908,8 @@ impl Stages<'_> {
                         .map(|((&a, &b), &c)| a + b + c),
                 );
                 self.ops.resize_t.apply_plane(sum, out, tmp);
+                out.iter_mut().for_each(|v| *v = nan_to_num(2.0 * *v));
             });
-        // Written in place by the indexed parallel extend (no zeroing first).
-        let mut grey = Vec::with_capacity(w.grey_grad.len());
-        grey.par_extend(
-            w.grey_grad
-                .par_iter()
-                .map(|&v| f64::from(nan_to_num(2.0 * v))),
-        );
         grey
     }
 

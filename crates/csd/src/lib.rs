@@ -216,18 +216,21 @@ pub struct GreyGuidanceOutput {
     /// As [`GuidanceOutput::denoiser_seconds`].
     pub denoiser_seconds: f64,
     /// dL/d(grey) = Σ_c dL/d(channel c) per pixel, `(view, row, column)`: the whole gradient of a
-    /// render whose three channels are one grey value.
-    pub grad_grey: Vec<f64>,
+    /// render whose three channels are one grey value. In `f32`, like the images' gradient.
+    pub grad_grey: Vec<f32>,
 }
 
 impl GreyGuidanceOutput {
-    /// The channel sums of `out`'s gradient (in `f64`, channels in order), checked against the
-    /// renders `images` it belongs to.
+    /// The channel sums of `out`'s gradient (in `f64`, channels in order, then rounded to `f32`),
+    /// checked against the renders `images` it belongs to.
     pub fn from_rgb(out: GuidanceOutput, images: &Images) -> Result<Self, GuidanceError> {
         let grad_grey = out
             .grad_images
             .grey_gradient(images.count, images.height, images.width)
-            .map_err(|e| GuidanceError::InvalidInput(format!("image gradient: {e}")))?;
+            .map_err(|e| GuidanceError::InvalidInput(format!("image gradient: {e}")))?
+            .into_iter()
+            .map(|v| v as f32)
+            .collect();
         Ok(Self {
             loss_stage1: out.loss_stage1,
             loss_stage2: out.loss_stage2,
@@ -272,7 +275,7 @@ pub trait Guidance: Send {
     /// [`Guidance::evaluate_many`] with each gradient summed over the channels: dL/d(grey) per
     /// pixel, all that the backward of a renderer whose output is grey needs. The same losses,
     /// from the same draws; the gradient is the channel sum of `evaluate_many`'s up to rounding
-    /// (the default computes exactly that sum, in `f64`). [`CascadedGuidance`] sums the channels
+    /// (the default computes that sum in `f64` and rounds it to `f32`). [`CascadedGuidance`] sums the channels
     /// before its last resize's adjoint, which is linear, and so maps one plane per view back to
     /// the render's size instead of three.
     fn evaluate_many_grey(

@@ -107,7 +107,7 @@ pub trait Renderer: Send {
     /// these values. The default is an error (a backend without grey output).
     fn backward_many_grey(
         &mut self,
-        d_greys: &[&[f64]],
+        d_greys: &[&[f32]],
     ) -> Result<Vec<Vec<[f64; 3]>>, RenderError> {
         let _ = d_greys;
         Err(RenderError::InvalidInput(format!(

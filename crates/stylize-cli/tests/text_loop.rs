@@ -44,7 +44,11 @@ impl Guidance for DarkerGuidance {
         let mean = images.rgb.iter().map(|&v| f64::from(v)).sum::<f64>() / n;
         let stage2_weight = self.stage2_weight.at(iteration);
         let mut grad_images = images.zeros_like();
-        grad_images.rgb.fill((scale / n) as f32);
+        // Four low mantissa bits cleared: the three channels' sum is then exact in f32, so a grey
+        // renderer's path (dL/d(grey) in f32) sees the values the RGB path sums in f64.
+        grad_images
+            .rgb
+            .fill(f32::from_bits(((scale / n) as f32).to_bits() & !0xF));
         Ok(GuidanceOutput {
             loss_stage1: scale * mean,
             loss_stage2: stage2_weight,
@@ -507,8 +511,8 @@ fn a_grey_renderer_takes_grey_gradients_with_the_rgb_paths_results() {
     // The CPU renderer's output is grey, so the loop asks the guidance for dL/d(grey) and the
     // renderer maps it back (`evaluate_many_grey`, `backward_many_grey`); `CountingRenderer`
     // does not say so and takes the RGB path. With a guidance that only implements `evaluate`,
-    // dL/d(grey) is the default's channel sums in f64 — what the RGB path's backward sums — so
-    // the two runs agree bit for bit.
+    // dL/d(grey) is the default's channel sums (exact here, see `DarkerGuidance`) — what the RGB
+    // path's backward sums — so the two runs agree bit for bit.
     let darap = layer();
     let objective = |grey: bool| {
         let renderer: Box<dyn Renderer> = if grey {

@@ -501,7 +501,7 @@ impl<'g> TextObjective<'g> {
                     );
                 }
             }
-            let d_greys: Vec<&[f64]> = outs.iter().map(|o| o.grad_grey.as_slice()).collect();
+            let d_greys: Vec<&[f32]> = outs.iter().map(|o| o.grad_grey.as_slice()).collect();
             let grads = self
                 .renderer
                 .backward_many_grey(&d_greys)

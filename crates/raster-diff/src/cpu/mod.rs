@@ -266,15 +266,7 @@ impl CpuRenderer {
     ) -> Result<Vec<Vec<[f64; 3]>>, RenderError> {
         let st = self.state.as_ref().ok_or(RenderError::NoForwardState)?;
         let npix = st.width * st.height;
-        for d_grey in d_greys {
-            if d_grey.len() != st.views.len() * npix {
-                return Err(RenderError::InvalidInput(format!(
-                    "gradient has {} values, the last render had {}",
-                    d_grey.len(),
-                    st.views.len() * npix
-                )));
-            }
-        }
+        check_grey_lengths(d_greys.iter().map(|d| d.len()), st.views.len() * npix)?;
         Ok(backward_views(st, d_greys.len(), |g, vi| {
             Cow::Borrowed(&d_greys[g][vi * npix..(vi + 1) * npix])
         }))
@@ -312,6 +304,21 @@ impl CpuRenderer {
             .as_ref()
             .map(|s| s.views.iter().flat_map(|v| v.ids.iter().copied()).collect())
     }
+}
+
+/// Checks that every dL/d(grey) has one value per pixel of the last render (`pixels`).
+fn check_grey_lengths(
+    lengths: impl Iterator<Item = usize>,
+    pixels: usize,
+) -> Result<(), RenderError> {
+    for len in lengths {
+        if len != pixels {
+            return Err(RenderError::InvalidInput(format!(
+                "gradient has {len} values, the last render had {pixels}"
+            )));
+        }
+    }
+    Ok(())
 }
 
 /// The backward pass of the render kept in `st` for `count` gradients: `d_view(g, v)` is
@@ -584,12 +591,19 @@ impl Renderer for CpuRenderer {
         true
     }
 
-    /// [`CpuRenderer::backward_grey_many`].
+    /// [`CpuRenderer::backward_grey_many`] of the values widened to `f64`, view by view inside
+    /// the parallel pass (the antialiasing's adjoint then works in that buffer).
     fn backward_many_grey(
         &mut self,
-        d_greys: &[&[f64]],
+        d_greys: &[&[f32]],
     ) -> Result<Vec<Vec<[f64; 3]>>, RenderError> {
-        self.backward_grey_many(d_greys)
+        let st = self.state.as_ref().ok_or(RenderError::NoForwardState)?;
+        let npix = st.width * st.height;
+        check_grey_lengths(d_greys.iter().map(|d| d.len()), st.views.len() * npix)?;
+        Ok(backward_views(st, d_greys.len(), |g, vi| {
+            let view = &d_greys[g][vi * npix..(vi + 1) * npix];
+            Cow::Owned(view.iter().map(|&v| f64::from(v)).collect())
+        }))
     }
 }
 
@@ -623,16 +637,20 @@ mod tests {
         let mut r = CpuRenderer::default();
         assert!(r.output_is_grey());
         let img = r.render(&v, &f, &views, 48, 40).expect("render");
+        // Values in channel 0 and zeros in the others: the channel sums are exact in f32.
         let gradient = |k: usize| {
             let mut d = img.zeros_like();
-            for (i, x) in d.rgb.iter_mut().enumerate() {
+            for (i, x) in d.rgb.iter_mut().enumerate().step_by(3) {
                 *x = ((i * (k + 3)) % 17) as f32 * 0.01 - 0.08;
             }
             d
         };
         let (d1, d2) = (gradient(1), gradient(2));
         let want = r.backward_many(&[&d1, &d2]).expect("backward");
-        let sums = |d: &Images| d.grey_gradient(2, 40, 48).expect("shape");
+        let sums = |d: &Images| -> Vec<f32> {
+            let g = d.grey_gradient(2, 40, 48).expect("shape");
+            g.iter().map(|&v| v as f32).collect()
+        };
         let (g1, g2) = (sums(&d1), sums(&d2));
         let got = r.backward_many_grey(&[&g1, &g2]).expect("backward");
         assert_eq!(got, want);
