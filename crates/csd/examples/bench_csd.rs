@@ -7,7 +7,9 @@
 use csd::resize::{PlaneResize, Resize2d};
 use csd::schedule::fill_standard_normal;
 use csd::sds::classifier_free_guidance;
-use csd::{CascadedGuidance, Denoiser, Embedding, GuidanceConfig, GuidanceError, Images, Tensor};
+use csd::{
+    CascadedGuidance, Denoiser, Embedding, Guidance, GuidanceConfig, GuidanceError, Images, Tensor,
+};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use std::time::Instant;
@@ -63,7 +65,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         emb.clone(),
         emb,
         GuidanceConfig::default(),
-    )?;
+    )?
+    .with_stage2_weight(optim::Schedule::constant(0.3));
     let batch = Images::new(views, n, n, images.clone())?;
     let mut rng = ChaCha8Rng::seed_from_u64(0);
     println!(
@@ -83,29 +86,45 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     // The same minus the time inside the (fake) denoiser calls, which allocate and zero their
     // outputs (16×6×256² f32 for stage II): the guidance's own overhead, as `metrics.jsonl`
     // reports it (`guidance − guidance_denoiser`).
-    let mut outside = |batch: &Images| {
+    // With `grey_gradient`, the evaluation as the loop asks for it when the renderer's output is
+    // grey (`evaluate_many_grey`, one evaluation: dL/d(grey) instead of dL/d(RGB)).
+    let mut outside = |batch: &Images, grey_gradient: bool| {
         let mut ms: Vec<f64> = (0..reps)
             .map(|_| {
                 let t = Instant::now();
-                let out = guidance
-                    .evaluate_with_weight(batch, 0.3, &mut rng)
-                    .expect("fake guidance evaluates");
-                (t.elapsed().as_secs_f64() - out.denoiser_seconds) * 1e3
+                let denoiser_seconds = if grey_gradient {
+                    guidance
+                        .evaluate_many_grey(batch, 1, 1, &mut rng)
+                        .expect("fake guidance evaluates")[0]
+                        .denoiser_seconds
+                } else {
+                    guidance
+                        .evaluate_with_weight(batch, 0.3, &mut rng)
+                        .expect("fake guidance evaluates")
+                        .denoiser_seconds
+                };
+                (t.elapsed().as_secs_f64() - denoiser_seconds) * 1e3
             })
             .collect();
         ms.sort_by(f64::total_cmp);
         ms[ms.len() / 2]
     };
-    let rgb_outside = outside(&batch);
+    let rgb_outside = outside(&batch, false);
     // Grey renders (three equal channels, what the renderers produce): x, z0, x0 and ẑ are
     // computed once per view and their planes copied.
     let grey: Vec<f32> = images.chunks_exact(3).flat_map(|p| [p[0]; 3]).collect();
-    let grey_outside = outside(&Images::new(views, n, n, grey)?);
+    let grey_batch = Images::new(views, n, n, grey)?;
+    let grey_outside = outside(&grey_batch, false);
+    let grey_gradient_outside = outside(&grey_batch, true);
     row(
         "evaluate, stage I + II, outside the denoiser calls",
         rgb_outside,
     );
     row("  the same, grey renders", grey_outside);
+    row(
+        "  the same, grey renders, dL/d(grey) (the loop's CPU path)",
+        grey_gradient_outside,
+    );
     row(
         "evaluate, stage I only (w_II = 0)",
         time_ms(reps, || {
