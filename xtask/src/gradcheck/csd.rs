@@ -8,13 +8,14 @@
 //! the image (the UNet is not differentiated); the check therefore uses the reference's surrogate with the
 //! per-stage gradients held fixed (detached, as in `target = (z − grad).detach()`):
 //! ℓ(img) = S·a/B·⟨grad_I, D(2R(img) − 1)⟩ + S·w_II/B·⟨grad_II, U(2R(img) − 1)⟩, whose derivative is what
-//! `CascadedGuidance` must return.
+//! `CascadedGuidance` must return. The grey checks take ℓ as a function of one value per pixel spread
+//! over the three channels: its derivative is `evaluate_many_grey`'s dL/d(grey).
 
 use super::{Report, Tolerance};
 use csd::resize::Resize2d;
 use csd::{
-    CascadedGuidance, Denoiser, Embedding, GuidanceConfig, GuidanceError, Images, InjectedDraws,
-    Tensor,
+    CascadedGuidance, Denoiser, Embedding, Guidance, GuidanceConfig, GuidanceError, Images,
+    InjectedDraws, Tensor,
 };
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -132,34 +133,62 @@ fn to_nchw(img: &[f64], views: usize, h: usize, w: usize) -> Vec<f64> {
     out
 }
 
+/// The image the chain is checked at: per pixel and channel, or (`Grey`) one value per pixel
+/// spread over the three channels, whose gradient is `evaluate_many_grey`'s dL/d(grey).
+#[derive(Clone, Copy, PartialEq)]
+enum Input {
+    Rgb,
+    Grey,
+}
+
 fn check_guidance_chain(
     report: &mut Report,
     name: &str,
     (views, h, w): (usize, usize, usize),
     stage2_weight: f64,
     seed: u64,
+    input: Input,
 ) -> anyhow::Result<()> {
     let mut g = guidance(false)?;
     let cfg = g.config().clone();
-    let theta: Vec<f64> = random(views * h * w * 3, seed)
+    let per_pixel = if input == Input::Grey { 1 } else { 3 };
+    let theta: Vec<f64> = random(views * h * w * per_pixel, seed)
         .iter()
         .map(|v| 0.5 + 0.5 * v)
         .collect();
-    let img32: Vec<f32> = theta.iter().map(|&v| v as f32).collect();
-    let mut rng = ChaCha8Rng::seed_from_u64(seed + 1);
+    // The render as the guidance sees it (RGB) from θ.
+    let rgb = move |x: &[f64]| -> Vec<f64> {
+        match input {
+            Input::Rgb => x.to_vec(),
+            Input::Grey => x.iter().flat_map(|&v| [v; 3]).collect(),
+        }
+    };
+    let img32: Vec<f32> = rgb(&theta).iter().map(|&v| v as f32).collect();
+    let batch = imgs(&img32, views, h, w);
     let trace = g.evaluate_traced(
-        &imgs(&img32, views, h, w),
+        &batch,
         stage2_weight,
-        &mut rng,
+        &mut ChaCha8Rng::seed_from_u64(seed + 1),
         &InjectedDraws::default(),
     )?;
-    let grad: Vec<f64> = trace
-        .output
-        .grad_images
-        .rgb
-        .iter()
-        .map(|&v| v as f64)
-        .collect();
+    let grad: Vec<f64> = match input {
+        Input::Rgb => trace
+            .output
+            .grad_images
+            .rgb
+            .iter()
+            .map(|&v| v as f64)
+            .collect(),
+        // The same draws (same seed), so the same per-stage gradients as the trace's.
+        Input::Grey => guidance(false)?
+            .with_stage2_weight(optim::Schedule::constant(stage2_weight))
+            .evaluate_many_grey(&batch, 1, 1, &mut ChaCha8Rng::seed_from_u64(seed + 1))?
+            .remove(0)
+            .grad_grey
+            .iter()
+            .map(|&v| v as f64)
+            .collect(),
+    };
 
     let (r, r1, r2) = (cfg.resolution, cfg.stage1_resolution, cfg.stage2_resolution);
     let resize = Resize2d::cubic_antialias((h, w), (r, r))?;
@@ -178,9 +207,9 @@ fn check_guidance_chain(
         .as_ref()
         .map(|s| s.score.grad.data.iter().map(|&v| v as f64).collect());
     let b = views as f64;
-    let forward = |img: &[f64]| -> anyhow::Result<f64> {
+    let forward = |theta: &[f64]| -> anyhow::Result<f64> {
         let x: Vec<f64> = resize
-            .apply(&to_nchw(img, views, h, w))?
+            .apply(&to_nchw(&rgb(theta), views, h, w))?
             .iter()
             .map(|v| 2.0 * v - 1.0)
             .collect();
@@ -301,6 +330,15 @@ pub fn suite(report: &mut Report) -> anyhow::Result<()> {
         (2, 96, 80),
         0.3,
         51,
+        Input::Rgb,
+    )?;
+    check_guidance_chain(
+        report,
+        "csd/guidance grey gradient (evaluate_many_grey), 2 views 96x80, w_II 0.3 (f32)",
+        (2, 96, 80),
+        0.3,
+        56,
+        Input::Grey,
     )?;
     check_guidance_chain(
         report,
@@ -308,6 +346,7 @@ pub fn suite(report: &mut Report) -> anyhow::Result<()> {
         (1, 512, 512),
         0.0,
         61,
+        Input::Rgb,
     )?;
     check_guidance_chain(
         report,
@@ -315,6 +354,15 @@ pub fn suite(report: &mut Report) -> anyhow::Result<()> {
         (3, 512, 512),
         1.0,
         71,
+        Input::Rgb,
+    )?;
+    check_guidance_chain(
+        report,
+        "csd/guidance grey gradient (evaluate_many_grey), 2 views 512x512, w_II 1 (f32)",
+        (2, 512, 512),
+        1.0,
+        76,
+        Input::Grey,
     )?;
     check_degenerate(report)
 }
