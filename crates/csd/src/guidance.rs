@@ -1199,39 +1199,21 @@ impl<'m> CascadedGuidance<'m> {
         stage2_weight: f64,
         rng: &mut dyn RngCore,
     ) -> Result<GuidanceOutput, GuidanceError> {
-        self.evaluate_untraced(images, stage2_weight, rng, false)
+        self.evaluate_untraced(images, stage2_weight, rng, false, rgb_gradient(images))
     }
 
-    /// One evaluation with fresh draws and no trace; `reuse_encoding` as in
-    /// [`Self::evaluate_core`] (the renders' encoding from the previous call on the same renders).
-    fn evaluate_untraced(
+    /// One evaluation with fresh draws and no trace, its gradient decoded by `decode` from the
+    /// workspace ([`Stages::decode_gradient`] or [`Stages::decode_grey_gradient`]);
+    /// `reuse_encoding` as in [`Self::evaluate_core`] (the renders' encoding from the previous
+    /// call on the same renders).
+    fn evaluate_untraced<T>(
         &mut self,
         images: &Images,
         stage2_weight: f64,
         rng: &mut dyn RngCore,
         reuse_encoding: bool,
-    ) -> Result<GuidanceOutput, GuidanceError> {
-        let (mut core, stages, work) = self.evaluate_core(
-            images,
-            stage2_weight,
-            rng,
-            &InjectedDraws::default(),
-            false,
-            reuse_encoding,
-        )?;
-        core.output.grad_images = stages.decode_gradient(images, work);
-        Ok(core.output)
-    }
-
-    /// [`Self::evaluate_untraced`] with the gradient decoded as channel sums
-    /// ([`Guidance::evaluate_many_grey`]).
-    fn evaluate_untraced_grey(
-        &mut self,
-        images: &Images,
-        stage2_weight: f64,
-        rng: &mut dyn RngCore,
-        reuse_encoding: bool,
-    ) -> Result<GreyGuidanceOutput, GuidanceError> {
+        decode: impl FnOnce(&Stages<'_>, GuidanceOutput, &mut Workspace) -> T,
+    ) -> Result<T, GuidanceError> {
         let (core, stages, work) = self.evaluate_core(
             images,
             stage2_weight,
@@ -1240,14 +1222,23 @@ impl<'m> CascadedGuidance<'m> {
             false,
             reuse_encoding,
         )?;
-        let out = core.output;
-        Ok(GreyGuidanceOutput {
-            loss_stage1: out.loss_stage1,
-            loss_stage2: out.loss_stage2,
-            stage2_weight: out.stage2_weight,
-            denoiser_seconds: out.denoiser_seconds,
-            grad_grey: stages.decode_grey_gradient(images, work),
-        })
+        Ok(decode(&stages, core.output, work))
+    }
+
+    /// `count` evaluations of the same renders at `iteration`'s stage-II weight, one after the
+    /// other from `rng`, the renders encoded once; gradients decoded by `decode`.
+    fn evaluations<T>(
+        &mut self,
+        images: &Images,
+        iteration: u64,
+        count: usize,
+        rng: &mut dyn RngCore,
+        decode: impl Fn(&Stages<'_>, GuidanceOutput, &mut Workspace) -> T + Copy,
+    ) -> Result<Vec<T>, GuidanceError> {
+        let weight = self.stage2_weight.at(iteration);
+        (0..count)
+            .map(|k| self.evaluate_untraced(images, weight, rng, k > 0, decode))
+            .collect()
     }
 
     /// Like [`Self::evaluate_with_weight`], returning every intermediate; `injected` replaces chosen
@@ -1300,10 +1291,7 @@ impl Guidance for CascadedGuidance<'_> {
         count: usize,
         rng: &mut dyn RngCore,
     ) -> Result<Vec<GuidanceOutput>, GuidanceError> {
-        let weight = self.stage2_weight.at(iteration);
-        (0..count)
-            .map(|k| self.evaluate_untraced(images, weight, rng, k > 0))
-            .collect()
+        self.evaluations(images, iteration, count, rng, rgb_gradient(images))
     }
 
     /// [`Guidance::evaluate_many`]'s evaluations with one plane per view mapped back to the
@@ -1315,10 +1303,19 @@ impl Guidance for CascadedGuidance<'_> {
         count: usize,
         rng: &mut dyn RngCore,
     ) -> Result<Vec<GreyGuidanceOutput>, GuidanceError> {
-        let weight = self.stage2_weight.at(iteration);
-        (0..count)
-            .map(|k| self.evaluate_untraced_grey(images, weight, rng, k > 0))
-            .collect()
+        self.evaluations(images, iteration, count, rng, |stages, out, work| {
+            GreyGuidanceOutput::with_gradient(&out, stages.decode_grey_gradient(images, work))
+        })
+    }
+}
+
+/// The decoding of [`CascadedGuidance::evaluate_untraced`] that fills `grad_images` (dL/d(RGB)).
+fn rgb_gradient(
+    images: &Images,
+) -> impl Fn(&Stages<'_>, GuidanceOutput, &mut Workspace) -> GuidanceOutput + Copy + '_ {
+    move |stages, mut out, work| {
+        out.grad_images = stages.decode_gradient(images, work);
+        out
     }
 }
 

@@ -231,13 +231,18 @@ impl GreyGuidanceOutput {
             .into_iter()
             .map(|v| v as f32)
             .collect();
-        Ok(Self {
+        Ok(Self::with_gradient(&out, grad_grey))
+    }
+
+    /// `out`'s terms (not its gradient) with `grad_grey`.
+    pub(crate) fn with_gradient(out: &GuidanceOutput, grad_grey: Vec<f32>) -> Self {
+        Self {
             loss_stage1: out.loss_stage1,
             loss_stage2: out.loss_stage2,
             stage2_weight: out.stage2_weight,
             denoiser_seconds: out.denoiser_seconds,
             grad_grey,
-        })
+        }
     }
 }
 

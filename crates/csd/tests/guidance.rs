@@ -1128,6 +1128,20 @@ fn echo() -> Box<dyn Denoiser> {
     .0
 }
 
+/// Both stages echo their input (so the gradient depends on the renders), w_II = 0.25.
+fn echo_guidance() -> CascadedGuidance<'static> {
+    let (cond, uncond) = embeddings();
+    CascadedGuidance::new(
+        echo(),
+        Some(echo()),
+        cond,
+        uncond,
+        GuidanceConfig::default(),
+    )
+    .expect("valid")
+    .with_stage2_weight(optim::Schedule::constant(0.25))
+}
+
 #[test]
 fn evaluate_many_is_that_many_evaluations_in_sequence_bit_for_bit() {
     use csd::Guidance;
@@ -1142,20 +1156,8 @@ fn evaluate_many_is_that_many_evaluations_in_sequence_bit_for_bit() {
         h,
         w,
     );
-    let make = || {
-        let (cond, uncond) = embeddings();
-        CascadedGuidance::new(
-            echo(),
-            Some(echo()),
-            cond,
-            uncond,
-            GuidanceConfig::default(),
-        )
-        .expect("valid")
-        .with_stage2_weight(optim::Schedule::constant(0.25))
-    };
     // Sequence: b once (so that the workspace holds another batch's encoding), then 3 × a, then b.
-    let mut one_by_one = make();
+    let mut one_by_one = echo_guidance();
     let mut rng = ChaCha8Rng::seed_from_u64(11);
     let mut expected = vec![one_by_one.evaluate(&b, 7, &mut rng).expect("runs")];
     for _ in 0..3 {
@@ -1163,7 +1165,7 @@ fn evaluate_many_is_that_many_evaluations_in_sequence_bit_for_bit() {
     }
     expected.push(one_by_one.evaluate(&b, 7, &mut rng).expect("runs"));
 
-    let mut batched = make();
+    let mut batched = echo_guidance();
     let mut rng2 = ChaCha8Rng::seed_from_u64(11);
     let mut got = batched.evaluate_many(&b, 7, 1, &mut rng2).expect("runs");
     got.extend(batched.evaluate_many(&a, 7, 3, &mut rng2).expect("runs"));
@@ -1258,19 +1260,7 @@ fn evaluate_many_grey_gives_the_channel_sums_of_evaluate_many() {
     use csd::Guidance;
     for (views, h, w) in [(2, 512, 512), (3, 40, 36)] {
         let a = imgs(&renders(views, h, w), views, h, w);
-        let make = || {
-            let (cond, uncond) = embeddings();
-            CascadedGuidance::new(
-                echo(),
-                Some(echo()),
-                cond,
-                uncond,
-                GuidanceConfig::default(),
-            )
-            .expect("valid")
-            .with_stage2_weight(optim::Schedule::constant(0.25))
-        };
-        let (mut rgb_guidance, mut grey_guidance) = (make(), make());
+        let (mut rgb_guidance, mut grey_guidance) = (echo_guidance(), echo_guidance());
         let mut rng = ChaCha8Rng::seed_from_u64(5);
         let mut rng2 = ChaCha8Rng::seed_from_u64(5);
         let want = rgb_guidance

@@ -183,21 +183,7 @@ fn image_gradient_reaches_x_as_a_descent_direction() {
 fn one_render_and_two_guidance_calls_per_iteration() {
     let darap = layer();
     let (mut obj, renders, calls) = text_objective(true);
-    let mut state = LoopState {
-        iteration: 0,
-        x: darap.rest_normals().to_vec(),
-        adam: ok(Adam::new(3 * darap.num_vertices(), AdamConfig::default())),
-        rng: ChaCha8Rng::seed_from_u64(1),
-    };
-    let spec = LoopSpec {
-        iterations: 3,
-        steps_per_batch: 2,
-        checkpoint_every: 0,
-        preview_every: 0,
-        halt_after: None,
-    };
-    let mut records = RecordIterations::default();
-    ok(run_loop(&darap, &spec, &mut state, &mut obj, &mut records));
+    let (state, records) = three_iterations(&darap, &mut obj, 1);
     assert_eq!(renders.load(Ordering::SeqCst), 3);
     assert_eq!(calls.load(Ordering::SeqCst), 6);
     assert_eq!(state.adam.state().step, 6);
@@ -443,6 +429,37 @@ impl csd::Denoiser for Echo {
 /// The loop evaluates an iteration's sub-steps together (one encoding of the renders in
 /// `CascadedGuidance::evaluate_many`, one `CpuRenderer::backward_many` pass): the optimization
 /// must be the sub-step-by-sub-step one, bit for bit, with both guidance stages running.
+/// Three iterations of two sub-steps each from the rest normals (Adam, lr 0.05), the loop's RNG
+/// seeded with `seed`: the final state and the per-iteration records.
+fn three_iterations(
+    darap: &Darap,
+    obj: &mut dyn Objective,
+    seed: u64,
+) -> (LoopState, RecordIterations) {
+    let spec = LoopSpec {
+        iterations: 3,
+        steps_per_batch: 2,
+        checkpoint_every: 0,
+        preview_every: 0,
+        halt_after: None,
+    };
+    let mut state = LoopState {
+        iteration: 0,
+        x: darap.rest_normals().to_vec(),
+        adam: ok(Adam::new(
+            3 * darap.num_vertices(),
+            AdamConfig {
+                lr: 0.05,
+                ..AdamConfig::default()
+            },
+        )),
+        rng: ChaCha8Rng::seed_from_u64(seed),
+    };
+    let mut records = RecordIterations::default();
+    ok(run_loop(darap, &spec, &mut state, obj, &mut records));
+    (state, records)
+}
+
 #[test]
 fn batched_sub_steps_equal_sub_steps_one_by_one_bit_for_bit() {
     let darap = layer();
@@ -466,32 +483,9 @@ fn batched_sub_steps_equal_sub_steps_one_by_one_bit_for_bit() {
             views(),
         )
     };
-    let spec = LoopSpec {
-        iterations: 3,
-        steps_per_batch: 2,
-        checkpoint_every: 0,
-        preview_every: 0,
-        halt_after: None,
-    };
-    let run = |obj: &mut dyn Objective| {
-        let mut state = LoopState {
-            iteration: 0,
-            x: darap.rest_normals().to_vec(),
-            adam: ok(Adam::new(
-                3 * darap.num_vertices(),
-                AdamConfig {
-                    lr: 0.05,
-                    ..AdamConfig::default()
-                },
-            )),
-            rng: ChaCha8Rng::seed_from_u64(8),
-        };
-        let mut records = RecordIterations::default();
-        ok(run_loop(&darap, &spec, &mut state, obj, &mut records));
-        (state, records)
-    };
-    let (batched, batched_records) = run(&mut objective());
-    let (one_by_one, one_by_one_records) = run(&mut SubStepsOneByOne(objective()));
+    let (batched, batched_records) = three_iterations(&darap, &mut objective(), 8);
+    let (one_by_one, one_by_one_records) =
+        three_iterations(&darap, &mut SubStepsOneByOne(objective()), 8);
     assert!(batched.x == one_by_one.x, "x differs");
     assert!(batched.adam == one_by_one.adam, "Adam state differs");
     assert!(batched.x != darap.rest_normals(), "x did not move");
@@ -535,26 +529,8 @@ fn a_grey_renderer_takes_grey_gradients_with_the_rgb_paths_results() {
             views(),
         )
     };
-    let spec = LoopSpec {
-        iterations: 3,
-        steps_per_batch: 2,
-        checkpoint_every: 0,
-        preview_every: 0,
-        halt_after: None,
-    };
-    let run = |obj: &mut dyn Objective| {
-        let mut state = LoopState {
-            iteration: 0,
-            x: darap.rest_normals().to_vec(),
-            adam: ok(Adam::new(3 * darap.num_vertices(), AdamConfig::default())),
-            rng: ChaCha8Rng::seed_from_u64(3),
-        };
-        let mut records = RecordIterations::default();
-        ok(run_loop(&darap, &spec, &mut state, obj, &mut records));
-        (state, records)
-    };
-    let (grey, grey_records) = run(&mut objective(true));
-    let (rgb, rgb_records) = run(&mut objective(false));
+    let (grey, grey_records) = three_iterations(&darap, &mut objective(true), 3);
+    let (rgb, rgb_records) = three_iterations(&darap, &mut objective(false), 3);
     assert!(grey.x == rgb.x, "x differs");
     assert!(grey.x != darap.rest_normals(), "x did not move");
     let terms = |r: &RecordIterations| r.0.iter().map(|r| r.terms.clone()).collect::<Vec<_>>();

@@ -476,7 +476,9 @@ impl<'g> TextObjective<'g> {
             invalid!("no renders")
         };
         let t = Instant::now();
-        let guided = |timings: &mut Vec<(&'static str, f64)>, denoiser: f64, n: usize| {
+        // Records the guidance's timings, checks its evaluation count and starts the backward's
+        // clock.
+        let guidance_done = |timings: &mut Vec<(&'static str, f64)>, denoiser: f64, n: usize| {
             timings.push(("guidance", t.elapsed().as_secs_f64()));
             timings.push(("guidance_denoiser", denoiser));
             if n != count as usize {
@@ -491,7 +493,7 @@ impl<'g> TextObjective<'g> {
                 .evaluate_many_grey(images, iteration, count as usize, rng)
                 .context("guidance")?;
             let denoiser = outs.iter().map(|o| o.denoiser_seconds).sum();
-            let t = guided(&mut timings, denoiser, outs.len())?;
+            let t = guidance_done(&mut timings, denoiser, outs.len())?;
             let pixels = images.count * images.height * images.width;
             for out in &outs {
                 if out.grad_grey.len() != pixels {
@@ -517,7 +519,7 @@ impl<'g> TextObjective<'g> {
                 .evaluate_many(images, iteration, count as usize, rng)
                 .context("guidance")?;
             let denoiser = outs.iter().map(|o| o.denoiser_seconds).sum();
-            let t = guided(&mut timings, denoiser, outs.len())?;
+            let t = guidance_done(&mut timings, denoiser, outs.len())?;
             for out in &outs {
                 if !out.grad_images.same_shape(images) {
                     invalid!(
