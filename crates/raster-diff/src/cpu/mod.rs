@@ -259,7 +259,8 @@ impl CpuRenderer {
     /// one dL/dvertices per entry of `d_greys`, in order. The per-pixel work that does not depend
     /// on the gradient (the fragment, the shading and its Jacobian) is done once and shared, so
     /// two gradients cost much less than two calls. Each result is what a call with that gradient
-    /// alone returns, bit for bit.
+    /// alone returns, bit for bit. (The loop's path is the trait's
+    /// [`backward_many_grey`](Renderer::backward_many_grey), which takes `f32` values.)
     pub fn backward_grey_many(
         &self,
         d_greys: &[&[f64]],
