@@ -357,7 +357,9 @@ fn backward_views<'a>(
             acc
         })
         .collect();
+    // The gradients' sums over the views and normal adjoints are independent: one task each.
     (0..count)
+        .into_par_iter()
         .map(|g| {
             let mut dx = vec![DVec3::ZERO; nv];
             let mut dn = vec![DVec3::ZERO; nv];
