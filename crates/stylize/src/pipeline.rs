@@ -10,8 +10,9 @@
 //! Since every sub-step sees the same deformed mesh, the loop asks for all of an iteration's
 //! `∂ℓ_s/∂positions` at once ([`Objective::evaluate_batch`]) before its first Adam step: the text
 //! objective then runs the guidance for every sub-step on one encoding of the renders and maps the
-//! image gradients back in one renderer pass, and an objective error in any sub-step leaves `x`
-//! untouched (a dARAP backward error can still come after an earlier sub-step's Adam step).
+//! image gradients back in one renderer pass. The dARAP backward passes of the sub-steps are
+//! independent too (same deformation) and run together; the Adam steps come after all of them,
+//! so an error in any sub-step's objective or dARAP backward leaves `x` untouched.
 //!
 //! Everything random (views, lights, timesteps, noise) comes from one `ChaCha8Rng` that is saved
 //! in checkpoints, so a resumed run continues bit-identically.
@@ -24,6 +25,7 @@ use darap::Darap;
 use optim::Adam;
 use rand_chacha::ChaCha8Rng;
 use raster_diff::{CameraConfig, Images, Renderer};
+use rayon::prelude::*;
 
 use crate::style::{Style, alignment};
 
@@ -263,25 +265,25 @@ pub fn run_loop(
                 spec.steps_per_batch
             );
         }
+        // Every sub-step's gradient is taken at the same deformation, so the dARAP backward passes
+        // are independent: they run together (each is deterministic, so the result does not depend
+        // on the threads), and the Adam steps follow only when all of them succeeded.
+        let t = Instant::now();
+        let sub_grads = evals
+            .par_iter()
+            .map(|ev| darap.try_backward(&deformation, &ev.grad_positions))
+            .collect::<Result<Vec<_>, _>>()
+            .context("dARAP backward")?;
+        let backward_seconds = t.elapsed().as_secs_f64();
         let mut grad = vec![[0.0; 3]; n];
-        for ev in evals {
+        for (ev, g) in evals.iter().zip(&sub_grads) {
             for &(name, v) in &ev.terms {
                 add_term(&mut record.terms, name, v, name.starts_with("loss"));
             }
             for &(name, v) in &ev.timings {
                 add_term(&mut record.timings, name, v, true);
             }
-            let t = Instant::now();
-            let g = darap
-                .try_backward(&deformation, &ev.grad_positions)
-                .context("dARAP backward")?;
-            add_term(
-                &mut record.timings,
-                "darap_backward",
-                t.elapsed().as_secs_f64(),
-                true,
-            );
-            for (acc, gi) in grad.iter_mut().zip(&g) {
+            for (acc, gi) in grad.iter_mut().zip(g) {
                 for c in 0..3 {
                     acc[c] += gi[c];
                 }
@@ -293,6 +295,12 @@ pub fn run_loop(
                 .with_context(|| format!("Adam step at iteration {iteration}"))?;
             add_term(&mut record.timings, "adam", t.elapsed().as_secs_f64(), true);
         }
+        add_term(
+            &mut record.timings,
+            "darap_backward",
+            backward_seconds,
+            true,
+        );
         record.grad_norm = grad
             .as_flattened()
             .iter()
@@ -734,6 +742,63 @@ mod tests {
             streaks,
             [None, Some(1.0), Some(2.0), Some(3.0), Some(4.0), None]
         );
+        Ok(())
+    }
+
+    /// Gradients of the right length on sub-step 0 and of the wrong length on sub-step 1.
+    struct SecondStepBad;
+
+    impl Objective for SecondStepBad {
+        fn describe(&self) -> String {
+            "second step bad".into()
+        }
+        fn evaluate(
+            &mut self,
+            _iteration: u64,
+            substep: u32,
+            deformed: &[[f64; 3]],
+            _rng: &mut ChaCha8Rng,
+        ) -> Result<StepEval> {
+            let n = deformed.len() - substep as usize;
+            Ok(StepEval {
+                terms: vec![("loss", 0.0)],
+                timings: Vec::new(),
+                grad_positions: vec![[1e-3, 0.0, 0.0]; n],
+            })
+        }
+    }
+
+    #[test]
+    fn a_darap_backward_error_in_a_later_sub_step_leaves_x_and_adam_untouched() -> Result<()> {
+        let (p, f) = mesh_core::shapes::icosphere(1).into_parts();
+        let darap = Darap::new(&p, &f, darap::DarapOptions::default())?;
+        let x0 = darap.rest_normals().to_vec();
+        let mut state = LoopState {
+            iteration: 0,
+            x: x0.clone(),
+            adam: Adam::new(3 * p.len(), optim::AdamConfig::default())?,
+            rng: ChaCha8Rng::seed_from_u64(0),
+        };
+        let adam0 = state.adam.state().clone();
+        let spec = LoopSpec {
+            iterations: 1,
+            steps_per_batch: 2,
+            checkpoint_every: 0,
+            preview_every: 0,
+            halt_after: None,
+        };
+        let err = run_loop(
+            &darap,
+            &spec,
+            &mut state,
+            &mut SecondStepBad,
+            &mut RecordIterations::default(),
+        )
+        .expect_err("a gradient of the wrong length");
+        assert!(format!("{err:#}").contains("dARAP backward"), "{err:#}");
+        assert_eq!(state.iteration, 0);
+        assert!(state.x == x0, "x moved although the iteration failed");
+        assert_eq!(state.adam.state(), &adam0);
         Ok(())
     }
 }
