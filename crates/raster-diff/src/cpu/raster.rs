@@ -157,6 +157,11 @@ struct Setup {
     owned: [bool; 3],
     cols: (usize, usize),
     rows: (usize, usize),
+    /// The nearest corner's depth, or 0 for a sliver (never skipped; see [`OCCLUSION_MARGIN`]).
+    z_near: f64,
+    /// Whether the corners were counter-clockwise on screen (y down) as given, i.e. the face
+    /// is seen from its front for a mesh whose faces are counter-clockwise seen from outside.
+    front: bool,
 }
 
 #[inline(always)]
@@ -179,6 +184,7 @@ fn setup(
     if area2 == 0.0 || !area2.is_finite() {
         return None;
     }
+    let front = area2 < 0.0;
     if area2 < 0.0 {
         c.swap(1, 2);
         area2 = -area2;
@@ -216,6 +222,15 @@ fn setup(
         owned: [owns(s[1], s[2]), owns(s[2], s[0]), owns(s[0], s[1])],
         cols: (c0 as usize, c1 as usize),
         rows: (r0 as usize, r1 as usize),
+        z_near: {
+            let d = (x1 - x0).max(y1 - y0) + 1.0;
+            if d * d <= SLIVER_RATIO * area2 {
+                c[0].cam.z.min(c[1].cam.z).min(c[2].cam.z)
+            } else {
+                0.0
+            }
+        },
+        front,
     })
 }
 
@@ -244,11 +259,38 @@ impl pulp::WithSimd for SetupAll<'_> {
 /// Columns whose edge functions are evaluated together (one 256-bit register of f64).
 const LANES: usize = 4;
 
+/// Side in pixels of the square depth tiles of [`RasterBand`]'s occlusion test.
+const TILE: usize = 8;
+
+/// Relative margin of the occlusion test: a triangle is skipped only when its nearest corner is
+/// farther than `1 + OCCLUSION_MARGIN` times the farthest depth already in its tiles.
+///
+/// Why that is safe: a covered pixel has e_i ≥ 0 and depth z = 1 / ((Σ e_i/z_i) / A) with A the
+/// doubled area; in exact arithmetic Σ e_i = A, so z ≥ min_i z_i. In floating point each edge
+/// function E = (a − p) × (b − p) is off by at most 2⁻⁵³|E| + 18·2⁻⁵³·D² with D the bounding box's
+/// larger side plus one (the differences are exactly rounded, each product has |·| ≤ (1.5 D)²),
+/// and so is A: together Σ e_i / A ≤ 1 + 2⁻⁵² + 108·2⁻⁵³·D²/A, plus a few ulps for the last
+/// operations — below 1 + 10⁻⁹ when D² ≤ [`SLIVER_RATIO`]·A (108·2⁻⁵³·2¹⁴ ≈ 2·10⁻¹⁰). Slivers
+/// beyond that ratio are never skipped. So a skipped triangle could not have passed the depth
+/// test at any pixel.
+const OCCLUSION_MARGIN: f64 = 2e-9;
+
+/// Triangles with (bounding box side + 1)² > `SLIVER_RATIO` × doubled area are slivers, which the
+/// occlusion test leaves alone (see [`OCCLUSION_MARGIN`]).
+const SLIVER_RATIO: f64 = 16384.0;
+
 /// One band of rows of [`rasterize`], as a [`crate::cpu::simd::dispatch`] kernel: the triangles
-/// binned to it, in index order, each scan-converted over its bounding box within the band.
+/// binned to it, each scan-converted over its bounding box within the band.
 /// The edge functions of [`LANES`] neighbouring pixel centres are evaluated together (the same
 /// expression per lane, so the same values as one at a time); the coverage rule and the depth
 /// test then run per covered pixel.
+///
+/// Front faces ([`Setup::front`]) go first; then each back face is skipped when its nearest corner
+/// lies beyond the farthest depth already stored in the [`TILE`]-pixel tiles its box touches
+/// (see [`OCCLUSION_MARGIN`]) — on a closed mesh seen from outside, nearly all of them. The result
+/// does not depend on the order: per pixel it is the smallest (depth, triangle index) pair, which
+/// the depth test with its index tie-break computes in any order; and a skipped triangle would not
+/// have changed it. Tested against the plain single pass over all triangles in index order.
 struct RasterBand<'a> {
     setups: &'a [Option<Setup>],
     bin: &'a [u32],
@@ -274,44 +316,103 @@ impl pulp::WithSimd for RasterBand<'_> {
         } = self;
         let row_end = (row_base + BAND_ROWS).min(height);
         for &t in bin {
+            if let Some(s) = &setups[t as usize]
+                && s.front
+            {
+                scan(s, t, row_base, row_end, width, ids, depth);
+            }
+        }
+        // The farthest depth per tile of the band after the front faces (+∞ where any pixel is
+        // still background), tiles of TILE × TILE pixels, row-major.
+        let tiles_x = width.div_ceil(TILE);
+        let mut tile_far = vec![0.0f64; tiles_x * BAND_ROWS.div_ceil(TILE)];
+        for (r, line) in depth.chunks_exact(width).enumerate() {
+            let far_row = &mut tile_far[(r / TILE) * tiles_x..][..tiles_x];
+            for (far, d) in far_row.iter_mut().zip(line.chunks(TILE)) {
+                // A NaN depth (none is expected) counts as +∞: it never lets a triangle be skipped.
+                *far = d.iter().fold(*far, |m, &z| {
+                    if z.is_nan() {
+                        f64::INFINITY
+                    } else if z > m {
+                        z
+                    } else {
+                        m
+                    }
+                });
+            }
+        }
+        for &t in bin {
             let Some(s) = &setups[t as usize] else {
                 continue;
             };
-            for row in s.rows.0.max(row_base)..=s.rows.1.min(row_end - 1) {
-                let py = row as f64 + 0.5;
-                let line = (row - row_base) * width;
-                let mut col = s.cols.0;
-                while col <= s.cols.1 {
-                    let n = (s.cols.1 + 1 - col).min(LANES);
-                    let mut px = [0.0; LANES];
-                    for (l, x) in px.iter_mut().enumerate() {
-                        *x = (col + l) as f64 + 0.5;
+            if s.front {
+                continue;
+            }
+            let (lo, hi) = (s.rows.0.max(row_base), s.rows.1.min(row_end - 1));
+            if lo > hi {
+                continue;
+            }
+            let mut far = 0.0f64;
+            for tr in (lo - row_base) / TILE..=(hi - row_base) / TILE {
+                for &z in &tile_far[tr * tiles_x + s.cols.0 / TILE..=tr * tiles_x + s.cols.1 / TILE]
+                {
+                    if z > far {
+                        far = z;
                     }
-                    let e = [
-                        edge_lanes(s.s[1], s.s[2], px, py),
-                        edge_lanes(s.s[2], s.s[0], px, py),
-                        edge_lanes(s.s[0], s.s[1], px, py),
-                    ];
-                    for l in 0..n {
-                        let (e0, e1, e2) = (e[0][l], e[1][l], e[2][l]);
-                        let inside = (e0 > 0.0 || (e0 == 0.0 && s.owned[0]))
-                            && (e1 > 0.0 || (e1 == 0.0 && s.owned[1]))
-                            && (e2 > 0.0 || (e2 == 0.0 && s.owned[2]));
-                        if !inside {
-                            continue;
-                        }
-                        let inv_z =
-                            (e0 * s.inv_z[0] + e1 * s.inv_z[1] + e2 * s.inv_z[2]) * s.inv_area2;
-                        let z = 1.0 / inv_z;
-                        let i = line + col + l;
-                        if z < depth[i] || (z == depth[i] && t < ids[i]) {
-                            depth[i] = z;
-                            ids[i] = t;
-                        }
-                    }
-                    col += LANES;
                 }
             }
+            if s.z_near > far * (1.0 + OCCLUSION_MARGIN) {
+                continue;
+            }
+            scan(s, t, row_base, row_end, width, ids, depth);
+        }
+    }
+}
+
+/// Scan-converts triangle `t` over its bounding box within the band's rows
+/// `row_base..row_end` (see [`RasterBand`]).
+#[inline(always)]
+fn scan(
+    s: &Setup,
+    t: u32,
+    row_base: usize,
+    row_end: usize,
+    width: usize,
+    ids: &mut [u32],
+    depth: &mut [f64],
+) {
+    for row in s.rows.0.max(row_base)..=s.rows.1.min(row_end - 1) {
+        let py = row as f64 + 0.5;
+        let line = (row - row_base) * width;
+        let mut col = s.cols.0;
+        while col <= s.cols.1 {
+            let n = (s.cols.1 + 1 - col).min(LANES);
+            let mut px = [0.0; LANES];
+            for (l, x) in px.iter_mut().enumerate() {
+                *x = (col + l) as f64 + 0.5;
+            }
+            let e = [
+                edge_lanes(s.s[1], s.s[2], px, py),
+                edge_lanes(s.s[2], s.s[0], px, py),
+                edge_lanes(s.s[0], s.s[1], px, py),
+            ];
+            for l in 0..n {
+                let (e0, e1, e2) = (e[0][l], e[1][l], e[2][l]);
+                let inside = (e0 > 0.0 || (e0 == 0.0 && s.owned[0]))
+                    && (e1 > 0.0 || (e1 == 0.0 && s.owned[1]))
+                    && (e2 > 0.0 || (e2 == 0.0 && s.owned[2]));
+                if !inside {
+                    continue;
+                }
+                let inv_z = (e0 * s.inv_z[0] + e1 * s.inv_z[1] + e2 * s.inv_z[2]) * s.inv_area2;
+                let z = 1.0 / inv_z;
+                let i = line + col + l;
+                if z < depth[i] || (z == depth[i] && t < ids[i]) {
+                    depth[i] = z;
+                    ids[i] = t;
+                }
+            }
+            col += LANES;
         }
     }
 }
@@ -375,6 +476,70 @@ pub fn rasterize(
 mod tests {
     use super::*;
     use pulp::WithSimd;
+
+    /// The plain z-buffer: every triangle in index order over its whole bounding box, no
+    /// orientation passes, no occlusion test.
+    fn rasterize_single_pass(
+        faces: &[[u32; 3]],
+        proj: &[Projected],
+        (width, height): (usize, usize),
+    ) -> (Vec<u32>, Vec<f64>) {
+        let mut ids = vec![NO_TRIANGLE; width * height];
+        let mut depth = vec![f64::INFINITY; width * height];
+        for (t, f) in faces.iter().enumerate() {
+            if let Some(s) = setup(f, proj, 0.5, width, height) {
+                scan(&s, t as u32, 0, height, width, &mut ids, &mut depth);
+            }
+        }
+        (ids, depth)
+    }
+
+    /// Same ids and depth bits as the single pass, on a closed mesh (most back faces skipped),
+    /// the same mesh turned inside out (its "front" faces are the hidden ones), an open mesh
+    /// (back faces visible through the hole), coincident faces of both orientations (equal
+    /// depths, decided by the index) and a nearly flat sphere (slivers).
+    #[test]
+    fn occlusion_skipping_gives_the_single_pass_z_buffer_bit_for_bit() {
+        let (mut v, f) = mesh_core::shapes::icosphere(3).into_parts();
+        for (i, p) in v.iter_mut().enumerate() {
+            p[0] *= 1.0 + 0.09 * (i % 3) as f64;
+        }
+        let flipped: Vec<[u32; 3]> = f.iter().map(|&[a, b, c]| [a, c, b]).collect();
+        let open: Vec<[u32; 3]> = f
+            .iter()
+            .copied()
+            .filter(|t| t.iter().all(|&k| v[k as usize][2] < 0.6))
+            .collect();
+        let mut doubled: Vec<[u32; 3]> = Vec::new();
+        for (i, &[a, b, c]) in f.iter().enumerate() {
+            doubled.push([a, b, c]);
+            if i % 2 == 0 {
+                doubled.push([a, c, b]);
+            }
+        }
+        // Nearly flat: seen edge-on from the orbit's low views, a sheet of slivers.
+        let squashed: Vec<[f64; 3]> = v.iter().map(|p| [p[0], p[1] * 1e-7, p[2]]).collect();
+        let bits = |d: &[f64]| d.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        let (w, h) = (97, 83);
+        let cases = [
+            (&v, &f),
+            (&v, &flipped),
+            (&v, &open),
+            (&v, &doubled),
+            (&squashed, &f),
+        ];
+        for (v, faces) in cases {
+            for view in crate::orbit_views(4, 25.0, 2.6, 60.0) {
+                let camera = Camera::new(&view, w, h).expect("camera");
+                let proj = project_vertices(&camera, v);
+                let (ids, depth) = rasterize(faces, &proj, 0.5, w, h);
+                let (ids_1, depth_1) = rasterize_single_pass(faces, &proj, (w, h));
+                assert!(ids.iter().filter(|&&t| t != NO_TRIANGLE).count() > w * h / 100);
+                assert_eq!(ids, ids_1);
+                assert_eq!(bits(&depth), bits(&depth_1));
+            }
+        }
+    }
 
     /// [`rasterize`] runs its kernels under the run-time dispatch (AVX2 where present); with
     /// `pulp::Scalar` they are compiled for the baseline instruction set. Same ids, same depths.
