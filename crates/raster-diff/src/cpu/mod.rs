@@ -8,6 +8,7 @@
 //! summed in view order; within a view pixels are visited in a fixed order.
 
 pub mod antialias;
+pub(crate) mod lanes;
 pub mod math;
 pub mod normals;
 pub mod raster;
@@ -419,9 +420,73 @@ impl pulp::WithSimd for ShadeView<'_> {
     }
 }
 
+/// Up to [`lanes::LANES`] pixels gathered for the lane-wise shading Jacobian (the backward's
+/// per-pixel work; the forward shading stays one pixel at a time, where gathering the lanes costs
+/// more than it saves, measured): each one's triangle (copied:
+/// the [`TriangleCache`] slot may be reused by the next pixel) and centre ray, and its (pixel
+/// index, triangle id), in the order they were pushed. Entries past `len` are stale, computed on
+/// and ignored.
+#[derive(Default)]
+struct PixelBatch {
+    triangles: [shading::Triangle; lanes::LANES],
+    rays: [DVec3; lanes::LANES],
+    pixels: [(usize, u32); lanes::LANES],
+    len: usize,
+}
+
+impl PixelBatch {
+    /// Adds a pixel; returns whether the batch is now full.
+    #[inline(always)]
+    fn push(&mut self, triangle: &shading::Triangle, ray: DVec3, pixel: usize, t: u32) -> bool {
+        self.triangles[self.len] = *triangle;
+        self.rays[self.len] = ray;
+        self.pixels[self.len] = (pixel, t);
+        self.len += 1;
+        self.len == lanes::LANES
+    }
+
+    /// Adds the pixels' shading Jacobians, scaled by each gradient's dL/dc, to that gradient's
+    /// (dL/dx, dL/dn) of the triangles' corners, pixel after pixel in the order they were pushed
+    /// (the order of the sums); empties the batch.
+    #[inline(always)]
+    fn accumulate(
+        &mut self,
+        faces: &[[u32; 3]],
+        d_colours: &[Cow<'_, [f64]>],
+        acc: &mut [(Vec<DVec3>, Vec<DVec3>)],
+    ) {
+        if self.len == 0 {
+            return;
+        }
+        let (dc_dx, dc_dn, some) = shading::shade_jacobian_lanes(
+            &shading::TriangleLanes::gather(&self.triangles),
+            lanes::V::gather(self.rays),
+        );
+        for (l, &(i, t)) in self.pixels[..self.len].iter().enumerate() {
+            if !some[l] {
+                continue;
+            }
+            let f = faces[t as usize];
+            for (d_colour, (dx, dn)) in d_colours.iter().zip(acc.iter_mut()) {
+                let dc = d_colour[i];
+                if dc == 0.0 {
+                    continue;
+                }
+                for k in 0..3 {
+                    dx[f[k] as usize] += dc_dx[k].lane(l) * dc;
+                    dn[f[k] as usize] += dc_dn[k].lane(l) * dc;
+                }
+            }
+        }
+        self.len = 0;
+    }
+}
+
 /// One view's share of the backward pass, as a [`simd::dispatch`] kernel: per covered pixel the
 /// shading's Jacobian, scaled by each gradient's dL/dc and added to that gradient's
-/// (dL/dx, dL/dn) of the triangle's corners.
+/// (dL/dx, dL/dn) of the triangle's corners. The Jacobians are evaluated four pixels at a time
+/// ([`PixelBatch`], [`shading::shade_jacobian_lanes`]: bit for bit the scalar
+/// [`shading::shade_jacobian`]) and added pixel after pixel in row-major order, as one at a time.
 struct AccumulateView<'a, 'b> {
     st: &'a ForwardState,
     view: &'a ViewState,
@@ -442,6 +507,7 @@ impl pulp::WithSimd for AccumulateView<'_, '_> {
         let mut triangle = TriangleCache::default();
         let rays = PixelRays::new(&view.camera);
         let width = view.camera.width;
+        let mut batch = PixelBatch::default();
         for (row, ids) in view.ids.chunks_exact(width).enumerate() {
             for (col, &t) in ids.iter().enumerate() {
                 let i = row * width + col;
@@ -449,23 +515,12 @@ impl pulp::WithSimd for AccumulateView<'_, '_> {
                     continue;
                 }
                 let tri = triangle.get(&view.camera, &st.vertices, &st.faces, &st.normals, t);
-                let ray = rays.get(&view.camera, row, col);
-                let Some((dc_dx, dc_dn)) = shading::shade_jacobian(tri, ray) else {
-                    continue;
-                };
-                let f = st.faces[t as usize];
-                for (d_colour, (dx, dn)) in d_colours.iter().zip(acc.iter_mut()) {
-                    let dc = d_colour[i];
-                    if dc == 0.0 {
-                        continue;
-                    }
-                    for k in 0..3 {
-                        dx[f[k] as usize] += dc_dx[k] * dc;
-                        dn[f[k] as usize] += dc_dn[k] * dc;
-                    }
+                if batch.push(tri, rays.get(&view.camera, row, col), i, t) {
+                    batch.accumulate(&st.faces, d_colours, acc);
                 }
             }
         }
+        batch.accumulate(&st.faces, d_colours, acc);
     }
 }
 

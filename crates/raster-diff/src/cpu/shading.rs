@@ -14,6 +14,7 @@
 
 use glam::DVec3;
 
+use super::lanes::{self, L, LANES, Mask, V};
 use super::math::{cross_adjoint, normalize, normalize_adjoint};
 
 /// Diffuse albedo (grey).
@@ -209,4 +210,232 @@ pub fn shade_jacobian(t: &Triangle, ray: DVec3) -> Option<([DVec3; 3], [DVec3; 3
         dp[k] += d.cross(t.p[j]) * da[i];
     }
     Some((dp, dn_corner))
+}
+
+/// [`Triangle`]s of several pixels, one per lane (see [`super::lanes`]).
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct TriangleLanes {
+    p: [V; 3],
+    p_cross: [V; 3],
+    n: [V; 3],
+    e1: V,
+    e2: V,
+    g: V,
+    ng: V,
+    ng_inv: L,
+    eye: V,
+    light: V,
+}
+
+impl TriangleLanes {
+    /// The triangles `ts`, lane `l` from `ts[l]`.
+    #[inline(always)]
+    pub fn gather(ts: &[Triangle; LANES]) -> Self {
+        let v = |f: &dyn Fn(&Triangle) -> DVec3| V::gather(std::array::from_fn(|l| f(&ts[l])));
+        Self {
+            p: std::array::from_fn(|i| v(&|t| t.p[i])),
+            p_cross: std::array::from_fn(|i| v(&|t| t.p_cross[i])),
+            n: std::array::from_fn(|i| v(&|t| t.n[i])),
+            e1: v(&|t| t.e1),
+            e2: v(&|t| t.e2),
+            g: v(&|t| t.g),
+            ng: v(&|t| t.ng),
+            ng_inv: L(std::array::from_fn(|l| ts[l].ng_inv)),
+            eye: v(&|t| t.eye),
+            light: v(&|t| t.light),
+        }
+    }
+}
+
+/// [`Forward`] per lane.
+struct ForwardLanes {
+    s: L,
+    w: [L; 3],
+    ns_raw: V,
+    ns: V,
+    ns_inv: L,
+    vv: V,
+    v: V,
+    v_inv: L,
+    sign: L,
+    tau_raw: L,
+    tau: L,
+    n: V,
+    ll: V,
+    l: V,
+    l_inv: L,
+    dot: L,
+}
+
+/// [`forward`] per lane, the same operations in the same order.
+#[inline(always)]
+fn forward_lanes(t: &TriangleLanes, ray: V) -> ForwardLanes {
+    let p = &t.p;
+    let a = [
+        ray.dot(t.p_cross[0]),
+        ray.dot(t.p_cross[1]),
+        ray.dot(t.p_cross[2]),
+    ];
+    let s = a[0] + a[1] + a[2];
+    let w = [a[0] / s, a[1] / s, a[2] / s];
+    let q = p[0] * w[0] + p[1] * w[1] + p[2] * w[2];
+    let ns_raw = t.n[0] * w[0] + t.n[1] * w[1] + t.n[2] * w[2];
+    let (ns, ns_inv) = lanes::normalize(ns_raw);
+    let ng = t.ng;
+    let vv = -q;
+    let (v, v_inv) = lanes::normalize(vv);
+    let sign = L::select(v.dot(ng).lt(L::splat(0.0)), L::splat(-1.0), L::splat(1.0));
+    let tau_raw = v.dot(ns * sign) / L::splat(BENT_WIDTH);
+    let tau = tau_raw.clamp(0.0, 1.0);
+    let n = ng * (sign * (L::splat(1.0) - tau)) + ns * (sign * tau);
+    let ll = t.light - (t.eye + q);
+    let (l, l_inv) = lanes::normalize(ll);
+    let dot = n.dot(l);
+    ForwardLanes {
+        s,
+        w,
+        ns_raw,
+        ns,
+        ns_inv,
+        vv,
+        v,
+        v_inv,
+        sign,
+        tau_raw,
+        tau,
+        n,
+        ll,
+        l,
+        l_inv,
+        dot,
+    }
+}
+
+/// [`shade_jacobian`] of one pixel per lane: `(dc/dx_i, dc/dn_i, some)`, where lane `l` of the
+/// Jacobians is what `shade_jacobian(t_l, ray_l)` returns when `some[l]` (bit for bit), and
+/// meaningless where it returns `None`.
+#[inline(always)]
+pub(crate) fn shade_jacobian_lanes(t: &TriangleLanes, ray: V) -> ([V; 3], [V; 3], Mask) {
+    let fw = forward_lanes(t, ray);
+    // `shade_jacobian` returns None exactly when dot ≤ 0 (a NaN dot gives Some).
+    let some = fw.dot.le(L::splat(0.0)).map(|clamped| !clamped);
+    let zero = V::ZERO;
+    let ddot = L::splat(RADIANCE_SCALE);
+    let dn = fw.l * ddot;
+    let dl = fw.n * ddot;
+    let dll = lanes::normalize_adjoint(fw.ll, fw.l, fw.l_inv, dl);
+    let mut dq = -dll;
+    let ns_s = fw.ns * fw.sign;
+    let ng_s = t.ng * fw.sign;
+    let dtau = dn.dot(ns_s - ng_s);
+    let mut dns_s = dn * fw.tau;
+    let dng_s = dn * (L::splat(1.0) - fw.tau);
+    // The bent-normal blend's interior, where τ is not clamped.
+    let blend = lanes::and(fw.tau_raw.gt(L::splat(0.0)), fw.tau_raw.lt(L::splat(1.0)));
+    let dtau_raw = dtau / L::splat(BENT_WIDTH);
+    let dv = V::select(blend, zero + ns_s * dtau_raw, zero);
+    dns_s = V::select(blend, dns_s + fw.v * dtau_raw, dns_s);
+    let dns = dns_s * fw.sign;
+    let dng = dng_s * fw.sign;
+    dq = dq - lanes::normalize_adjoint(fw.vv, fw.v, fw.v_inv, dv);
+    let dg = lanes::normalize_adjoint(t.g, t.ng, t.ng_inv, dng);
+    // cross_adjoint(e1, e2, dg) = (e2 × dg, dg × e1)
+    let (de1, de2) = (t.e2.cross(dg), dg.cross(t.e1));
+    let mut dp = [zero - (de1 + de2), zero + de1, zero + de2];
+    let dns_raw = lanes::normalize_adjoint(fw.ns_raw, fw.ns, fw.ns_inv, dns);
+    let mut dn_corner = [zero; 3];
+    let mut dw = [L::splat(0.0); 3];
+    for i in 0..3 {
+        dn_corner[i] = dns_raw * fw.w[i];
+        dw[i] = dw[i] + t.n[i].dot(dns_raw);
+        dp[i] = dp[i] + dq * fw.w[i];
+        dw[i] = dw[i] + t.p[i].dot(dq);
+    }
+    let wdw = fw.w[0] * dw[0] + fw.w[1] * dw[1] + fw.w[2] * dw[2];
+    let da = [
+        (dw[0] - wdw) / fw.s,
+        (dw[1] - wdw) / fw.s,
+        (dw[2] - wdw) / fw.s,
+    ];
+    let d = ray;
+    for i in 0..3 {
+        let (j, k) = ((i + 1) % 3, (i + 2) % 3);
+        dp[j] = dp[j] + t.p[k].cross(d) * da[i];
+        dp[k] = dp[k] + d.cross(t.p[j]) * da[i];
+    }
+    (dp, dn_corner, some)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    fn bits(v: DVec3) -> [u64; 3] {
+        v.to_array().map(f64::to_bits)
+    }
+
+    /// Lane `l` of the lane-wise Jacobian is the scalar [`shade_jacobian`] of lane `l`'s triangle
+    /// and ray, bit for bit, on random triangles covering every branch: lit and unlit pixels,
+    /// both sides (the two-sided sign), τ clamped at 0, at 1 and in between, and corner normals
+    /// whose interpolation falls under the normalization's floor.
+    #[test]
+    fn lane_jacobian_equals_the_scalar_one_bit_for_bit() {
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let unit = |rng: &mut ChaCha8Rng| {
+            DVec3::new(
+                rng.random::<f64>() - 0.5,
+                rng.random::<f64>() - 0.5,
+                rng.random::<f64>() - 0.5,
+            )
+        };
+        let (mut lit, mut unlit, mut blended, mut floored) = (0, 0, 0, 0);
+        for case in 0..4000 {
+            let ts: [Triangle; LANES] = std::array::from_fn(|_| {
+                let x = [unit(&mut rng), unit(&mut rng), unit(&mut rng)];
+                let mut n = [unit(&mut rng), unit(&mut rng), unit(&mut rng)].map(|v| v.normalize());
+                if case % 50 == 0 {
+                    // Tiny corner normals: |Σ w_i n_i|² under the normalization's floor.
+                    n = n.map(|v| v * 1e-11);
+                }
+                let eye = DVec3::new(0.1, 0.2, 3.0) + unit(&mut rng);
+                Triangle::new(x, n, eye, eye + unit(&mut rng) * 4.0)
+            });
+            // Rays through a point inside each triangle (and sometimes outside it).
+            let rays: [DVec3; LANES] = std::array::from_fn(|l| {
+                let (a, b) = (rng.random::<f64>(), rng.random::<f64>());
+                let spread = if case % 7 == 0 { 3.0 } else { 1.0 };
+                let (a, b) = if a + b > 1.0 {
+                    (1.0 - a, 1.0 - b)
+                } else {
+                    (a, b)
+                };
+                let p = ts[l].p;
+                p[0] + (p[1] - p[0]) * (a * spread) + (p[2] - p[0]) * b
+            });
+            let (dx, dn, some) = shade_jacobian_lanes(&TriangleLanes::gather(&ts), V::gather(rays));
+            for l in 0..LANES {
+                let scalar = shade_jacobian(&ts[l], rays[l]);
+                assert_eq!(some[l], scalar.is_some(), "case {case} lane {l}");
+                let fw = forward(&ts[l], rays[l]);
+                if fw.tau_raw > 0.0 && fw.tau_raw < 1.0 {
+                    blended += 1;
+                }
+                if fw.ns_raw.length_squared() <= crate::cpu::math::NORMALIZE_EPS2 {
+                    floored += 1;
+                }
+                let Some((sx, sn)) = scalar else {
+                    unlit += 1;
+                    continue;
+                };
+                lit += 1;
+                for k in 0..3 {
+                    assert_eq!(bits(dx[k].lane(l)), bits(sx[k]), "case {case} lane {l}");
+                    assert_eq!(bits(dn[k].lane(l)), bits(sn[k]), "case {case} lane {l}");
+                }
+            }
+        }
+        assert!(lit > 1000 && unlit > 1000 && blended > 100 && floored > 0);
+    }
 }
