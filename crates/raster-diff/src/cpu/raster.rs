@@ -14,7 +14,9 @@
 //! that is exactly antisymmetric in (a, b), so shared edges are watertight in floating point.
 //!
 //! Clipping: a triangle with any vertex nearer than the near plane (depth 0.5 by default) is not
-//! drawn (no partial clipping); the far plane is at infinity. No back-face culling.
+//! drawn (no partial clipping); the far plane is at infinity. No back-face culling: back faces are
+//! only skipped where nearer surfaces already hide them (an exact shortcut: the band kernel of
+//! [`rasterize`] draws front faces first; see `docs/renderer.md`).
 //! Depth test: nearest depth wins; equal depths go to the smaller triangle index (deterministic).
 
 use glam::DVec3;
