@@ -521,6 +521,24 @@ mod tests {
         }
         // Nearly flat: seen edge-on from the orbit's low views, a sheet of slivers.
         let squashed: Vec<[f64; 3]> = v.iter().map(|p| [p[0], p[1] * 1e-7, p[2]]).collect();
+        // A second sphere inside the first (hidden front faces), and an inside-out one a hair
+        // outside it: its back faces win by a relative 10⁻¹² in depth, over the first sphere's
+        // front faces in the same tiles.
+        let mut nested = v.clone();
+        nested.extend(v.iter().map(|p| p.map(|c| c * 0.5)));
+        nested.extend(v.iter().map(|p| p.map(|c| c * (1.0 + 1e-12))));
+        let n = v.len() as u32;
+        let nested_faces: Vec<[u32; 3]> = (0..3)
+            .flat_map(|k| {
+                let faces = if k == 2 { &flipped } else { &f };
+                faces.iter().map(move |t| t.map(|i| i + k * n))
+            })
+            .collect();
+        // Long and thin across the views' depth range: huge depth spans inside one triangle.
+        let stretched: Vec<[f64; 3]> = v
+            .iter()
+            .map(|p| [p[0] * 0.2, p[1] * 1e3, p[2] * 0.2])
+            .collect();
         let bits = |d: &[f64]| d.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
         let (w, h) = (97, 83);
         let cases = [
@@ -529,6 +547,8 @@ mod tests {
             (&v, &open),
             (&v, &doubled),
             (&squashed, &f),
+            (&nested, &nested_faces),
+            (&stretched, &f),
         ];
         for (v, faces) in cases {
             for view in crate::orbit_views(4, 25.0, 2.6, 60.0) {
@@ -540,6 +560,55 @@ mod tests {
                 assert_eq!(ids, ids_1);
                 assert_eq!(bits(&depth), bits(&depth_1));
             }
+        }
+        // A plane seen head-on (one depth over whole tiles) behind a copy of opposite winding
+        // 10⁻¹² nearer: the back face must win wherever it is the nearer one, even though its
+        // nearest corner is within rounding of the tiles' farthest depth. Both windings in front.
+        let k = 12;
+        let grid: Vec<[f64; 3]> = (0..=k)
+            .flat_map(|i| (0..=k).map(move |j| [i as f64 / 6.0 - 1.0, j as f64 / 6.0 - 1.0, 0.0]))
+            .collect();
+        let quads: Vec<[u32; 3]> = (0..k as u32)
+            .flat_map(|i| (0..k as u32).map(move |j| (i * (k as u32 + 1) + j, k as u32 + 1)))
+            .flat_map(|(a, r)| [[a, a + r, a + 1], [a + 1, a + r, a + r + 1]])
+            .collect();
+        let view = View {
+            eye: [0.0, 0.0, 3.0],
+            target: [0.0; 3],
+            up: [0.0, 1.0, 0.0],
+            fov_y_deg: 60.0,
+            light_pos: [0.0, 0.0, 3.0],
+        };
+        let camera = Camera::new(&view, w, h).expect("camera");
+        for nearer_flipped in [false, true] {
+            let mut v = grid.clone();
+            v.extend(grid.iter().map(|p| [p[0], p[1], 3e-12]));
+            let m = grid.len() as u32;
+            let faces: Vec<[u32; 3]> = quads
+                .iter()
+                .map(|&t| {
+                    if nearer_flipped {
+                        t
+                    } else {
+                        [t[0], t[2], t[1]]
+                    }
+                })
+                .chain(quads.iter().map(|&[a, b, c]| {
+                    let t = if nearer_flipped { [a, c, b] } else { [a, b, c] };
+                    t.map(|i| i + m)
+                }))
+                .collect();
+            let proj = project_vertices(&camera, &v);
+            let (ids, depth) = rasterize(&faces, &proj, 0.5, w, h);
+            let (ids_1, depth_1) = rasterize_single_pass(&faces, &proj, (w, h));
+            assert!(
+                ids.iter()
+                    .filter(|&&t| t >= quads.len() as u32 && t != NO_TRIANGLE)
+                    .count()
+                    > w * h / 10
+            );
+            assert_eq!(ids, ids_1);
+            assert_eq!(bits(&depth), bits(&depth_1));
         }
     }
 
