@@ -659,9 +659,12 @@ mod tests {
     use super::*;
     use rand::SeedableRng;
 
-    /// An objective whose gradient is zero on the iterations in `zero` and constant elsewhere.
+    /// An objective whose gradient is zero on the iterations in `zero` and constant elsewhere, and
+    /// one entry short (a wrong length, which dARAP's backward rejects) on sub-step
+    /// `short_substep`.
     struct Flat {
         zero: std::ops::RangeInclusive<u64>,
+        short_substep: Option<u32>,
     }
 
     impl Objective for Flat {
@@ -671,7 +674,7 @@ mod tests {
         fn evaluate(
             &mut self,
             iteration: u64,
-            _substep: u32,
+            substep: u32,
             deformed: &[[f64; 3]],
             _rng: &mut ChaCha8Rng,
         ) -> Result<StepEval> {
@@ -680,12 +683,37 @@ mod tests {
             } else {
                 1e-3
             };
+            let n = deformed.len() - usize::from(self.short_substep == Some(substep));
             Ok(StepEval {
                 terms: vec![("loss", 0.0)],
                 timings: Vec::new(),
-                grad_positions: vec![[g, 0.0, 0.0]; deformed.len()],
+                grad_positions: vec![[g, 0.0, 0.0]; n],
             })
         }
+    }
+
+    /// dARAP on an icosphere, a loop state at its rest normals and a loop of `iterations` ×
+    /// `steps_per_batch` steps without checkpoints or previews.
+    fn icosphere_loop(
+        iterations: u64,
+        steps_per_batch: u32,
+    ) -> Result<(Darap, LoopState, LoopSpec)> {
+        let (p, f) = mesh_core::shapes::icosphere(1).into_parts();
+        let darap = Darap::new(&p, &f, darap::DarapOptions::default())?;
+        let state = LoopState {
+            iteration: 0,
+            x: darap.rest_normals().to_vec(),
+            adam: Adam::new(3 * p.len(), optim::AdamConfig::default())?,
+            rng: ChaCha8Rng::seed_from_u64(0),
+        };
+        let spec = LoopSpec {
+            iterations,
+            steps_per_batch,
+            checkpoint_every: 0,
+            preview_every: 0,
+            halt_after: None,
+        };
+        Ok((darap, state, spec))
     }
 
     #[test]
@@ -705,29 +733,13 @@ mod tests {
 
     #[test]
     fn zero_gradient_streak_is_recorded_in_the_iteration_records() -> Result<()> {
-        let (p, f) = mesh_core::shapes::icosphere(1).into_parts();
-        let darap = Darap::new(&p, &f, darap::DarapOptions::default())?;
-        let mut state = LoopState {
-            iteration: 0,
-            x: darap.rest_normals().to_vec(),
-            adam: Adam::new(3 * p.len(), optim::AdamConfig::default())?,
-            rng: ChaCha8Rng::seed_from_u64(0),
-        };
-        let spec = LoopSpec {
-            iterations: 6,
-            steps_per_batch: 1,
-            checkpoint_every: 0,
-            preview_every: 0,
-            halt_after: None,
-        };
+        let (darap, mut state, spec) = icosphere_loop(6, 1)?;
         let mut records = RecordIterations::default();
-        run_loop(
-            &darap,
-            &spec,
-            &mut state,
-            &mut Flat { zero: 2..=5 },
-            &mut records,
-        )?;
+        let mut objective = Flat {
+            zero: 2..=5,
+            short_substep: None,
+        };
+        run_loop(&darap, &spec, &mut state, &mut objective, &mut records)?;
         let streaks: Vec<Option<f64>> = records
             .0
             .iter()
@@ -745,53 +757,21 @@ mod tests {
         Ok(())
     }
 
-    /// Gradients of the right length on sub-step 0 and of the wrong length on sub-step 1.
-    struct SecondStepBad;
-
-    impl Objective for SecondStepBad {
-        fn describe(&self) -> String {
-            "second step bad".into()
-        }
-        fn evaluate(
-            &mut self,
-            _iteration: u64,
-            substep: u32,
-            deformed: &[[f64; 3]],
-            _rng: &mut ChaCha8Rng,
-        ) -> Result<StepEval> {
-            let n = deformed.len() - substep as usize;
-            Ok(StepEval {
-                terms: vec![("loss", 0.0)],
-                timings: Vec::new(),
-                grad_positions: vec![[1e-3, 0.0, 0.0]; n],
-            })
-        }
-    }
-
     #[test]
     fn a_darap_backward_error_in_a_later_sub_step_leaves_x_and_adam_untouched() -> Result<()> {
-        let (p, f) = mesh_core::shapes::icosphere(1).into_parts();
-        let darap = Darap::new(&p, &f, darap::DarapOptions::default())?;
-        let x0 = darap.rest_normals().to_vec();
-        let mut state = LoopState {
-            iteration: 0,
-            x: x0.clone(),
-            adam: Adam::new(3 * p.len(), optim::AdamConfig::default())?,
-            rng: ChaCha8Rng::seed_from_u64(0),
-        };
-        let adam0 = state.adam.state().clone();
-        let spec = LoopSpec {
-            iterations: 1,
-            steps_per_batch: 2,
-            checkpoint_every: 0,
-            preview_every: 0,
-            halt_after: None,
+        let (darap, mut state, spec) = icosphere_loop(1, 2)?;
+        let (x0, adam0) = (state.x.clone(), state.adam.state().clone());
+        // Sub-step 0's gradient is fine (nonzero: iterations count from 1), sub-step 1's has
+        // the wrong length.
+        let mut objective = Flat {
+            zero: 0..=0,
+            short_substep: Some(1),
         };
         let err = run_loop(
             &darap,
             &spec,
             &mut state,
-            &mut SecondStepBad,
+            &mut objective,
             &mut RecordIterations::default(),
         )
         .expect_err("a gradient of the wrong length");
