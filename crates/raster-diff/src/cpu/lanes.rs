@@ -1,6 +1,6 @@
 //! Four pixels at a time: `f64` values in [`LANES`] lanes ([`L`]) and 3-vectors of them ([`V`]),
-//! for the shading and its Jacobian evaluated on several pixels together
-//! ([`super::shading::shade_lanes`], [`super::shading::shade_jacobian_lanes`]).
+//! for the shading's Jacobian evaluated on several pixels together
+//! ([`super::shading::shade_jacobian_lanes`], the renderer's backward).
 //!
 //! Every operation is the per-lane IEEE operation written as a loop over the lanes (the compiler
 //! turns it into one 256-bit instruction under [`super::simd::dispatch`]), and the vector

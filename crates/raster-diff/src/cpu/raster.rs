@@ -499,7 +499,9 @@ mod tests {
     /// Same ids and depth bits as the single pass, on a closed mesh (most back faces skipped),
     /// the same mesh turned inside out (its "front" faces are the hidden ones), an open mesh
     /// (back faces visible through the hole), coincident faces of both orientations (equal
-    /// depths, decided by the index) and a nearly flat sphere (slivers).
+    /// depths, decided by the index), a nearly flat sphere (slivers), nested spheres with an
+    /// inside-out one a hair outside, a long thin mesh, and a head-on plane behind a nearer copy
+    /// of opposite winding (back faces that win by a rounding-sized depth difference).
     #[test]
     fn occlusion_skipping_gives_the_single_pass_z_buffer_bit_for_bit() {
         let (mut v, f) = mesh_core::shapes::icosphere(3).into_parts();
@@ -562,8 +564,9 @@ mod tests {
             }
         }
         // A plane seen head-on (one depth over whole tiles) behind a copy of opposite winding
-        // 10⁻¹² nearer: the back face must win wherever it is the nearer one, even though its
-        // nearest corner is within rounding of the tiles' farthest depth. Both windings in front.
+        // 10⁻¹² nearer: the nearer copy must win everywhere, also when it is the back face and
+        // its nearest corner lies within rounding of the tiles' farthest depth. Each winding in
+        // turn is the nearer copy.
         let k = 12;
         let grid: Vec<[f64; 3]> = (0..=k)
             .flat_map(|i| (0..=k).map(move |j| [i as f64 / 6.0 - 1.0, j as f64 / 6.0 - 1.0, 0.0]))
