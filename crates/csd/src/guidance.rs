@@ -352,7 +352,8 @@ struct Workspace {
     sample2: Tensor,
     /// grad_II.
     grad2: Vec<f32>,
-    /// ∂L/∂x, `(B, 3, r, r)`.
+    /// ∂L/∂x, `(B, 3, r, r)`; with [`Stages::grey_gradient`] its channel sums Σ_c ∂L/∂x_c,
+    /// `(B, r, r)`.
     grad_x: Vec<f32>,
     /// Per-view scratch for the interleaved resizes (one per view, so views run in parallel).
     scratch: Vec<Vec<f32>>,
@@ -405,6 +406,20 @@ fn per_plane(grey: bool, out: &mut [f32], plane: usize, mut f: impl FnMut(usize,
             f(c + 1, o);
         }
     }
+}
+
+/// Σ_c of the three equal-sized channel planes of `planes`, into `sum` (in `f32`, in channel
+/// order).
+fn channel_sums(planes: &[f32], sum: &mut Vec<f32>) {
+    let p = planes.len() / CHANNELS;
+    sum.clear();
+    sum.extend(
+        planes[..p]
+            .iter()
+            .zip(&planes[p..2 * p])
+            .zip(&planes[2 * p..3 * p])
+            .map(|((&a, &b), &c)| a + b + c),
+    );
 }
 
 /// Noise into `buf`: the injected values (length checked) or `len` fresh samples from `rng`.
@@ -569,6 +584,15 @@ struct Core {
     stage2: Option<Stage2Core>,
 }
 
+/// The switches of [`CascadedGuidance::evaluate_core`]: [`Stages::keep_outputs`],
+/// [`Stages::grey_gradient`], and `reuse_encoding` (see `evaluate_core`).
+#[derive(Clone, Copy, Debug)]
+struct CoreOptions {
+    keep_outputs: bool,
+    reuse_encoding: bool,
+    grey_gradient: bool,
+}
+
 /// What every stage of one evaluation reads.
 struct Stages<'a> {
     cfg: &'a GuidanceConfig,
@@ -580,6 +604,11 @@ struct Stages<'a> {
     views: usize,
     /// Keep the denoiser outputs (for a trace).
     keep_outputs: bool,
+    /// Accumulate ∂L/∂x as one plane per view, Σ_c ∂L/∂x_c (for
+    /// [`Stages::decode_grey_gradient`]): each stage sums its gradient's three channels at its own
+    /// resolution and maps one plane back instead of three (the adjoint resizes are linear, so the
+    /// same values up to `f32` rounding).
+    grey_gradient: bool,
 }
 
 impl Stages<'_> {
@@ -716,15 +745,29 @@ impl Stages<'_> {
             &*model,
         )?;
         let k1 = (cfg.loss_scale * cfg.stage1_weight / b as f64) as f32;
-        w.grad_x.resize(b * CHANNELS * pr, 0.0);
-        w.grad_x
-            .par_chunks_mut(pr)
-            .zip(w.grad1.par_chunks(p1))
-            .zip(w.plane_scratch.par_iter_mut())
-            .for_each(|((gx, g), (tmp, _))| {
-                ops.down1_t.apply_plane(g, gx, tmp);
-                gx.iter_mut().for_each(|v| *v *= k1);
-            });
+        if self.grey_gradient {
+            w.grad_x.resize(b * pr, 0.0);
+            w.grad_x
+                .par_chunks_mut(pr)
+                .zip(w.grad1.par_chunks(CHANNELS * p1))
+                .zip(w.plane_scratch.par_chunks_mut(CHANNELS))
+                .for_each(|((gx, g), planes)| {
+                    let (tmp, sum) = &mut planes[0];
+                    channel_sums(g, sum);
+                    ops.down1_t.apply_plane(sum, gx, tmp);
+                    gx.iter_mut().for_each(|v| *v *= k1);
+                });
+        } else {
+            w.grad_x.resize(b * CHANNELS * pr, 0.0);
+            w.grad_x
+                .par_chunks_mut(pr)
+                .zip(w.grad1.par_chunks(p1))
+                .zip(w.plane_scratch.par_iter_mut())
+                .for_each(|((gx, g), (tmp, _))| {
+                    ops.down1_t.apply_plane(g, gx, tmp);
+                    gx.iter_mut().for_each(|v| *v *= k1);
+                });
+        }
         Ok(Stage1Core {
             t1,
             loss1,
@@ -841,17 +884,31 @@ impl Stages<'_> {
             &*model,
         )?;
         let k2 = (cfg.loss_scale * weight / b as f64) as f32;
-        w.grad_x
-            .par_chunks_mut(pr)
-            .zip(w.grad2.par_chunks(p2))
-            .zip(w.plane_scratch.par_iter_mut())
-            .for_each(|((gx, g), (tmp, up))| {
-                up.resize(pr, 0.0);
-                ops.up_t.apply_plane(g, up, tmp);
-                for (a, &u) in gx.iter_mut().zip(up.iter()) {
-                    *a += k2 * u;
-                }
-            });
+        let add_adjoint = |gx: &mut [f32], g: &[f32], tmp: &mut Vec<f32>, up: &mut Vec<f32>| {
+            up.resize(pr, 0.0);
+            ops.up_t.apply_plane(g, up, tmp);
+            for (a, &u) in gx.iter_mut().zip(up.iter()) {
+                *a += k2 * u;
+            }
+        };
+        if self.grey_gradient {
+            w.grad_x
+                .par_chunks_mut(pr)
+                .zip(w.grad2.par_chunks(CHANNELS * p2))
+                .zip(w.plane_scratch.par_chunks_exact_mut(CHANNELS))
+                .for_each(|((gx, g), planes)| {
+                    let (first, rest) = planes.split_at_mut(1);
+                    let ((tmp, up), (_, sum)) = (&mut first[0], &mut rest[0]);
+                    channel_sums(g, sum);
+                    add_adjoint(gx, sum, tmp, up);
+                });
+        } else {
+            w.grad_x
+                .par_chunks_mut(pr)
+                .zip(w.grad2.par_chunks(p2))
+                .zip(w.plane_scratch.par_iter_mut())
+                .for_each(|((gx, g), (tmp, up))| add_adjoint(gx, g, tmp, up));
+        }
         Ok(Stage2Core {
             t2,
             s2,
@@ -862,7 +919,7 @@ impl Stages<'_> {
     }
 
     /// x = 2·R(img) − 1 ⇒ ∂L/∂img = 2·Rᵀ(∂L/∂x), written straight into (view, row, col, channel)
-    /// with a final NaN/∞ guard.
+    /// with a final NaN/∞ guard. Reads ∂L/∂x per channel (not [`Self::grey_gradient`]).
     fn decode_gradient(&self, images: &Images, w: &mut Workspace) -> Images {
         let pr = self.cfg.resolution * self.cfg.resolution;
         let plane_in = images.height * images.width;
@@ -885,9 +942,10 @@ impl Stages<'_> {
         grad
     }
 
-    /// dL/d(grey) = Σ_c ∂L/∂img_c = 2·Rᵀ(Σ_c ∂L/∂x_c) (Rᵀ is linear): the channels are summed at
-    /// the guidance's resolution (in `f32`, in channel order) and one plane per view is mapped
-    /// back, with the same final NaN/∞ guard as [`Self::decode_gradient`].
+    /// dL/d(grey) = Σ_c ∂L/∂img_c = 2·Rᵀ(Σ_c ∂L/∂x_c) (Rᵀ is linear): reads the channel sums
+    /// the stages accumulated ([`Self::grey_gradient`]; each summed its gradient's channels at its
+    /// own resolution, in `f32`, in channel order) and maps one plane per view back, with the same
+    /// final NaN/∞ guard as [`Self::decode_gradient`].
     fn decode_grey_gradient(&self, images: &Images, w: &mut Workspace) -> Vec<f32> {
         let pr = self.cfg.resolution * self.cfg.resolution;
         let plane_in = images.height * images.width;
@@ -895,19 +953,10 @@ impl Stages<'_> {
         let mut grey = Vec::new();
         grey.par_extend(rayon::iter::repeat_n(0.0f32, images.count * plane_in));
         grey.par_chunks_mut(plane_in)
-            .zip(w.grad_x.par_chunks(CHANNELS * pr))
+            .zip(w.grad_x.par_chunks(pr))
             .zip(w.plane_scratch.par_chunks_mut(CHANNELS))
             .for_each(|((out, gx), planes)| {
-                let (tmp, sum) = &mut planes[0];
-                sum.clear();
-                sum.extend(
-                    gx[..pr]
-                        .iter()
-                        .zip(&gx[pr..2 * pr])
-                        .zip(&gx[2 * pr..])
-                        .map(|((&a, &b), &c)| a + b + c),
-                );
-                self.ops.resize_t.apply_plane(sum, out, tmp);
+                self.ops.resize_t.apply_plane(gx, out, &mut planes[0].0);
                 out.iter_mut().for_each(|v| *v = nan_to_num(2.0 * *v));
             });
         grey
@@ -1110,8 +1159,9 @@ impl<'m> CascadedGuidance<'m> {
     }
 
     /// One evaluation into the workspace buffers, stage by stage: encode the renders, stage I,
-    /// stage II (when its weight is positive), decode the gradient. Returns the output and what a
-    /// trace needs; the denoiser outputs are kept only with `keep_outputs`.
+    /// stage II (when its weight is positive), ∂L/∂x in the layout `grey_gradient` picks (see
+    /// [`Stages::grey_gradient`]; the caller decodes it with the matching decoding). Returns the
+    /// output and what a trace needs; the denoiser outputs are kept only with `keep_outputs`.
     ///
     /// With `reuse_encoding`, `images` must be the renders of the previous call (the caller's
     /// promise; [`Guidance::evaluate_many`] is the only caller that makes it): x = 2·R(img) − 1
@@ -1123,8 +1173,11 @@ impl<'m> CascadedGuidance<'m> {
         stage2_weight: f64,
         rng: &mut dyn RngCore,
         injected: &InjectedDraws,
-        keep_outputs: bool,
-        reuse_encoding: bool,
+        CoreOptions {
+            keep_outputs,
+            reuse_encoding,
+            grey_gradient,
+        }: CoreOptions,
     ) -> Result<(Core, Stages<'_>, &mut Workspace), GuidanceError> {
         self.check_call(images, stage2_weight)?;
         let input_hw = (images.height, images.width);
@@ -1155,6 +1208,7 @@ impl<'m> CascadedGuidance<'m> {
             uncond,
             views: images.count,
             keep_outputs,
+            grey_gradient,
         };
         if !(reuse_encoding && work.derived.x) {
             stages.encode_renders(images, work)?;
@@ -1199,42 +1253,44 @@ impl<'m> CascadedGuidance<'m> {
         stage2_weight: f64,
         rng: &mut dyn RngCore,
     ) -> Result<GuidanceOutput, GuidanceError> {
-        self.evaluate_untraced(images, stage2_weight, rng, false, rgb_gradient(images))
+        self.evaluate_untraced(images, stage2_weight, rng, false, RgbGradient(images))
     }
 
-    /// One evaluation with fresh draws and no trace, its gradient decoded by `decode` from the
-    /// workspace ([`Stages::decode_gradient`] or [`Stages::decode_grey_gradient`]);
-    /// `reuse_encoding` as in [`Self::evaluate_core`] (the renders' encoding from the previous
-    /// call on the same renders).
-    fn evaluate_untraced<T>(
+    /// One evaluation with fresh draws and no trace, its gradient laid out and decoded by
+    /// `decode`; `reuse_encoding` as in [`Self::evaluate_core`] (the renders' encoding from the
+    /// previous call on the same renders).
+    fn evaluate_untraced<D: Decode>(
         &mut self,
         images: &Images,
         stage2_weight: f64,
         rng: &mut dyn RngCore,
         reuse_encoding: bool,
-        decode: impl FnOnce(&Stages<'_>, GuidanceOutput, &mut Workspace) -> T,
-    ) -> Result<T, GuidanceError> {
+        decode: D,
+    ) -> Result<D::Out, GuidanceError> {
         let (core, stages, work) = self.evaluate_core(
             images,
             stage2_weight,
             rng,
             &InjectedDraws::default(),
-            false,
-            reuse_encoding,
+            CoreOptions {
+                keep_outputs: false,
+                reuse_encoding,
+                grey_gradient: D::GREY,
+            },
         )?;
-        Ok(decode(&stages, core.output, work))
+        Ok(decode.decode(&stages, core.output, work))
     }
 
     /// `count` evaluations of the same renders at `iteration`'s stage-II weight, one after the
     /// other from `rng`, the renders encoded once; gradients decoded by `decode`.
-    fn evaluations<T>(
+    fn evaluations<D: Decode + Copy>(
         &mut self,
         images: &Images,
         iteration: u64,
         count: usize,
         rng: &mut dyn RngCore,
-        decode: impl Fn(&Stages<'_>, GuidanceOutput, &mut Workspace) -> T + Copy,
-    ) -> Result<Vec<T>, GuidanceError> {
+        decode: D,
+    ) -> Result<Vec<D::Out>, GuidanceError> {
         let weight = self.stage2_weight.at(iteration);
         (0..count)
             .map(|k| self.evaluate_untraced(images, weight, rng, k > 0, decode))
@@ -1250,8 +1306,17 @@ impl<'m> CascadedGuidance<'m> {
         rng: &mut dyn RngCore,
         injected: &InjectedDraws,
     ) -> Result<GuidanceTrace, GuidanceError> {
-        let (mut core, stages, work) =
-            self.evaluate_core(images, stage2_weight, rng, injected, true, false)?;
+        let (mut core, stages, work) = self.evaluate_core(
+            images,
+            stage2_weight,
+            rng,
+            injected,
+            CoreOptions {
+                keep_outputs: true,
+                reuse_encoding: false,
+                grey_gradient: false,
+            },
+        )?;
         core.output.grad_images = stages.decode_gradient(images, work);
         let r = stages.cfg.resolution;
         let shape = [images.count, CHANNELS, r, r];
@@ -1291,11 +1356,12 @@ impl Guidance for CascadedGuidance<'_> {
         count: usize,
         rng: &mut dyn RngCore,
     ) -> Result<Vec<GuidanceOutput>, GuidanceError> {
-        self.evaluations(images, iteration, count, rng, rgb_gradient(images))
+        self.evaluations(images, iteration, count, rng, RgbGradient(images))
     }
 
     /// [`Guidance::evaluate_many`]'s evaluations with one plane per view mapped back to the
-    /// render's size: the channels of ∂L/∂x are summed first.
+    /// render's size: each stage sums its gradient's channels before its
+    /// adjoint resize (docs/guidance.md, "The seam").
     fn evaluate_many_grey(
         &mut self,
         images: &Images,
@@ -1303,19 +1369,46 @@ impl Guidance for CascadedGuidance<'_> {
         count: usize,
         rng: &mut dyn RngCore,
     ) -> Result<Vec<GreyGuidanceOutput>, GuidanceError> {
-        self.evaluations(images, iteration, count, rng, |stages, out, work| {
-            GreyGuidanceOutput::with_gradient(&out, stages.decode_grey_gradient(images, work))
-        })
+        self.evaluations(images, iteration, count, rng, GreyGradient(images))
     }
 }
 
-/// The decoding of [`CascadedGuidance::evaluate_untraced`] that fills `grad_images` (dL/d(RGB)).
-fn rgb_gradient(
-    images: &Images,
-) -> impl Fn(&Stages<'_>, GuidanceOutput, &mut Workspace) -> GuidanceOutput + Copy + '_ {
-    move |stages, mut out, work| {
-        out.grad_images = stages.decode_gradient(images, work);
+/// How [`CascadedGuidance::evaluate_untraced`] lays out ∂L/∂x and turns it into the caller's
+/// gradient: the layout and the decoding that reads it come together, so they cannot disagree.
+trait Decode {
+    type Out;
+    /// Whether ∂L/∂x is accumulated as channel sums ([`Stages::grey_gradient`]).
+    const GREY: bool;
+    fn decode(self, stages: &Stages<'_>, out: GuidanceOutput, work: &mut Workspace) -> Self::Out;
+}
+
+/// dL/d(RGB) of the renders, in `grad_images` ([`Stages::decode_gradient`]).
+#[derive(Clone, Copy)]
+struct RgbGradient<'a>(&'a Images);
+
+impl Decode for RgbGradient<'_> {
+    type Out = GuidanceOutput;
+    const GREY: bool = false;
+    fn decode(
+        self,
+        stages: &Stages<'_>,
+        mut out: GuidanceOutput,
+        work: &mut Workspace,
+    ) -> Self::Out {
+        out.grad_images = stages.decode_gradient(self.0, work);
         out
+    }
+}
+
+/// dL/d(grey) of the renders ([`Stages::decode_grey_gradient`]).
+#[derive(Clone, Copy)]
+struct GreyGradient<'a>(&'a Images);
+
+impl Decode for GreyGradient<'_> {
+    type Out = GreyGuidanceOutput;
+    const GREY: bool = true;
+    fn decode(self, stages: &Stages<'_>, out: GuidanceOutput, work: &mut Workspace) -> Self::Out {
+        GreyGuidanceOutput::with_gradient(&out, stages.decode_grey_gradient(self.0, work))
     }
 }
 
