@@ -745,6 +745,10 @@ impl Stages<'_> {
             &*model,
         )?;
         let k1 = (cfg.loss_scale * cfg.stage1_weight / b as f64) as f32;
+        let set_adjoint = |gx: &mut [f32], g: &[f32], tmp: &mut Vec<f32>| {
+            ops.down1_t.apply_plane(g, gx, tmp);
+            gx.iter_mut().for_each(|v| *v *= k1);
+        };
         if self.grey_gradient {
             w.grad_x.resize(b * pr, 0.0);
             w.grad_x
@@ -754,8 +758,7 @@ impl Stages<'_> {
                 .for_each(|((gx, g), planes)| {
                     let (tmp, sum) = &mut planes[0];
                     channel_sums(g, sum);
-                    ops.down1_t.apply_plane(sum, gx, tmp);
-                    gx.iter_mut().for_each(|v| *v *= k1);
+                    set_adjoint(gx, sum, tmp);
                 });
         } else {
             w.grad_x.resize(b * CHANNELS * pr, 0.0);
@@ -763,10 +766,7 @@ impl Stages<'_> {
                 .par_chunks_mut(pr)
                 .zip(w.grad1.par_chunks(p1))
                 .zip(w.plane_scratch.par_iter_mut())
-                .for_each(|((gx, g), (tmp, _))| {
-                    ops.down1_t.apply_plane(g, gx, tmp);
-                    gx.iter_mut().for_each(|v| *v *= k1);
-                });
+                .for_each(|((gx, g), (tmp, _))| set_adjoint(gx, g, tmp));
         }
         Ok(Stage1Core {
             t1,
