@@ -1,8 +1,8 @@
 //! Calibration probe for benchmark sessions on a shared VM (docs/benchmarks.md, issue 10,
 //! target 3, thirteenth pass). Single thread; prints the best of five of each part in ms:
 //! - `sqrt`: a 20M-step dependent `sqrt` chain (the core's clock);
-//! - `walk`: a 2M-step walk along one random cycle through 64 MiB (memory latency: this is the
-//!   part that tracks the VM's slow phases);
+//! - `walk`: a 2M-step walk along one random cycle through 64 MiB (memory latency; on
+//!   2026-12-02 it followed the VM's slow phase for an hour, then not);
 //! - `fma`: 32 independent `f64` FMA chains, 200M FMAs, reported as cycles per FMA at the clock
 //!   that a dependent FMA chain gives (0.125 = both FMA pipes busy; more means the core is shared).
 //!
