@@ -40,3 +40,7 @@ bench-render:
 
 bench-csd:
     cargo run --release -p csd --example bench_csd
+
+# Issue 10's target 3: real CLI runs with the fixture models, per-part medians (docs/benchmarks.md).
+bench-iteration runs="3":
+    bash scripts/bench-target3.sh {{runs}}
