@@ -301,12 +301,14 @@ pub fn blended_pixels(colour: &[f64], blends: &[Blend]) -> Vec<(u32, f64)> {
 }
 
 /// Adjoint of [`apply`]: from dL/d(out) returns dL/d(colour) and adds the visibility gradient
-/// dL/dα · dα/dx to `d_vertices`. Works in `d_out`'s buffer when it owns one (no copy).
+/// dL/dα · dα/dx to the vertices' dL/dx through `add_d_vertex(vertex, value)`, blend after blend
+/// (the caller's accumulator, whatever its layout). Works in `d_out`'s buffer when it owns one (no
+/// copy).
 pub fn apply_adjoint<'a>(
     colour: &[f64],
     blends: &[Blend],
     d_out: Cow<'a, [f64]>,
-    d_vertices: &mut [DVec3],
+    mut add_d_vertex: impl FnMut(usize, DVec3),
 ) -> Cow<'a, [f64]> {
     if blends.is_empty() {
         return d_out;
@@ -320,8 +322,8 @@ pub fn apply_adjoint<'a>(
         d_colour[s] += g * b.alpha;
         d_colour[t] -= g * b.alpha;
         let d_alpha = g * (colour[s] - colour[t]);
-        d_vertices[b.edge[0] as usize] += b.d_alpha[0] * d_alpha;
-        d_vertices[b.edge[1] as usize] += b.d_alpha[1] * d_alpha;
+        add_d_vertex(b.edge[0] as usize, b.d_alpha[0] * d_alpha);
+        add_d_vertex(b.edge[1] as usize, b.d_alpha[1] * d_alpha);
     }
     d_colour.into()
 }
@@ -407,7 +409,7 @@ mod tests {
             } else {
                 Cow::Borrowed(&d_out[..])
             };
-            let got = apply_adjoint(&colour, &blends, input, &mut dx);
+            let got = apply_adjoint(&colour, &blends, input, |v, g| dx[v] += g);
             assert_eq!(bits(&got), bits(&want));
             assert_eq!(dbits(&dx), dbits(&want_dx));
         }

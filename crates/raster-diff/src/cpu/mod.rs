@@ -323,6 +323,13 @@ fn check_grey_lengths(
     Ok(())
 }
 
+/// One vertex's adjoints for one gradient, accumulated by the backward pass over a view's pixels:
+/// `[dL/dx, dL/dn]` (position, smooth normal). A view's records are vertex-major, gradient `g` of
+/// vertex `v` at `v·count + g`, so a pixel's contributions to a corner, for every gradient, land in
+/// one run of `48·count` bytes instead of `2·count` separate arrays (measured: the backward a few
+/// per cent faster; the same additions in the same order, so the same bits).
+type VertexAdjoint = [DVec3; 2];
+
 /// The backward pass of the render kept in `st` for `count` gradients: `d_view(g, v)` is
 /// gradient `g`'s dL/d(grey) on view `v`, `(row, column)`, asked for inside the view's parallel
 /// task. Per view, the per-pixel work that does not depend on the gradient (the fragment, the
@@ -333,20 +340,18 @@ fn backward_views<'a>(
     d_view: impl Fn(usize, usize) -> Cow<'a, [f64]> + Sync,
 ) -> Vec<Vec<[f64; 3]>> {
     let nv = st.vertices.len();
-    // Per view, per gradient: (dL/dx, dL/dn) accumulated over the view's pixels.
-    let per_view: Vec<Vec<(Vec<DVec3>, Vec<DVec3>)>> = st
+    // Per view: the vertices' adjoint records for every gradient (see `VertexAdjoint`).
+    let per_view: Vec<Vec<VertexAdjoint>> = st
         .views
         .par_iter()
         .enumerate()
         .map(|(vi, view)| {
-            let mut acc: Vec<(Vec<DVec3>, Vec<DVec3>)> = (0..count)
-                .map(|_| (vec![DVec3::ZERO; nv], vec![DVec3::ZERO; nv]))
-                .collect();
-            let d_colours: Vec<Cow<'_, [f64]>> = acc
-                .iter_mut()
-                .enumerate()
-                .map(|(g, (dx, _))| {
-                    antialias::apply_adjoint(&view.colour, &view.blends, d_view(g, vi), dx)
+            let mut acc: Vec<VertexAdjoint> = vec![[DVec3::ZERO; 2]; nv * count];
+            let d_colours: Vec<Cow<'_, [f64]>> = (0..count)
+                .map(|g| {
+                    antialias::apply_adjoint(&view.colour, &view.blends, d_view(g, vi), |v, d| {
+                        acc[v * count + g][0] += d
+                    })
                 })
                 .collect();
             simd::dispatch(AccumulateView {
@@ -365,10 +370,10 @@ fn backward_views<'a>(
             let mut dx = vec![DVec3::ZERO; nv];
             let mut dn = vec![DVec3::ZERO; nv];
             for view in &per_view {
-                let (x, n) = &view[g];
-                for v in 0..nv {
-                    dx[v] += x[v];
-                    dn[v] += n[v];
+                let records = view[g..].iter().step_by(count);
+                for (v, [x, n]) in records.enumerate() {
+                    dx[v] += *x;
+                    dn[v] += *n;
                 }
             }
             normals::smooth_normals_adjoint(
@@ -453,7 +458,7 @@ impl PixelBatch {
         &mut self,
         faces: &[[u32; 3]],
         d_colours: &[Cow<'_, [f64]>],
-        acc: &mut [(Vec<DVec3>, Vec<DVec3>)],
+        acc: &mut [VertexAdjoint],
     ) {
         if self.len == 0 {
             return;
@@ -467,14 +472,16 @@ impl PixelBatch {
                 continue;
             }
             let f = faces[t as usize];
-            for (d_colour, (dx, dn)) in d_colours.iter().zip(acc.iter_mut()) {
+            let count = d_colours.len();
+            for (g, d_colour) in d_colours.iter().enumerate() {
                 let dc = d_colour[i];
                 if dc == 0.0 {
                     continue;
                 }
                 for k in 0..3 {
-                    dx[f[k] as usize] += dc_dx[k].lane(l) * dc;
-                    dn[f[k] as usize] += dc_dn[k].lane(l) * dc;
+                    let [dx, dn] = &mut acc[f[k] as usize * count + g];
+                    *dx += dc_dx[k].lane(l) * dc;
+                    *dn += dc_dn[k].lane(l) * dc;
                 }
             }
         }
@@ -491,7 +498,7 @@ struct AccumulateView<'a, 'b> {
     st: &'a ForwardState,
     view: &'a ViewState,
     d_colours: &'a [Cow<'b, [f64]>],
-    acc: &'a mut [(Vec<DVec3>, Vec<DVec3>)],
+    acc: &'a mut [VertexAdjoint],
 }
 
 impl pulp::WithSimd for AccumulateView<'_, '_> {
@@ -779,12 +786,12 @@ mod tests {
                     .collect::<Vec<_>>()
             };
             assert_eq!(key(&blends), key(&view.blends));
-            let mut acc = vec![(vec![DVec3::ZERO; v.len()], vec![DVec3::ZERO; v.len()])];
+            let mut acc = vec![[DVec3::ZERO; 2]; v.len()];
             let d_colour = antialias::apply_adjoint(
                 &view.colour,
                 &view.blends,
                 Cow::Borrowed(&d[vi * npix..(vi + 1) * npix]),
-                &mut acc[0].0,
+                |k, g| acc[k][0] += g,
             );
             AccumulateView {
                 st,
@@ -794,8 +801,8 @@ mod tests {
             }
             .with_simd(pulp::Scalar);
             for k in 0..v.len() {
-                total.0[k] += acc[0].0[k];
-                total.1[k] += acc[0].1[k];
+                total.0[k] += acc[k][0];
+                total.1[k] += acc[k][1];
             }
         }
         normals::smooth_normals_adjoint(
