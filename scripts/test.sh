@@ -9,19 +9,25 @@ step "setup (scripts/setup.sh)";   bash scripts/setup.sh
 export XDG_RUNTIME_DIR="${XDG_RUNTIME_DIR:-/tmp}"   # silences Mesa's warnings under lavapipe
 
 step "cargo fmt --check";          cargo fmt --all -- --check
-step "cargo clippy -D warnings";   cargo clippy --workspace --all-targets --locked -- -D warnings
-step "cargo test";                 cargo test --workspace --locked
+# Lints without a separate `cargo clippy` pass: from here on clippy's driver compiles the
+# workspace's own crates (scripts/clippy-rustc.sh, what `cargo clippy -- -D warnings` sets up), so
+# the one build that the tests need also runs every clippy lint and fails on any warning, and the
+# dependencies are compiled once, not checked once and compiled again (docs/benchmarks.md, "Build
+# time"). Every cargo call below sees the same wrapper, so they share artifacts.
+CLIPPY_DRIVER="$(rustc --print sysroot)/bin/clippy-driver"
+[[ -x "$CLIPPY_DRIVER" ]] || { echo "error: no clippy-driver at $CLIPPY_DRIVER (rustup component add clippy)" >&2; exit 1; }
+export CLIPPY_DRIVER RUSTC_WORKSPACE_WRAPPER="$PWD/scripts/clippy-rustc.sh"
+step "clippy -D warnings while building every target (cargo test --all-targets --no-run)"
+cargo test --workspace --all-targets --locked --no-run
+# The same targets as built above (a plain `cargo test` would build the examples a second time,
+# in normal mode), then the doc tests, which `--all-targets` leaves out.
+step "cargo test";                 cargo test --workspace --all-targets --locked
+step "cargo test --doc";           cargo test --workspace --doc --locked
 # The README's quick-start build (docs/cli.md, "Builds and features"): lints, and its own test.
 # Its dependencies get fewer features than in the workspace's build, so Cargo recompiles them (the
-# faer tree, the proc-macros); one compilation serves both checks: clippy's driver compiles our
-# crates (scripts/clippy-rustc.sh, what `cargo clippy -- -D warnings` sets up) while `cargo test`
-# builds every target, then the features test runs on those artifacts (docs/benchmarks.md,
-# "Build time").
-quick_start() {
-    CLIPPY_DRIVER="$(rustc --print sysroot)/bin/clippy-driver" \
-        RUSTC_WORKSPACE_WRAPPER="$PWD/scripts/clippy-rustc.sh" \
-        cargo test -p stylize-cli --no-default-features --locked "$@"
-}
+# faer tree, the proc-macros); one compilation serves both checks, as above, then the features
+# test runs on those artifacts.
+quick_start() { cargo test -p stylize-cli --no-default-features --locked "$@"; }
 step "quick-start build: clippy, all targets"; quick_start --all-targets --no-run
 step "quick-start build: test";    quick_start --test features
 step "cargo build (xtask)";        cargo build -p xtask --locked   # visible progress; `cargo xtask` runs quietly
