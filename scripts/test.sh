@@ -13,7 +13,9 @@ step "cargo fmt --check";          cargo fmt --all -- --check
 # workspace's own crates (scripts/clippy-rustc.sh, what `cargo clippy -- -D warnings` sets up), so
 # the one build that the tests need also runs every clippy lint and fails on any warning, and the
 # dependencies are compiled once, not checked once and compiled again (docs/benchmarks.md, "Build
-# time"). Every cargo call below sees the same wrapper, so they share artifacts.
+# time"). Every cargo call below sees the same wrapper, so they share artifacts. (The wrapper is part
+# of our crates' fingerprints: a plain `cargo build` afterwards recompiles our crates, not the
+# dependencies, and the next run of this script recompiles them back.)
 CLIPPY_DRIVER="$(rustc --print sysroot)/bin/clippy-driver"
 [[ -x "$CLIPPY_DRIVER" ]] || { echo "error: no clippy-driver at $CLIPPY_DRIVER (rustup component add clippy)" >&2; exit 1; }
 export CLIPPY_DRIVER RUSTC_WORKSPACE_WRAPPER="$PWD/scripts/clippy-rustc.sh"
