@@ -12,6 +12,7 @@
 #   RUNS            number of runs (default 3); the VM's speed drifts, so compare builds by
 #                   alternating their runs, not by one run each
 #   STYLIZE_BINARY  a release `stylize` binary to measure (default: builds target/release/stylize)
+#                   (the mesh comes from mesh-core's `write_icosphere` example, built either way)
 # Needs cargo, python3, and ONNX Runtime (fetched from PyPI by scripts/setup-onnxruntime.sh).
 set -euo pipefail
 
@@ -23,7 +24,7 @@ if ! [[ "${RUNS}" =~ ^[1-9][0-9]*$ ]]; then
     echo "error: RUNS must be a positive integer, got '${RUNS}'" >&2
     exit 2
 fi
-command -v python3 >/dev/null || { echo "error: python3 is needed for the icosphere and the medians" >&2; exit 2; }
+command -v python3 >/dev/null || { echo "error: python3 is needed for the medians" >&2; exit 2; }
 
 cd "${REPO_ROOT}"
 if [[ -z "${ORT_DYLIB_PATH:-}" ]]; then
@@ -40,34 +41,8 @@ fi
 WORK="$(mktemp -d "${TMPDIR:-/tmp}/bench-target3.XXXXXX")"
 trap 'rm -rf "${WORK}"' EXIT
 
-# Icosphere level 5: the icosahedron, five times split into four with midpoints pushed to the sphere.
-python3 - "${WORK}/ico5.obj" <<'PY'
-import math, sys
-t = (1 + 5 ** 0.5) / 2
-V = [(-1, t, 0), (1, t, 0), (-1, -t, 0), (1, -t, 0), (0, -1, t), (0, 1, t), (0, -1, -t), (0, 1, -t),
-     (t, 0, -1), (t, 0, 1), (-t, 0, -1), (-t, 0, 1)]
-F = [(0, 11, 5), (0, 5, 1), (0, 1, 7), (0, 7, 10), (0, 10, 11), (1, 5, 9), (5, 11, 4), (11, 10, 2),
-     (10, 7, 6), (7, 1, 8), (3, 9, 4), (3, 4, 2), (3, 2, 6), (3, 6, 8), (3, 8, 9), (4, 9, 5),
-     (2, 4, 11), (6, 2, 10), (8, 6, 7), (9, 8, 1)]
-unit = lambda v: tuple(c / math.sqrt(sum(x * x for x in v)) for c in v)
-V = [unit(v) for v in V]
-for _ in range(5):
-    mids, split = {}, []
-    def mid(a, b):
-        key = (min(a, b), max(a, b))
-        if key not in mids:
-            V.append(unit(tuple((V[a][i] + V[b][i]) / 2 for i in range(3))))
-            mids[key] = len(V) - 1
-        return mids[key]
-    for a, b, c in F:
-        ab, bc, ca = mid(a, b), mid(b, c), mid(c, a)
-        split += [(a, ab, ca), (b, bc, ab), (c, ca, bc), (ab, bc, ca)]
-    F = split
-assert (len(V), len(F)) == (10242, 20480)
-with open(sys.argv[1], "w") as out:
-    out.writelines("v %.17g %.17g %.17g\n" % v for v in V)
-    out.writelines("f %d %d %d\n" % (a + 1, b + 1, c + 1) for a, b, c in F)
-PY
+# The 20,480-face icosphere, from mesh-core's own generator.
+cargo run --release --locked --quiet -p mesh-core --example write_icosphere -- 5 "${WORK}/ico5.obj"
 
 PIN=()
 if command -v taskset >/dev/null && [[ "$(nproc)" -ge 2 ]]; then
