@@ -26,18 +26,21 @@ cargo test --workspace --all-targets --locked --no-run
 step "cargo test";                 cargo test --workspace --all-targets --locked
 step "cargo test --doc";           cargo test --workspace --doc --locked
 # The README's quick-start build (docs/cli.md, "Builds and features"): lints, and its own test.
-# Its dependencies get fewer features than in the workspace's build, so Cargo recompiles them (the
-# faer tree, the proc-macros); one compilation serves both checks, as above, then the features
-# test runs on those artifacts.
-quick_start() { cargo test -p stylize-cli --no-default-features --locked "$@"; }
+# Selected alone, its dependencies would get fewer features than in the workspace's build and Cargo
+# would compile them again (the faer tree, the proc-macros); `-p workspace-hack` pins them to the
+# workspace build's (crates/workspace-hack: no code, and `check-deps` below keeps it complete), so
+# only our crates compile here. One compilation serves both checks, as above.
+quick_start() { cargo test -p stylize-cli -p workspace-hack --no-default-features --locked "$@"; }
 step "quick-start build: clippy, all targets"; quick_start --all-targets --no-run
 step "quick-start build: test";    quick_start --test features
 step "cargo build (xtask)";        cargo build -p xtask --locked   # visible progress; `cargo xtask` runs quietly
 step "cargo xtask check-deps";     cargo xtask check-deps
 step "cargo xtask gradcheck";      cargo xtask gradcheck
 # --- Python bindings (crates/darap-py): build into .venv (dev profile, shared target/), pytest ---
+# (feature workspace-hack: the workspace build's dependency artifacts, as for the quick-start build)
 step "darap-py: maturin develop";  VIRTUAL_ENV="$PWD/.venv" PATH="$PWD/.venv/bin:$PATH" \
-                                   maturin develop --locked --manifest-path crates/darap-py/Cargo.toml
+                                   maturin develop --locked --manifest-path crates/darap-py/Cargo.toml \
+                                   --features workspace-hack
 step "pytest (darap-py, scripts)"; .venv/bin/python -m pytest crates/darap-py/tests scripts/tests
 # --- end Python bindings ---
 step "cargo xtask fuzz";           cargo xtask fuzz --seconds 60

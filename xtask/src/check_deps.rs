@@ -1,5 +1,8 @@
-//! Dependency rules: crates that must stay light do not pull in heavy ones.
+//! Dependency rules: crates that must stay light do not pull in heavy ones; and the narrower builds
+//! of `scripts/test.sh` resolve every dependency with the workspace build's features, so they reuse
+//! its artifacts (`crates/workspace-hack`).
 
+use std::collections::{BTreeMap, BTreeSet};
 use std::process::Command;
 
 /// (crate, forbidden dependencies in its normal dependency tree)
@@ -112,19 +115,8 @@ pub fn run() -> anyhow::Result<()> {
         .map(|&(krate, forbidden)| (krate, &[][..], forbidden))
         .chain(FEATURE_RULES.iter().copied());
     for (krate, features, forbidden) in rules {
-        let out = Command::new(env!("CARGO"))
-            .args([
-                "tree", "--quiet", "--edges", "normal", "--prefix", "none", "--format", "{p}",
-                "-p", krate,
-            ])
-            .args(features)
-            .output()?;
-        anyhow::ensure!(
-            out.status.success(),
-            "cargo tree -p {krate} failed: {}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        let tree = String::from_utf8_lossy(&out.stdout);
+        let selection = [&["-p", krate][..], features].concat();
+        let tree = cargo_tree(&["--edges", "normal", "--format", "{p}"], &selection)?;
         let mut names: Vec<&str> = tree
             .lines()
             .filter_map(|l| l.split_whitespace().next())
@@ -157,6 +149,118 @@ pub fn run() -> anyhow::Result<()> {
         "dependency rules violated:\n  {}",
         violations.join("\n  ")
     );
+    check_feature_unification()?;
     println!("check-deps: all rules hold");
     Ok(())
+}
+
+/// The builds `scripts/test.sh` runs after `cargo test --workspace --all-targets`, with the
+/// selection that pins their dependencies' features to that build's.
+const NARROWER_BUILDS: &[(&str, &[&str])] = &[
+    (
+        "the quick-start test build",
+        &[
+            "-p",
+            "stylize-cli",
+            "-p",
+            "workspace-hack",
+            "--no-default-features",
+        ],
+    ),
+    (
+        "the Python module (maturin)",
+        &["-p", "darap-py", "--features", "workspace-hack"],
+    ),
+    ("xtask", &["-p", "xtask"]),
+];
+
+/// Dependencies allowed to differ in a narrower build, and why.
+const UNIFICATION_EXEMPT: &[(&str, &str)] = &[(
+    "tower",
+    "a dev-dependency of stylize-cli's view tests; the workspace's features would pull tokio into \
+     the quick-start test build, and it alone recompiles",
+)];
+
+/// Every external dependency of each narrower build must have the features it has in the
+/// workspace build (`cargo tree` with the default edges, dev-dependencies included, as the
+/// `--all-targets` builds): otherwise Cargo compiles it, and everything above it, a second time.
+/// Host (build-script, proc-macro) and target resolutions of one package are compared as a set.
+fn check_feature_unification() -> anyhow::Result<()> {
+    let workspace = feature_sets(&["--workspace"])?;
+    let mut drifted = Vec::new();
+    for (build, args) in NARROWER_BUILDS {
+        let narrower = feature_sets(args)?;
+        let mut differing = 0;
+        for (package, features) in &narrower {
+            let name = package.split_whitespace().next().unwrap_or_default();
+            if UNIFICATION_EXEMPT.iter().any(|(n, _)| *n == name) {
+                continue;
+            }
+            let wanted = workspace.get(package);
+            if wanted != Some(features) {
+                differing += 1;
+                drifted.push(format!(
+                    "{build}: {package} has features {features:?}, the workspace build {}",
+                    wanted.map_or("does not build it".to_string(), |w| format!("{w:?}"))
+                ));
+            }
+        }
+        println!(
+            "{build} ({}): {} external packages, {differing} with features other than the workspace build's",
+            args.join(" "),
+            narrower.len()
+        );
+    }
+    anyhow::ensure!(
+        drifted.is_empty(),
+        "the narrower builds would recompile dependencies the workspace build compiled:\n  {}\n\
+         Give crates/workspace-hack/Cargo.toml (xtask/Cargo.toml for xtask) an entry for each \
+         package with the workspace build's features ([build-dependencies] for proc-macro \
+         dependencies such as syn); see crates/workspace-hack/src/lib.rs.",
+        drifted.join("\n  ")
+    );
+    Ok(())
+}
+
+/// External packages ("name vX.Y.Z") of one `cargo tree` selection with the feature sets they are
+/// resolved with (more than one when host and target resolutions differ).
+fn feature_sets(selection: &[&str]) -> anyhow::Result<BTreeMap<String, BTreeSet<String>>> {
+    let tree = cargo_tree(&["--format", "{p}|{f}"], selection)?;
+    let mut sets: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
+    for line in tree.lines().filter(|l| !l.trim().is_empty()) {
+        let (package, features) = line
+            .split_once('|')
+            .ok_or_else(|| anyhow::anyhow!("unexpected `cargo tree` line {line:?}"))?;
+        let features = features.trim_end_matches(" (*)");
+        // Workspace members ("name vX (/path)") are compiled per build anyway.
+        if package.contains(" (/") {
+            continue;
+        }
+        let package = package.trim_end_matches(" (proc-macro)").trim();
+        sets.entry(package.to_string())
+            .or_default()
+            .insert(features.to_string());
+    }
+    anyhow::ensure!(
+        !sets.is_empty(),
+        "cargo tree {} listed no external package; output format changed?",
+        selection.join(" ")
+    );
+    Ok(sets)
+}
+
+/// `cargo tree --quiet --prefix none ARGS SELECTION`'s output.
+fn cargo_tree(args: &[&str], selection: &[&str]) -> anyhow::Result<String> {
+    let out = Command::new(env!("CARGO"))
+        .args(["tree", "--quiet", "--prefix", "none"])
+        .args(args)
+        .args(selection)
+        .output()?;
+    anyhow::ensure!(
+        out.status.success(),
+        "cargo tree {} failed: {}",
+        selection.join(" "),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    Ok(String::from_utf8_lossy(&out.stdout).into_owned())
 }
