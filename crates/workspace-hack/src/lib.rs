@@ -1,4 +1,5 @@
-//! Build-time only: no code, and no crate uses it in a build a user runs.
+//! Build-time only: no code. CI's narrower builds and xtask select it; no product build (the
+//! README's commands, `cargo install`, `pip install`) does.
 //!
 //! Cargo resolves a dependency's features over the packages of one invocation. The README's test
 //! command (`scripts/test.sh`) builds the whole workspace once, then two narrower builds:
@@ -15,5 +16,6 @@
 //! extra items the dependencies offer.
 //!
 //! The same technique as `cargo hakari`'s generated crate, kept by hand: `cargo xtask check-deps`
-//! compares the feature sets of the three builds (`cargo tree`) and names any dependency whose
-//! features have drifted, with the line to add to this crate's `Cargo.toml`.
+//! compares the feature sets of those builds and of xtask's with the workspace build's (`cargo
+//! tree`) and fails on any dependency whose features have drifted, naming it with both feature
+//! sets: its entry here then needs the workspace build's set.
