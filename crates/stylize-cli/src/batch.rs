@@ -16,7 +16,8 @@
 //!
 //! Rows are numbered from 0 in file order; shard `i` of `n` takes the rows with `index % n == i`.
 //! At load time, an empty `out` and two rows writing the same run directory (after path
-//! normalization: `.`/`..`, trailing slashes, links of existing folders) are errors naming the rows.
+//! normalization: `.`/`..`, trailing slashes, links of existing folders) are errors naming the rows,
+//! and so is a run directory inside another row's (`a` and `a/previews`, `a` and `a/b/c`).
 //!
 //! Each row takes its run directory's lock, then: **skipped** when the directory holds a complete
 //! run of the same task (same identity, see [`crate::identity`]); an **error** when it holds a
@@ -118,6 +119,7 @@ pub fn read_manifest(path: &Path) -> anyhow::Result<Vec<Row>> {
     // Normalized run directory → (row, `out` as written).
     let mut seen: std::collections::HashMap<PathBuf, (usize, PathBuf)> =
         std::collections::HashMap::new();
+    let mut keys = Vec::with_capacity(rows.len());
     for (i, r) in rows.iter_mut().enumerate() {
         if r.prompt.is_some() == r.style.is_some() {
             bail!(
@@ -156,7 +158,27 @@ pub fn read_manifest(path: &Path) -> anyhow::Result<Vec<Row>> {
                 written.display().to_string()
             );
         }
-        seen.insert(key, (i, written));
+        seen.insert(key.clone(), (i, written));
+        keys.push(key);
+    }
+    // A run directory inside another row's: the outer row's `--force` cleanup would meet the
+    // inner run (its `previews/`, say), and the outer folder would look foreign to a fresh claim.
+    for (i, key) in keys.iter().enumerate() {
+        let mut ancestor = key.parent();
+        while let Some(a) = ancestor {
+            if let Some((j, outer)) = seen.get(a) {
+                bail!(
+                    "manifest {}: row {i}'s run directory {} lies inside row {j}'s {} (out = {:?} \
+                     and {:?}); run directories must not nest — give each row its own folder",
+                    path.display(),
+                    key.display(),
+                    a.display(),
+                    seen[key].1.display().to_string(),
+                    outer.display().to_string()
+                );
+            }
+            ancestor = a.parent();
+        }
     }
     // A row's input must not be another row's output (its mesh.obj, or anything in its previews/).
     for (i, r) in rows.iter().enumerate() {

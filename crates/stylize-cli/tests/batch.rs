@@ -150,6 +150,21 @@ fn duplicate_or_empty_outputs_are_manifest_errors_naming_the_rows() {
     assert!(e.contains("row 1") && e.contains("empty"), "{e}");
     let e = err(row("runs/a") + &row("  "));
     assert!(e.contains("row 1") && e.contains("empty"), "{e}");
+    // One run directory inside another's, in either row order and at any depth.
+    let e = err(row("runs/a") + &row("runs/b") + &row("runs/a/previews"));
+    assert!(
+        e.contains("row 2's run directory") && e.contains("row 0's") && e.contains("nest"),
+        "{e}"
+    );
+    let e = err(row("runs/n/x/y") + &row("./runs/n/"));
+    assert!(
+        e.contains("row 0's run directory") && e.contains("row 1's"),
+        "{e}"
+    );
+    assert!(
+        err(row("runs/ab") + &row("runs/a")).is_empty(),
+        "a sibling with a common prefix"
+    );
     // One row's input is another row's output.
     let e = err(row("runs/a")
         + "{\"mesh\": \"runs/a/mesh.obj\", \"style\": \"cube\", \"out\": \"runs/b\"}\n");

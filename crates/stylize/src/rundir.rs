@@ -25,7 +25,8 @@
 //!   `--force` included (paths are compared by file identity, so links and `..` do not fool it);
 //! - a non-empty folder that is not one of our run directories (no valid `task.json`,
 //!   `checkpoint.json` or `run.json`) is refused unless `--force`;
-//! - `--force` removes only our own files ([`RUN_FILES`], `previews/`, our temporary files);
+//! - `--force` removes only our own files ([`RUN_FILES`], the preview grids in `previews/`, our
+//!   temporary files), and `previews/` itself only when that leaves it empty;
 //! - the directory lock is taken before anything in the folder is read or changed.
 
 use std::os::unix::fs::MetadataExt;
@@ -51,7 +52,7 @@ pub struct RunDir {
     root: PathBuf,
 }
 
-/// Every file name a run writes at top level (what `--force` removes, with `previews/`).
+/// Every file name a run writes at top level (what `--force` removes, with the preview grids).
 pub const RUN_FILES: &[&str] = &[
     "task.json",
     "config.toml",
@@ -206,6 +207,13 @@ pub fn refuse_overwriting_inputs(
         }
     }
     Ok(())
+}
+
+/// Whether `name` is a preview grid's file name, `iter_` then digits then `.png`.
+pub fn is_preview_name(name: &str) -> bool {
+    name.strip_prefix("iter_")
+        .and_then(|r| r.strip_suffix(".png"))
+        .is_some_and(|d| !d.is_empty() && d.bytes().all(|b| b.is_ascii_digit()))
 }
 
 impl RunDir {
@@ -503,11 +511,29 @@ impl RunDir {
                 std::fs::remove_file(&p).io_context("cannot remove", &p)?;
             }
         }
-        let previews = self.previews();
-        if previews.is_dir() {
-            std::fs::remove_dir_all(&previews).io_context("cannot remove", &previews)?;
-        }
+        self.remove_previews()?;
         self.remove_temporaries();
+        Ok(())
+    }
+
+    /// Removes the preview grids (`previews/iter_NNNNNN.png`) and our temporary files there, then
+    /// the folder if that left it empty. Anything else in it is kept — another run directory
+    /// placed there, say — so starting over never deletes what this run did not write.
+    fn remove_previews(&self) -> Result<()> {
+        let previews = self.previews();
+        let Ok(entries) = std::fs::read_dir(&previews) else {
+            return Ok(());
+        };
+        for e in entries.flatten() {
+            let name = e.file_name().to_string_lossy().into_owned();
+            let is_file = e.file_type().is_ok_and(|t| t.is_file());
+            if is_file && (is_preview_name(&name) || crate::durable::is_temp_name(&name)) {
+                let p = e.path();
+                std::fs::remove_file(&p).io_context("cannot remove", &p)?;
+            }
+        }
+        // Not empty (someone else's files): kept.
+        let _ = std::fs::remove_dir(&previews);
         Ok(())
     }
 
@@ -597,13 +623,45 @@ mod tests {
         let e = err(run.claim(&claim(&id, &[], false, ResumeMode::Never)));
         assert!(e.contains("--force"), "{e}");
         ok(std::fs::write(run.file("user-notes.txt"), "keep me"));
-        let (_lock, start) = ok(run.claim(&claim(&id, &[], true, ResumeMode::Never)));
+        let (forced, start) = ok(run.claim(&claim(&id, &[], true, ResumeMode::Never)));
         assert!(matches!(start, Start::Fresh));
         assert!(!run.summary().exists() && !run.file("mesh.obj").exists());
         assert!(
             run.file("user-notes.txt").exists(),
             "--force removes only the run's own files"
         );
+        // previews/: the grids go; another run directory placed there stays.
+        drop(forced);
+        let nested = run.previews().join("previews");
+        ok(std::fs::create_dir_all(&nested));
+        ok(std::fs::write(run.previews().join("iter_000004.png"), ""));
+        ok(std::fs::write(run.previews().join("run.json"), "{}"));
+        ok(std::fs::write(nested.join("iter_000002.png"), ""));
+        let (lock, _) = ok(run.claim(&claim(&id, &[], true, ResumeMode::Never)));
+        assert!(!run.previews().join("iter_000004.png").exists());
+        assert!(
+            run.previews().join("run.json").exists() && nested.join("iter_000002.png").exists()
+        );
+        drop(lock);
+        ok(std::fs::remove_file(run.previews().join("run.json")));
+        ok(std::fs::remove_dir_all(&nested));
+        ok(std::fs::write(run.previews().join("iter_000006.png"), ""));
+        let _ = ok(run.claim(&claim(&id, &[], true, ResumeMode::Never)));
+        assert!(!run.previews().exists(), "an emptied previews/ is removed");
+    }
+
+    #[test]
+    fn preview_names() {
+        assert!(is_preview_name("iter_000012.png") && is_preview_name("iter_1234567.png"));
+        for n in [
+            "iter_.png",
+            "iter_12.PNG",
+            "iter_1a.png",
+            "x_000001.png",
+            "iter_000001.png~",
+        ] {
+            assert!(!is_preview_name(n), "{n}");
+        }
     }
 
     #[test]
