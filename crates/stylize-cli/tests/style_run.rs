@@ -80,8 +80,19 @@ fn run_directory_is_complete_and_refuses_overwrite() {
     let tmp = ok(tempfile::tempdir());
     let mesh = small_mesh(tmp.path());
     let out = tmp.path().join("nested/dirs/run");
-    let cfg = config(6, 4);
-    ok(run(&mesh, &out, cfg.clone(), false, None));
+    let mut cfg = config(6, 4);
+    // A text-path setting: not used, so warned about and not recorded as the run's.
+    cfg.optim.iterations = 2000;
+    let outcome = ok(run(&mesh, &out, cfg.clone(), false, None));
+    assert!(
+        outcome
+            .warnings
+            .iter()
+            .any(|w| w.contains("optim.iterations = 2000")
+                && w.contains("not used by a model-free style run")),
+        "{:?}",
+        outcome.warnings
+    );
     for f in [
         "config.toml",
         "metrics.jsonl",
@@ -112,6 +123,12 @@ fn run_directory_is_complete_and_refuses_overwrite() {
     assert_eq!(summary["status"], "complete");
     let saved = ok(SavedDeformation::read(out.join("deformation.npz")));
     assert_eq!(saved.lambda(), Some(8.0));
+    let recorded = saved.csd_cfg();
+    assert_eq!(
+        (recorded["n_iters"].as_u64(), recorded["lr"].as_f64()),
+        (Some(6), Some(cfg.style.lr)),
+        "the optimizer settings the run used"
+    );
     assert!(saved.extra("seed").is_some() && saved.extra("rotation_rule").is_some());
     assert!(saved.extra("format_version").is_some());
     let e = run(&mesh, &out, cfg, false, None)

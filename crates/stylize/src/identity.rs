@@ -47,6 +47,71 @@ pub const PRESENTATION_KEYS: &[&str] = &[
 /// Keys of the text path's sections that the model-free path reads as well.
 const STYLE_PATH_OPTIM_KEYS: &[&str] = &["optim.beta1", "optim.beta2", "optim.eps"];
 
+/// Whether a run on the model-free path (`style_path`) or the text path reads the result-changing
+/// key `name` (`section.key`). Presentation keys and `[region]` are read by both.
+fn path_reads(section: &str, name: &str, style_path: bool) -> bool {
+    if !style_path {
+        return section != "style";
+    }
+    match section {
+        "darap" | "style" | "region" => true,
+        "run" => name == "run.seed" || PRESENTATION_KEYS.contains(&name),
+        _ => STYLE_PATH_OPTIM_KEYS.contains(&name),
+    }
+}
+
+/// Keys the model-free path reads only for its pictures (previews, turntable, before/after), so
+/// they are not in its identity yet are used.
+const STYLE_PATH_PICTURE_KEYS: &[&str] = &["camera.fov_deg"];
+
+/// The settings of `config` that differ from their defaults although the chosen path
+/// (`style_path`: model-free) never reads them, as `section.key = value` — a `--set
+/// optim.iterations=…` on a `--style` run, a negative prompt without a prompt. Presentation and
+/// memory keys ([`PRESENTATION_KEYS`]) are not listed.
+pub fn unread_settings(config: &Config, style_path: bool) -> Result<Vec<String>> {
+    let table = toml::Table::try_from(config)?;
+    let defaults = toml::Table::try_from(Config::default())?;
+    let mut unread = Vec::new();
+    for (section, keys) in &table {
+        let Some(keys) = keys.as_table() else {
+            continue;
+        };
+        let default_keys = defaults.get(section).and_then(|d| d.as_table());
+        for (key, value) in keys {
+            let name = format!("{section}.{key}");
+            if PRESENTATION_KEYS.contains(&name.as_str())
+                || path_reads(section, &name, style_path)
+                || (style_path && STYLE_PATH_PICTURE_KEYS.contains(&name.as_str()))
+            {
+                continue;
+            }
+            if default_keys.and_then(|d| d.get(key)) != Some(value) {
+                unread.push(format!("{name} = {value}"));
+            }
+        }
+    }
+    Ok(unread)
+}
+
+/// The warning for [`unread_settings`] (`None` when there are none).
+pub fn unread_settings_warning(config: &Config, style_path: bool) -> Result<Option<String>> {
+    let unread = unread_settings(config, style_path)?;
+    if unread.is_empty() {
+        return Ok(None);
+    }
+    let what = if style_path {
+        "a model-free style run, which reads [style] (its own iterations and lr), [darap], \
+         run.seed and optim.beta1/beta2/eps"
+    } else {
+        "a prompt run ([style] is the model-free path's)"
+    };
+    Ok(Some(format!(
+        "{} {} not used by {what}",
+        unread.join(", "),
+        if unread.len() == 1 { "is" } else { "are" }
+    )))
+}
+
 /// The model a text run uses, as recorded.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct ModelIdentity {
@@ -206,14 +271,7 @@ impl TaskIdentity {
                 if PRESENTATION_KEYS.contains(&name.as_str()) {
                     continue;
                 }
-                let read = if style_path {
-                    matches!(section.as_str(), "darap" | "style")
-                        || name == "run.seed"
-                        || STYLE_PATH_OPTIM_KEYS.contains(&name.as_str())
-                } else {
-                    section != "style"
-                };
-                if read {
+                if path_reads(section, &name, style_path) {
                     fields.insert(format!("config.{name}"), value.to_string());
                 }
             }
@@ -278,6 +336,36 @@ mod tests {
     fn id(objective: &ObjectiveIdentity, config: &Config) -> TaskIdentity {
         let (p, f) = tri();
         TaskIdentity::new(&p, &f, objective, config).unwrap_or_else(|e| panic!("{e:#}"))
+    }
+
+    #[test]
+    fn settings_the_chosen_path_never_reads_are_named() {
+        let c = Config::default()
+            .with_overrides(&[
+                "optim.iterations=2000",
+                "guidance.negative_prompt=blurry",
+                "style.lr=0.05",
+                "camera.fov_deg=60",
+                "run.turntable_views=3",
+            ])
+            .unwrap_or_else(|e| panic!("{e}"));
+        let style = unread_settings(&c, true).unwrap_or_default();
+        assert_eq!(
+            style,
+            [
+                "guidance.negative_prompt = \"blurry\"",
+                "optim.iterations = 2000"
+            ]
+        );
+        let text = unread_settings(&c, false).unwrap_or_default();
+        assert_eq!(text, ["style.lr = 0.05"]);
+        let w = unread_settings_warning(&c, true)
+            .ok()
+            .flatten()
+            .unwrap_or_default();
+        assert!(w.contains("are not used by a model-free style run"), "{w}");
+        assert!(unread_settings(&Config::default(), true).is_ok_and(|u| u.is_empty()));
+        assert!(unread_settings(&Config::default(), false).is_ok_and(|u| u.is_empty()));
     }
 
     #[test]

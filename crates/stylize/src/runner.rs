@@ -570,10 +570,11 @@ pub fn build_objective<'g>(
     Ok(match task {
         Task::Style(style) => {
             let obj = StyleObjective::new(&style, &mesh.positions, &mesh.faces);
+            let (iterations, lr) = config.iterations_and_lr(true);
             BuiltObjective {
                 objective: Box::new(obj.clone()),
-                spec: spec(config.style.iterations, 1),
-                adam: adam(config.style.lr),
+                spec: spec(iterations, 1),
+                adam: adam(lr),
                 style: Some(obj),
                 renderer_choice: None,
                 label,
@@ -589,10 +590,11 @@ pub fn build_objective<'g>(
                 adapt_distance: config.camera.adapt_distance,
             };
             let obj = TextObjective::new(renderer, guidance, &mesh.faces, views);
+            let (iterations, lr) = config.iterations_and_lr(false);
             BuiltObjective {
                 objective: Box::new(obj),
-                spec: spec(config.optim.iterations, config.optim.steps_per_batch),
-                adam: adam(config.optim.lr),
+                spec: spec(iterations, config.optim.steps_per_batch),
+                adam: adam(lr),
                 style: None,
                 renderer_choice: Some(why),
                 label,
@@ -763,6 +765,10 @@ pub fn execute_with<'g>(
         Task::Style(s) => Some(s.clone()),
         Task::Text { .. } => None,
     };
+    if let Some(w) = crate::identity::unread_settings_warning(config, style.is_some())? {
+        progress.warning(&format!("warning: {w}"));
+        prepared.warnings.push(w);
+    }
     let BuiltObjective {
         mut objective,
         spec,
@@ -1083,13 +1089,15 @@ fn write_deformation(
     task_value: &str,
     region: Option<&ResolvedRegion>,
 ) -> Result<()> {
+    // The optimizer settings this run used (`[style]`'s on the model-free path).
+    let (n_iters, lr) = config.iterations_and_lr(task_key == "style");
     let csd_cfg = serde_json::json!({
         "local_step_procrustes": { "lamb": config.darap.lambda, "normalize_target_normals": true },
         "arap_energy_type": "spokes_and_rims_mine",
         "solve_method": "arap",
         "pin_first_vertex": true,
-        "lr": config.optim.lr,
-        "n_iters": config.optim.iterations,
+        "lr": lr,
+        "n_iters": n_iters,
     });
     let dataset_cfg =
         serde_json::json!({ "mesh": source.display().to_string(), task_key: task_value });

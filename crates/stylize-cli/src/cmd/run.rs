@@ -153,6 +153,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let result = match (&args.style, &args.prompt) {
         (Some(style), None) => {
             let style = Style::parse(style)?;
+            if let Some(m) = &args.settings.model
+                && !args.settings.quiet
+            {
+                eprintln!(
+                    "warning: --model {} is not used by a --style run (model-free)",
+                    m.display()
+                );
+            }
             if let Style::Exemplar { path, .. } = &style {
                 options.inputs.push(("exemplar mesh".into(), path.clone()));
             }
