@@ -233,6 +233,13 @@ impl Default for StyleSection {
     }
 }
 
+/// The largest `run.turntable_size`, in pixels (the zoomed renders behind a tile reach 4×).
+pub const MAX_TURNTABLE_SIZE: usize = 1024;
+/// The most `run.turntable_views` (tiles of the contact sheet and of `before_after.png`).
+pub const MAX_TURNTABLE_VIEWS: usize = 64;
+/// The most `run.turntable_gif_frames` (one per degree).
+pub const MAX_TURNTABLE_GIF_FRAMES: usize = 360;
+
 /// `[run]`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -243,11 +250,12 @@ pub struct RunSection {
     pub checkpoint_every: u64,
     /// Write a PNG grid of the current views every N iterations (0: never): 250.
     pub preview_every: u64,
-    /// Frames of the final turntable contact sheet: 8.
+    /// Frames of the final turntable contact sheet: 8 (1 to [`MAX_TURNTABLE_VIEWS`]).
     pub turntable_views: usize,
-    /// Side in pixels of preview and turntable frames: 256.
+    /// Side in pixels of preview and turntable frames: 256 (1 to [`MAX_TURNTABLE_SIZE`]).
     pub turntable_size: usize,
-    /// Frames of the animated `turntable.gif` (0: none): 36.
+    /// Frames of the animated `turntable.gif`, 360°/N apart (0: none; at most
+    /// [`MAX_TURNTABLE_GIF_FRAMES`]): 36.
     pub turntable_gif_frames: usize,
     /// Save the deformed positions to `snapshots.npz` every N iterations, plus iteration 0 and the
     /// last (0: no snapshots): 50.
@@ -421,8 +429,28 @@ impl Config {
                 "render.width and render.height must be positive"
             );
         }
-        if self.run.turntable_size == 0 {
-            bad_field!("run.turntable_size", "run.turntable_size must be positive");
+        let run = &self.run;
+        if !(1..=MAX_TURNTABLE_SIZE).contains(&run.turntable_size) {
+            bad_field!(
+                "run.turntable_size",
+                "run.turntable_size must be in 1..={MAX_TURNTABLE_SIZE} pixels, got {}",
+                run.turntable_size
+            );
+        }
+        if !(1..=MAX_TURNTABLE_VIEWS).contains(&run.turntable_views) {
+            bad_field!(
+                "run.turntable_views",
+                "run.turntable_views must be in 1..={MAX_TURNTABLE_VIEWS}, got {}",
+                run.turntable_views
+            );
+        }
+        if run.turntable_gif_frames > MAX_TURNTABLE_GIF_FRAMES {
+            bad_field!(
+                "run.turntable_gif_frames",
+                "run.turntable_gif_frames must be at most {MAX_TURNTABLE_GIF_FRAMES} (1° apart; \
+                 0 = no GIF), got {}",
+                run.turntable_gif_frames
+            );
         }
         if !(self.guidance.t_min >= 1
             && self.guidance.t_min <= self.guidance.t_max
@@ -606,6 +634,30 @@ mod tests {
         assert!(!c.camera.adapt_distance);
         assert_eq!(c.guidance.stage2_weight, "0.1");
         assert_eq!(c.darap.lambda, 5.0);
+    }
+
+    #[test]
+    fn picture_settings_are_bounded_before_a_run_starts() {
+        for (set, key) in [
+            ("run.turntable_views=0", "run.turntable_views"),
+            ("run.turntable_views=65", "run.turntable_views"),
+            ("run.turntable_size=0", "run.turntable_size"),
+            ("run.turntable_size=100000", "run.turntable_size"),
+            ("run.turntable_gif_frames=361", "run.turntable_gif_frames"),
+        ] {
+            let e = Config::default()
+                .with_overrides(&[set])
+                .err()
+                .map(|e| e.full_message())
+                .unwrap_or_default();
+            assert!(e.contains(key), "{set}: {e}");
+        }
+        let c = ok(Config::default().with_overrides(&[
+            "run.turntable_views=64",
+            "run.turntable_size=1024",
+            "run.turntable_gif_frames=360",
+        ]));
+        ok(c.validate());
     }
 
     #[test]

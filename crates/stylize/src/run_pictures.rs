@@ -24,6 +24,11 @@ pub const GIF_FRAME_DELAY_CS: u16 = 8;
 /// bounding-sphere framing is still shown whole, just not filling its tiles).
 const MAX_ZOOM: f64 = 4.0;
 
+/// Pixels [`filled_orbit`] renders at once (12 views of 512²): its views are rendered in chunks
+/// of at most this many pixels, at least one view, so the renderer's buffers stay bounded however
+/// long the orbit or large the zoomed render.
+const ORBIT_CHUNK_PIXELS: usize = 12 * 512 * 512;
+
 /// Renders and writes the before/after sheet (see the module documentation); `views` columns.
 pub fn write_before_after(
     path: &Path,
@@ -163,6 +168,11 @@ fn crop(images: &Images, size: usize, x0: usize, y0: usize, side: usize) -> Imag
 /// on the silhouettes — one zoom and one window for all views. Should the silhouettes still not
 /// fit the window, the resolution is lowered until they do (down to the unzoomed render). With
 /// `free`, the pixels of faces touching the region are tinted ([`crate::runner::tint_region`]).
+///
+/// Every pass renders the views in chunks of at most [`ORBIT_CHUNK_PIXELS`] pixels and keeps only
+/// the silhouette bounds, or the cropped tiles, of each chunk: memory grows with `views·size²`,
+/// not with the zoomed renders (the final resolution is rendered twice, for the bounds and for the
+/// tiles).
 pub fn filled_orbit(
     positions: &[[f64; 3]],
     faces: &[[u32; 3]],
@@ -174,11 +184,38 @@ pub fn filled_orbit(
     let size = size.max(1);
     let orbit = crate::runner::bounding_orbit(positions, views, fov_deg);
     let mut renderer = raster_diff::CpuRenderer::default();
+    // Renders the orbit at `side` pixels a chunk of views at a time (`ORBIT_CHUNK_PIXELS`),
+    // handing each chunk (with its triangle ids) to `each`.
+    let mut chunks =
+        |side: usize, each: &mut dyn FnMut(Images, Option<Vec<u32>>) -> Result<()>| -> Result<()> {
+            let per_chunk = (ORBIT_CHUNK_PIXELS / (side * side)).max(1);
+            for chunk in orbit.chunks(per_chunk) {
+                let images = renderer
+                    .render(positions, faces, chunk, side, side)
+                    .context("turntable render")?;
+                each(images, renderer.triangle_ids())?;
+            }
+            Ok(())
+        };
+    // The union of the views' silhouettes at `side` pixels.
+    let mut bounds_at = |side: usize| -> Result<Option<([usize; 2], [usize; 2])>> {
+        let mut union: Option<([usize; 2], [usize; 2])> = None;
+        chunks(side, &mut |images, _| {
+            if let Some((lo, hi)) = silhouette_bounds(&[&images], side) {
+                union = Some(match union {
+                    Some((l, h)) => (
+                        [l[0].min(lo[0]), l[1].min(lo[1])],
+                        [h[0].max(hi[0]), h[1].max(hi[1])],
+                    ),
+                    None => (lo, hi),
+                });
+            }
+            Ok(())
+        })?;
+        Ok(union)
+    };
     let probe_size = size.min(128);
-    let probe = renderer
-        .render(positions, faces, &orbit, probe_size, probe_size)
-        .context("turntable render")?;
-    let zoom = match silhouette_bounds(&[&probe], probe_size) {
+    let zoom = match bounds_at(probe_size)? {
         Some((lo, hi)) => {
             let extent = (hi[0] - lo[0]).max(hi[1] - lo[1]) + 1 + 2;
             (probe_size as f64 / extent as f64).clamp(1.0, MAX_ZOOM)
@@ -186,27 +223,37 @@ pub fn filled_orbit(
         None => 1.0,
     };
     let mut big = ((size as f64 * zoom).floor() as usize).max(size);
-    loop {
-        let mut images = renderer
-            .render(positions, faces, &orbit, big, big)
-            .context("turntable render")?;
-        let bounds = silhouette_bounds(&[&images], big);
+    let bounds = loop {
+        let bounds = bounds_at(big)?;
         let extent = bounds.map_or(0, |(lo, hi)| (hi[0] - lo[0]).max(hi[1] - lo[1]) + 1);
         if extent <= size || big == size {
-            if let (Some(free), Some(ids)) = (free, renderer.triangle_ids()) {
-                crate::runner::tint_region(&mut images, &ids, faces, free);
-            }
-            let (x0, y0) = match bounds {
-                Some((lo, hi)) => (
-                    window_start(lo[0], hi[0], size, big),
-                    window_start(lo[1], hi[1], size, big),
-                ),
-                None => ((big - size) / 2, (big - size) / 2),
-            };
-            return Ok(crop(&images, big, x0, y0, size));
+            break bounds;
         }
         big = (big * size / extent).max(size);
-    }
+    };
+    let (x0, y0) = match bounds {
+        Some((lo, hi)) => (
+            window_start(lo[0], hi[0], size, big),
+            window_start(lo[1], hi[1], size, big),
+        ),
+        None => ((big - size) / 2, (big - size) / 2),
+    };
+    let mut out = Images {
+        count: 0,
+        height: size,
+        width: size,
+        rgb: Vec::with_capacity(orbit.len() * size * size * 3),
+    };
+    chunks(big, &mut |mut images, ids| {
+        if let (Some(free), Some(ids)) = (free, ids) {
+            crate::runner::tint_region(&mut images, &ids, faces, free);
+        }
+        let cropped = crop(&images, big, x0, y0, size);
+        out.count += cropped.count;
+        out.rgb.extend_from_slice(&cropped.rgb);
+        Ok(())
+    })?;
+    Ok(out)
 }
 
 /// Writes `turntable.gif` (see [`encode_gif`]) atomically.

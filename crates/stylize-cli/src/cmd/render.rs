@@ -13,21 +13,29 @@ use anyhow::Context;
 use raster_diff::image::{Encoding, contact_sheet, write_png};
 use raster_diff::{Images, orbit_views, select_renderer};
 
-/// Views rendered per batch (bounds the renderer's per-render memory).
-const BATCH: usize = 8;
+/// Pixels rendered per batch (8 views of 1024²; at least one view): bounds the renderer's
+/// per-render memory.
+const BATCH_PIXELS: usize = 8 * 1024 * 1024;
+/// The most frames (`--turntable`).
+const MAX_FRAMES: usize = 360;
+/// The largest `--size`.
+const MAX_SIZE: usize = 8192;
+/// The most pixels of all frames together (kept for the contact sheet and the GIF, 12 bytes
+/// each): 2²⁷, e.g. 8 frames of 4096², 36 of 1930², 360 of 610².
+const MAX_TOTAL_PIXELS: usize = 1 << 27;
 
 /// Arguments of `stylize render`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// Mesh file (OBJ, OFF, PLY, glTF/GLB).
     pub mesh: PathBuf,
-    /// Number of turntable frames.
+    /// Number of turntable frames (1 to 360).
     #[arg(long, default_value_t = 8, allow_negative_numbers = true)]
     pub turntable: usize,
     /// Output folder (created if missing).
     #[arg(short, long = "out", alias = "output", value_name = "DIR")]
     pub output: PathBuf,
-    /// Image width and height in pixels.
+    /// Image width and height in pixels (1 to 8192; frames × size² at most 2²⁷).
     #[arg(long, default_value_t = 512, allow_negative_numbers = true)]
     pub size: usize,
     /// Camera elevation in degrees.
@@ -51,13 +59,37 @@ pub struct Args {
     /// Do not write the animated `turntable.gif`.
     #[arg(long)]
     pub no_gif: bool,
-    /// Overwrite existing frames, contact sheet and GIF.
+    /// Overwrite existing frames, contact sheet and GIF (and remove the frames, or the GIF with
+    /// `--no-gif`, that an earlier render left beyond this one's).
     #[arg(long)]
     pub force: bool,
 }
 
 fn frame_path(dir: &Path, k: usize) -> PathBuf {
     dir.join(format!("frame_{k:03}.png"))
+}
+
+/// The frame number of a `frame_NNN.png` name (digits, at least three).
+fn frame_number(name: &str) -> Option<usize> {
+    let digits = name.strip_prefix("frame_")?.strip_suffix(".png")?;
+    (digits.len() >= 3 && digits.bytes().all(|b| b.is_ascii_digit()))
+        .then(|| digits.parse().ok())
+        .flatten()
+}
+
+/// The frames `frame_NNN.png` in `dir` numbered `frames` or more: an earlier, longer render's.
+fn stale_frames(dir: &Path, frames: usize) -> Vec<PathBuf> {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return Vec::new();
+    };
+    let mut stale: Vec<PathBuf> = entries
+        .flatten()
+        .filter(|e| e.file_type().is_ok_and(|t| t.is_file()))
+        .filter(|e| frame_number(&e.file_name().to_string_lossy()).is_some_and(|k| k >= frames))
+        .map(|e| e.path())
+        .collect();
+    stale.sort();
+    stale
 }
 
 fn save(path: &Path, images: &Images, index: usize, encoding: Encoding) -> anyhow::Result<()> {
@@ -72,11 +104,28 @@ fn save(path: &Path, images: &Images, index: usize, encoding: Encoding) -> anyho
 
 /// Runs `stylize render`.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    anyhow::ensure!(args.turntable >= 1, "--turntable must be at least 1");
     anyhow::ensure!(
-        (1..=8192).contains(&args.size),
-        "--size must be in 1..=8192"
+        (1..=MAX_FRAMES).contains(&args.turntable),
+        "--turntable must be in 1..={MAX_FRAMES}, got {}",
+        args.turntable
     );
+    anyhow::ensure!(
+        (1..=MAX_SIZE).contains(&args.size),
+        "--size must be in 1..={MAX_SIZE}, got {}",
+        args.size
+    );
+    anyhow::ensure!(
+        args.turntable * args.size * args.size <= MAX_TOTAL_PIXELS,
+        "--turntable {} at --size {} is {} pixels in all, more than the {MAX_TOTAL_PIXELS} \
+         (2^27) a render keeps in memory for its contact sheet and GIF: fewer frames or a \
+         smaller --size",
+        args.turntable,
+        args.size,
+        args.turntable * args.size * args.size
+    );
+    if let Some(c) = args.columns {
+        anyhow::ensure!(c >= 1, "--columns must be at least 1");
+    }
     anyhow::ensure!(
         args.distance.is_finite() && args.distance > 0.0,
         "--distance must be positive, got {}",
@@ -127,12 +176,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         width: args.size,
         rgb: Vec::new(),
     };
-    for (b, chunk) in views.chunks(BATCH).enumerate() {
+    let batch = (BATCH_PIXELS / (args.size * args.size)).max(1);
+    for (b, chunk) in views.chunks(batch).enumerate() {
         let images = renderer
             .render(&mesh.positions, &mesh.faces, chunk, args.size, args.size)
             .with_context(|| format!("rendering {}", args.mesh.display()))?;
         for i in 0..images.count {
-            save(&frame_path(dir, b * BATCH + i), &images, i, encoding)?;
+            save(&frame_path(dir, b * batch + i), &images, i, encoding)?;
         }
         all.count += images.count;
         all.rgb.extend_from_slice(&images.rgb);
@@ -153,6 +203,23 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             )
         })
         .with_context(|| format!("cannot write {}", gif_path.display()))?;
+    }
+    if args.force {
+        // What an earlier render left beyond this one's outputs would pass for part of them.
+        let mut stale = stale_frames(dir, args.turntable);
+        if args.no_gif && gif_path.is_file() {
+            stale.push(gif_path.clone());
+        }
+        for p in &stale {
+            std::fs::remove_file(p).with_context(|| format!("cannot remove {}", p.display()))?;
+        }
+        if !stale.is_empty() {
+            eprintln!(
+                "removed {} file(s) left by an earlier render ({} …)",
+                stale.len(),
+                stale[0].display()
+            );
+        }
     }
     eprintln!(
         "wrote {} frames, contact_sheet.png{} to {}",
@@ -233,6 +300,73 @@ mod tests {
         assert!(run(args(mesh.clone(), out.clone(), false)).is_err());
         assert!(run(args(mesh.clone(), out.clone(), false)).is_err());
         run(args(mesh, out, true)).expect("forced render");
+    }
+
+    #[test]
+    fn forced_shorter_render_removes_the_earlier_frames_beyond_it() {
+        let tmp = tempfile::tempdir().expect("tempdir");
+        let mesh = tmp.path().join("tet.obj");
+        std::fs::write(
+            &mesh,
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n",
+        )
+        .expect("write obj");
+        let out = tmp.path().join("r");
+        let mut a = args(mesh.clone(), out.clone(), false);
+        a.turntable = 5;
+        run(a).expect("first render");
+        std::fs::write(out.join("frame_notes.png"), "mine").expect("write");
+        let mut a = args(mesh, out.clone(), true);
+        a.turntable = 2;
+        a.no_gif = true;
+        run(a).expect("forced render");
+        let mut names: Vec<String> = std::fs::read_dir(&out)
+            .expect("dir")
+            .flatten()
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .collect();
+        names.sort();
+        assert_eq!(
+            names,
+            [
+                "contact_sheet.png",
+                "frame_000.png",
+                "frame_001.png",
+                "frame_notes.png"
+            ]
+        );
+    }
+
+    #[test]
+    fn out_of_range_options_are_rejected_before_anything_is_written() {
+        let tmp = tempfile::tempdir().expect("tempdir");
+        let out = tmp.path().join("out");
+        let base = || args(tmp.path().join("nope.obj"), out.clone(), false);
+        type Edit = fn(&mut Args);
+        let cases: [(&str, Edit); 5] = [
+            ("--turntable", |a| a.turntable = 0),
+            ("--turntable", |a| a.turntable = 100_000),
+            ("--size", |a| a.size = 9000),
+            ("2^27", |a| (a.turntable, a.size) = (360, 2048)),
+            ("--columns", |a| a.columns = Some(0)),
+        ];
+        for (needle, edit) in cases {
+            let mut a = base();
+            edit(&mut a);
+            let e = format!("{:#}", run(a).expect_err("rejected"));
+            assert!(e.contains(needle), "{needle}: {e}");
+        }
+        assert!(!out.exists());
+        assert_eq!(frame_number("frame_012.png"), Some(12));
+        assert_eq!(frame_number("frame_1234.png"), Some(1234));
+        for n in [
+            "frame_01.png",
+            "frame_abc.png",
+            "frame_001.jpg",
+            "xframe_001.png",
+        ] {
+            assert_eq!(frame_number(n), None, "{n}");
+        }
     }
 
     #[test]
