@@ -108,33 +108,26 @@ fn existing_outputs_are_refused_without_force_and_nothing_is_written() {
 }
 
 #[test]
-fn empty_mask_file_keeps_rest_shape() {
+fn mask_file_listing_no_vertex_is_an_error_and_writes_nothing() {
+    // (R = I everywhere giving the rest shape is darap's own test,
+    // `all_false_mask_gives_rest_shape_and_zero_gradient`.)
     let dir = tempfile::tempdir().unwrap();
     let mask = dir.path().join("mask.txt");
-    std::fs::write(&mask, "# no vertex may rotate\n\n").unwrap();
     let out = dir.path().join("bunny.obj");
-    run(Args {
-        mask: Some(mask),
-        ..args(out.clone())
-    })
-    .unwrap();
-    // R = I everywhere on a closed mesh: the rest shape, recentred (same bbox diagonal).
-    let saved = stylize::saved::SavedDeformation::read(golden("bunny_targets.npz")).unwrap();
-    let mut rest = saved.verts_f64();
-    mesh_core::normalize::side2_cube(&mut rest);
-    let n = rest.len() as f64;
-    let mean: [f64; 3] = std::array::from_fn(|c| rest.iter().map(|p| p[c]).sum::<f64>() / n);
-    let expected: Vec<[f64; 3]> = rest
-        .iter()
-        .map(|p| std::array::from_fn(|c| p[c] - mean[c]))
-        .collect();
-    let got = mesh_core::io::read_mesh(&out).unwrap().positions;
-    let d = got
-        .iter()
-        .zip(&expected)
-        .flat_map(|(p, q)| (0..3).map(move |c| (p[c] - q[c]).abs()))
-        .fold(0.0, f64::max);
-    assert!(d < 1e-10, "{d}");
+    for text in ["", "# no vertex may rotate\n\n"] {
+        std::fs::write(&mask, text).unwrap();
+        let e = run(Args {
+            mask: Some(mask.clone()),
+            ..args(out.clone())
+        })
+        .expect_err("an empty mask is refused");
+        let e = format!("{e:#}");
+        assert!(
+            e.contains("mask.txt") && e.contains("lists no vertex"),
+            "{e}"
+        );
+        assert!(!out.exists());
+    }
 }
 
 #[test]

@@ -11,7 +11,7 @@
 //!
 //! **Mask file** (`--mask FILE`): plain text, one vertex index per line (0-based, the saved file's
 //! vertex order) of the vertices that **may rotate**; every other vertex keeps `R = I`. Blank
-//! lines and lines starting with `#` are ignored.
+//! lines and lines starting with `#` are ignored; a file that lists no vertex is an error.
 //!
 //! **Region.** A saved localized run (`region_weights` in the `.npz`) is re-applied with its
 //! region by default. `--mask FILE` or `--region SPEC` (repeatable; boxes and spheres in the
@@ -93,7 +93,8 @@ pub fn output_paths(output: &Path, lambdas: &[f64]) -> anyhow::Result<Vec<PathBu
 }
 
 /// Parses a mask file: one 0-based vertex index per line (`#` comments and blank lines ignored);
-/// returns `free[v]` (true for listed vertices).
+/// returns `free[v]` (true for listed vertices). A file that lists no vertex is an error, as a
+/// `--region` that selects none.
 pub fn read_mask(path: &Path, num_vertices: usize) -> anyhow::Result<Vec<bool>> {
     let text = crate::input::read_to_string(path)
         .with_context(|| format!("cannot read mask file {}", path.display()))?;
@@ -118,6 +119,12 @@ pub fn read_mask(path: &Path, num_vertices: usize) -> anyhow::Result<Vec<bool>> 
         );
         free[v] = true;
     }
+    ensure!(
+        free.contains(&true),
+        "mask file {} lists no vertex: a localized apply would change nothing (one 0-based vertex \
+         index per line; --no-region applies to the whole mesh)",
+        path.display()
+    );
     Ok(free)
 }
 
