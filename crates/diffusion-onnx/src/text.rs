@@ -5,7 +5,7 @@ use std::borrow::Cow;
 use ort::session::{Session, SessionInputValue};
 
 use crate::OnnxError;
-use crate::manifest::{BUILTIN_T5_TOKENIZER, Dtype, ModelDir};
+use crate::manifest::{Dtype, ModelDir};
 use crate::runtime::{SessionOptions, open_session};
 use crate::session::{Kind, check_signature, float_output, int_input};
 use crate::tokenizer::T5Tokenizer;
@@ -41,11 +41,7 @@ impl T5Encoder {
                       directory that has one, or re-export without --skip-text-encoder"
                 .into(),
         })?;
-        let tokenizer = if t.tokenizer == BUILTIN_T5_TOKENIZER {
-            T5Tokenizer::builtin(t.max_tokens)?
-        } else {
-            T5Tokenizer::from_file(&model.path_of(&t.tokenizer), t.max_tokens)?
-        };
+        let tokenizer = T5Tokenizer::of_text_encoder(model, t)?;
         let file = model.path_of(&t.file);
         let session = open_session(&file, options, "text encoder")?;
         check_signature(

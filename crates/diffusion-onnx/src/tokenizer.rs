@@ -6,6 +6,7 @@ use tokenizers::Tokenizer;
 
 use crate::OnnxError;
 use crate::builtin::T5_TOKENIZER_JSON;
+use crate::manifest::{BUILTIN_T5_TOKENIZER, ModelDir, TextEncoderManifest};
 
 /// Id of `</s>`.
 pub const EOS_ID: i64 = 1;
@@ -56,6 +57,27 @@ impl T5Tokenizer {
         Ok(Self { inner, max_tokens })
     }
 
+    /// The tokenizer a manifest's `[text_encoder]` names (the shipped one or a file in the model
+    /// directory), `max_tokens` long.
+    pub fn of_text_encoder(model: &ModelDir, t: &TextEncoderManifest) -> Result<Self, OnnxError> {
+        if t.tokenizer == BUILTIN_T5_TOKENIZER {
+            Self::builtin(t.max_tokens)
+        } else {
+            Self::from_file(&model.path_of(&t.tokenizer), t.max_tokens)
+        }
+    }
+
+    /// The tokenizer of a model directory's `[text_encoder]`; `None` when it has none (prompts
+    /// then come from precomputed embeddings).
+    pub fn of_model(model: &ModelDir) -> Result<Option<Self>, OnnxError> {
+        model
+            .manifest()
+            .text_encoder
+            .as_ref()
+            .map(|t| Self::of_text_encoder(model, t))
+            .transpose()
+    }
+
     /// Tokens per prompt.
     pub fn max_tokens(&self) -> usize {
         self.max_tokens
@@ -66,9 +88,17 @@ impl T5Tokenizer {
         prompt.trim().to_lowercase()
     }
 
-    /// Encodes one prompt: content tokens truncated to `max_tokens − 1`, then `</s>`, then padding
-    /// (as Hugging Face's T5 tokenizer with `truncation=True, padding="max_length"`).
-    pub fn encode(&self, prompt: &str) -> Result<Tokens, OnnxError> {
+    /// The content tokens of `prompt` (after [`Self::preprocess`], without `</s>`) that
+    /// [`Self::encode`] drops: those past the first `max_tokens − 1`. 0 when the prompt fits.
+    pub fn dropped_tokens(&self, prompt: &str) -> Result<usize, OnnxError> {
+        Ok(self
+            .content_ids(prompt)?
+            .len()
+            .saturating_sub(self.max_tokens - 1))
+    }
+
+    /// The content token ids of `prompt` (preprocessed, no `</s>`), not truncated.
+    fn content_ids(&self, prompt: &str) -> Result<Vec<i64>, OnnxError> {
         let text = Self::preprocess(prompt);
         let enc = self
             .inner
@@ -79,6 +109,13 @@ impl T5Tokenizer {
         while ids.last() == Some(&EOS_ID) {
             ids.pop();
         }
+        Ok(ids)
+    }
+
+    /// Encodes one prompt: content tokens truncated to `max_tokens − 1`, then `</s>`, then padding
+    /// (as Hugging Face's T5 tokenizer with `truncation=True, padding="max_length"`).
+    pub fn encode(&self, prompt: &str) -> Result<Tokens, OnnxError> {
+        let mut ids = self.content_ids(prompt)?;
         ids.truncate(self.max_tokens - 1);
         ids.push(EOS_ID);
         let real = ids.len();
@@ -132,5 +169,14 @@ mod tests {
         assert_eq!(t.input_ids.len(), 77);
         assert_eq!(t.input_ids[76], EOS_ID);
         assert!(t.attention_mask.iter().all(|&m| m == 1));
+        let dropped = tok.dropped_tokens(&long).expect("count");
+        let all = tok.dropped_tokens(&long).expect("count") + 76;
+        assert!(dropped > 100, "{dropped}");
+        // Removing `dropped` tokens' worth of words brings it to exactly what is kept.
+        assert_eq!(tok.dropped_tokens("a photo of a cat").ok(), Some(0));
+        let exact = "cat ".repeat(76);
+        let n = tok.content_ids(&exact).expect("ids").len();
+        assert_eq!(tok.dropped_tokens(&exact).ok(), Some(n.saturating_sub(76)));
+        assert_eq!(tok.content_ids(&long).expect("ids").len(), all);
     }
 }

@@ -494,9 +494,11 @@ fn run_row(
                         set.map_err(anyhow::Error::from)
                     });
                     let set = set.as_mut().map_err(|e| anyhow::anyhow!("{e:#}"))?;
+                    let warnings = set.prompt_warnings(prompt, config)?;
                     Ok(Task::Text {
                         prompt: prompt.clone(),
                         guidance: Box::new(set.guidance_for(prompt, config)?),
+                        warnings,
                     })
                 },
                 &run_options,

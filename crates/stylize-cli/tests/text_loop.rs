@@ -318,6 +318,7 @@ fn text_run_resumed_from_checkpoint_equals_uninterrupted_run() {
             random_scale: true,
             stage2_weight: ok(config.stage2_schedule()),
         }),
+        warnings: Vec::new(),
     };
     let request = |out: &str, resume: bool, halt_after: Option<u64>| RunRequest {
         mesh: mesh.clone(),

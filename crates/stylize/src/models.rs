@@ -35,6 +35,33 @@ pub const FLOP_PER_PARAMETER_SAMPLE: [f64; 2] = [620.0, 9_830.0];
 /// "What a CPU can do").
 pub const CPU_FLOP_PER_SECOND: f64 = 1.5e11;
 
+/// Warnings about `prompt` and `config`'s negative prompt: one for each that is longer than the
+/// model's text encoder reads (T5: 76 content tokens and `</s>`), naming how many tokens are
+/// dropped from its end. Empty when both fit, or when the directory has no text encoder.
+pub fn prompt_warnings(dir: &ModelDir, prompt: &str, config: &Config) -> Result<Vec<String>> {
+    let Some(tokenizer) = diffusion_onnx::T5Tokenizer::of_model(dir)? else {
+        return Ok(Vec::new());
+    };
+    let mut warnings = Vec::new();
+    for (what, text) in [
+        ("the prompt", prompt),
+        (
+            "the negative prompt",
+            config.guidance.negative_prompt.as_str(),
+        ),
+    ] {
+        let dropped = tokenizer.dropped_tokens(text)?;
+        if dropped > 0 {
+            warnings.push(format!(
+                "{what} is longer than the text encoder reads ({} tokens with the end marker): its \
+                 last {dropped} token(s) are dropped, as in IF's own pipeline — shorten it to keep them",
+                tokenizer.max_tokens()
+            ));
+        }
+    }
+    Ok(warnings)
+}
+
 /// The warning `stylize run` prints before it starts when real-size UNets (by
 /// [`ModelDir::approx_parameters`], i.e. the size of their files) would run on the CPU execution
 /// provider: the estimated time per iteration and for the whole run, from
@@ -106,6 +133,11 @@ impl ModelSet {
     /// before a run starts).
     pub fn cpu_time_warning(&self, config: &Config) -> Option<String> {
         cpu_time_warning(&self.dir, &self.options.device, config)
+    }
+
+    /// [`prompt_warnings`] for this set's model directory.
+    pub fn prompt_warnings(&self, prompt: &str, config: &Config) -> Result<Vec<String>> {
+        prompt_warnings(&self.dir, prompt, config)
     }
 
     /// Opens the model directory and its UNets (stage II only when the manifest lists it), with
@@ -201,6 +233,24 @@ pub fn load_guidance(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn prompts_longer_than_the_text_encoder_reads_are_warned_about() {
+        let fixture = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/models/tiny-if");
+        let dir = ModelDir::open(&fixture).expect("fixture model");
+        let mut config = Config::default();
+        let short = prompt_warnings(&dir, "a 3d render of a lego chair", &config);
+        assert!(short.is_ok_and(|w| w.is_empty()));
+        let long = "an intricately carved gothic wooden chair ".repeat(20);
+        config.guidance.negative_prompt = long.clone();
+        let w = prompt_warnings(&dir, &long, &config).unwrap_or_default();
+        assert_eq!(w.len(), 2, "{w:?}");
+        assert!(
+            w[0].starts_with("the prompt") && w[0].contains("dropped"),
+            "{w:?}"
+        );
+        assert!(w[1].starts_with("the negative prompt"), "{w:?}");
+    }
 
     /// A model directory whose stage files have the given sizes (sparse files: nothing is written).
     fn fake_model(stage1_bytes: u64, stage2_bytes: Option<u64>) -> tempfile::TempDir {

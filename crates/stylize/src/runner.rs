@@ -94,6 +94,9 @@ pub enum Task<'g> {
         prompt: String,
         /// The guidance (it may borrow models that outlive the run, `'g`).
         guidance: Box<dyn Guidance + 'g>,
+        /// Warnings found while loading (a prompt longer than the text encoder reads:
+        /// [`crate::models::ModelSet::prompt_warnings`]); reported and kept in `run.json`.
+        warnings: Vec<String>,
     },
 }
 
@@ -763,7 +766,13 @@ pub fn execute_with<'g>(
     let task = make_task_unless_stopped(&dir, &start, cancel, make_task, &mut inputs)?;
     let style = match &task {
         Task::Style(s) => Some(s.clone()),
-        Task::Text { .. } => None,
+        Task::Text { warnings, .. } => {
+            for w in warnings {
+                progress.warning(&format!("warning: {w}"));
+                prepared.warnings.push(w.clone());
+            }
+            None
+        }
     };
     if let Some(w) = crate::identity::unread_settings_warning(config, style.is_some())? {
         progress.warning(&format!("warning: {w}"));

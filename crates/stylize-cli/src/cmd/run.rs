@@ -200,9 +200,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     if let Some(w) = set.cpu_time_warning(&config) {
                         eprintln!("warning: {w}");
                     }
+                    let warnings = set.prompt_warnings(prompt, &config)?;
                     Ok(Task::Text {
                         prompt: prompt.clone(),
                         guidance: Box::new(set.into_guidance(prompt, &config)?),
+                        warnings,
                     })
                 },
                 &options,
