@@ -171,3 +171,43 @@ fn a_region_vertex_file_is_never_overwritten_even_with_force() {
     assert!(format!("{e:#}").contains("region vertex file"), "{e:#}");
     assert_eq!(std::fs::read_to_string(&verts).unwrap(), "0\n1\n2\n");
 }
+
+#[test]
+fn a_missing_or_malformed_recorded_lambda_is_named_as_the_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut saved = stylize::saved::SavedDeformation::read(golden("bunny_targets.npz")).unwrap();
+    let path = dir.path().join("edited.npz");
+    let cases = [
+        (r#"{"local_step_procrustes": {"lamb": -3}}"#, "lamb = -3"),
+        (
+            r#"{"local_step_procrustes": {"lamb": "eight"}}"#,
+            "lamb = \"eight\"",
+        ),
+        (
+            r#"{"local_step_procrustes": {"lamb": NaN}}"#,
+            "not valid JSON",
+        ),
+        (r#"{"local_step_procrustes": {}}"#, "records no λ"),
+    ];
+    for (cfg, needle) in cases {
+        saved.deform_by_csd_cfg = cfg.to_string();
+        saved.write(&path).unwrap();
+        let e = run(Args {
+            saved: path.clone(),
+            ..args(dir.path().join("out.obj"))
+        })
+        .expect_err("refused");
+        let e = format!("{e:#}");
+        assert!(
+            e.contains(needle) && e.contains("edited.npz") && !e.contains("--lambda -"),
+            "{cfg}: {e}"
+        );
+    }
+    // --lambda overrides what the file records.
+    run(Args {
+        saved: path,
+        lambda: vec![5.0],
+        ..args(dir.path().join("out.obj"))
+    })
+    .unwrap();
+}

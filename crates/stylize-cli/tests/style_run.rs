@@ -230,3 +230,20 @@ fn unknown_style_and_missing_mesh_are_clear_errors() {
         "no run directory for an unreadable mesh"
     );
 }
+
+#[test]
+fn lambda_zero_is_warned_about_up_front() {
+    let tmp = ok(tempfile::tempdir());
+    let mesh = small_mesh(tmp.path());
+    let mut cfg = config(2, 0);
+    cfg.darap.lambda = 0.0;
+    let outcome = ok(run(&mesh, &tmp.path().join("run"), cfg, false, None));
+    assert!(
+        outcome
+            .warnings
+            .iter()
+            .any(|w| w.starts_with("darap.lambda = 0") && w.contains("no effect")),
+        "{:?}",
+        outcome.warnings
+    );
+}

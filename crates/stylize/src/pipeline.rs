@@ -210,8 +210,9 @@ impl ZeroGradientWatch {
         (self.streak == ZERO_GRADIENT_WARN_AFTER).then(|| {
             format!(
                 "warning: the gradient with respect to the deformation has been exactly zero for {} iterations \
-                 (up to iteration {iteration}): the objective is not changing the mesh. Check the prompt \
-                 embeddings and the model (metrics.jsonl field grad_zero_streak)",
+                 (up to iteration {iteration}): the objective is not changing the mesh. Check darap.lambda \
+                 (at 0 the target normals have no effect) and, for a prompt run, the prompt embeddings \
+                 and the model (metrics.jsonl field grad_zero_streak)",
                 self.streak
             )
         })

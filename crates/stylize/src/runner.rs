@@ -774,6 +774,12 @@ pub fn execute_with<'g>(
             None
         }
     };
+    if config.darap.lambda == 0.0 {
+        let w = "darap.lambda = 0: the target normals have no effect, so the optimization cannot \
+                 change the mesh (the result is the input, normalized); λ 8 is the reference's";
+        progress.warning(&format!("warning: {w}"));
+        prepared.warnings.push(w.to_string());
+    }
     if let Some(w) = crate::identity::unread_settings_warning(config, style.is_some())? {
         progress.warning(&format!("warning: {w}"));
         prepared.warnings.push(w);

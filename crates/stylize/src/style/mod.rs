@@ -61,6 +61,17 @@ impl Style {
         {
             invalid!("exemplar {}: face index {bad} out of range", path.display());
         }
+        if let Some(v) = mesh
+            .positions
+            .iter()
+            .position(|p| p.iter().any(|c| !c.is_finite()))
+        {
+            invalid!(
+                "exemplar {}: vertex {v} has a non-finite coordinate {:?}",
+                path.display(),
+                mesh.positions[v]
+            );
+        }
         let normals: Vec<[f64; 3]> =
             mesh_core::normals::vertex_normals_area_weighted(&mesh.positions, &mesh.faces)
                 .into_iter()
@@ -199,6 +210,17 @@ mod tests {
             assert_eq!(style.target(n), Style::Cube.target(n), "{n:?}");
         }
         assert!(Style::parse("exemplar:/no/such/file.obj").is_err());
+        // A vertex at infinity is named as such (not "no usable vertex normals").
+        std::fs::write(
+            &path,
+            "v 0 0 0\nv 1 0 0\nv 0 inf 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n",
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        let e = Style::parse(&spec)
+            .err()
+            .map(|e| format!("{e:#}"))
+            .unwrap_or_default();
+        assert!(e.contains("vertex 2") && e.contains("non-finite"), "{e}");
     }
 
     #[test]
