@@ -87,6 +87,15 @@ pub mod models {
         }
 
         /// Unreachable (no value exists).
+        pub fn prompt_warnings(
+            &self,
+            _prompt: &str,
+            _config: &Config,
+        ) -> stylize::Result<Vec<String>> {
+            match *self {}
+        }
+
+        /// Unreachable (no value exists).
         pub fn guidance_for(
             &mut self,
             _prompt: &str,

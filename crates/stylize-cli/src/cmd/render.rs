@@ -255,6 +255,17 @@ mod tests {
         }
     }
 
+    /// A tetrahedron written to `dir/tet.obj`.
+    fn tetrahedron(dir: &Path) -> PathBuf {
+        let mesh = dir.join("tet.obj");
+        std::fs::write(
+            &mesh,
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n",
+        )
+        .expect("write obj");
+        mesh
+    }
+
     /// Width and height from the PNG signature and IHDR chunk (bytes 16..24, big-endian).
     fn png_size(path: &Path) -> (u32, u32) {
         let bytes = std::fs::read(path).expect("png exists");
@@ -268,12 +279,7 @@ mod tests {
     #[test]
     fn writes_frames_and_contact_sheet_and_refuses_to_overwrite_without_force() {
         let tmp = tempfile::tempdir().expect("tempdir");
-        let mesh = tmp.path().join("tet.obj");
-        std::fs::write(
-            &mesh,
-            "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n",
-        )
-        .expect("write obj");
+        let mesh = tetrahedron(tmp.path());
         let out = tmp.path().join("renders/nested");
         run(args(mesh.clone(), out.clone(), false)).expect("first render");
         for k in 0..3 {
@@ -305,12 +311,7 @@ mod tests {
     #[test]
     fn forced_shorter_render_removes_the_earlier_frames_beyond_it() {
         let tmp = tempfile::tempdir().expect("tempdir");
-        let mesh = tmp.path().join("tet.obj");
-        std::fs::write(
-            &mesh,
-            "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n",
-        )
-        .expect("write obj");
+        let mesh = tetrahedron(tmp.path());
         let out = tmp.path().join("r");
         let mut a = args(mesh.clone(), out.clone(), false);
         a.turntable = 5;
