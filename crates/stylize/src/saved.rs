@@ -179,12 +179,33 @@ impl SavedDeformation {
         serde_json::from_str(&self.deform_by_csd_cfg).unwrap_or(Value::Null)
     }
 
-    /// `local_step_procrustes.lamb`: the λ used in training, if recorded.
+    /// `local_step_procrustes.lamb`: the λ used in training, if recorded as a finite number ≥ 0
+    /// ([`Self::recorded_lambda`] says what is wrong otherwise).
     pub fn lambda(&self) -> Option<f64> {
-        self.csd_cfg()
-            .get("local_step_procrustes")?
-            .get("lamb")?
-            .as_f64()
+        self.recorded_lambda().ok()
+    }
+
+    /// The recorded λ, or why there is none to use: `deform_by_csd_cfg` is not valid JSON, it has
+    /// no `local_step_procrustes.lamb`, or that is not a finite number ≥ 0 (the message names
+    /// the value; the caller names the file).
+    pub fn recorded_lambda(&self) -> std::result::Result<f64, String> {
+        let cfg = self.csd_cfg();
+        if cfg.is_null() {
+            return Err(format!(
+                "`deform_by_csd_cfg` is not valid JSON ({:?}…), so the λ it should record cannot \
+                 be read",
+                self.deform_by_csd_cfg.chars().take(60).collect::<String>()
+            ));
+        }
+        let Some(lamb) = cfg.get("local_step_procrustes").and_then(|l| l.get("lamb")) else {
+            return Err("it records no λ (local_step_procrustes.lamb)".into());
+        };
+        match lamb.as_f64() {
+            Some(l) if l.is_finite() && l >= 0.0 => Ok(l),
+            _ => Err(format!(
+                "the recorded λ (local_step_procrustes.lamb = {lamb}) is not a finite number ≥ 0"
+            )),
+        }
     }
 
     /// `pin_first_vertex` (default `true`).

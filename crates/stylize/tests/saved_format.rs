@@ -195,6 +195,30 @@ fn out_of_range_face_in_saved_file_is_refused() {
     // Defaults when the config lacks the keys.
     assert_eq!(s.lambda(), None);
     assert!(s.pin_first_vertex());
+    // A recorded λ that is not a finite number ≥ 0 is no λ, and the reason names it.
+    let mut s = s;
+    for (cfg, why) in [
+        (
+            r#"{"local_step_procrustes": {"lamb": -1.5}}"#,
+            "lamb = -1.5",
+        ),
+        (
+            r#"{"local_step_procrustes": {"lamb": "8"}}"#,
+            "lamb = \"8\"",
+        ),
+        (
+            r#"{"local_step_procrustes": {"lamb": NaN}}"#,
+            "not valid JSON",
+        ),
+        ("{}", "records no λ"),
+    ] {
+        s.deform_by_csd_cfg = cfg.into();
+        assert_eq!(s.lambda(), None, "{cfg}");
+        let e = s.recorded_lambda().expect_err("no usable λ");
+        assert!(e.contains(why), "{cfg}: {e}");
+    }
+    s.deform_by_csd_cfg = r#"{"local_step_procrustes": {"lamb": 0}}"#.into();
+    assert_eq!(s.recorded_lambda(), Ok(0.0));
 }
 
 #[test]

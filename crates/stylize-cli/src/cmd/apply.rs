@@ -128,30 +128,6 @@ pub fn read_mask(path: &Path, num_vertices: usize) -> anyhow::Result<Vec<bool>> 
     Ok(free)
 }
 
-/// The λ a saved file records (`local_step_procrustes.lamb` in `deform_by_csd_cfg`), with an
-/// error that says which part is missing or malformed (`path` names the file).
-fn recorded_lambda(saved: &SavedDeformation, path: &Path) -> anyhow::Result<f64> {
-    let file = path.display();
-    let cfg = saved.csd_cfg();
-    if cfg.is_null() {
-        bail!(
-            "{file}: `deform_by_csd_cfg` is not valid JSON ({:?}…), so the λ it should record \
-             cannot be read; pass --lambda",
-            saved.deform_by_csd_cfg.chars().take(60).collect::<String>()
-        );
-    }
-    let Some(lamb) = cfg.get("local_step_procrustes").and_then(|l| l.get("lamb")) else {
-        bail!("{file} records no λ (local_step_procrustes.lamb); pass --lambda");
-    };
-    match lamb.as_f64() {
-        Some(l) if l.is_finite() && l >= 0.0 => Ok(l),
-        _ => bail!(
-            "{file}: the recorded λ (local_step_procrustes.lamb = {lamb}) is not a finite number \
-             ≥ 0; pass --lambda to choose one"
-        ),
-    }
-}
-
 /// The region to apply: `--mask` / `--region` (feathered by `--region-feather`, else the saved
 /// rings), else the saved `region_weights`, else none (also with `--no-region`).
 fn region_weights(
@@ -246,7 +222,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
 
     let lambdas = if args.lambda.is_empty() {
-        vec![recorded_lambda(&saved, &args.saved)?]
+        vec![
+            saved
+                .recorded_lambda()
+                .map_err(|why| anyhow::anyhow!("{}: {why}; pass --lambda", args.saved.display()))?,
+        ]
     } else {
         args.lambda.clone()
     };
