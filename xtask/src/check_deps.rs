@@ -59,6 +59,36 @@ const RULES: &[(&str, &[&str])] = &[
     ("raster-diff", &["ort", "tokenizers", "gltf", "zip", "tobj"]),
     // `.npy` only from the npy crate: no zip, and no mesh code.
     ("diffusion-onnx", &["wgpu", "mesh-core", "zip"]),
+    // Run directories (lock, durable writes, claims, checkpoint container): files and JSON only,
+    // nothing numerical, no models, no renderer, no command line or terminal UI.
+    (
+        "rundir",
+        &[
+            "mesh-core",
+            "cotan",
+            "darap",
+            "raster-diff",
+            "csd",
+            "optim",
+            "diffusion-onnx",
+            "npy",
+            "image-batch",
+            "rand",
+            "rand_chacha",
+            "faer",
+            "glam",
+            "rayon",
+            "wgpu",
+            "ort",
+            "tokenizers",
+            "zip",
+            "clap",
+            "indicatif",
+            "console",
+            "signal-hook",
+            "tokio",
+        ],
+    ),
     // The optimization as a library: no command line, no terminal UI, no signal handling.
     (
         "stylize",

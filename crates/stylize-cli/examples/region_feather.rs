@@ -14,11 +14,9 @@ use std::collections::HashMap;
 use std::path::PathBuf;
 
 use anyhow::Context;
+use stylize::run_pictures::{tint_region, turntable, write_grid};
 use stylize_cli::config::{Config, RegionSection};
-use stylize_cli::runner::{
-    LogMode, RunRequest, Task, execute, prepare_mesh_with_region, tint_region, turntable,
-    write_grid,
-};
+use stylize_cli::runner::{LogMode, RunRequest, Task, execute, prepare_mesh_with_region};
 use stylize_cli::style::Style;
 
 const REGION: &str = "box:-1,-1,-1,0,1,1";

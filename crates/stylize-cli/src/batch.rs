@@ -35,10 +35,10 @@ use serde::Deserialize;
 use crate::config::Config;
 use crate::identity::{ModelIdentity, ObjectiveIdentity};
 use crate::models::ModelSet;
-use crate::rundir::RunDir;
 use crate::runner::{LogMode, RunOptions, RunRequest, Task, execute_with};
 use crate::signals::Interrupted;
 use crate::style::Style;
+use rundir::RunDir;
 
 /// One manifest row.
 #[derive(Clone, Debug, PartialEq, Deserialize)]
@@ -186,7 +186,7 @@ pub fn read_manifest(path: &Path) -> anyhow::Result<Vec<Row>> {
             continue;
         };
         let parent = normalized_dir(r.mesh.parent().unwrap_or(Path::new(".")));
-        let writer = if crate::rundir::RUN_FILES.contains(&name) {
+        let writer = if rundir::RUN_FILES.contains(&name) {
             seen.get(&parent)
         } else {
             None

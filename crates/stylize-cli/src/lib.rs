@@ -19,6 +19,4 @@ pub mod view;
 pub use features::models;
 #[cfg(feature = "text")]
 pub use stylize::models;
-pub use stylize::{
-    checkpoint, durable, eval, identity, lock, pipeline, run_pictures, rundir, style,
-};
+pub use stylize::{eval, identity, pipeline, run_pictures, style};

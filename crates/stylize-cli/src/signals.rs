@@ -2,7 +2,7 @@
 //! only sets a flag; the loop finishes its current iteration, writes a checkpoint, and the command
 //! exits with 128 + the signal number (130 for SIGINT, 143 for SIGTERM) after printing how to
 //! resume. A second signal terminates at once with the same status (the run directory lock is
-//! then left behind; on the same host it is taken over at once, see [`stylize::lock`]).
+//! then left behind; on the same host it is taken over at once, see [`rundir::lock`]).
 
 use std::path::PathBuf;
 use std::sync::Once;
@@ -99,14 +99,16 @@ pub fn exit_code(e: &anyhow::Error) -> u8 {
     if let Some(i) = e.downcast_ref::<Interrupted>() {
         return i.exit_code();
     }
-    use stylize::lock::LockError;
+    use rundir::LockError;
     let locked = |l: &LockError| matches!(l, LockError::Held { .. } | LockError::Busy { .. });
     if e.chain().any(|c| {
         c.downcast_ref::<LockError>().is_some_and(locked)
-            || matches!(
-                c.downcast_ref::<stylize::Error>().map(stylize::Error::kind),
-                Some(stylize::Error::Lock(l)) if locked(l)
-            )
+            || c.downcast_ref::<rundir::Error>()
+                .and_then(rundir::Error::as_lock)
+                .is_some_and(locked)
+            || c.downcast_ref::<stylize::Error>()
+                .and_then(stylize::Error::lock_error)
+                .is_some_and(locked)
     }) {
         return 75;
     }

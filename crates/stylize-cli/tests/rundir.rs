@@ -6,8 +6,8 @@ use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
 use mesh_core::TriMesh;
+use stylize::checkpoint::Checkpoint;
 use stylize::saved::SavedDeformation;
-use stylize_cli::checkpoint::Checkpoint;
 
 mod common;
 use common::{ok, s, stderr};
@@ -190,7 +190,7 @@ fn one_process_per_directory_and_signals_checkpoint_for_an_exact_resume() {
         ok(Checkpoint::load(&run.join("checkpoint.json"))),
     );
     assert!(
-        ca.x == cb.x && ca.adam == cb.adam,
+        ca.state.x == cb.state.x && ca.state.adam == cb.state.adam,
         "state differs after resume"
     );
     assert_eq!(metrics_iterations(&run), (1..=1500).collect::<Vec<_>>());

@@ -159,15 +159,18 @@ fn resume_after_interruption_equals_uninterrupted_run() {
     let xa = ok(SavedDeformation::read(a.join("deformation.npz"))).verts_normals;
     let xb = ok(SavedDeformation::read(b.join("deformation.npz"))).verts_normals;
     assert_eq!(xa, xb, "resumed run differs from the uninterrupted one");
-    let ca = ok(stylize_cli::checkpoint::Checkpoint::load(
+    let ca = ok(stylize::checkpoint::Checkpoint::load(
         &a.join("checkpoint.json"),
     ));
-    let cb = ok(stylize_cli::checkpoint::Checkpoint::load(
+    let cb = ok(stylize::checkpoint::Checkpoint::load(
         &b.join("checkpoint.json"),
     ));
     assert_eq!(ca.iteration, cb.iteration);
-    assert!(ca.x == cb.x, "x differs after resume");
-    assert!(ca.adam == cb.adam, "Adam state differs after resume");
+    assert!(ca.state.x == cb.state.x, "x differs after resume");
+    assert!(
+        ca.state.adam == cb.state.adam,
+        "Adam state differs after resume"
+    );
     let lines = |d: &Path| {
         ok(std::fs::read_to_string(d.join("metrics.jsonl")))
             .lines()

@@ -337,14 +337,17 @@ fn text_run_resumed_from_checkpoint_equals_uninterrupted_run() {
     assert!(!halted.complete);
     ok(execute(&request("b", true, None), LogMode::Quiet, task()));
     let load = |d: &str| {
-        ok(stylize_cli::checkpoint::Checkpoint::load(
+        ok(stylize::checkpoint::Checkpoint::load(
             &tmp.path().join(d).join("checkpoint.json"),
         ))
     };
     let (a, b) = (load("a"), load("b"));
     assert_eq!((a.iteration, b.iteration), (5, 5));
-    assert!(a.x == b.x, "x differs after resume");
-    assert!(a.adam == b.adam, "Adam state differs after resume");
+    assert!(a.state.x == b.state.x, "x differs after resume");
+    assert!(
+        a.state.adam == b.state.adam,
+        "Adam state differs after resume"
+    );
 }
 
 #[test]

@@ -6,6 +6,10 @@
 //! [`std::error::Error::source`]) prints `what it was doing: what went wrong: why`. Each variant's
 //! own message never repeats its source's, so the chain never says a thing twice.
 //! [`Error::kind`] skips the context layers to the failure itself.
+//!
+//! The run directory's failures and refusals (its lock, a durable write, a checkpoint, another
+//! task in the folder) are [`rundir::Error`]s, carried in [`Error::RunDir`]; a run stopped through
+//! its cancellation flag is [`Stopped`].
 
 use std::path::{Path, PathBuf};
 
@@ -38,39 +42,14 @@ pub enum Error {
     /// a wrong type, an unknown name).
     #[error(transparent)]
     ConfigSyntax(#[from] toml::de::Error),
-    /// The run directory refuses the request: it holds another task, an incompatible resume, a
-    /// file that is not the run's, or contradicting flags.
-    #[error("{message}")]
-    RunDir {
-        /// The run directory.
-        dir: PathBuf,
-        /// Why, with what to do about it.
-        message: String,
-    },
-    /// The run directory holds a run (complete, or a checkpoint to resume) of a different task.
-    #[error("{message}")]
-    DifferentTask {
-        /// The run directory.
-        dir: PathBuf,
-        /// The fields that differ (`config.darap.lambda: was 8, now 5`).
-        differences: Vec<String>,
-        /// The refusal, listing them, with what to do about it.
-        message: String,
-    },
-    /// The run directory is locked by another process (or its lock was lost).
+    /// The run directory refused the request (another task, an incompatible resume, a foreign
+    /// folder, contradicting flags), is locked by another process (or its lock was lost), holds
+    /// a damaged file, or one of its durable writes failed: [`rundir::Error`].
     #[error(transparent)]
-    Lock(#[from] crate::lock::LockError),
+    RunDir(#[from] rundir::Error),
     /// The run was stopped through its cancellation flag (a checkpoint was written).
     #[error(transparent)]
-    Stopped(#[from] crate::runner::Stopped),
-    /// A file of the run directory, or a checkpoint, is damaged.
-    #[error("{message}")]
-    Corrupt {
-        /// The file.
-        path: PathBuf,
-        /// What is wrong, naming the file.
-        message: String,
-    },
+    Stopped(#[from] Stopped),
     /// A mesh could not be read, written, repaired or used.
     #[error(transparent)]
     Mesh(#[from] mesh_core::MeshError),
@@ -103,7 +82,7 @@ pub enum Error {
     /// The saved-deformation `.npz` could not be read or written.
     #[error(transparent)]
     Saved(#[from] crate::saved::SavedError),
-    /// JSON (checkpoint, `task.json`, `run.json`) could not be written or parsed.
+    /// JSON (`run.json`) could not be written.
     #[error(transparent)]
     Json(#[from] serde_json::Error),
     /// The configuration could not be written as TOML.
@@ -125,6 +104,13 @@ pub enum Error {
         /// The failure.
         source: Box<Error>,
     },
+}
+
+impl From<rundir::LockError> for Error {
+    /// A lock error is the run directory's ([`Error::RunDir`]).
+    fn from(e: rundir::LockError) -> Self {
+        Error::RunDir(e.into())
+    }
 }
 
 #[cfg(feature = "text")]
@@ -149,14 +135,6 @@ impl Error {
     pub fn config(field: &str, message: impl Into<String>) -> Self {
         Self::Config {
             field: field.to_string(),
-            message: message.into(),
-        }
-    }
-
-    /// A refusal of the run directory `dir`.
-    pub fn run_dir(dir: &Path, message: impl Into<String>) -> Self {
-        Self::RunDir {
-            dir: dir.to_path_buf(),
             message: message.into(),
         }
     }
@@ -186,6 +164,29 @@ impl Error {
             other => other,
         }
     }
+
+    /// The run directory's lock error, under any [`Error::Context`] layers, when this is one.
+    pub fn lock_error(&self) -> Option<&rundir::LockError> {
+        match self.kind() {
+            Self::RunDir(e) => e.as_lock(),
+            _ => None,
+        }
+    }
+}
+
+/// A run stopped through its cancellation flag ([`crate::runner::RunHooks::cancel`]; the error
+/// [`crate::runner::execute_with`] returns; the command line turns it into its signal message and
+/// exit status).
+#[derive(Debug, thiserror::Error)]
+#[error("{}", match .checkpoint_iteration {
+    Some(i) => format!("stopped after iteration {i}, checkpoint written to {}", .dir.join("checkpoint.json").display()),
+    None => format!("stopped before the first iteration; nothing to resume in {}", .dir.display()),
+})]
+pub struct Stopped {
+    /// The run directory.
+    pub dir: PathBuf,
+    /// The iteration the checkpoint holds (`None`: stopped before any checkpoint was written).
+    pub checkpoint_iteration: Option<u64>,
 }
 
 /// `.context(…)` / `.with_context(|| …)` on results whose error converts into [`Error`] (the

@@ -17,7 +17,7 @@
 //! `clip(M) = (1/N) Σ_v cos(E_img(render_v(M)), E_txt(text))`, the mean over N orbit views (16 in the
 //! paper) of the cosine between each view's image embedding and the prompt's text embedding. Each
 //! mesh (source and result) is normalized to the side-2 cube and rendered with
-//! [`crate::runner::turntable`] (azimuth 360°·k/N, elevation 20°, head light, distance fitting the
+//! [`crate::run_pictures::turntable`] (azimuth 360°·k/N, elevation 20°, head light, distance fitting the
 //! bounding sphere in the field of view — the same framing for every mesh, so scores compare across
 //! runs; a run's `turntable.png` is zoomed to fill its tiles instead) on the CPU renderer at
 //! [`ClipSettings::render_size`] pixels; the CLIP model resizes the renders to its own size
@@ -248,7 +248,7 @@ pub fn view_embeddings(
     let start = std::time::Instant::now();
     let mut positions = mesh.positions.clone();
     mesh_core::normalize::side2_cube(&mut positions);
-    let images = crate::runner::turntable(
+    let images = crate::run_pictures::turntable(
         renderer,
         &positions,
         &mesh.faces,

@@ -18,7 +18,11 @@
 //!   specs, the feather rings and `region.weights_sha256`, the SHA-256 of the resolved per-vertex
 //!   weights (f64 LE) — a vertex file edited between a run and its resume changes it.
 //!
-//! [`TaskIdentity::differences`] names each differing field with its old and new value.
+//! The record itself, [`TaskIdentity`] (field name → value text, with
+//! [`TaskIdentity::differences`], which names each differing field with its old and new value),
+//! is the run directory's ([`rundir::identity`]), which stores and compares it without looking
+//! inside; how it is computed is this module's: [`TaskIdentityExt::new`] and
+//! [`TaskIdentityExt::with_region`].
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -29,6 +33,8 @@ use sha2::{Digest, Sha256};
 
 use crate::config::Config;
 use crate::style::Style;
+
+pub use rundir::TaskIdentity;
 
 /// Configuration keys that do not change the optimized result (cadence, presentation, memory):
 /// they may differ between a run and its resume.
@@ -192,14 +198,6 @@ impl ObjectiveIdentity {
     }
 }
 
-/// The identity of a run's task (see the module documentation). Stored in `task.json` and in
-/// every checkpoint.
-#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
-pub struct TaskIdentity {
-    /// Field name → canonical value text (sorted).
-    pub fields: BTreeMap<String, String>,
-}
-
 fn hex(bytes: &[u8]) -> String {
     bytes.iter().map(|b| format!("{b:02x}")).collect()
 }
@@ -222,9 +220,23 @@ pub fn mesh_sha256(positions: &[[f64; 3]], faces: &[[u32; 3]]) -> String {
     hex(&h.finalize())
 }
 
-impl TaskIdentity {
+/// How a run's [`TaskIdentity`] is computed (see the module documentation): the record is
+/// [`rundir`]'s, its fields are stylize's.
+pub trait TaskIdentityExt: Sized {
     /// The identity of optimizing `objective` on the prepared mesh with `config`.
-    pub fn new(
+    fn new(
+        positions: &[[f64; 3]],
+        faces: &[[u32; 3]],
+        objective: &ObjectiveIdentity,
+        config: &Config,
+    ) -> Result<Self>;
+
+    /// Adds a localized run's region: its specs, feather rings and resolved weights.
+    fn with_region(self, specs: &[String], feather: u32, weights: &[f64]) -> Self;
+}
+
+impl TaskIdentityExt for TaskIdentity {
+    fn new(
         positions: &[[f64; 3]],
         faces: &[[u32; 3]],
         objective: &ObjectiveIdentity,
@@ -279,8 +291,7 @@ impl TaskIdentity {
         Ok(Self { fields })
     }
 
-    /// Adds a localized run's region: its specs, feather rings and resolved weights.
-    pub fn with_region(mut self, specs: &[String], feather: u32, weights: &[f64]) -> Self {
+    fn with_region(mut self, specs: &[String], feather: u32, weights: &[f64]) -> Self {
         let mut h = Sha256::new();
         h.update((weights.len() as u64).to_le_bytes());
         for w in weights {
@@ -295,30 +306,6 @@ impl TaskIdentity {
         self.fields
             .insert("region.weights_sha256".into(), hex(&h.finalize()));
         self
-    }
-
-    /// Every field that differs, as `field: checkpoint OLD, now NEW` (empty when equal).
-    pub fn differences(&self, now: &TaskIdentity) -> Vec<String> {
-        let mut out = Vec::new();
-        let absent = "(absent)".to_string();
-        for key in self.fields.keys().chain(now.fields.keys()) {
-            let (a, b) = (self.fields.get(key), now.fields.get(key));
-            if a != b && !out.iter().any(|(k, _): &(String, String)| k == key) {
-                let short = |v: Option<&String>| {
-                    let v = v.unwrap_or(&absent);
-                    if v.chars().count() > 80 {
-                        format!("{}…", v.chars().take(80).collect::<String>())
-                    } else {
-                        v.clone()
-                    }
-                };
-                out.push((
-                    key.clone(),
-                    format!("{key}: was {}, now {}", short(a), short(b)),
-                ));
-            }
-        }
-        out.into_iter().map(|(_, m)| m).collect()
     }
 }
 

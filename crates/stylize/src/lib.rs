@@ -5,15 +5,16 @@
 //! - [`style`]: the model-free styles (cube, octahedron, exemplar) and their alignment loss;
 //! - [`config`]: every setting of a run, with the reference's defaults;
 //! - [`runner`]: one run from mesh file to complete run directory, with a [`runner::Progress`]
-//!   observer and a cancellation flag ([`runner::RunHooks`]);
-//! - [`rundir`], [`lock`], [`durable`], [`checkpoint`], [`identity`]: the run directory (locked,
-//!   every file replaced atomically and durably), checkpoints and the task identity that guards a
-//!   resume;
+//!   observer and a cancellation flag ([`runner::RunHooks`]), in a run directory of the
+//!   [`rundir`] crate (locked, every file replaced atomically and durably, claimed, resumed);
+//! - [`checkpoint`]: the loop's state in a checkpoint ([`rundir::checkpoint`] is the container);
+//!   [`identity`]: how the task identity that guards a resume is computed;
 //! - [`saved`]: the reference's saved-deformation `.npz`; [`snapshots`]: the deformed mesh along
-//!   the run, for replay; [`run_pictures`]: the before/after sheet and the turntable (PNG, GIF);
+//!   the run, for replay; [`run_pictures`]: the before/after sheet, the turntable (PNG, GIF) and
+//!   the orbit, tint and grid helpers the previews share;
 //! - `models`: DeepFloyd IF guidance from a model directory (feature `text`); [`eval`]: metrics
 //!   of finished runs (CLIP similarity with `text`);
-//! - [`error`]: the typed [`Error`] every public function returns;
+//! - [`error`]: the typed [`Error`] every public function returns, and [`error::Stopped`];
 //! - [`malloc`]: the C allocator's policy that keeps the loop's large per-iteration buffers from
 //!   being page-faulted in anew every iteration (for programs that run the loop).
 //!
@@ -28,17 +29,14 @@
 
 pub mod checkpoint;
 pub mod config;
-pub mod durable;
 pub mod error;
 pub mod eval;
 pub mod identity;
-pub mod lock;
 pub mod malloc;
 #[cfg(feature = "text")]
 pub mod models;
 pub mod pipeline;
 pub mod run_pictures;
-pub mod rundir;
 pub mod runner;
 pub mod saved;
 pub mod snapshots;

@@ -7,7 +7,10 @@
 //!   fill their tiles and the two rows compare pixel for pixel;
 //! - `turntable.png` and `turntable.gif` ([`filled_orbit`]): the result framed so that it fills
 //!   its `size`×`size` tiles (one zoom and one crop for all views, so the animation does not pump),
-//!   as a contact sheet and as a looping GIF ([`encode_gif`]).
+//!   as a contact sheet and as a looping GIF ([`encode_gif`]);
+//! - the helpers the previews, `eval` and the command line share: [`bounding_orbit`] and
+//!   [`turntable`] (orbit views fitting a mesh's bounding sphere), [`tint_region`] (a localized
+//!   run's region in [`REGION_TINT`]) and [`write_grid`] (a contact sheet of views as one PNG).
 
 use std::io::Write;
 use std::path::Path;
@@ -43,13 +46,73 @@ pub fn write_before_after(
     write_png_atomic(path, &sheet)
 }
 
-/// Writes the first image of `images` as a PNG at `path`, atomically ([`crate::durable`]).
+/// Writes the first image of `images` as a PNG at `path`, atomically ([`rundir::durable`]).
 pub fn write_png_atomic(path: &Path, images: &Images) -> Result<()> {
-    crate::durable::replace_with(path, |tmp| {
+    rundir::durable::replace_with(path, |tmp| {
         let file = std::fs::File::create(tmp).io_context("cannot create", tmp)?;
         raster_diff::image::write_png(std::io::BufWriter::new(file), images, 0, Encoding::Direct)
             .with_context(|| format!("cannot write {}", path.display()))
     })
+}
+
+/// Writes a grid of images as one PNG.
+pub fn write_grid(path: &Path, images: &Images) -> Result<()> {
+    if let Some(parent) = path.parent() {
+        std::fs::create_dir_all(parent).io_context("cannot create", parent)?;
+    }
+    let columns = images.count.clamp(1, 4);
+    let sheet = raster_diff::image::contact_sheet(images, columns.max(1));
+    write_png_atomic(path, &sheet)
+}
+
+/// Tint of [`tint_region`] (a warm orange, multiplied into the shading).
+pub const REGION_TINT: [f32; 3] = [1.0, 0.62, 0.3];
+
+/// Tints, in place, the pixels whose visible triangle (`ids`, one per pixel as
+/// `CpuRenderer::triangle_ids` returns them) has a corner in the region `free`.
+pub fn tint_region(images: &mut Images, ids: &[u32], faces: &[[u32; 3]], free: &[bool]) {
+    for (pixel, &t) in images.rgb.chunks_exact_mut(3).zip(ids) {
+        let inside = faces.get(t as usize).is_some_and(|f| {
+            f.iter()
+                .any(|&v| free.get(v as usize).copied().unwrap_or(false))
+        });
+        if inside {
+            for (c, k) in pixel.iter_mut().zip(REGION_TINT) {
+                *c *= k;
+            }
+        }
+    }
+}
+
+/// `n` orbit views (elevation 20°, azimuth 360°·k/n, looking at the origin, vertical field of view
+/// `fov` degrees) from which the whole mesh is visible: with r the largest distance of a vertex
+/// from the origin, a sphere of radius r subtends the field of view at distance r / sin(fov/2);
+/// 10 % margin is added.
+pub fn bounding_orbit(positions: &[[f64; 3]], n: usize, fov: f64) -> Vec<raster_diff::View> {
+    let radius = positions
+        .iter()
+        .map(|p| (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt())
+        .filter(|r| r.is_finite())
+        .fold(0.0_f64, f64::max)
+        .max(1e-3);
+    let half_fov = (fov.clamp(1.0, 179.0) * 0.5).to_radians();
+    let distance = 1.1 * radius / half_fov.sin();
+    raster_diff::orbit_views(n.max(1), 20.0, distance, fov)
+}
+
+/// Renders `n` turntable views of a mesh on the CPU renderer, from [`bounding_orbit`].
+pub fn turntable(
+    renderer: &mut raster_diff::CpuRenderer,
+    positions: &[[f64; 3]],
+    faces: &[[u32; 3]],
+    n: usize,
+    size: usize,
+    fov: f64,
+) -> Result<Images> {
+    let views = bounding_orbit(positions, n, fov);
+    renderer
+        .render(positions, faces, &views, size, size)
+        .context("turntable render")
 }
 
 /// The sheet as one image: 2 rows (source, result) × `views` columns of square tiles.
@@ -162,12 +225,12 @@ fn crop(images: &Images, size: usize, x0: usize, y0: usize, side: usize) -> Imag
 /// the origin), `size`×`size` pixels each, framed so the mesh fills the tiles.
 ///
 /// The camera first fits the bounding sphere (distance 1.1·r / sin(fov/2), as
-/// [`crate::runner::turntable`]); a probe render at ≤ 128 pixels measures the union of the views'
+/// [`turntable`]); a probe render at ≤ 128 pixels measures the union of the views'
 /// silhouettes, and the views are rendered again at `zoom·size` pixels (zoom = probe size /
 /// (silhouette side + 2 probe pixels), at most 4) and cropped to the `size`×`size` window centred
 /// on the silhouettes — one zoom and one window for all views. Should the silhouettes still not
 /// fit the window, the resolution is lowered until they do (down to the unzoomed render). With
-/// `free`, the pixels of faces touching the region are tinted ([`crate::runner::tint_region`]).
+/// `free`, the pixels of faces touching the region are tinted ([`tint_region`]).
 ///
 /// Every pass renders the views in chunks of at most [`ORBIT_CHUNK_PIXELS`] pixels and keeps only
 /// the silhouette bounds, or the cropped tiles, of each chunk: memory grows with `views·size²`,
@@ -182,7 +245,7 @@ pub fn filled_orbit(
     free: Option<&[bool]>,
 ) -> Result<Images> {
     let size = size.max(1);
-    let orbit = crate::runner::bounding_orbit(positions, views, fov_deg);
+    let orbit = bounding_orbit(positions, views, fov_deg);
     let mut renderer = raster_diff::CpuRenderer::default();
     // Renders the orbit at `side` pixels a chunk of views at a time (`ORBIT_CHUNK_PIXELS`),
     // handing each chunk (with its triangle ids) to `each`.
@@ -246,7 +309,7 @@ pub fn filled_orbit(
     };
     chunks(big, &mut |mut images, ids| {
         if let (Some(free), Some(ids)) = (free, ids) {
-            crate::runner::tint_region(&mut images, &ids, faces, free);
+            tint_region(&mut images, &ids, faces, free);
         }
         let cropped = crop(&images, big, x0, y0, size);
         out.count += cropped.count;
@@ -258,7 +321,7 @@ pub fn filled_orbit(
 
 /// Writes `turntable.gif` (see [`encode_gif`]) atomically.
 pub fn write_turntable_gif(path: &Path, frames: &Images, delay_cs: u16) -> Result<()> {
-    crate::durable::replace_with(path, |tmp| {
+    rundir::durable::replace_with(path, |tmp| {
         let file = std::fs::File::create(tmp).io_context("cannot create", tmp)?;
         encode_gif(
             std::io::BufWriter::new(file),
@@ -429,7 +492,7 @@ mod tests {
         let filled = filled_orbit(&m.positions, &m.faces, 4, size, 60.0, None)
             .unwrap_or_else(|e| panic!("{e:#}"));
         assert_eq!((filled.count, filled.height, filled.width), (4, size, size));
-        let plain = crate::runner::turntable(
+        let plain = turntable(
             &mut raster_diff::CpuRenderer::default(),
             &m.positions,
             &m.faces,

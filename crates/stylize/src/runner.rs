@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
-use crate::error::{Context, Error, IoContext, Result, invalid};
+use crate::error::{Context, Error, IoContext, Result, Stopped, invalid};
 use csd::Guidance;
 use darap::Darap;
 use mesh_core::TriMesh;
@@ -16,16 +16,16 @@ use optim::{Adam, AdamConfig};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use raster_diff::{Images, Renderer};
+use rundir::{Claim, ResumeMode, RunDir, RunLock, Start};
 
-use crate::checkpoint::{CHECKPOINT_VERSION, Checkpoint};
+use crate::checkpoint::{CHECKPOINT_VERSION, Checkpoint, CheckpointState};
 use crate::config::{Backend, Config};
-use crate::identity::{ObjectiveIdentity, TaskIdentity};
-use crate::lock::RunLock;
+use crate::identity::{ObjectiveIdentity, TaskIdentity, TaskIdentityExt};
 use crate::pipeline::{
     IterationRecord, LoopSpec, LoopState, Objective, Observer, StyleObjective, TextObjective,
     ViewSettings, run_loop,
 };
-use crate::rundir::{Claim, ResumeMode, RunDir, Start};
+use crate::run_pictures::{tint_region, turntable, write_grid};
 use crate::saved::SavedDeformation;
 use crate::style::Style;
 
@@ -68,20 +68,6 @@ impl std::fmt::Debug for RunHooks<'_> {
             .field("cancel", &self.cancel)
             .finish_non_exhaustive()
     }
-}
-
-/// A run stopped through [`RunHooks::cancel`] (the error [`execute_with`] returns; the command line
-/// turns it into its signal message and exit status).
-#[derive(Debug, thiserror::Error)]
-#[error("{}", match .checkpoint_iteration {
-    Some(i) => format!("stopped after iteration {i}, checkpoint written to {}", .dir.join("checkpoint.json").display()),
-    None => format!("stopped before the first iteration; nothing to resume in {}", .dir.display()),
-})]
-pub struct Stopped {
-    /// The run directory.
-    pub dir: PathBuf,
-    /// The iteration the checkpoint holds (`None`: stopped before any checkpoint was written).
-    pub checkpoint_iteration: Option<u64>,
 }
 
 /// What to optimize.
@@ -281,66 +267,6 @@ fn record_json(r: &IterationRecord) -> serde_json::Value {
     obj.into()
 }
 
-/// Writes a grid of images as one PNG.
-pub fn write_grid(path: &Path, images: &Images) -> Result<()> {
-    if let Some(parent) = path.parent() {
-        std::fs::create_dir_all(parent).io_context("cannot create", parent)?;
-    }
-    let columns = images.count.clamp(1, 4);
-    let sheet = raster_diff::image::contact_sheet(images, columns.max(1));
-    crate::run_pictures::write_png_atomic(path, &sheet)
-}
-
-/// Tint of [`tint_region`] (a warm orange, multiplied into the shading).
-pub const REGION_TINT: [f32; 3] = [1.0, 0.62, 0.3];
-
-/// Tints, in place, the pixels whose visible triangle (`ids`, one per pixel as
-/// `CpuRenderer::triangle_ids` returns them) has a corner in the region `free`.
-pub fn tint_region(images: &mut Images, ids: &[u32], faces: &[[u32; 3]], free: &[bool]) {
-    for (pixel, &t) in images.rgb.chunks_exact_mut(3).zip(ids) {
-        let inside = faces.get(t as usize).is_some_and(|f| {
-            f.iter()
-                .any(|&v| free.get(v as usize).copied().unwrap_or(false))
-        });
-        if inside {
-            for (c, k) in pixel.iter_mut().zip(REGION_TINT) {
-                *c *= k;
-            }
-        }
-    }
-}
-
-/// `n` orbit views (elevation 20°, azimuth 360°·k/n, looking at the origin, vertical field of view
-/// `fov` degrees) from which the whole mesh is visible: with r the largest distance of a vertex
-/// from the origin, a sphere of radius r subtends the field of view at distance r / sin(fov/2);
-/// 10 % margin is added.
-pub fn bounding_orbit(positions: &[[f64; 3]], n: usize, fov: f64) -> Vec<raster_diff::View> {
-    let radius = positions
-        .iter()
-        .map(|p| (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt())
-        .filter(|r| r.is_finite())
-        .fold(0.0_f64, f64::max)
-        .max(1e-3);
-    let half_fov = (fov.clamp(1.0, 179.0) * 0.5).to_radians();
-    let distance = 1.1 * radius / half_fov.sin();
-    raster_diff::orbit_views(n.max(1), 20.0, distance, fov)
-}
-
-/// Renders `n` turntable views of a mesh on the CPU renderer, from [`bounding_orbit`].
-pub fn turntable(
-    renderer: &mut raster_diff::CpuRenderer,
-    positions: &[[f64; 3]],
-    faces: &[[u32; 3]],
-    n: usize,
-    size: usize,
-    fov: f64,
-) -> Result<Images> {
-    let views = bounding_orbit(positions, n, fov);
-    renderer
-        .render(positions, faces, &views, size, size)
-        .context("turntable render")
-}
-
 impl Observer for RunObserver<'_> {
     fn iteration(&mut self, record: &IterationRecord) -> Result<()> {
         let line = record_json(record).to_string();
@@ -379,16 +305,18 @@ impl Observer for RunObserver<'_> {
         self.metrics
             .sync_data()
             .io_context("cannot sync", &metrics)?;
-        Checkpoint {
+        Ok(Checkpoint {
             version: CHECKPOINT_VERSION,
             iteration: state.iteration,
-            x: state.x.clone(),
-            adam: state.adam.state().clone(),
-            rng: state.rng.clone(),
-            config_toml: self.config_toml.clone(),
+            state: CheckpointState {
+                x: state.x.clone(),
+                adam: state.adam.state().clone(),
+                rng: state.rng.clone(),
+                config_toml: self.config_toml.clone(),
+            },
             identity: Some(self.identity.clone()),
         }
-        .save_atomic(&self.dir.checkpoint())
+        .save_atomic(&self.dir.checkpoint())?)
     }
 
     fn preview(
@@ -610,7 +538,7 @@ pub fn build_objective<'g>(
 /// `metrics.jsonl` and starts at the rest normals; a resume checks the checkpoint against the mesh
 /// and cuts `metrics.jsonl` back to its iteration.
 pub fn initial_state(
-    start: Start,
+    start: Start<CheckpointState>,
     dir: &RunDir,
     prepared: &Prepared,
     config: &Config,
@@ -620,8 +548,8 @@ pub fn initial_state(
     Ok(match start {
         Start::Fresh | Start::Complete => {
             dir.write_task(&prepared.identity)?;
-            crate::durable::replace_bytes(&dir.config(), prepared.config_toml.as_bytes())?;
-            crate::durable::replace_bytes(&dir.metrics(), b"")?;
+            rundir::durable::replace_bytes(&dir.config(), prepared.config_toml.as_bytes())?;
+            rundir::durable::replace_bytes(&dir.metrics(), b"")?;
             LoopState {
                 iteration: 0,
                 x: prepared.darap.rest_normals().to_vec(),
@@ -630,18 +558,24 @@ pub fn initial_state(
             }
         }
         Start::Resume(c) => {
-            if c.x.len() != n {
+            let CheckpointState {
+                x,
+                adam: moments,
+                rng,
+                ..
+            } = c.state;
+            if x.len() != n {
                 invalid!(
                     "the checkpoint has {} vertices, the mesh {n}: not the same mesh",
-                    c.x.len()
+                    x.len()
                 );
             }
             dir.truncate_metrics(c.iteration)?;
             LoopState {
                 iteration: c.iteration,
-                x: c.x,
-                adam: Adam::from_state(adam, c.adam)?,
-                rng: c.rng,
+                x,
+                adam: Adam::from_state(adam, moments)?,
+                rng,
             }
         }
     })
@@ -674,7 +608,7 @@ pub fn write_outputs(
     lock.ensure_held()?;
     for ext in ["obj", "ply", "glb"] {
         let path = dir.file(&format!("mesh.{ext}"));
-        let written = crate::durable::replace_with(&path, |tmp| {
+        let written = rundir::durable::replace_with(&path, |tmp| {
             mesh_core::io::write_mesh(tmp, &deformed, Some(&normals)).map_err(Error::from)
         });
         match written {
@@ -895,7 +829,7 @@ fn claim_run_dir(
     options: &RunOptions,
     prepared: &Prepared,
     inputs: &[(String, PathBuf)],
-) -> Result<(RunLock, Start)> {
+) -> Result<(RunLock, Start<CheckpointState>)> {
     let resume = if options.resume_if_checkpoint {
         ResumeMode::IfCheckpoint
     } else if request.resume {
@@ -903,20 +837,20 @@ fn claim_run_dir(
     } else {
         ResumeMode::Never
     };
-    dir.claim(&Claim {
+    Ok(dir.claim(&Claim {
         force: request.force,
         resume,
         skip_complete: options.skip_complete,
         identity: &prepared.identity,
         inputs,
-    })
+    })?)
 }
 
 /// Stage 3 of [`execute_with`]: the caller's task (models load here), unless the run was
 /// cancelled before or while it loaded; an exemplar becomes an input no output may replace.
 fn make_task_unless_stopped<'g>(
     dir: &RunDir,
-    start: &Start,
+    start: &Start<CheckpointState>,
     cancel: &AtomicBool,
     make_task: impl FnOnce() -> Result<Task<'g>>,
     inputs: &mut Vec<(String, PathBuf)>,
@@ -939,8 +873,8 @@ fn make_task_unless_stopped<'g>(
     }
     if let Task::Style(Style::Exemplar { path, .. }) = &task {
         inputs.push(("exemplar mesh".into(), path.clone()));
-        crate::rundir::refuse_overwriting_inputs(
-            &crate::rundir::RUN_FILES
+        rundir::refuse_overwriting_inputs(
+            &rundir::RUN_FILES
                 .iter()
                 .map(|n| dir.file(n))
                 .collect::<Vec<_>>(),
@@ -1084,7 +1018,7 @@ fn write_summary(
         })),
         "task": prepared.identity.fields,
     });
-    crate::durable::replace_bytes(
+    rundir::durable::replace_bytes(
         &dir.summary(),
         serde_json::to_string_pretty(&summary)?.as_bytes(),
     )
@@ -1147,7 +1081,7 @@ fn write_deformation(
             scalar_i64(i64::from(config.region.feather))?,
         )?;
     }
-    crate::durable::replace_with(&dir.deformation(), |tmp| {
+    rundir::durable::replace_with(&dir.deformation(), |tmp| {
         saved.write(tmp).map_err(Error::from)
     })
     .with_context(|| format!("cannot write {}", dir.deformation().display()))

@@ -13,7 +13,7 @@
 //!   the initial targets (the rest normals): the undeformed mesh in that same frame.
 //!
 //! Entries are taken at iteration 0, every `run.snapshot_every` iterations and at the last
-//! iteration. The whole file is rewritten at each entry, atomically ([`crate::durable`]: a
+//! iteration. The whole file is rewritten at each entry, atomically ([`rundir::durable`]: a
 //! temporary file in the same folder, synced, renamed), so a reader never sees a torn file. On a
 //! resume from a checkpoint at iteration c, entries after c (written before a kill) are dropped
 //! first, so the file never holds duplicate or future iterations. The file is not part of the task
@@ -123,7 +123,7 @@ impl Snapshots {
             .map_err(Error::Invalid)?;
         let x = NpyArray::new(vec![k, self.vertices, 3], NpyData::F32(self.x.clone()))
             .map_err(Error::Invalid)?;
-        crate::durable::replace_with(path, |tmp| {
+        rundir::durable::replace_with(path, |tmp| -> Result<()> {
             let mut w = NpzWriter::create(tmp)?;
             w.add("iterations", &iterations)?;
             w.add("x", &x)?;

@@ -301,14 +301,16 @@ fn checkpoint_seed(scratch: &Path) -> anyhow::Result<Vec<u8>> {
     let c = stylize::checkpoint::Checkpoint {
         version: stylize::checkpoint::CHECKPOINT_VERSION,
         iteration: 3,
-        x: vec![[0.5, -0.25, 1.0], [1e-300, 2.0, -3.5]],
-        adam: optim::AdamState {
-            step: 3,
-            m: vec![0.0, 1.0, -2.0, 0.5, 0.25, 1e-9],
-            v: vec![1e-300, 2.0, 3.0, 4.0, 5.0, 6.0],
+        state: stylize::checkpoint::CheckpointState {
+            x: vec![[0.5, -0.25, 1.0], [1e-300, 2.0, -3.5]],
+            adam: optim::AdamState {
+                step: 3,
+                m: vec![0.0, 1.0, -2.0, 0.5, 0.25, 1e-9],
+                v: vec![1e-300, 2.0, 3.0, 4.0, 5.0, 6.0],
+            },
+            rng: rand_chacha::ChaCha8Rng::seed_from_u64(9),
+            config_toml: "[run]\nseed = 9\n".into(),
         },
-        rng: rand_chacha::ChaCha8Rng::seed_from_u64(9),
-        config_toml: "[run]\nseed = 9\n".into(),
         identity: Some(stylize::identity::TaskIdentity {
             fields: [
                 ("mesh_sha256", "00ff"),

@@ -22,7 +22,7 @@
 //! `OUT_lambda5.ext`, `OUT_lambda8.ext`, … . Parent folders are created; existing outputs are
 //! refused unless `--force` (all outputs are checked before any is written). An output that is
 //! one of the inputs (the saved file, the mask — compared by file identity) is refused always,
-//! `--force` included. Each output is written atomically and durably (`crate::durable`).
+//! `--force` included. Each output is written atomically and durably (`rundir::durable`).
 
 use std::path::{Path, PathBuf};
 
@@ -251,7 +251,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             inputs.push(("region vertex file".into(), file));
         }
     }
-    crate::rundir::refuse_overwriting_inputs(&outputs, &[], &inputs)?;
+    rundir::refuse_overwriting_inputs(&outputs, &[], &inputs)?;
     for (i, a) in outputs.iter().enumerate() {
         if outputs[..i].contains(a) {
             bail!(
@@ -303,7 +303,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             std::fs::create_dir_all(parent)
                 .with_context(|| format!("cannot create {}", parent.display()))?;
         }
-        crate::durable::replace_with(out, |tmp| {
+        rundir::durable::replace_with(out, |tmp| {
             mesh_core::io::write_mesh(tmp, &mesh, Some(&normals)).map_err(stylize::Error::from)
         })
         .with_context(|| format!("cannot write {}", out.display()))?;

@@ -93,7 +93,7 @@ fn stale_frames(dir: &Path, frames: usize) -> Vec<PathBuf> {
 }
 
 fn save(path: &Path, images: &Images, index: usize, encoding: Encoding) -> anyhow::Result<()> {
-    crate::durable::replace_with(path, |tmp| {
+    rundir::durable::replace_with(path, |tmp| {
         let file =
             std::fs::File::create(tmp).map_err(|e| stylize::Error::io("cannot create", tmp, e))?;
         write_png(std::io::BufWriter::new(file), images, index, encoding)
@@ -148,7 +148,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .chain([sheet_path.clone()])
         .chain((!args.no_gif).then(|| gif_path.clone()))
         .collect();
-    crate::rundir::refuse_overwriting_inputs(
+    rundir::refuse_overwriting_inputs(
         &outputs,
         &[],
         &[("input mesh".to_string(), args.mesh.clone())],
@@ -192,7 +192,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .unwrap_or_else(|| (args.turntable as f64).sqrt().ceil() as usize);
     save(&sheet_path, &contact_sheet(&all, columns), 0, encoding)?;
     if !args.no_gif {
-        crate::durable::replace_with(&gif_path, |tmp| {
+        rundir::durable::replace_with(&gif_path, |tmp| {
             let file = std::fs::File::create(tmp)
                 .map_err(|e| stylize::Error::io("cannot create", tmp, e))?;
             stylize::run_pictures::encode_gif(

@@ -233,7 +233,7 @@ impl RunItem {
     pub fn status(&self) -> &'static str {
         if self.root.join("run.json").is_file() {
             "complete"
-        } else if self.root.join(crate::lock::LOCK_FILE).exists() {
+        } else if self.root.join(rundir::lock::LOCK_FILE).exists() {
             "running"
         } else if self.root.join("task.json").is_file() {
             "incomplete"

@@ -7,15 +7,16 @@
 //!   task.json          the task's identity (crate::identity), written first: marks the folder ours
 //!   config.toml        resolved configuration (every key)
 //!   metrics.jsonl      one JSON object per iteration: losses, weights, timings
-//!   checkpoint.json    x, Adam moments and step, RNG state, iteration, task identity
+//!   checkpoint.json    iteration, the run's state (x, Adam moments and step, RNG state, config),
+//!                      task identity (crate::checkpoint)
 //!   previews/iter_NNNNNN.png   grid of the current views every run.preview_every iterations
 //!   mesh.obj, mesh.ply, mesh.glb   deformed mesh (side-2 cube frame) with vertex normals
 //!   deformation.npz    reference format (spec §8) + format_version, seed, rotation_rule
 //!   snapshots.npz      deformed positions at iteration 0, every run.snapshot_every and the last
-//!                      (crate::snapshots; rewritten atomically while the run goes)
+//!                      (stylize::snapshots; rewritten atomically while the run goes)
 //!   turntable.png      contact sheet of an orbit around the result, filling its tiles
 //!   turntable.gif      the same orbit animated (run.turntable_gif_frames frames, looping)
-//!   before_after.png   source (top) and result (bottom), same views and crop (crate::run_pictures)
+//!   before_after.png   source (top) and result (bottom), same views and crop (stylize::run_pictures)
 //!   run.json           summary; written last — its presence marks the run complete
 //! ```
 //!
@@ -32,19 +33,20 @@
 use std::os::unix::fs::MetadataExt;
 use std::path::{Path, PathBuf};
 
-use crate::error::{Error, IoContext, Result};
-
-/// `return Err(Error::run_dir(dir, format!(…)))`.
-macro_rules! run_dir_err {
-    ($dir:expr, $($arg:tt)*) => {
-        return Err(Error::run_dir($dir, format!($($arg)*)))
-    };
-}
+use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 use crate::checkpoint::Checkpoint;
+use crate::error::{Error, IoContext, Result};
 use crate::identity::TaskIdentity;
 use crate::lock::{RunLock, is_lock_name};
+
+/// `return Err(Error::refused(dir, format!(…)))`.
+macro_rules! run_dir_err {
+    ($dir:expr, $($arg:tt)*) => {
+        return Err(Error::refused($dir, format!($($arg)*)))
+    };
+}
 
 /// Paths inside a run directory.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -72,13 +74,13 @@ pub const RUN_FILES: &[&str] = &[
 /// The `format` value of `task.json`.
 const TASK_FORMAT: &str = "stylize-task";
 
-/// How an existing directory is to be used.
+/// How an existing directory is to be used; `S` is the state the caller keeps in its checkpoints.
 #[derive(Debug)]
-pub enum Start {
+pub enum Start<S> {
     /// Nothing there (or removed with `--force`): start at iteration 1.
     Fresh,
     /// A checkpoint of the same task to continue from.
-    Resume(Box<Checkpoint>),
+    Resume(Box<Checkpoint<S>>),
     /// A complete run of the same task (only when [`Claim::skip_complete`]).
     Complete,
 }
@@ -294,7 +296,9 @@ impl RunDir {
         crate::durable::replace_bytes(&self.task(), text.as_bytes())
     }
 
-    fn has_marker(&self) -> bool {
+    /// Whether the folder holds a valid `task.json`, a run summary or a checkpoint with a state
+    /// of type `S`.
+    fn has_marker<S: DeserializeOwned>(&self) -> bool {
         if self.task_identity().is_some() {
             return true;
         }
@@ -305,11 +309,11 @@ impl RunDir {
         if summary.is_some_and(|v| v.get("status").is_some() && v.get("objective").is_some()) {
             return true;
         }
-        self.has_checkpoint() && Checkpoint::load(&self.checkpoint()).is_ok()
+        self.has_checkpoint() && Checkpoint::<S>::load(&self.checkpoint()).is_ok()
     }
 
-    /// What is at `root` now.
-    pub fn inspect(&self) -> Result<Existing> {
+    /// What is at `root` now (a checkpoint counts as ours when its state parses as an `S`).
+    pub fn inspect<S: DeserializeOwned>(&self) -> Result<Existing> {
         let entries = match std::fs::read_dir(&self.root) {
             Ok(e) => e,
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Existing::Missing),
@@ -328,7 +332,7 @@ impl RunDir {
         {
             return Ok(Existing::Empty);
         }
-        if self.has_marker() {
+        if self.has_marker::<S>() {
             return Ok(Existing::Ours);
         }
         names.sort();
@@ -336,8 +340,9 @@ impl RunDir {
     }
 
     /// Takes the directory for a run: checks inputs are not overwritten, refuses foreign folders
-    /// without `--force`, takes the lock, and decides (under the lock) how to start.
-    pub fn claim(&self, claim: &Claim<'_>) -> Result<(RunLock, Start)> {
+    /// without `--force`, takes the lock, and decides (under the lock) how to start. `S` is the
+    /// state the caller's checkpoints hold ([`Checkpoint`]); a resume hands it back.
+    pub fn claim<S: DeserializeOwned>(&self, claim: &Claim<'_>) -> Result<(RunLock, Start<S>)> {
         if self.root.exists() && !self.root.is_dir() {
             run_dir_err!(
                 &self.root,
@@ -368,7 +373,7 @@ impl RunDir {
             .map(|n| self.file(n))
             .collect();
         refuse_overwriting_inputs(&outputs, &[self.previews()], claim.inputs)?;
-        match self.inspect()? {
+        match self.inspect::<S>()? {
             Existing::Foreign(names) if !claim.force => {
                 let shown: Vec<&str> = names.iter().take(6).map(String::as_str).collect();
                 run_dir_err!(
@@ -395,7 +400,7 @@ impl RunDir {
         Ok((lock, start))
     }
 
-    fn decide(&self, claim: &Claim<'_>) -> Result<Start> {
+    fn decide<S: DeserializeOwned>(&self, claim: &Claim<'_>) -> Result<Start<S>> {
         let dir = self.root.display();
         if claim.force {
             self.remove_outputs()?;
@@ -403,7 +408,7 @@ impl RunDir {
         }
         let recorded = || -> Result<Option<TaskIdentity>> {
             if self.has_checkpoint() {
-                return Ok(Checkpoint::load(&self.checkpoint())?.identity);
+                return Ok(Checkpoint::<S>::load(&self.checkpoint())?.identity);
             }
             Ok(self.task_identity())
         };
@@ -449,7 +454,7 @@ impl RunDir {
                      it or --force to start over"
                 );
             }
-            let c = Checkpoint::load(&self.checkpoint())?;
+            let c = Checkpoint::<S>::load(&self.checkpoint())?;
             let Some(id) = &c.identity else {
                 run_dir_err!(
                     &self.root,
@@ -575,6 +580,12 @@ mod tests {
         r.unwrap_or_else(|e| panic!("{e:?}"))
     }
 
+    /// A caller's checkpoint state.
+    #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+    struct State {
+        x: Vec<f64>,
+    }
+
     fn identity(v: &str) -> TaskIdentity {
         TaskIdentity {
             fields: [("style".to_string(), v.to_string())].into(),
@@ -596,8 +607,19 @@ mod tests {
         }
     }
 
+    /// The error's whole chain on one line.
     fn err<T>(r: Result<T>) -> String {
-        r.err().map(|e| e.full_message()).unwrap_or_default()
+        let Err(e) = r else {
+            return String::new();
+        };
+        let mut out = e.to_string();
+        let mut cur = std::error::Error::source(&e);
+        while let Some(s) = cur {
+            out.push_str(": ");
+            out.push_str(&s.to_string());
+            cur = s.source();
+        }
+        out
     }
 
     #[test]
@@ -605,7 +627,7 @@ mod tests {
         let dir = ok(tempfile::tempdir());
         let run = RunDir::new(dir.path().join("a/b/run"));
         let id = identity("cube");
-        let (lock, start) = ok(run.claim(&claim(&id, &[], false, ResumeMode::Never)));
+        let (lock, start) = ok(run.claim::<State>(&claim(&id, &[], false, ResumeMode::Never)));
         assert!(matches!(start, Start::Fresh));
         assert!(run.root().is_dir(), "parent folders are created");
         assert!(run.file(crate::lock::LOCK_FILE).is_file());
@@ -620,10 +642,10 @@ mod tests {
             r#"{"status":"complete","objective":"x"}"#,
         ));
         ok(std::fs::write(run.file("mesh.obj"), ""));
-        let e = err(run.claim(&claim(&id, &[], false, ResumeMode::Never)));
+        let e = err(run.claim::<State>(&claim(&id, &[], false, ResumeMode::Never)));
         assert!(e.contains("--force"), "{e}");
         ok(std::fs::write(run.file("user-notes.txt"), "keep me"));
-        let (forced, start) = ok(run.claim(&claim(&id, &[], true, ResumeMode::Never)));
+        let (forced, start) = ok(run.claim::<State>(&claim(&id, &[], true, ResumeMode::Never)));
         assert!(matches!(start, Start::Fresh));
         assert!(!run.summary().exists() && !run.file("mesh.obj").exists());
         assert!(
@@ -637,7 +659,7 @@ mod tests {
         ok(std::fs::write(run.previews().join("iter_000004.png"), ""));
         ok(std::fs::write(run.previews().join("run.json"), "{}"));
         ok(std::fs::write(nested.join("iter_000002.png"), ""));
-        let (lock, _) = ok(run.claim(&claim(&id, &[], true, ResumeMode::Never)));
+        let (lock, _) = ok(run.claim::<State>(&claim(&id, &[], true, ResumeMode::Never)));
         assert!(!run.previews().join("iter_000004.png").exists());
         assert!(
             run.previews().join("run.json").exists() && nested.join("iter_000002.png").exists()
@@ -646,7 +668,7 @@ mod tests {
         ok(std::fs::remove_file(run.previews().join("run.json")));
         ok(std::fs::remove_dir_all(&nested));
         ok(std::fs::write(run.previews().join("iter_000006.png"), ""));
-        let _ = ok(run.claim(&claim(&id, &[], true, ResumeMode::Never)));
+        let _ = ok(run.claim::<State>(&claim(&id, &[], true, ResumeMode::Never)));
         assert!(!run.previews().exists(), "an emptied previews/ is removed");
     }
 
@@ -673,14 +695,14 @@ mod tests {
         ok(std::fs::write(proj.join("config.toml"), "# mine"));
         let run = RunDir::new(&proj);
         let id = identity("cube");
-        let e = err(run.claim(&claim(&id, &[], false, ResumeMode::Never)));
+        let e = err(run.claim::<State>(&claim(&id, &[], false, ResumeMode::Never)));
         assert!(
             e.contains("not a stylize run directory") && e.contains("config.toml"),
             "{e}"
         );
         // The input mesh is one of the outputs' names: refused even with --force.
         let inputs = vec![("input mesh".to_string(), proj.join("../proj/./mesh.obj"))];
-        let e = err(run.claim(&claim(&id, &inputs, true, ResumeMode::Never)));
+        let e = err(run.claim::<State>(&claim(&id, &inputs, true, ResumeMode::Never)));
         assert!(e.contains("input mesh") && e.contains("--force"), "{e}");
         // A hard link of the input under an output's name is the same file.
         let other = dir.path().join("other");
@@ -689,14 +711,15 @@ mod tests {
             proj.join("mesh.obj"),
             other.join("mesh.ply"),
         ));
-        let e = err(RunDir::new(&other).claim(&claim(&id, &inputs, true, ResumeMode::Never)));
+        let e =
+            err(RunDir::new(&other).claim::<State>(&claim(&id, &inputs, true, ResumeMode::Never)));
         assert!(e.contains("mesh.ply"), "{e}");
         // An input inside previews/ would be removed by --force.
         let prev = dir.path().join("r2/previews");
         ok(std::fs::create_dir_all(&prev));
         ok(std::fs::write(prev.join("x.obj"), ""));
         let inputs = vec![("exemplar mesh".to_string(), prev.join("x.obj"))];
-        let e = err(RunDir::new(dir.path().join("r2")).claim(&claim(
+        let e = err(RunDir::new(dir.path().join("r2")).claim::<State>(&claim(
             &id,
             &inputs,
             true,
@@ -711,11 +734,41 @@ mod tests {
         let dir = ok(tempfile::tempdir());
         let run = RunDir::new(dir.path().join("r"));
         let id = identity("cube");
-        let e = err(run.claim(&claim(&id, &[], false, ResumeMode::Required)));
+        let e = err(run.claim::<State>(&claim(&id, &[], false, ResumeMode::Required)));
         assert!(e.contains("does not exist") && !run.root().exists(), "{e}");
         ok(std::fs::create_dir_all(run.root()));
-        let e = err(run.claim(&claim(&id, &[], false, ResumeMode::Required)));
+        let e = err(run.claim::<State>(&claim(&id, &[], false, ResumeMode::Required)));
         assert!(e.contains("no checkpoint"), "{e}");
+        let c = Checkpoint {
+            version: crate::CHECKPOINT_VERSION,
+            iteration: 4,
+            state: State { x: vec![0.1, -2.5] },
+            identity: Some(id.clone()),
+        };
+        ok(run.write_task(&id));
+        ok(c.save_atomic(&run.checkpoint()));
+        let e = err(run.claim::<State>(&claim(&id, &[], false, ResumeMode::Never)));
+        assert!(e.contains("--resume"), "{e}");
+        let (lock, start) = ok(run.claim::<State>(&claim(&id, &[], false, ResumeMode::Required)));
+        assert!(
+            matches!(start, Start::Resume(ref r) if **r == c),
+            "{start:?}"
+        );
+        drop(lock);
+        let other = identity("octahedron");
+        let r = run.claim::<State>(&claim(&other, &[], false, ResumeMode::IfCheckpoint));
+        assert!(
+            matches!(&r, Err(Error::DifferentTask { differences, .. })
+                if differences == &["style: was cube, now octahedron"]),
+            "{r:?}"
+        );
+        // A checkpoint whose state is not an `S` does not make the folder ours.
+        ok(std::fs::write(
+            run.checkpoint(),
+            r#"{"version":2,"iteration":1,"identity":{"fields":{}}}"#,
+        ));
+        ok(std::fs::remove_file(run.task()));
+        assert!(matches!(ok(run.inspect::<State>()), Existing::Foreign(_)));
     }
 
     #[test]
@@ -723,8 +776,8 @@ mod tests {
         let dir = ok(tempfile::tempdir());
         let run = RunDir::new(dir.path());
         let id = identity("cube");
-        let (_lock, _) = ok(run.claim(&claim(&id, &[], false, ResumeMode::Never)));
-        let e = err(run.claim(&claim(&id, &[], false, ResumeMode::Never)));
+        let (_lock, _) = ok(run.claim::<State>(&claim(&id, &[], false, ResumeMode::Never)));
+        let e = err(run.claim::<State>(&claim(&id, &[], false, ResumeMode::Never)));
         assert!(e.contains("in use") && e.contains("pid"), "{e}");
     }
 

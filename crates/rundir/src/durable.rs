@@ -7,14 +7,36 @@
 //! keep the target's extension because some writers choose the format from it (`mesh.obj`).
 //! [`is_temp_name`] recognizes them, so a run directory's leftovers from a killed process are
 //! known to be ours.
+//!
+//! [`replace_with`] is generic over the writer's error type, so a caller's own writers (a mesh,
+//! an image, an archive) return their own errors through it.
 
+use std::collections::hash_map::RandomState;
 use std::fs::File;
+use std::hash::{BuildHasher, Hasher};
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
 
 use crate::error::{Error, IoContext, Result};
 
 /// Marker between the stem and the process id in temporary names.
 const TEMP_MARK: &str = ".tmp-";
+
+/// 64 random bits: SipHash under a fresh key of the standard library's `RandomState` (seeded
+/// from the operating system's random source once per thread, then stepped per key) over a
+/// process-wide counter and the time. Never repeats within a process; across processes and
+/// hosts it is as unpredictable as the key.
+pub(crate) fn random_u64() -> u64 {
+    static CALLS: AtomicU64 = AtomicU64::new(0);
+    let mut h = RandomState::new().build_hasher();
+    h.write_u64(CALLS.fetch_add(1, Ordering::Relaxed));
+    let now = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_nanos())
+        .unwrap_or(0);
+    h.write_u128(now);
+    h.finish()
+}
 
 /// A fresh temporary path next to `target` (same folder, same extension).
 pub fn temp_path(target: &Path) -> PathBuf {
@@ -22,7 +44,7 @@ pub fn temp_path(target: &Path) -> PathBuf {
         .file_stem()
         .map(|s| s.to_string_lossy().into_owned())
         .unwrap_or_default();
-    let suffix: u64 = rand::random();
+    let suffix = random_u64();
     let mut name = format!(".{stem}{TEMP_MARK}{}-{suffix:016x}", std::process::id());
     if let Some(ext) = target.extension() {
         name.push('.');
@@ -58,8 +80,12 @@ pub fn sync_dir(dir: &Path) -> Result<()> {
 
 /// Writes `target` atomically: `write` fills a temporary path next to it, which is then synced,
 /// renamed over `target`, and the folder synced. On any error the temporary file is removed and
-/// `target` is left as it was.
-pub fn replace_with(target: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
+/// `target` is left as it was. `write`'s error type is the caller's (this crate's [`Error`]s
+/// convert into it).
+pub fn replace_with<E: From<Error>>(
+    target: &Path,
+    write: impl FnOnce(&Path) -> Result<(), E>,
+) -> Result<(), E> {
     let tmp = temp_path(target);
     let result = write(&tmp).and_then(|()| {
         File::open(&tmp)
@@ -70,7 +96,7 @@ pub fn replace_with(target: &Path, write: impl FnOnce(&Path) -> Result<()>) -> R
             path: target.to_path_buf(),
             source: e,
         })?;
-        sync_dir(target.parent().unwrap_or(Path::new(".")))
+        Ok(sync_dir(target.parent().unwrap_or(Path::new(".")))?)
     });
     if result.is_err() {
         let _ = std::fs::remove_file(&tmp);
@@ -105,10 +131,10 @@ mod tests {
     fn failed_write_leaves_target_and_no_temporary() {
         let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
         let target = dir.path().join("run.json");
-        replace_bytes(&target, b"old").unwrap_or_else(|e| panic!("{}", e.full_message()));
+        replace_bytes(&target, b"old").unwrap_or_else(|e| panic!("{e}"));
         let r = replace_with(&target, |tmp| {
             std::fs::write(tmp, b"partial").io_context("cannot write", tmp)?;
-            Err(Error::Invalid("disk full".into()))
+            Err(Error::refused(tmp, "disk full"))
         });
         assert!(r.is_err());
         assert_eq!(std::fs::read(&target).unwrap_or_default(), b"old");

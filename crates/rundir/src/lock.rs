@@ -387,8 +387,8 @@ impl RunLock {
             beat: 0,
             token: format!(
                 "{:016x}{:016x}",
-                rand::random::<u64>(),
-                rand::random::<u64>()
+                crate::durable::random_u64(),
+                crate::durable::random_u64()
             ),
             command: std::env::args().collect::<Vec<_>>().join(" "),
         };
