@@ -12,6 +12,7 @@
 //! [`TriMesh`]; with the default feature `io`, [`io`] reads and writes OBJ, OFF, PLY and glTF/GLB.
 //! NumPy files live in the `npy` crate, the reference's saved-deformation `.npz` in `stylize`.
 
+pub mod bvh;
 mod error;
 pub mod geometry;
 pub mod normalize;
