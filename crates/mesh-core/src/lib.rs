@@ -18,6 +18,7 @@ pub mod geometry;
 pub mod normalize;
 pub mod normals;
 pub mod region;
+pub mod remesh;
 pub mod shapes;
 pub mod subdivide;
 pub mod topology;
