@@ -4,8 +4,8 @@
 //! # Algorithm
 //! Given a target edge length `L`, each of [`RemeshOptions::iterations`] rounds runs, in order:
 //! 1. **split** every edge longer than `4/3·L` at its midpoint (repeatedly, until none is);
-//! 2. **collapse** every edge shorter than `4/5·L` into one of its ends (the other end keeps its
-//!    position), refusing a collapse that would
+//! 2. **collapse** every edge shorter than `4/5·L`: to its midpoint when both ends are free (not on
+//!    a feature or boundary), else into the end that may not move; refusing a collapse that would
 //!    - create an edge longer than `4/3·L`,
 //!    - break the link condition (the two ends share a neighbour other than the edge's opposite
 //!      corners), leave a vertex of valence < 3, pinch a boundary (an interior edge between two
@@ -17,7 +17,7 @@
 //!      along a feature edge), or collapse across a feature;
 //! 3. **flip** every interior, non-feature edge whose flip lowers `Σ (valence − target)²` over its
 //!    four vertices (target 6 inside, 4 on the boundary), unless the flip lowers the smaller minimum
-//!    angle of the two triangles, folds them, or duplicates an edge; a pair with a corner under 10°
+//!    angle of the two triangles below `min(before, 30°)`, folds them, or duplicates an edge; a pair with a corner under 10°
 //!    (a needle or a zero-area face) is also flipped whenever that raises its minimum angle;
 //! 4. **tangential relaxation**, [`SMOOTHING_STEPS`] times: every free vertex moves to the
 //!    area-weighted centroid of its incident faces' centroids, projected into its tangent plane
@@ -247,6 +247,10 @@ fn min_angle(a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> f64 {
 /// A collapse may not make a face with a smaller corner (unless no worse than before).
 const MIN_NEW_ANGLE: f64 = 5.0 * std::f64::consts::PI / 180.0;
 
+/// A valence-improving flip may lower the pair's minimum angle, but never below this (or below
+/// the minimum before, when that is smaller).
+const FLIP_KEEP_ANGLE: f64 = 30.0 * std::f64::consts::PI / 180.0;
+
 /// A face pair with a corner under this is flipped whenever that raises its minimum angle.
 const NEEDLE_ANGLE: f64 = 10.0 * std::f64::consts::PI / 180.0;
 
@@ -471,24 +475,37 @@ impl<'a> Remesher<'a> {
                 continue;
             }
             let h = 2 * e as u32;
-            let ok0 = self.collapse_ok(h, &counts);
-            let ok1 = self.collapse_ok(opp(h), &counts);
-            let g = match (ok0, ok1) {
-                (true, true) => {
+            let (a, b) = (self.mesh.from(h) as usize, self.mesh.to(h) as usize);
+            let (pa, pb) = (self.mesh.pos[a], self.mesh.pos[b]);
+            // Two free ends meet at the midpoint; otherwise one end stays where it is.
+            let free = |v: usize| counts[v] == 0 && !self.mesh.locked[v];
+            let mid = [
+                (pa[0] + pb[0]) / 2.0,
+                (pa[1] + pb[1]) / 2.0,
+                (pa[2] + pb[2]) / 2.0,
+            ];
+            let chosen = if free(a) && free(b) && self.collapse_ok(h, &counts, mid) {
+                Some((h, mid))
+            } else {
+                let ok0 = self.collapse_ok(h, &counts, pb);
+                let ok1 = self.collapse_ok(opp(h), &counts, pa);
+                match (ok0, ok1) {
                     // Remove the end with the lower valence.
-                    if self.mesh.valence(self.mesh.from(h)) <= self.mesh.valence(self.mesh.to(h)) {
-                        h
-                    } else {
-                        opp(h)
+                    (true, true) if self.mesh.valence(a as u32) <= self.mesh.valence(b as u32) => {
+                        Some((h, pb))
                     }
+                    (true, true) | (false, true) => Some((opp(h), pa)),
+                    (true, false) => Some((h, pb)),
+                    (false, false) => None,
                 }
-                (true, false) => h,
-                (false, true) => opp(h),
-                (false, false) => continue,
+            };
+            let Some((g, target)) = chosen else {
+                continue;
             };
             let v1 = self.mesh.to(g);
             let mut scratch = std::mem::take(&mut self.buf);
             self.mesh.collapse(g, &mut scratch);
+            self.mesh.pos[v1 as usize] = target;
             // Edges merged at the opposite corners may have become features: recount v1's ring.
             self.mesh.outgoing(v1, &mut scratch);
             let ring: Vec<u32> = scratch.iter().map(|&k| self.mesh.to(k)).collect();
@@ -511,8 +528,9 @@ impl<'a> Remesher<'a> {
         n.min(255) as u8
     }
 
-    /// Whether collapsing half-edge `h` (removing `from(h)`) is allowed.
-    fn collapse_ok(&mut self, h: u32, counts: &[u8]) -> bool {
+    /// Whether collapsing half-edge `h` (removing `from(h)`, moving `to(h)` to `target`) is
+    /// allowed.
+    fn collapse_ok(&mut self, h: u32, counts: &[u8], target: [f64; 3]) -> bool {
         let m = &*self.mesh;
         let o = opp(h);
         let (v0, v1) = (m.from(h), m.to(h));
@@ -557,80 +575,18 @@ impl<'a> Remesher<'a> {
         let mut r1 = std::mem::take(&mut self.buf2);
         m.outgoing(v0, &mut r0);
         m.outgoing(v1, &mut r1);
-        let ok = (|| {
-            let common = r0
-                .iter()
-                .filter(|&&g| {
-                    let w = m.to(g);
-                    r1.iter().any(|&k| m.to(k) == w)
-                })
-                .count();
-            let expected = vl.is_some() as usize + vr.is_some() as usize;
-            if common != expected {
-                return false;
-            }
-            let (nv0, nv1) = (r0.len(), r1.len());
-            let after = nv0 + nv1 - 2 - expected;
-            if after < 3 {
-                return false;
-            }
-            let p1 = m.pos[v1 as usize];
-            // Geometry: the faces around v0 that survive, with v0 moved to v1.
-            let mut ring_normal = [0.0; 3];
-            for &g in r0.iter() {
-                if m.is_boundary_halfedge(g) {
-                    continue;
-                }
-                let (a, b) = (m.to(g), m.to(m.next(g)));
-                let n = cross(
-                    sub(m.pos[a as usize], m.pos[v0 as usize]),
-                    sub(m.pos[b as usize], m.pos[v0 as usize]),
-                );
-                for k in 0..3 {
-                    ring_normal[k] += n[k];
-                }
-            }
-            let ring_normal = normalized(ring_normal);
-            let mut worst_old = f64::INFINITY;
-            for &g in r0.iter() {
+        let common = r0
+            .iter()
+            .filter(|&&g| {
                 let w = m.to(g);
-                if w != v1 && dist(p1, m.pos[w as usize]) > self.hi {
-                    return false;
-                }
-                if m.is_boundary_halfedge(g) {
-                    continue;
-                }
-                let (a, b) = (m.to(g), m.to(m.next(g)));
-                let p0 = m.pos[v0 as usize];
-                let (pa, pb) = (m.pos[a as usize], m.pos[b as usize]);
-                worst_old = worst_old.min(min_angle(p0, pa, pb));
-            }
-            for &g in r0.iter() {
-                if m.is_boundary_halfedge(g) {
-                    continue;
-                }
-                let (a, b) = (m.to(g), m.to(m.next(g)));
-                if a == v1 || b == v1 {
-                    continue;
-                }
-                let p0 = m.pos[v0 as usize];
-                let (pa, pb) = (m.pos[a as usize], m.pos[b as usize]);
-                let old = normalized(cross(sub(pa, p0), sub(pb, p0))).or(ring_normal);
-                let Some(new) = normalized(cross(sub(pa, p1), sub(pb, p1))) else {
-                    return false;
-                };
-                if let Some(old) = old
-                    && dot(old, new) <= 0.0
-                {
-                    return false;
-                }
-                let angle = min_angle(p1, pa, pb);
-                if angle < MIN_NEW_ANGLE && angle < worst_old {
-                    return false;
-                }
-            }
-            true
-        })();
+                r1.iter().any(|&k| m.to(k) == w)
+            })
+            .count();
+        let expected = vl.is_some() as usize + vr.is_some() as usize;
+        let ok = common == expected
+            && r0.len() + r1.len() - 2 - expected >= 3
+            && ring_ok(m, v0, v1, target, &r0, self.hi)
+            && (target == m.pos[v1 as usize] || ring_ok(m, v1, v0, target, &r1, self.hi));
         self.buf = r0;
         self.buf2 = r1;
         ok
@@ -676,9 +632,9 @@ impl<'a> Remesher<'a> {
             );
             let old_min = min_angle(pa, pb, pc).min(min_angle(pb, pa, pd));
             let new_min = min_angle(pa, pd, pc).min(min_angle(pd, pb, pc));
-            // Toward valence 6 without lowering the minimum angle, or, for a needle pair, toward a
-            // larger minimum angle whatever the valences.
-            let wanted = (after < before && new_min >= old_min)
+            // Toward valence 6 without lowering the minimum angle below min(before, 30°), or, for
+            // a needle pair, toward a larger minimum angle whatever the valences.
+            let wanted = (after < before && new_min >= old_min.min(FLIP_KEEP_ANGLE))
                 || (old_min < NEEDLE_ANGLE && new_min > old_min);
             if !wanted {
                 continue;
@@ -795,6 +751,56 @@ impl<'a> Remesher<'a> {
             self.mesh.pos[v as usize] = q;
         }
     }
+}
+
+/// Whether moving vertex `v` (outgoing half-edges `ring`) to `p1` as it merges with `other` keeps
+/// every edge to a neighbour at most `hi` long, and every face that survives (those without
+/// `other`) unfolded (its normal turns by less than 90°) and not near-degenerate (no corner under
+/// [`MIN_NEW_ANGLE`] unless no worse than the worst face around `v` before).
+fn ring_ok(m: &HalfEdgeMesh, v: u32, other: u32, p1: [f64; 3], ring: &[u32], hi: f64) -> bool {
+    let p0 = m.pos[v as usize];
+    let mut ring_normal = [0.0; 3];
+    let mut worst_old = f64::INFINITY;
+    for &g in ring {
+        let w = m.to(g);
+        if w != other && dist(p1, m.pos[w as usize]) > hi {
+            return false;
+        }
+        if m.is_boundary_halfedge(g) {
+            continue;
+        }
+        let (pa, pb) = (m.pos[w as usize], m.pos[m.to(m.next(g)) as usize]);
+        let n = cross(sub(pa, p0), sub(pb, p0));
+        for k in 0..3 {
+            ring_normal[k] += n[k];
+        }
+        worst_old = worst_old.min(min_angle(p0, pa, pb));
+    }
+    let ring_normal = normalized(ring_normal);
+    for &g in ring {
+        if m.is_boundary_halfedge(g) {
+            continue;
+        }
+        let (a, b) = (m.to(g), m.to(m.next(g)));
+        if a == other || b == other {
+            continue;
+        }
+        let (pa, pb) = (m.pos[a as usize], m.pos[b as usize]);
+        let old = normalized(cross(sub(pa, p0), sub(pb, p0))).or(ring_normal);
+        let Some(new) = normalized(cross(sub(pa, p1), sub(pb, p1))) else {
+            return false;
+        };
+        if let Some(old) = old
+            && dot(old, new) <= 0.0
+        {
+            return false;
+        }
+        let angle = min_angle(p1, pa, pb);
+        if angle < MIN_NEW_ANGLE && angle < worst_old {
+            return false;
+        }
+    }
+    true
 }
 
 #[cfg(test)]
