@@ -49,7 +49,9 @@
 //! edges split and flip). Vertices no face uses are dropped. Out-of-range indices and NaN or infinite
 //! coordinates are refused.
 //!
-//! Bounded work: the target length must be finite, positive and at most the bounding-box diagonal
+//! Bounded work: coordinates must be at most [`MAX_COORDINATE`] in magnitude and the bounding-box
+//! diagonal at least [`MIN_DIAGONAL`] ([`RemeshError::Scale`]: squared areas must not overflow or
+//! underflow); the target length must be finite, positive and at most the bounding-box diagonal
 //! (else the mesh is smaller than one edge: [`RemeshError::MeshSmallerThanEdge`]); the output's face
 //! count is predicted up front as `max(1.2·area / (√3/4·L²), Σ edge length / L)` and refused over
 //! [`RemeshOptions::max_faces`] before any work ([`RemeshError::TooManyFaces`]); the running face
@@ -75,6 +77,14 @@ use crate::geometry::{cross, dot, norm, sub};
 
 /// Tangential relaxation steps (each followed by the projection) per round.
 pub const SMOOTHING_STEPS: usize = 3;
+
+/// The largest coordinate magnitude [`remesh`] accepts: squared face areas (fourth powers of
+/// lengths) of such points stay finite in `f64`.
+pub const MAX_COORDINATE: f64 = 1e70;
+
+/// The smallest bounding-box diagonal [`remesh`] accepts (a mesh of one point is
+/// [`RemeshError::MeshSmallerThanEdge`]): fourth powers of lengths stay normal `f64` numbers.
+pub const MIN_DIAGONAL: f64 = 1e-70;
 
 /// The most rounds [`remesh`] accepts.
 pub const MAX_ITERATIONS: usize = 1000;
@@ -119,6 +129,17 @@ pub enum RemeshError {
     /// The target edge length is zero, negative, NaN or infinite.
     #[error("the target edge length must be a positive finite number, got {0}")]
     EdgeLength(f64),
+    /// Coordinates too large or a mesh too small for the arithmetic (normalize it first, e.g. to
+    /// the side-2 cube of [`crate::normalize::side2_cube`]).
+    #[error(
+        "the mesh's scale is outside what remeshing handles (largest coordinate {size:e}, bounding-box diagonal {diagonal:e}; accepted: coordinates up to 1e70, diagonal at least 1e-70); normalize it first"
+    )]
+    Scale {
+        /// The largest coordinate magnitude.
+        size: f64,
+        /// The bounding-box diagonal.
+        diagonal: f64,
+    },
     /// The target edge length exceeds the bounding-box diagonal.
     #[error(
         "the target edge length {length} exceeds the mesh's bounding-box diagonal {diagonal}: the mesh is smaller than one target edge"
@@ -289,7 +310,14 @@ fn check(
             bb.grow(positions[v as usize]);
         }
     }
+    let size = (0..3)
+        .map(|k| bb.lo[k].abs().max(bb.hi[k].abs()))
+        .fold(0.0, f64::max);
     let diagonal = norm(sub(bb.hi, bb.lo));
+    if size > MAX_COORDINATE || (diagonal > 0.0 && diagonal < MIN_DIAGONAL) || !diagonal.is_finite()
+    {
+        return Err(RemeshError::Scale { size, diagonal });
+    }
     if l > diagonal {
         return Err(RemeshError::MeshSmallerThanEdge {
             length: l,

@@ -275,6 +275,36 @@ fn bad_input_is_refused_clearly() {
         Err(RemeshError::Iterations { .. })
     ));
 
+    // Huge and tiny scales.
+    for scale in [1e80, 1e-80] {
+        let q: Vec<[f64; 3]> = p.iter().map(|v| v.map(|c| c * scale)).collect();
+        let e = remesh(&q, &f, &o(0.3 * scale)).expect_err("scale");
+        assert!(matches!(e, RemeshError::Scale { .. }), "{e}");
+        assert!(e.to_string().contains("normalize it first"));
+    }
+    // Large and small but fine scales give the same mesh, scaled.
+    for scale in [1e60, 1e-60] {
+        let q: Vec<[f64; 3]> = p.iter().map(|v| v.map(|c| c * scale)).collect();
+        let out = remesh(&q, &f, &o(0.3 * scale)).expect("scaled");
+        let plain = remesh(&p, &f, &o(0.3)).expect("plain");
+        assert_eq!(out.faces, plain.faces, "scale {scale}");
+    }
+    // A mesh of one point (all vertices equal) is smaller than any edge.
+    let point = vec![[1.0; 3]; 4];
+    let e = remesh(&point, &shapes::tetrahedron().faces, &o(0.1)).expect_err("point");
+    assert!(matches!(e, RemeshError::MeshSmallerThanEdge { .. }), "{e}");
+    // A long needle strip: its area predicts nothing, its edge lengths do.
+    let needle = vec![
+        [0.0, 0.0, 0.0],
+        [1000.0, 0.0, 0.0],
+        [1000.0, 1e-9, 0.0],
+        [0.0, 1e-9, 0.0],
+    ];
+    let mut opts = o(0.001);
+    opts.max_faces = 100_000;
+    let e = remesh(&needle, &[[0, 1, 2], [0, 2, 3]], &opts).expect_err("needle");
+    assert!(matches!(e, RemeshError::TooManyFaces { .. }), "{e}");
+
     // Non-manifold edge: three faces on edge (0, 1).
     let q = vec![
         [0.0, 0.0, 0.0],
