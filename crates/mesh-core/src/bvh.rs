@@ -198,6 +198,7 @@ pub struct Bvh {
     order: Vec<u32>,
     faces: Vec<[u32; 3]>,
     tris: Vec<[[f64; 3]; 3]>,
+    boxes: Vec<Aabb>,
     num_vertices: usize,
 }
 
@@ -233,6 +234,7 @@ impl Bvh {
             nodes: Vec::with_capacity(2 * faces.len() / LEAF_SIZE + 1),
             order: (0..faces.len() as u32).collect(),
             faces: faces.to_vec(),
+            boxes: tris.iter().map(|t| Aabb::of_points(t)).collect(),
             tris,
             num_vertices: positions.len(),
         };
@@ -255,8 +257,9 @@ impl Bvh {
         Ok(bvh)
     }
 
+    #[inline]
     fn face_bounds(&self, f: u32) -> Aabb {
-        Aabb::of_points(&self.tris[f as usize])
+        self.boxes[f as usize]
     }
 
     /// Builds the subtree over `order[..]` (which starts at `offset` in the full order).
@@ -357,21 +360,20 @@ impl Bvh {
                 }
             }
         }
-        for (t, f) in self.tris.iter_mut().zip(&self.faces) {
+        for ((t, b), f) in self.tris.iter_mut().zip(&mut self.boxes).zip(&self.faces) {
             *t = [
                 positions[f[0] as usize],
                 positions[f[1] as usize],
                 positions[f[2] as usize],
             ];
+            *b = Aabb::of_points(t);
         }
         for i in (0..self.nodes.len()).rev() {
             let n = self.nodes[i];
             let bounds = if n.count > 0 {
                 let mut b = Aabb::EMPTY;
                 for &f in &self.order[n.start as usize..(n.start + n.count) as usize] {
-                    for &p in &self.tris[f as usize] {
-                        b.grow(p);
-                    }
+                    b = b.union(&self.boxes[f as usize]);
                 }
                 b
             } else {
@@ -400,9 +402,12 @@ impl Bvh {
         }
         let mut best: Option<ClosestPoint> = None;
         let mut best_d2 = f64::INFINITY;
-        let mut stack: Vec<u32> = Vec::with_capacity(64);
-        stack.push(0);
-        while let Some(i) = stack.pop() {
+        // Depth-first with the nearer child on top: at most depth + 1 ≤ 34 entries (module docs).
+        let mut stack = [0u32; 128];
+        let mut top = 1usize;
+        while top > 0 {
+            top -= 1;
+            let i = stack[top];
             let n = &self.nodes[i as usize];
             // Prune only boxes clearly farther than the best (a little slack covers the rounding
             // of the box distance against the triangle distance, so no closer face is missed).
@@ -437,13 +442,10 @@ impl Bvh {
                 let r = n.start;
                 let dl = self.nodes[l as usize].bounds.distance_squared(p);
                 let dr = self.nodes[r as usize].bounds.distance_squared(p);
-                if dl <= dr {
-                    stack.push(r);
-                    stack.push(l);
-                } else {
-                    stack.push(l);
-                    stack.push(r);
-                }
+                let (near, far) = if dl <= dr { (l, r) } else { (r, l) };
+                stack[top] = far;
+                stack[top + 1] = near;
+                top += 2;
             }
         }
         best

@@ -291,3 +291,38 @@ fn a_20k_face_mesh_in_the_dev_profile() {
         t.elapsed().as_secs_f64()
     );
 }
+
+#[test]
+fn bvh_timings_for_the_report() {
+    // Not asserted: the figures docs/remeshing.md quotes (dev profile, one core).
+    let s = mesh_core::shapes::icosphere(6);
+    let t = Instant::now();
+    let mut bvh = Bvh::new(&s.positions, &s.faces).expect("bvh");
+    let build = t.elapsed().as_secs_f64();
+    let moved: Vec<[f64; 3]> = s.positions.iter().map(|p| p.map(|c| c * 1.01)).collect();
+    let t = Instant::now();
+    bvh.refit(&moved).expect("refit");
+    let refit = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    let mut pairs = 0usize;
+    bvh.for_each_overlapping_pair(|_, _| pairs += 1);
+    let overlap = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    let mut d = 0.0;
+    for p in &s.positions {
+        d += bvh
+            .closest_point(p.map(|c| c * 1.05))
+            .expect("closest")
+            .distance_squared;
+    }
+    let closest = t.elapsed().as_secs_f64();
+    println!(
+        "bvh on {} faces: build {:.1} ms, refit {:.1} ms, self-overlap traversal {:.1} ms ({pairs} box pairs), {} closest points {:.1} ms (Σd² {d:.3})",
+        s.faces.len(),
+        build * 1e3,
+        refit * 1e3,
+        overlap * 1e3,
+        s.positions.len(),
+        closest * 1e3
+    );
+}
