@@ -326,3 +326,29 @@ fn bvh_timings_for_the_report() {
         closest * 1e3
     );
 }
+
+#[test]
+fn feature_angle_tradeoff_for_the_report() {
+    // Not asserted: on organic meshes with coarse triangles the 30° default finds many creases that
+    // are only coarse sampling; a higher angle evens the triangles and loses sharp tips.
+    for name in ["triceratops.off", "cow.off"] {
+        let (p, f) = load(name);
+        let l = 0.015 * bbox_diagonal(&p);
+        for angle in [60.0, 180.0] {
+            let mut o = RemeshOptions::new(l);
+            o.feature_angle_deg = angle;
+            let out = remesh(&p, &f, &o).expect("remeshes");
+            let q = quality(&out.positions, &out.faces).expect("quality");
+            let h = hausdorff(&out.positions, &out.faces, &p, &f).expect("hausdorff");
+            println!(
+                "{name:>16} feature angle {angle:>3}°: std/mean {:.3}, min angle {:.2}°, <10° {:.2} %, valence 6 {:.1} %, {:.1} % of edges in range, Hausdorff {:.3} L",
+                q.edge_std_over_mean(),
+                q.min_angle_deg,
+                100.0 * q.share_below_10_deg,
+                100.0 * q.share_valence_6,
+                100.0 * share_in_range(&out.positions, &out.faces, l),
+                h.max() / l
+            );
+        }
+    }
+}
