@@ -3,7 +3,7 @@
 //!
 //! # Algorithm
 //! Given a target edge length `L`, each of [`RemeshOptions::iterations`] rounds runs, in order:
-//! 1. **split** every edge longer than `4/3·L` at its midpoint (repeatedly, until none is);
+//! 1. **split** every edge longer than `4/3·L` at its midpoint, longest first (until none is);
 //! 2. **collapse** every edge shorter than `4/5·L`: to its midpoint when both ends are free (not on
 //!    a feature or boundary), else into the end that may not move; refusing a collapse that would
 //!    - create an edge longer than `4/3·L`,
@@ -468,30 +468,45 @@ impl<'a> Remesher<'a> {
         c
     }
 
+    /// Splits the longest edge first (longest-edge bisection), so a needle or zero-area face is
+    /// cut across its long side instead of sprouting new long edges from its short ones.
     fn split_long_edges(&mut self) -> Result<(), RemeshError> {
-        let mut e = 0;
-        while e < self.mesh.num_edges() {
-            if self.mesh.edge_live(e) && self.mesh.edge_length(e) > self.hi {
-                let h = 2 * e as u32;
-                let (a, b) = (
-                    self.mesh.pos[self.mesh.from(h) as usize],
-                    self.mesh.pos[self.mesh.to(h) as usize],
-                );
-                let mid = [
-                    (a[0] + b[0]) / 2.0,
-                    (a[1] + b[1]) / 2.0,
-                    (a[2] + b[2]) / 2.0,
-                ];
-                self.mesh.split(e, mid);
-                if self.mesh.live_faces() > self.max_faces {
-                    return Err(RemeshError::FaceBudget {
-                        max: self.max_faces,
-                    });
-                }
-                // Edge `e` is now the half toward `from(2e)`: look at it again.
-                continue;
+        use std::cmp::Reverse;
+        use std::collections::BinaryHeap;
+        // Positive finite lengths order like their bit patterns; ties go to the lower index.
+        let mut heap: BinaryHeap<(u64, Reverse<usize>)> = (0..self.mesh.num_edges())
+            .filter(|&e| self.mesh.edge_live(e))
+            .map(|e| (self.mesh.edge_length(e), e))
+            .filter(|&(l, _)| l > self.hi)
+            .map(|(l, e)| (l.to_bits(), Reverse(e)))
+            .collect();
+        while let Some((bits, Reverse(e))) = heap.pop() {
+            if !self.mesh.edge_live(e) || self.mesh.edge_length(e).to_bits() != bits {
+                continue; // stale: the edge was split since it was queued
             }
-            e += 1;
+            let h = 2 * e as u32;
+            let (a, b) = (
+                self.mesh.pos[self.mesh.from(h) as usize],
+                self.mesh.pos[self.mesh.to(h) as usize],
+            );
+            let mid = [
+                (a[0] + b[0]) / 2.0,
+                (a[1] + b[1]) / 2.0,
+                (a[2] + b[2]) / 2.0,
+            ];
+            let first_new = self.mesh.num_edges();
+            self.mesh.split(e, mid);
+            if self.mesh.live_faces() > self.max_faces {
+                return Err(RemeshError::FaceBudget {
+                    max: self.max_faces,
+                });
+            }
+            for g in std::iter::once(e).chain(first_new..self.mesh.num_edges()) {
+                let l = self.mesh.edge_length(g);
+                if l > self.hi {
+                    heap.push((l.to_bits(), Reverse(g)));
+                }
+            }
         }
         Ok(())
     }
