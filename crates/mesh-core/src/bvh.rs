@@ -397,11 +397,41 @@ impl Bvh {
         p: [f64; 3],
         accept: impl Fn(u32) -> bool,
     ) -> Option<ClosestPoint> {
+        self.closest_inner(p, accept, None)
+    }
+
+    /// [`closest_point`](Self::closest_point) with a guess: the search starts from face `hint`'s
+    /// distance (e.g. the face a point projected onto before it moved a little), which prunes more
+    /// of the tree. The answer is the same as without the hint; an out-of-range hint is ignored.
+    pub fn closest_point_hinted(&self, p: [f64; 3], hint: u32) -> Option<ClosestPoint> {
+        self.closest_inner(p, |_| true, Some(hint))
+    }
+
+    fn closest_inner(
+        &self,
+        p: [f64; 3],
+        accept: impl Fn(u32) -> bool,
+        hint: Option<u32>,
+    ) -> Option<ClosestPoint> {
         if self.nodes.is_empty() || !p.iter().all(|c| c.is_finite()) {
             return None;
         }
         let mut best: Option<ClosestPoint> = None;
         let mut best_d2 = f64::INFINITY;
+        if let Some(f) = hint
+            && (f as usize) < self.tris.len()
+            && accept(f)
+        {
+            let (q, w) = closest_on_triangle(p, &self.tris[f as usize]);
+            let d = sub(q, p);
+            best_d2 = dot(d, d);
+            best = Some(ClosestPoint {
+                face: f,
+                point: q,
+                barycentric: w,
+                distance_squared: best_d2,
+            });
+        }
         // Depth-first with the nearer child on top: at most depth + 1 ≤ 34 entries (module docs).
         let mut stack = [0u32; 128];
         let mut top = 1usize;

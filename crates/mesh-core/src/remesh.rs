@@ -391,6 +391,9 @@ struct Remesher<'a> {
     max_faces: usize,
     buf: Vec<u32>,
     buf2: Vec<u32>,
+    /// Per vertex: the input face it last projected onto (`NONE` before its first projection), the
+    /// closest-point search's starting guess.
+    hints: Vec<u32>,
 }
 
 impl<'a> Remesher<'a> {
@@ -431,6 +434,7 @@ impl<'a> Remesher<'a> {
             max_faces: o.max_faces,
             buf: Vec::new(),
             buf2: Vec::new(),
+            hints: Vec::new(),
         };
         let counts = r.feature_counts();
         let mut ring = Vec::new();
@@ -788,10 +792,19 @@ impl<'a> Remesher<'a> {
                 moved.push((v, [p[0] + d[0], p[1] + d[1], p[2] + d[2]], false));
             }
         }
+        self.hints.resize(nv, NONE);
         for (v, p, on_line) in moved {
-            let tree = if on_line { &self.lines } else { surface };
-            let q = tree.closest_point(p).map_or(p, |c| c.point);
-            self.mesh.pos[v as usize] = q;
+            let vi = v as usize;
+            let q = if on_line {
+                self.lines.closest_point(p)
+            } else {
+                let c = surface.closest_point_hinted(p, self.hints[vi]);
+                if let Some(c) = c {
+                    self.hints[vi] = c.face;
+                }
+                c
+            };
+            self.mesh.pos[vi] = q.map_or(p, |c| c.point);
         }
     }
 }

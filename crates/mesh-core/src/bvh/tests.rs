@@ -148,6 +148,10 @@ fn closest_point_equals_brute_force() {
             let p = rng.point(1.6);
             let got = bvh.closest_point(p).expect("ok");
             let (face, d2) = brute_closest(&pos, &faces, p);
+            // A hint, good or bad, changes nothing.
+            for hint in [0, face, (face + 7) % faces.len() as u32, u32::MAX] {
+                assert_eq!(bvh.closest_point_hinted(p, hint), Some(got));
+            }
             assert_eq!(got.distance_squared, d2, "seed {seed} at {p:?}");
             assert_eq!(got.face, face);
             // The point and its barycentrics agree.
