@@ -8,15 +8,19 @@
 //! - vectors are column vectors in the math of the docs; arrays are row-major (`Vec<[f64; 3]>`).
 //!
 //! Layers: plain slice functions ([`geometry`], [`normals`], [`normalize`], [`topology`],
-//! [`subdivide`], [`shapes`], [`region`]) work on `&[[f64; 3]]` / `&[[u32; 3]]`; [`validate`] checks and repairs a
+//! [`subdivide`], [`shapes`], [`region`]) work on `&[[f64; 3]]` / `&[[u32; 3]]`; [`bvh`] is the one
+//! box hierarchy over a mesh's triangles (closest points, rays, box and self-overlap queries, refit);
+//! [`remesh`] remeshes isotropically on it (no I/O); [`validate`] checks and repairs a
 //! [`TriMesh`]; with the default feature `io`, [`io`] reads and writes OBJ, OFF, PLY and glTF/GLB.
 //! NumPy files live in the `npy` crate, the reference's saved-deformation `.npz` in `stylize`.
 
+pub mod bvh;
 mod error;
 pub mod geometry;
 pub mod normalize;
 pub mod normals;
 pub mod region;
+pub mod remesh;
 pub mod shapes;
 pub mod subdivide;
 pub mod topology;

@@ -1,0 +1,800 @@
+//! A bounding-volume hierarchy over the triangles of a mesh: closest points, rays, boxes and the
+//! self-overlap traversal, with a refit after the vertices move.
+//!
+//! The tree is an axis-aligned box hierarchy built once from `(positions, faces)` by median splits:
+//! every node's faces are split in two equal halves along the longest axis of their centroids'
+//! bounding box (ties by face index, so the tree is a pure function of the input), down to leaves
+//! of at most [`LEAF_SIZE`] faces. The depth is therefore at most `⌈log₂(F / LEAF_SIZE)⌉ + 1`
+//! (≤ 32 for any `u32` face count). Nodes are stored in pre-order, so every child has a larger
+//! index than its parent and [`Bvh::refit`] recomputes the boxes bottom-up in one backward pass
+//! without touching the tree's shape.
+//!
+//! Conventions:
+//! - boxes are closed: two boxes that touch at a face, edge or corner overlap;
+//! - a face's box is the bounding box of its three corners, so degenerate (zero-area, even
+//!   repeated-vertex) faces are ordinary members: their closest point is the closest point of the
+//!   segment or point they collapse to, and they take part in box and pair queries;
+//! - rays never hit a degenerate face or a face parallel to the ray (the Möller–Trumbore
+//!   determinant is zero); hits on edges and corners count (barycentrics ≥ 0 inclusive);
+//! - barycentrics `[w0, w1, w2]` weight the face's corners in the order the face lists them, so
+//!   `point = w0·p0 + w1·p1 + w2·p2` and `w0 + w1 + w2 = 1`;
+//! - ties are broken by the lowest face index (closest point, equal ray `t`), so every answer is
+//!   deterministic and equal to the brute-force scan over faces in index order.
+
+use crate::geometry::{cross, dot, sub};
+
+/// Most faces per leaf.
+pub const LEAF_SIZE: usize = 4;
+
+/// What [`Bvh::new`] and [`Bvh::refit`] refuse.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum BvhError {
+    /// A face names a vertex that does not exist.
+    #[error("face {face} uses vertex {index}, but the mesh has only {num_vertices} vertices")]
+    FaceIndex {
+        /// The face.
+        face: usize,
+        /// The out-of-range vertex index.
+        index: u32,
+        /// The number of positions given.
+        num_vertices: usize,
+    },
+    /// A vertex used by a face has a NaN or infinite coordinate.
+    #[error("vertex {vertex} has a non-finite coordinate {position:?}")]
+    NonFinite {
+        /// The vertex.
+        vertex: usize,
+        /// Its position.
+        position: [f64; 3],
+    },
+    /// [`Bvh::refit`] was given a different number of vertices than the tree was built with.
+    #[error("refit: the tree was built over {expected} vertices, got {got}")]
+    VertexCount {
+        /// Vertices at build time.
+        expected: usize,
+        /// Vertices given to refit.
+        got: usize,
+    },
+}
+
+/// An axis-aligned box `[lo, hi]` (closed).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Aabb {
+    /// Smallest corner.
+    pub lo: [f64; 3],
+    /// Largest corner.
+    pub hi: [f64; 3],
+}
+
+impl Aabb {
+    /// The empty box (`lo = +∞`, `hi = −∞`): the identity of [`Aabb::union`].
+    pub const EMPTY: Aabb = Aabb {
+        lo: [f64::INFINITY; 3],
+        hi: [f64::NEG_INFINITY; 3],
+    };
+
+    /// The bounding box of some points.
+    pub fn of_points(points: &[[f64; 3]]) -> Aabb {
+        let mut b = Aabb::EMPTY;
+        for &p in points {
+            b.grow(p);
+        }
+        b
+    }
+
+    /// Enlarges the box to contain `p`.
+    #[inline]
+    pub fn grow(&mut self, p: [f64; 3]) {
+        for k in 0..3 {
+            self.lo[k] = self.lo[k].min(p[k]);
+            self.hi[k] = self.hi[k].max(p[k]);
+        }
+    }
+
+    /// The smallest box containing both.
+    #[inline]
+    pub fn union(&self, other: &Aabb) -> Aabb {
+        let mut b = *self;
+        for k in 0..3 {
+            b.lo[k] = b.lo[k].min(other.lo[k]);
+            b.hi[k] = b.hi[k].max(other.hi[k]);
+        }
+        b
+    }
+
+    /// Whether the closed boxes share a point.
+    #[inline]
+    pub fn overlaps(&self, other: &Aabb) -> bool {
+        (0..3).all(|k| self.lo[k] <= other.hi[k] && other.lo[k] <= self.hi[k])
+    }
+
+    /// Squared distance from `p` to the box (0 inside).
+    #[inline]
+    pub fn distance_squared(&self, p: [f64; 3]) -> f64 {
+        let mut d2 = 0.0;
+        for k in 0..3 {
+            let d = if p[k] < self.lo[k] {
+                self.lo[k] - p[k]
+            } else if p[k] > self.hi[k] {
+                p[k] - self.hi[k]
+            } else {
+                0.0
+            };
+            d2 += d * d;
+        }
+        d2
+    }
+
+    /// The parameter interval `[t0, t1]` (clipped to `[0, t_max]`) where the ray
+    /// `origin + t·direction` is inside the box, or `None`.
+    fn ray_interval(
+        &self,
+        origin: [f64; 3],
+        inv: [f64; 3],
+        dir: [f64; 3],
+        t_max: f64,
+    ) -> Option<f64> {
+        let mut t0 = 0.0f64;
+        let mut t1 = t_max;
+        for k in 0..3 {
+            if dir[k] == 0.0 {
+                if origin[k] < self.lo[k] || origin[k] > self.hi[k] {
+                    return None;
+                }
+                continue;
+            }
+            let a = (self.lo[k] - origin[k]) * inv[k];
+            let b = (self.hi[k] - origin[k]) * inv[k];
+            let (near, far) = if a <= b { (a, b) } else { (b, a) };
+            t0 = t0.max(near);
+            t1 = t1.min(far);
+            if t0 > t1 {
+                return None;
+            }
+        }
+        Some(t0)
+    }
+}
+
+/// The answer of [`Bvh::closest_point`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ClosestPoint {
+    /// The face the closest point lies on (lowest index among equally close faces).
+    pub face: u32,
+    /// The closest point.
+    pub point: [f64; 3],
+    /// Its barycentric coordinates in the face (corner order as the face lists them).
+    pub barycentric: [f64; 3],
+    /// Squared distance from the query point.
+    pub distance_squared: f64,
+}
+
+/// One ray–triangle intersection.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RayHit {
+    /// The face hit.
+    pub face: u32,
+    /// Ray parameter: the hit point is `origin + t·direction`.
+    pub t: f64,
+    /// Barycentric coordinates of the hit point in the face.
+    pub barycentric: [f64; 3],
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Node {
+    bounds: Aabb,
+    /// Leaf: first index into `order`; interior: index of the right child (the left child is the
+    /// next node).
+    start: u32,
+    /// Leaf: number of faces (≥ 1); interior: 0.
+    count: u32,
+}
+
+/// A box hierarchy over a triangle mesh (see the [module docs](self) for the conventions).
+#[derive(Clone, Debug)]
+pub struct Bvh {
+    nodes: Vec<Node>,
+    order: Vec<u32>,
+    faces: Vec<[u32; 3]>,
+    tris: Vec<[[f64; 3]; 3]>,
+    boxes: Vec<Aabb>,
+    num_vertices: usize,
+}
+
+fn triangles(positions: &[[f64; 3]], faces: &[[u32; 3]]) -> Result<Vec<[[f64; 3]; 3]>, BvhError> {
+    let mut tris = Vec::with_capacity(faces.len());
+    for (fi, f) in faces.iter().enumerate() {
+        let mut t = [[0.0; 3]; 3];
+        for (k, &v) in f.iter().enumerate() {
+            let p = *positions.get(v as usize).ok_or(BvhError::FaceIndex {
+                face: fi,
+                index: v,
+                num_vertices: positions.len(),
+            })?;
+            if !p.iter().all(|c| c.is_finite()) {
+                return Err(BvhError::NonFinite {
+                    vertex: v as usize,
+                    position: p,
+                });
+            }
+            t[k] = p;
+        }
+        tris.push(t);
+    }
+    Ok(tris)
+}
+
+impl Bvh {
+    /// Builds the tree. Refuses a face index out of range and a non-finite vertex used by a face;
+    /// an empty face list gives an empty tree (every query answers nothing).
+    pub fn new(positions: &[[f64; 3]], faces: &[[u32; 3]]) -> Result<Bvh, BvhError> {
+        let tris = triangles(positions, faces)?;
+        let mut bvh = Bvh {
+            nodes: Vec::with_capacity(2 * faces.len() / LEAF_SIZE + 1),
+            order: (0..faces.len() as u32).collect(),
+            faces: faces.to_vec(),
+            boxes: tris.iter().map(|t| Aabb::of_points(t)).collect(),
+            tris,
+            num_vertices: positions.len(),
+        };
+        if !faces.is_empty() {
+            let centroids: Vec<[f64; 3]> = bvh
+                .tris
+                .iter()
+                .map(|t| {
+                    let mut c = [0.0; 3];
+                    for k in 0..3 {
+                        c[k] = (t[0][k] + t[1][k] + t[2][k]) / 3.0;
+                    }
+                    c
+                })
+                .collect();
+            let mut order = std::mem::take(&mut bvh.order);
+            bvh.build(&mut order, 0, &centroids);
+            bvh.order = order;
+        }
+        Ok(bvh)
+    }
+
+    #[inline]
+    fn face_bounds(&self, f: u32) -> Aabb {
+        self.boxes[f as usize]
+    }
+
+    /// Builds the subtree over `order[..]` (which starts at `offset` in the full order).
+    fn build(&mut self, order: &mut [u32], offset: usize, centroids: &[[f64; 3]]) {
+        let mut bounds = Aabb::EMPTY;
+        let mut cbounds = Aabb::EMPTY;
+        for &f in order.iter() {
+            bounds = bounds.union(&self.face_bounds(f));
+            cbounds.grow(centroids[f as usize]);
+        }
+        let me = self.nodes.len();
+        self.nodes.push(Node {
+            bounds,
+            start: offset as u32,
+            count: order.len() as u32,
+        });
+        if order.len() <= LEAF_SIZE {
+            return;
+        }
+        let ext = sub(cbounds.hi, cbounds.lo);
+        let axis = if ext[0] >= ext[1] && ext[0] >= ext[2] {
+            0
+        } else if ext[1] >= ext[2] {
+            1
+        } else {
+            2
+        };
+        let mid = order.len() / 2;
+        order.select_nth_unstable_by(mid, |&a, &b| {
+            centroids[a as usize][axis]
+                .total_cmp(&centroids[b as usize][axis])
+                .then(a.cmp(&b))
+        });
+        let (left, right) = order.split_at_mut(mid);
+        self.build(left, offset, centroids);
+        let right_index = self.nodes.len() as u32;
+        self.build(right, offset + mid, centroids);
+        self.nodes[me].start = right_index;
+        self.nodes[me].count = 0;
+    }
+
+    /// Number of faces in the tree.
+    pub fn len(&self) -> usize {
+        self.faces.len()
+    }
+
+    /// Whether the tree holds no face.
+    pub fn is_empty(&self) -> bool {
+        self.faces.is_empty()
+    }
+
+    /// The faces the tree was built over.
+    pub fn faces(&self) -> &[[u32; 3]] {
+        &self.faces
+    }
+
+    /// The corners of face `f` as the tree currently sees them (after the last refit).
+    pub fn triangle(&self, f: u32) -> [[f64; 3]; 3] {
+        self.tris[f as usize]
+    }
+
+    /// Number of nodes and the depth of the deepest leaf (the root has depth 1; 0 when empty).
+    pub fn shape(&self) -> (usize, usize) {
+        fn depth(nodes: &[Node], i: usize) -> usize {
+            let n = &nodes[i];
+            if n.count > 0 {
+                1
+            } else {
+                1 + depth(nodes, i + 1).max(depth(nodes, n.start as usize))
+            }
+        }
+        if self.nodes.is_empty() {
+            (0, 0)
+        } else {
+            (self.nodes.len(), depth(&self.nodes, 0))
+        }
+    }
+
+    /// Recomputes every box for moved vertices (same faces, same tree): `O(F)`, no allocation.
+    /// Queries afterwards answer for the new positions exactly as a rebuilt tree would (the tree's
+    /// shape may be less tight than a rebuild's, never wrong). Refuses a different vertex count or
+    /// a non-finite vertex (the tree is left unchanged then).
+    pub fn refit(&mut self, positions: &[[f64; 3]]) -> Result<(), BvhError> {
+        if positions.len() != self.num_vertices {
+            return Err(BvhError::VertexCount {
+                expected: self.num_vertices,
+                got: positions.len(),
+            });
+        }
+        for f in &self.faces {
+            for &v in f {
+                let p = positions[v as usize];
+                if !p.iter().all(|c| c.is_finite()) {
+                    return Err(BvhError::NonFinite {
+                        vertex: v as usize,
+                        position: p,
+                    });
+                }
+            }
+        }
+        for ((t, b), f) in self.tris.iter_mut().zip(&mut self.boxes).zip(&self.faces) {
+            *t = [
+                positions[f[0] as usize],
+                positions[f[1] as usize],
+                positions[f[2] as usize],
+            ];
+            *b = Aabb::of_points(t);
+        }
+        for i in (0..self.nodes.len()).rev() {
+            let n = self.nodes[i];
+            let bounds = if n.count > 0 {
+                let mut b = Aabb::EMPTY;
+                for &f in &self.order[n.start as usize..(n.start + n.count) as usize] {
+                    b = b.union(&self.boxes[f as usize]);
+                }
+                b
+            } else {
+                self.nodes[i + 1]
+                    .bounds
+                    .union(&self.nodes[n.start as usize].bounds)
+            };
+            self.nodes[i].bounds = bounds;
+        }
+        Ok(())
+    }
+
+    /// The closest point of the surface to `p` (`None` for an empty tree or a non-finite `p`).
+    pub fn closest_point(&self, p: [f64; 3]) -> Option<ClosestPoint> {
+        self.closest_point_filtered(p, |_| true)
+    }
+
+    /// [`closest_point`](Self::closest_point) among the faces `accept` returns true for.
+    pub fn closest_point_filtered(
+        &self,
+        p: [f64; 3],
+        accept: impl Fn(u32) -> bool,
+    ) -> Option<ClosestPoint> {
+        self.closest_inner(p, accept, None)
+    }
+
+    /// [`closest_point`](Self::closest_point) with a guess: the search starts from face `hint`'s
+    /// distance (e.g. the face a point projected onto before it moved a little), which prunes more
+    /// of the tree. The answer is the same as without the hint; an out-of-range hint is ignored.
+    pub fn closest_point_hinted(&self, p: [f64; 3], hint: u32) -> Option<ClosestPoint> {
+        self.closest_inner(p, |_| true, Some(hint))
+    }
+
+    fn closest_inner(
+        &self,
+        p: [f64; 3],
+        accept: impl Fn(u32) -> bool,
+        hint: Option<u32>,
+    ) -> Option<ClosestPoint> {
+        if self.nodes.is_empty() || !p.iter().all(|c| c.is_finite()) {
+            return None;
+        }
+        let mut best: Option<ClosestPoint> = None;
+        let mut best_d2 = f64::INFINITY;
+        if let Some(f) = hint
+            && (f as usize) < self.tris.len()
+            && accept(f)
+        {
+            let (q, w) = closest_on_triangle(p, &self.tris[f as usize]);
+            let d = sub(q, p);
+            best_d2 = dot(d, d);
+            best = Some(ClosestPoint {
+                face: f,
+                point: q,
+                barycentric: w,
+                distance_squared: best_d2,
+            });
+        }
+        // Depth-first with the nearer child on top: at most depth + 1 ≤ 34 entries (module docs).
+        let mut stack = [0u32; 128];
+        let mut top = 1usize;
+        while top > 0 {
+            top -= 1;
+            let i = stack[top];
+            let n = &self.nodes[i as usize];
+            // Prune only boxes clearly farther than the best (a little slack covers the rounding
+            // of the box distance against the triangle distance, so no closer face is missed).
+            if n.bounds.distance_squared(p) * (1.0 - 1e-9) > best_d2 {
+                continue;
+            }
+            if n.count > 0 {
+                for &f in &self.order[n.start as usize..(n.start + n.count) as usize] {
+                    if !accept(f) {
+                        continue;
+                    }
+                    let (q, w) = closest_on_triangle(p, &self.tris[f as usize]);
+                    let d = sub(q, p);
+                    let d2 = dot(d, d);
+                    let better = match best {
+                        None => true,
+                        Some(b) => d2 < best_d2 || (d2 == best_d2 && f < b.face),
+                    };
+                    if better {
+                        best_d2 = d2;
+                        best = Some(ClosestPoint {
+                            face: f,
+                            point: q,
+                            barycentric: w,
+                            distance_squared: d2,
+                        });
+                    }
+                }
+            } else {
+                // Visit the nearer child first.
+                let l = i + 1;
+                let r = n.start;
+                let dl = self.nodes[l as usize].bounds.distance_squared(p);
+                let dr = self.nodes[r as usize].bounds.distance_squared(p);
+                let (near, far) = if dl <= dr { (l, r) } else { (r, l) };
+                stack[top] = far;
+                stack[top + 1] = near;
+                top += 2;
+            }
+        }
+        best
+    }
+
+    /// The first hit of the ray `origin + t·direction`, `0 ≤ t ≤ t_max` (`f64::INFINITY` for no
+    /// limit); ties in `t` go to the lowest face index. `direction` need not be unit length (`t`
+    /// is in its units). `None` for no hit, a zero or non-finite direction or origin.
+    pub fn ray_first_hit(
+        &self,
+        origin: [f64; 3],
+        direction: [f64; 3],
+        t_max: f64,
+    ) -> Option<RayHit> {
+        let mut best: Option<RayHit> = None;
+        self.ray_walk(origin, direction, t_max, |bvh, f, lim| {
+            if let Some((t, w)) = ray_triangle(origin, direction, &bvh.tris[f as usize])
+                && t <= *lim
+            {
+                let better = match best {
+                    None => true,
+                    Some(b) => t < b.t || (t == b.t && f < b.face),
+                };
+                if better {
+                    *lim = t;
+                    best = Some(RayHit {
+                        face: f,
+                        t,
+                        barycentric: w,
+                    });
+                }
+            }
+        });
+        best
+    }
+
+    /// Every hit of the ray with `0 ≤ t ≤ t_max`, sorted by `t` then face index.
+    pub fn ray_hits(&self, origin: [f64; 3], direction: [f64; 3], t_max: f64) -> Vec<RayHit> {
+        let mut hits = Vec::new();
+        self.ray_walk(origin, direction, t_max, |bvh, f, _| {
+            if let Some((t, w)) = ray_triangle(origin, direction, &bvh.tris[f as usize])
+                && t <= t_max
+            {
+                hits.push(RayHit {
+                    face: f,
+                    t,
+                    barycentric: w,
+                });
+            }
+        });
+        hits.sort_by(|a, b| a.t.total_cmp(&b.t).then(a.face.cmp(&b.face)));
+        hits
+    }
+
+    fn ray_walk(
+        &self,
+        origin: [f64; 3],
+        dir: [f64; 3],
+        t_max: f64,
+        mut visit: impl FnMut(&Bvh, u32, &mut f64),
+    ) {
+        let finite = origin.iter().chain(dir.iter()).all(|c| c.is_finite());
+        if self.nodes.is_empty() || !finite || dir == [0.0; 3] || t_max.is_nan() || t_max < 0.0 {
+            return;
+        }
+        let inv = [1.0 / dir[0], 1.0 / dir[1], 1.0 / dir[2]];
+        let mut limit = t_max;
+        let mut stack: Vec<u32> = vec![0];
+        while let Some(i) = stack.pop() {
+            let n = &self.nodes[i as usize];
+            if n.bounds.ray_interval(origin, inv, dir, limit).is_none() {
+                continue;
+            }
+            if n.count > 0 {
+                for &f in &self.order[n.start as usize..(n.start + n.count) as usize] {
+                    visit(self, f, &mut limit);
+                }
+            } else {
+                stack.push(n.start);
+                stack.push(i + 1);
+            }
+        }
+    }
+
+    /// The faces whose boxes overlap `query` (closed boxes), in increasing order.
+    pub fn faces_overlapping(&self, query: &Aabb) -> Vec<u32> {
+        let mut out = Vec::new();
+        if self.nodes.is_empty() {
+            return out;
+        }
+        let mut stack: Vec<u32> = vec![0];
+        while let Some(i) = stack.pop() {
+            let n = &self.nodes[i as usize];
+            if !n.bounds.overlaps(query) {
+                continue;
+            }
+            if n.count > 0 {
+                for &f in &self.order[n.start as usize..(n.start + n.count) as usize] {
+                    if self.face_bounds(f).overlaps(query) {
+                        out.push(f);
+                    }
+                }
+            } else {
+                stack.push(n.start);
+                stack.push(i + 1);
+            }
+        }
+        out.sort_unstable();
+        out
+    }
+
+    /// Calls `pair(a, b)` once for every pair of distinct faces `a < b` whose boxes overlap (a face
+    /// is never paired with itself; faces sharing a vertex are included — the caller decides what
+    /// adjacency means). The order of the calls follows the tree.
+    pub fn for_each_overlapping_pair(&self, mut pair: impl FnMut(u32, u32)) {
+        if self.nodes.is_empty() {
+            return;
+        }
+        let mut stack: Vec<(u32, u32)> = vec![(0, 0)];
+        while let Some((i, j)) = stack.pop() {
+            let a = &self.nodes[i as usize];
+            if i == j {
+                if a.count > 0 {
+                    let fs = &self.order[a.start as usize..(a.start + a.count) as usize];
+                    for (k, &f) in fs.iter().enumerate() {
+                        let bf = self.face_bounds(f);
+                        for &g in &fs[k + 1..] {
+                            if bf.overlaps(&self.face_bounds(g)) {
+                                pair(f.min(g), f.max(g));
+                            }
+                        }
+                    }
+                } else {
+                    let (l, r) = (i + 1, a.start);
+                    stack.push((l, l));
+                    stack.push((r, r));
+                    stack.push((l, r));
+                }
+                continue;
+            }
+            let b = &self.nodes[j as usize];
+            if !a.bounds.overlaps(&b.bounds) {
+                continue;
+            }
+            match (a.count > 0, b.count > 0) {
+                (true, true) => {
+                    let fa = &self.order[a.start as usize..(a.start + a.count) as usize];
+                    let fb = &self.order[b.start as usize..(b.start + b.count) as usize];
+                    for &f in fa {
+                        let bf = self.face_bounds(f);
+                        for &g in fb {
+                            if bf.overlaps(&self.face_bounds(g)) {
+                                pair(f.min(g), f.max(g));
+                            }
+                        }
+                    }
+                }
+                (false, true) => {
+                    stack.push((i + 1, j));
+                    stack.push((a.start, j));
+                }
+                (true, false) => {
+                    stack.push((i, j + 1));
+                    stack.push((i, b.start));
+                }
+                (false, false) => {
+                    // Split the larger box.
+                    if volume(&a.bounds) >= volume(&b.bounds) {
+                        stack.push((i + 1, j));
+                        stack.push((a.start, j));
+                    } else {
+                        stack.push((i, j + 1));
+                        stack.push((i, b.start));
+                    }
+                }
+            }
+        }
+    }
+
+    /// [`for_each_overlapping_pair`](Self::for_each_overlapping_pair) collected and sorted.
+    pub fn overlapping_pairs(&self) -> Vec<[u32; 2]> {
+        let mut out = Vec::new();
+        self.for_each_overlapping_pair(|a, b| out.push([a, b]));
+        out.sort_unstable();
+        out
+    }
+}
+
+fn volume(b: &Aabb) -> f64 {
+    let e = sub(b.hi, b.lo);
+    // Sum of extents: a size measure that stays useful for flat boxes.
+    e[0] + e[1] + e[2]
+}
+
+/// The closest point of the segment `a b` to `p` and its parameter `s` (point = a + s·(b − a)).
+fn closest_on_segment(p: [f64; 3], a: [f64; 3], b: [f64; 3]) -> ([f64; 3], f64) {
+    let ab = sub(b, a);
+    let l2 = dot(ab, ab);
+    let s = if l2 > 0.0 {
+        (dot(sub(p, a), ab) / l2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    ([a[0] + s * ab[0], a[1] + s * ab[1], a[2] + s * ab[2]], s)
+}
+
+/// The closest point of triangle `t` to `p`, with its barycentric coordinates (Ericson's Voronoi
+/// region walk; a degenerate triangle falls back to the closest of its three edges).
+pub fn closest_on_triangle(p: [f64; 3], t: &[[f64; 3]; 3]) -> ([f64; 3], [f64; 3]) {
+    let [a, b, c] = *t;
+    let ab = sub(b, a);
+    let ac = sub(c, a);
+    let n = cross(ab, ac);
+    let nn = dot(n, n);
+    let scale = dot(ab, ab).max(dot(ac, ac));
+    if nn.partial_cmp(&(1e-24 * scale * scale)) != Some(std::cmp::Ordering::Greater) {
+        // Degenerate: the closest of the three segments.
+        let mut best = ([0.0; 3], [1.0, 0.0, 0.0], f64::INFINITY);
+        for (i, j) in [(0usize, 1usize), (1, 2), (2, 0)] {
+            let (q, s) = closest_on_segment(p, t[i], t[j]);
+            let d = sub(q, p);
+            let d2 = dot(d, d);
+            if d2 < best.2 {
+                let mut w = [0.0; 3];
+                w[i] = 1.0 - s;
+                w[j] += s;
+                best = (q, w, d2);
+            }
+        }
+        return (best.0, best.1);
+    }
+    let ap = sub(p, a);
+    let d1 = dot(ab, ap);
+    let d2 = dot(ac, ap);
+    if d1 <= 0.0 && d2 <= 0.0 {
+        return (a, [1.0, 0.0, 0.0]);
+    }
+    let bp = sub(p, b);
+    let d3 = dot(ab, bp);
+    let d4 = dot(ac, bp);
+    if d3 >= 0.0 && d4 <= d3 {
+        return (b, [0.0, 1.0, 0.0]);
+    }
+    let vc = d1 * d4 - d3 * d2;
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        let v = d1 / (d1 - d3);
+        return (
+            [a[0] + v * ab[0], a[1] + v * ab[1], a[2] + v * ab[2]],
+            [1.0 - v, v, 0.0],
+        );
+    }
+    let cp = sub(p, c);
+    let d5 = dot(ab, cp);
+    let d6 = dot(ac, cp);
+    if d6 >= 0.0 && d5 <= d6 {
+        return (c, [0.0, 0.0, 1.0]);
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        let w = d2 / (d2 - d6);
+        return (
+            [a[0] + w * ac[0], a[1] + w * ac[1], a[2] + w * ac[2]],
+            [1.0 - w, 0.0, w],
+        );
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
+        let w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+        let bc = sub(c, b);
+        return (
+            [b[0] + w * bc[0], b[1] + w * bc[1], b[2] + w * bc[2]],
+            [0.0, 1.0 - w, w],
+        );
+    }
+    let denom = 1.0 / (va + vb + vc);
+    let v = vb * denom;
+    let w = vc * denom;
+    (
+        [
+            a[0] + ab[0] * v + ac[0] * w,
+            a[1] + ab[1] * v + ac[1] * w,
+            a[2] + ab[2] * v + ac[2] * w,
+        ],
+        [1.0 - v - w, v, w],
+    )
+}
+
+/// Möller–Trumbore: `(t, barycentrics)` of the ray's hit with triangle `t`, `t ≥ 0`, edges
+/// inclusive; `None` when it misses or the determinant is zero.
+pub fn ray_triangle(
+    origin: [f64; 3],
+    dir: [f64; 3],
+    tri: &[[f64; 3]; 3],
+) -> Option<(f64, [f64; 3])> {
+    let e1 = sub(tri[1], tri[0]);
+    let e2 = sub(tri[2], tri[0]);
+    let pv = cross(dir, e2);
+    let det = dot(e1, pv);
+    if det == 0.0 || !det.is_finite() {
+        return None;
+    }
+    let inv = 1.0 / det;
+    let tv = sub(origin, tri[0]);
+    let u = dot(tv, pv) * inv;
+    if !(0.0..=1.0).contains(&u) {
+        return None;
+    }
+    let qv = cross(tv, e1);
+    let v = dot(dir, qv) * inv;
+    if v < 0.0 || u + v > 1.0 {
+        return None;
+    }
+    let t = dot(e2, qv) * inv;
+    if t.is_finite() && t >= 0.0 {
+        Some((t, [1.0 - u - v, u, v]))
+    } else {
+        None
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,863 @@
+//! Isotropic remeshing (Botsch & Kobbelt 2004, "A remeshing approach to multiresolution
+//! modeling"), with a triangle-quality report and a sampled Hausdorff distance.
+//!
+//! # Algorithm
+//! Given a target edge length `L`, each of [`RemeshOptions::iterations`] rounds runs, in order:
+//! 1. **split** every edge longer than `4/3·L` at its midpoint, longest first (until none is);
+//! 2. **collapse** every edge shorter than `4/5·L`: to its midpoint when both ends are free (not on
+//!    a feature or boundary), else into the end that may not move; refusing a collapse that would
+//!    - create an edge longer than `4/3·L`,
+//!    - break the link condition (the two ends share a neighbour other than the edge's opposite
+//!      corners), leave a vertex of valence < 3, pinch a boundary (an interior edge between two
+//!      boundary vertices) or close a three-edge hole,
+//!    - fold a face (its normal turns by more than 90°),
+//!    - leave a near-degenerate face (a corner under 5°, unless no worse than the worst face it
+//!      replaces),
+//!    - move a corner, move a feature vertex off its feature line (a feature vertex collapses only
+//!      along a feature edge), or collapse across a feature;
+//! 3. **flip** every interior, non-feature edge whose flip lowers `Σ (valence − target)²` over its
+//!    four vertices (target 6 inside, 4 on the boundary), unless the flip lowers the smaller minimum
+//!    angle of the two triangles below `min(before, 30°)`, folds them, or duplicates an edge; a pair with a corner under 10°
+//!    (a needle or a zero-area face) is also flipped whenever that raises its minimum angle;
+//! 4. **tangential relaxation**, [`SMOOTHING_STEPS`] times: every free vertex moves to the
+//!    area-weighted centroid of its incident faces' centroids, projected into its tangent plane
+//!    (vertex normal); a feature vertex moves, along its feature line, toward the midpoint of its two
+//!    feature neighbours; then **every moved vertex is projected back onto the input**: a free
+//!    vertex onto the input surface, a feature vertex onto the input's feature lines — both by the
+//!    closest point through a [`Bvh`] over a frozen copy of the input.
+//!
+//! # Features and boundaries
+//! An input edge is a *feature* when its dihedral angle (the angle between its two faces' normals)
+//! exceeds [`RemeshOptions::feature_angle_deg`], and every boundary edge is one too. A vertex with
+//! exactly two feature edges slides along its feature line; a vertex with one or more than two,
+//! or where its feature line turns by more than the feature angle (the corners of a flat
+//! square's boundary), is a *corner*: it never moves and is never removed. Feature edges are split (both halves stay
+//! features) and may be collapsed along the line, never flipped or collapsed across. So boundary
+//! edges are split, collapsed only along the boundary and never flipped; boundary vertices slide
+//! along the boundary. Collapses keep the topology (link condition), so the number of components,
+//! the genus (Euler characteristic) and the number of boundary loops are preserved, with one
+//! exception: a closed component smaller than a few target edges cannot go below a tetrahedron and
+//! keeps its short edges.
+//!
+//! # Input
+//! Faces must be consistently oriented and manifold: an edge used by more than two faces, or twice
+//! in the same direction, is refused with [`RemeshError::NonManifoldEdge`] naming it, and a vertex
+//! whose faces form two or more fans with [`RemeshError::NonManifoldVertex`] (run
+//! [`crate::validate::repair`] first to orient and clean a mesh from a file). A face with a repeated
+//! vertex is dropped (it has no area and no well-defined edges); zero-area faces with three distinct
+//! vertices are kept and usually vanish in the first round (their short edges collapse, their long
+//! edges split and flip). Vertices no face uses are dropped. Out-of-range indices and NaN or infinite
+//! coordinates are refused.
+//!
+//! Bounded work: coordinates must be at most [`MAX_COORDINATE`] in magnitude and the bounding-box
+//! diagonal at least [`MIN_DIAGONAL`] ([`RemeshError::Scale`]: squared areas must not overflow or
+//! underflow); the target length must be finite, positive and at most the bounding-box diagonal
+//! (else the mesh is smaller than one edge: [`RemeshError::MeshSmallerThanEdge`]); the output's face
+//! count is predicted up front as `max(1.2·area / (√3/4·L²), Σ edge length / L)` and refused over
+//! [`RemeshOptions::max_faces`] before any work ([`RemeshError::TooManyFaces`]); the running face
+//! count is checked against the same limit after every split pass; at most [`MAX_ITERATIONS`] rounds.
+//!
+//! # Guarantees and limits
+//! The output is a pure function of the input and the options (no hashing order, no threads), its
+//! faces are CCW like the input's, and every vertex lies on the input surface (up to the closest-point
+//! arithmetic) — corners exactly at their input positions. Features are kept only where the dihedral
+//! angle test finds them: a smooth crease below the threshold is remeshed as smooth surface. Edge
+//! lengths are not guaranteed to end inside `[4/5·L, 4/3·L]`: the collapse and flip refusals, corners
+//! and short feature lines leave some outside (on smooth closed meshes ≥ 90 % end inside, see the
+//! tests). Thin parts thinner than `L` may self-intersect after remeshing; there is no check.
+
+mod halfedge;
+mod quality;
+
+use halfedge::{HalfEdgeMesh, NONE, dist, opp};
+pub use quality::{Hausdorff, Quality, hausdorff, quality};
+
+use crate::bvh::{Bvh, BvhError};
+use crate::geometry::{cross, dot, norm, sub};
+
+/// Tangential relaxation steps (each followed by the projection) per round.
+pub const SMOOTHING_STEPS: usize = 3;
+
+/// The largest coordinate magnitude [`remesh`] accepts: squared face areas (fourth powers of
+/// lengths) of such points stay finite in `f64`.
+pub const MAX_COORDINATE: f64 = 1e70;
+
+/// The smallest bounding-box diagonal [`remesh`] accepts (a mesh of one point is
+/// [`RemeshError::MeshSmallerThanEdge`]): fourth powers of lengths stay normal `f64` numbers.
+pub const MIN_DIAGONAL: f64 = 1e-70;
+
+/// The most rounds [`remesh`] accepts.
+pub const MAX_ITERATIONS: usize = 1000;
+
+/// What to remesh to.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RemeshOptions {
+    /// Target edge length `L`, in the mesh's units.
+    pub target_edge_length: f64,
+    /// Rounds of split, collapse, flip, relax (default 10).
+    pub iterations: usize,
+    /// Dihedral angle in degrees above which an edge is a feature (default 30; 180 turns feature
+    /// detection off except for boundaries).
+    pub feature_angle_deg: f64,
+    /// The largest output face count accepted (default 2,000,000), checked up front from the
+    /// predicted count and while remeshing.
+    pub max_faces: usize,
+}
+
+impl RemeshOptions {
+    /// The defaults with a given target edge length.
+    pub fn new(target_edge_length: f64) -> Self {
+        Self {
+            target_edge_length,
+            iterations: 10,
+            feature_angle_deg: 30.0,
+            max_faces: 2_000_000,
+        }
+    }
+}
+
+/// What [`remesh`], [`quality`] and [`hausdorff`] refuse.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum RemeshError {
+    /// An out-of-range face index or a non-finite vertex.
+    #[error("{0}")]
+    Input(#[from] BvhError),
+    /// No face to remesh.
+    #[error("the mesh has no faces")]
+    Empty,
+    /// The target edge length is zero, negative, NaN or infinite.
+    #[error("the target edge length must be a positive finite number, got {0}")]
+    EdgeLength(f64),
+    /// Coordinates too large or a mesh too small for the arithmetic (normalize it first, e.g. to
+    /// the side-2 cube of [`crate::normalize::side2_cube`]).
+    #[error(
+        "the mesh's scale is outside what remeshing handles (largest coordinate {size:e}, bounding-box diagonal {diagonal:e}; accepted: coordinates up to 1e70, diagonal at least 1e-70); normalize it first"
+    )]
+    Scale {
+        /// The largest coordinate magnitude.
+        size: f64,
+        /// The bounding-box diagonal.
+        diagonal: f64,
+    },
+    /// The target edge length exceeds the bounding-box diagonal.
+    #[error(
+        "the target edge length {length} exceeds the mesh's bounding-box diagonal {diagonal}: the mesh is smaller than one target edge"
+    )]
+    MeshSmallerThanEdge {
+        /// The target edge length.
+        length: f64,
+        /// The bounding-box diagonal.
+        diagonal: f64,
+    },
+    /// The feature angle is outside `[0, 180]` degrees or NaN.
+    #[error("the feature angle must be between 0 and 180 degrees, got {0}")]
+    FeatureAngle(f64),
+    /// Too many rounds.
+    #[error("at most {max} remeshing iterations are accepted, got {got}")]
+    Iterations {
+        /// Requested.
+        got: usize,
+        /// [`MAX_ITERATIONS`].
+        max: usize,
+    },
+    /// The predicted output is over the face limit.
+    #[error(
+        "remeshing to edge length {length} would make about {predicted} faces, over the limit of {max}; choose a longer edge length"
+    )]
+    TooManyFaces {
+        /// The target edge length.
+        length: f64,
+        /// The predicted face count.
+        predicted: usize,
+        /// [`RemeshOptions::max_faces`].
+        max: usize,
+    },
+    /// The mesh grew past the face limit while remeshing (the prediction was too low, e.g. for
+    /// long zero-area faces).
+    #[error("remeshing stopped: the mesh grew past the limit of {max} faces")]
+    FaceBudget {
+        /// [`RemeshOptions::max_faces`].
+        max: usize,
+    },
+    /// An edge with more than two faces, or used twice in the same direction.
+    #[error(
+        "non-manifold edge ({a}, {b}): used by more than two faces or twice in the same direction (inconsistent orientation); repair the mesh first"
+    )]
+    NonManifoldEdge {
+        /// First vertex.
+        a: u32,
+        /// Second vertex.
+        b: u32,
+    },
+    /// A vertex whose faces form more than one fan.
+    #[error(
+        "non-manifold vertex {vertex}: its faces form more than one fan (two parts touch there); repair the mesh first"
+    )]
+    NonManifoldVertex {
+        /// The vertex.
+        vertex: u32,
+    },
+}
+
+/// The result of [`remesh`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct Remeshed {
+    /// New vertex positions.
+    pub positions: Vec<[f64; 3]>,
+    /// New faces, CCW like the input's.
+    pub faces: Vec<[u32; 3]>,
+    /// For every new face, the input face its centroid's closest point lies on (an index into the
+    /// input's face list), so per-face labels can follow.
+    pub source_faces: Vec<u32>,
+}
+
+/// The predicted output face count for target length `l`: `max(1.2·A / (√3/4·L²), Σ ℓ_e / L)`.
+pub fn predicted_faces(positions: &[[f64; 3]], faces: &[[u32; 3]], l: f64) -> f64 {
+    let area: f64 = faces
+        .iter()
+        .map(|f| 0.5 * norm(tri_cross(positions, *f)))
+        .sum();
+    let perimeter: f64 = faces
+        .iter()
+        .map(|f| {
+            (0..3)
+                .map(|k| dist(positions[f[k] as usize], positions[f[(k + 1) % 3] as usize]))
+                .sum::<f64>()
+        })
+        .sum::<f64>()
+        / 2.0;
+    let by_area = 1.2 * area / (3f64.sqrt() / 4.0 * l * l);
+    by_area.max(perimeter / l)
+}
+
+fn tri_cross(p: &[[f64; 3]], f: [u32; 3]) -> [f64; 3] {
+    let (a, b, c) = (p[f[0] as usize], p[f[1] as usize], p[f[2] as usize]);
+    cross(sub(b, a), sub(c, a))
+}
+
+/// The unit normal of a face, `None` for a (numerically) zero-area one: `|N| ≤ 1e-10·ℓ_max²`, so a
+/// collinear face's rounding noise is not taken for a direction.
+fn face_normal(p: &[[f64; 3]], f: [u32; 3]) -> Option<[f64; 3]> {
+    let (a, b, c) = (p[f[0] as usize], p[f[1] as usize], p[f[2] as usize]);
+    let n = cross(sub(b, a), sub(c, a));
+    let l2 = dot(sub(b, a), sub(b, a))
+        .max(dot(sub(c, a), sub(c, a)))
+        .max(dot(sub(c, b), sub(c, b)));
+    if norm(n) <= 1e-10 * l2 {
+        None
+    } else {
+        normalized(n)
+    }
+}
+
+fn normalized(v: [f64; 3]) -> Option<[f64; 3]> {
+    let n = norm(v);
+    (n > 0.0 && n.is_finite()).then(|| [v[0] / n, v[1] / n, v[2] / n])
+}
+
+/// The smallest corner angle of a triangle, in radians (0 for a degenerate one).
+fn min_angle(a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> f64 {
+    let corner = |p: [f64; 3], q: [f64; 3], r: [f64; 3]| {
+        let (u, v) = (sub(q, p), sub(r, p));
+        norm(cross(u, v)).atan2(dot(u, v))
+    };
+    corner(a, b, c).min(corner(b, c, a)).min(corner(c, a, b))
+}
+
+/// A collapse may not make a face with a smaller corner (unless no worse than before).
+const MIN_NEW_ANGLE: f64 = 5.0 * std::f64::consts::PI / 180.0;
+
+/// A valence-improving flip may lower the pair's minimum angle, but never below this (or below
+/// the minimum before, when that is smaller).
+const FLIP_KEEP_ANGLE: f64 = 30.0 * std::f64::consts::PI / 180.0;
+
+/// A face pair with a corner under this is flipped whenever that raises its minimum angle.
+const NEEDLE_ANGLE: f64 = 10.0 * std::f64::consts::PI / 180.0;
+
+/// Checks the input and the options; returns the mesh's faces without repeated-vertex faces.
+fn check(
+    positions: &[[f64; 3]],
+    faces: &[[u32; 3]],
+    o: &RemeshOptions,
+) -> Result<Vec<[u32; 3]>, RemeshError> {
+    let l = o.target_edge_length;
+    if !(l.is_finite() && l > 0.0) {
+        return Err(RemeshError::EdgeLength(l));
+    }
+    let a = o.feature_angle_deg;
+    if !(0.0..=180.0).contains(&a) {
+        return Err(RemeshError::FeatureAngle(a));
+    }
+    if o.iterations > MAX_ITERATIONS {
+        return Err(RemeshError::Iterations {
+            got: o.iterations,
+            max: MAX_ITERATIONS,
+        });
+    }
+    quality::check_faces(positions, faces)?;
+    let kept: Vec<[u32; 3]> = faces
+        .iter()
+        .copied()
+        .filter(|f| f[0] != f[1] && f[1] != f[2] && f[2] != f[0])
+        .collect();
+    if kept.is_empty() {
+        return Err(RemeshError::Empty);
+    }
+    let mut bb = crate::bvh::Aabb::EMPTY;
+    for f in &kept {
+        for &v in f {
+            bb.grow(positions[v as usize]);
+        }
+    }
+    let size = (0..3)
+        .map(|k| bb.lo[k].abs().max(bb.hi[k].abs()))
+        .fold(0.0, f64::max);
+    let diagonal = norm(sub(bb.hi, bb.lo));
+    if size > MAX_COORDINATE || (diagonal > 0.0 && diagonal < MIN_DIAGONAL) || !diagonal.is_finite()
+    {
+        return Err(RemeshError::Scale { size, diagonal });
+    }
+    if l > diagonal {
+        return Err(RemeshError::MeshSmallerThanEdge {
+            length: l,
+            diagonal,
+        });
+    }
+    let predicted = predicted_faces(positions, &kept, l);
+    if predicted.is_nan() || predicted > o.max_faces as f64 {
+        return Err(RemeshError::TooManyFaces {
+            length: l,
+            predicted: if predicted.is_finite() {
+                predicted.ceil() as usize
+            } else {
+                usize::MAX
+            },
+            max: o.max_faces,
+        });
+    }
+    Ok(kept)
+}
+
+/// Remeshes `(positions, faces)` isotropically to `options.target_edge_length` (see the
+/// [module docs](self) for the algorithm, what it preserves and what it refuses).
+pub fn remesh(
+    positions: &[[f64; 3]],
+    faces: &[[u32; 3]],
+    options: &RemeshOptions,
+) -> Result<Remeshed, RemeshError> {
+    let kept = check(positions, faces, options)?;
+    let surface = Bvh::new(positions, faces)?;
+    let mut mesh = HalfEdgeMesh::new(positions, &kept)?;
+    let mut r = Remesher::new(&mut mesh, positions, &kept, options)?;
+    for _ in 0..options.iterations {
+        r.split_long_edges()?;
+        r.collapse_short_edges();
+        r.flip_edges();
+        for _ in 0..SMOOTHING_STEPS {
+            r.relax_and_project(&surface);
+        }
+    }
+    let (positions, faces) = r.mesh.compact();
+    let source_faces = faces
+        .iter()
+        .map(|f| {
+            let c = centroid(&positions, *f);
+            surface.closest_point(c).map_or(0, |q| q.face)
+        })
+        .collect();
+    Ok(Remeshed {
+        positions,
+        faces,
+        source_faces,
+    })
+}
+
+fn centroid(p: &[[f64; 3]], f: [u32; 3]) -> [f64; 3] {
+    let (a, b, c) = (p[f[0] as usize], p[f[1] as usize], p[f[2] as usize]);
+    [
+        (a[0] + b[0] + c[0]) / 3.0,
+        (a[1] + b[1] + c[1]) / 3.0,
+        (a[2] + b[2] + c[2]) / 3.0,
+    ]
+}
+
+struct Remesher<'a> {
+    mesh: &'a mut HalfEdgeMesh,
+    /// The input's feature lines as degenerate triangles `[a, b, b]` over the input positions.
+    lines: Bvh,
+    lo: f64,
+    hi: f64,
+    max_faces: usize,
+    buf: Vec<u32>,
+    buf2: Vec<u32>,
+    /// Per vertex: the input face it last projected onto (`NONE` before its first projection), the
+    /// closest-point search's starting guess.
+    hints: Vec<u32>,
+}
+
+impl<'a> Remesher<'a> {
+    fn new(
+        mesh: &'a mut HalfEdgeMesh,
+        positions: &[[f64; 3]],
+        faces: &[[u32; 3]],
+        o: &RemeshOptions,
+    ) -> Result<Self, RemeshError> {
+        let cos_limit = o.feature_angle_deg.to_radians().cos();
+        let normals: Vec<Option<[f64; 3]>> =
+            faces.iter().map(|f| face_normal(positions, *f)).collect();
+        let mut segments = Vec::new();
+        for e in 0..mesh.num_edges() {
+            let h = 2 * e as u32;
+            let (f0, f1) = (mesh.face_of(h), mesh.face_of(opp(h)));
+            let is_feature = if f0 == NONE || f1 == NONE {
+                true
+            } else {
+                match (normals[f0 as usize], normals[f1 as usize]) {
+                    (Some(a), Some(b)) => o.feature_angle_deg < 180.0 && dot(a, b) < cos_limit,
+                    _ => false,
+                }
+            };
+            mesh.feature[e] = is_feature;
+            if is_feature {
+                let b = mesh.to(h);
+                segments.push([mesh.from(h), b, b]);
+            }
+        }
+        let lines = Bvh::new(positions, &segments)?;
+        let l = o.target_edge_length;
+        let r = Remesher {
+            mesh,
+            lines,
+            lo: 0.8 * l,
+            hi: 4.0 / 3.0 * l,
+            max_faces: o.max_faces,
+            buf: Vec::new(),
+            buf2: Vec::new(),
+            hints: Vec::new(),
+        };
+        let counts = r.feature_counts();
+        let mut ring = Vec::new();
+        for v in 0..r.mesh.num_vertices() {
+            r.mesh.locked[v] = counts[v] != 0 && counts[v] != 2;
+            if counts[v] == 2 {
+                // A feature line that turns by more than the feature angle here has a corner.
+                r.mesh.outgoing(v as u32, &mut ring);
+                let dirs: Vec<[f64; 3]> = ring
+                    .iter()
+                    .filter(|&&g| r.mesh.feature[(g / 2) as usize])
+                    .filter_map(|&g| {
+                        normalized(sub(r.mesh.pos[r.mesh.to(g) as usize], r.mesh.pos[v]))
+                    })
+                    .collect();
+                if dirs.len() == 2 && -dot(dirs[0], dirs[1]) < cos_limit {
+                    r.mesh.locked[v] = true;
+                }
+            }
+        }
+        Ok(r)
+    }
+
+    /// Feature edges at every vertex.
+    fn feature_counts(&self) -> Vec<u8> {
+        let mut c = vec![0u8; self.mesh.num_vertices()];
+        for e in 0..self.mesh.num_edges() {
+            if self.mesh.edge_live(e) && self.mesh.feature[e] {
+                let h = 2 * e as u32;
+                for v in [self.mesh.from(h), self.mesh.to(h)] {
+                    c[v as usize] = c[v as usize].saturating_add(1);
+                }
+            }
+        }
+        c
+    }
+
+    /// Splits the longest edge first (longest-edge bisection), so a needle or zero-area face is
+    /// cut across its long side instead of sprouting new long edges from its short ones.
+    fn split_long_edges(&mut self) -> Result<(), RemeshError> {
+        use std::cmp::Reverse;
+        use std::collections::BinaryHeap;
+        // Positive finite lengths order like their bit patterns; ties go to the lower index.
+        let mut heap: BinaryHeap<(u64, Reverse<usize>)> = (0..self.mesh.num_edges())
+            .filter(|&e| self.mesh.edge_live(e))
+            .map(|e| (self.mesh.edge_length(e), e))
+            .filter(|&(l, _)| l > self.hi)
+            .map(|(l, e)| (l.to_bits(), Reverse(e)))
+            .collect();
+        while let Some((bits, Reverse(e))) = heap.pop() {
+            if !self.mesh.edge_live(e) || self.mesh.edge_length(e).to_bits() != bits {
+                continue; // stale: the edge was split since it was queued
+            }
+            let h = 2 * e as u32;
+            let (a, b) = (
+                self.mesh.pos[self.mesh.from(h) as usize],
+                self.mesh.pos[self.mesh.to(h) as usize],
+            );
+            let mid = [
+                (a[0] + b[0]) / 2.0,
+                (a[1] + b[1]) / 2.0,
+                (a[2] + b[2]) / 2.0,
+            ];
+            let first_new = self.mesh.num_edges();
+            self.mesh.split(e, mid);
+            if self.mesh.live_faces() > self.max_faces {
+                return Err(RemeshError::FaceBudget {
+                    max: self.max_faces,
+                });
+            }
+            for g in std::iter::once(e).chain(first_new..self.mesh.num_edges()) {
+                let l = self.mesh.edge_length(g);
+                if l > self.hi {
+                    heap.push((l.to_bits(), Reverse(g)));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn collapse_short_edges(&mut self) {
+        let mut counts = self.feature_counts();
+        for e in 0..self.mesh.num_edges() {
+            if !self.mesh.edge_live(e) || self.mesh.edge_length(e) >= self.lo {
+                continue;
+            }
+            let h = 2 * e as u32;
+            let (a, b) = (self.mesh.from(h) as usize, self.mesh.to(h) as usize);
+            let (pa, pb) = (self.mesh.pos[a], self.mesh.pos[b]);
+            // Two free ends meet at the midpoint; otherwise one end stays where it is.
+            let free = |v: usize| counts[v] == 0 && !self.mesh.locked[v];
+            let mid = [
+                (pa[0] + pb[0]) / 2.0,
+                (pa[1] + pb[1]) / 2.0,
+                (pa[2] + pb[2]) / 2.0,
+            ];
+            let chosen = if free(a) && free(b) && self.collapse_ok(h, &counts, mid) {
+                Some((h, mid))
+            } else {
+                let ok0 = self.collapse_ok(h, &counts, pb);
+                let ok1 = self.collapse_ok(opp(h), &counts, pa);
+                match (ok0, ok1) {
+                    // Remove the end with the lower valence.
+                    (true, true) if self.mesh.valence(a as u32) <= self.mesh.valence(b as u32) => {
+                        Some((h, pb))
+                    }
+                    (true, true) | (false, true) => Some((opp(h), pa)),
+                    (true, false) => Some((h, pb)),
+                    (false, false) => None,
+                }
+            };
+            let Some((g, target)) = chosen else {
+                continue;
+            };
+            let v1 = self.mesh.to(g);
+            let mut scratch = std::mem::take(&mut self.buf);
+            self.mesh.collapse(g, &mut scratch);
+            self.mesh.pos[v1 as usize] = target;
+            // Edges merged at the opposite corners may have become features: recount v1's ring.
+            self.mesh.outgoing(v1, &mut scratch);
+            let ring: Vec<u32> = scratch.iter().map(|&k| self.mesh.to(k)).collect();
+            self.buf = scratch;
+            counts[v1 as usize] = self.count_at(v1);
+            for w in ring {
+                counts[w as usize] = self.count_at(w);
+            }
+        }
+    }
+
+    fn count_at(&mut self, v: u32) -> u8 {
+        let mut buf = std::mem::take(&mut self.buf2);
+        self.mesh.outgoing(v, &mut buf);
+        let n = buf
+            .iter()
+            .filter(|&&g| self.mesh.feature[(g / 2) as usize])
+            .count();
+        self.buf2 = buf;
+        n.min(255) as u8
+    }
+
+    /// Whether collapsing half-edge `h` (removing `from(h)`, moving `to(h)` to `target`) is
+    /// allowed.
+    fn collapse_ok(&mut self, h: u32, counts: &[u8], target: [f64; 3]) -> bool {
+        let m = &*self.mesh;
+        let o = opp(h);
+        let (v0, v1) = (m.from(h), m.to(h));
+        let e = (h / 2) as usize;
+        if m.locked[v0 as usize] {
+            return false;
+        }
+        let feature_edge = m.feature[e];
+        if counts[v0 as usize] > 0 && !feature_edge {
+            return false; // a feature vertex moves only along its feature line
+        }
+        let boundary_edge = m.is_boundary_edge(e);
+        if !boundary_edge && m.is_boundary_vertex(v0) && m.is_boundary_vertex(v1) {
+            return false;
+        }
+        if m.is_boundary_halfedge(h) && m.boundary_loop_is_triangle(h) {
+            return false;
+        }
+        if m.is_boundary_halfedge(o) && m.boundary_loop_is_triangle(o) {
+            return false;
+        }
+        let vl = (!m.is_boundary_halfedge(h)).then(|| m.to(m.next(h)));
+        let vr = (!m.is_boundary_halfedge(o)).then(|| m.to(m.next(o)));
+        for v in [vl, vr].into_iter().flatten() {
+            let need = if m.is_boundary_vertex(v) { 3 } else { 4 };
+            if m.valence(v) < need {
+                return false;
+            }
+        }
+        // An ear: both other edges of a side face on the boundary.
+        for side in [h, o] {
+            if !m.is_boundary_halfedge(side) {
+                let s1 = m.next(side);
+                let s2 = m.next(s1);
+                if m.is_boundary_halfedge(opp(s1)) && m.is_boundary_halfedge(opp(s2)) {
+                    return false;
+                }
+            }
+        }
+        // Link condition: the common neighbours are exactly the opposite corners.
+        let mut r0 = std::mem::take(&mut self.buf);
+        let mut r1 = std::mem::take(&mut self.buf2);
+        m.outgoing(v0, &mut r0);
+        m.outgoing(v1, &mut r1);
+        let common = r0
+            .iter()
+            .filter(|&&g| {
+                let w = m.to(g);
+                r1.iter().any(|&k| m.to(k) == w)
+            })
+            .count();
+        let expected = vl.is_some() as usize + vr.is_some() as usize;
+        let ok = common == expected
+            && r0.len() + r1.len() - 2 - expected >= 3
+            && ring_ok(m, v0, v1, target, &r0, self.hi)
+            && (target == m.pos[v1 as usize] || ring_ok(m, v1, v0, target, &r1, self.hi));
+        self.buf = r0;
+        self.buf2 = r1;
+        ok
+    }
+
+    fn flip_edges(&mut self) {
+        let mut ring = Vec::new();
+        for e in 0..self.mesh.num_edges() {
+            let m = &*self.mesh;
+            if !m.edge_live(e) || m.feature[e] || m.is_boundary_edge(e) {
+                continue;
+            }
+            let h = 2 * e as u32;
+            let o = opp(h);
+            let (a, b) = (m.from(h), m.to(h));
+            let c = m.to(m.next(h));
+            let d = m.to(m.next(o));
+            if c == d {
+                continue;
+            }
+            m.outgoing(c, &mut ring);
+            if ring.iter().any(|&g| m.to(g) == d) {
+                continue;
+            }
+            let target = |v: u32| if m.is_boundary_vertex(v) { 4i64 } else { 6 };
+            let val = |v: u32| m.valence(v) as i64;
+            let (va, vb, vc, vd) = (val(a), val(b), val(c), val(d));
+            if va <= 3 || vb <= 3 {
+                continue;
+            }
+            let dev = |x: i64, t: i64| (x - t) * (x - t);
+            let before =
+                dev(va, target(a)) + dev(vb, target(b)) + dev(vc, target(c)) + dev(vd, target(d));
+            let after = dev(va - 1, target(a))
+                + dev(vb - 1, target(b))
+                + dev(vc + 1, target(c))
+                + dev(vd + 1, target(d));
+            let (pa, pb, pc, pd) = (
+                m.pos[a as usize],
+                m.pos[b as usize],
+                m.pos[c as usize],
+                m.pos[d as usize],
+            );
+            let old_min = min_angle(pa, pb, pc).min(min_angle(pb, pa, pd));
+            let new_min = min_angle(pa, pd, pc).min(min_angle(pd, pb, pc));
+            // Toward valence 6 without lowering the minimum angle below min(before, 30°), or, for
+            // a needle pair, toward a larger minimum angle whatever the valences.
+            let wanted = (after < before && new_min >= old_min.min(FLIP_KEEP_ANGLE))
+                || (old_min < NEEDLE_ANGLE && new_min > old_min);
+            if !wanted {
+                continue;
+            }
+            let n_old = {
+                let n1 = cross(sub(pb, pa), sub(pc, pa));
+                let n2 = cross(sub(pa, pb), sub(pd, pb));
+                [n1[0] + n2[0], n1[1] + n2[1], n1[2] + n2[2]]
+            };
+            let n1 = cross(sub(pd, pa), sub(pc, pa));
+            let n2 = cross(sub(pb, pd), sub(pc, pd));
+            if dot(n1, n2) <= 0.0 || dot(n1, n_old) <= 0.0 || dot(n2, n_old) <= 0.0 {
+                continue;
+            }
+            self.mesh.flip(e);
+        }
+    }
+
+    fn relax_and_project(&mut self, surface: &Bvh) {
+        let m = &*self.mesh;
+        let nv = m.num_vertices();
+        let counts = self.feature_counts();
+        let mut normals = vec![[0.0; 3]; nv];
+        let mut centroid_sum = vec![[0.0; 3]; nv];
+        let mut area_sum = vec![0.0; nv];
+        for f in 0..m.num_face_slots() {
+            if !m.face_live(f) {
+                continue;
+            }
+            let vs = m.face_vertices(f as u32);
+            let (a, b, c) = (
+                m.pos[vs[0] as usize],
+                m.pos[vs[1] as usize],
+                m.pos[vs[2] as usize],
+            );
+            let n = cross(sub(b, a), sub(c, a));
+            let area = 0.5 * norm(n);
+            let ctr = [
+                (a[0] + b[0] + c[0]) / 3.0,
+                (a[1] + b[1] + c[1]) / 3.0,
+                (a[2] + b[2] + c[2]) / 3.0,
+            ];
+            for &v in &vs {
+                let v = v as usize;
+                for k in 0..3 {
+                    normals[v][k] += n[k];
+                    centroid_sum[v][k] += area * ctr[k];
+                }
+                area_sum[v] += area;
+            }
+        }
+        let mut ring = Vec::new();
+        let mut moved: Vec<(u32, [f64; 3], bool)> = Vec::new();
+        for v in 0..nv as u32 {
+            let vi = v as usize;
+            if !m.vertex_live(vi) || m.locked[vi] {
+                continue;
+            }
+            let p = m.pos[vi];
+            if counts[vi] == 2 {
+                m.outgoing(v, &mut ring);
+                let fs: Vec<u32> = ring
+                    .iter()
+                    .filter(|&&g| m.feature[(g / 2) as usize])
+                    .map(|&g| m.to(g))
+                    .collect();
+                if fs.len() != 2 {
+                    continue;
+                }
+                let (q0, q1) = (m.pos[fs[0] as usize], m.pos[fs[1] as usize]);
+                let Some(t) = normalized(sub(q1, q0)) else {
+                    continue;
+                };
+                let mid = [
+                    (q0[0] + q1[0]) / 2.0,
+                    (q0[1] + q1[1]) / 2.0,
+                    (q0[2] + q1[2]) / 2.0,
+                ];
+                let s = dot(sub(mid, p), t);
+                moved.push((v, [p[0] + s * t[0], p[1] + s * t[1], p[2] + s * t[2]], true));
+            } else if counts[vi] == 0 {
+                let target = if area_sum[vi] > 0.0 {
+                    let a = area_sum[vi];
+                    [
+                        centroid_sum[vi][0] / a,
+                        centroid_sum[vi][1] / a,
+                        centroid_sum[vi][2] / a,
+                    ]
+                } else {
+                    m.outgoing(v, &mut ring);
+                    let mut s = [0.0; 3];
+                    for &g in &ring {
+                        let q = m.pos[m.to(g) as usize];
+                        for k in 0..3 {
+                            s[k] += q[k] / ring.len() as f64;
+                        }
+                    }
+                    s
+                };
+                let d = sub(target, p);
+                let d = match normalized(normals[vi]) {
+                    Some(n) => {
+                        let s = dot(d, n);
+                        [d[0] - s * n[0], d[1] - s * n[1], d[2] - s * n[2]]
+                    }
+                    None => d,
+                };
+                moved.push((v, [p[0] + d[0], p[1] + d[1], p[2] + d[2]], false));
+            }
+        }
+        self.hints.resize(nv, NONE);
+        for (v, p, on_line) in moved {
+            let vi = v as usize;
+            let q = if on_line {
+                self.lines.closest_point(p)
+            } else {
+                let c = surface.closest_point_hinted(p, self.hints[vi]);
+                if let Some(c) = c {
+                    self.hints[vi] = c.face;
+                }
+                c
+            };
+            self.mesh.pos[vi] = q.map_or(p, |c| c.point);
+        }
+    }
+}
+
+/// Whether moving vertex `v` (outgoing half-edges `ring`) to `p1` as it merges with `other` keeps
+/// every edge to a neighbour at most `hi` long, and every face that survives (those without
+/// `other`) unfolded (its normal turns by less than 90°) and not near-degenerate (no corner under
+/// [`MIN_NEW_ANGLE`] unless no worse than the worst face around `v` before).
+fn ring_ok(m: &HalfEdgeMesh, v: u32, other: u32, p1: [f64; 3], ring: &[u32], hi: f64) -> bool {
+    let p0 = m.pos[v as usize];
+    let mut ring_normal = [0.0; 3];
+    let mut worst_old = f64::INFINITY;
+    for &g in ring {
+        let w = m.to(g);
+        if w != other && dist(p1, m.pos[w as usize]) > hi {
+            return false;
+        }
+        if m.is_boundary_halfedge(g) {
+            continue;
+        }
+        let (pa, pb) = (m.pos[w as usize], m.pos[m.to(m.next(g)) as usize]);
+        let n = cross(sub(pa, p0), sub(pb, p0));
+        for k in 0..3 {
+            ring_normal[k] += n[k];
+        }
+        worst_old = worst_old.min(min_angle(p0, pa, pb));
+    }
+    let ring_normal = normalized(ring_normal);
+    for &g in ring {
+        if m.is_boundary_halfedge(g) {
+            continue;
+        }
+        let (a, b) = (m.to(g), m.to(m.next(g)));
+        if a == other || b == other {
+            continue;
+        }
+        let (pa, pb) = (m.pos[a as usize], m.pos[b as usize]);
+        let old = normalized(cross(sub(pa, p0), sub(pb, p0))).or(ring_normal);
+        let Some(new) = normalized(cross(sub(pa, p1), sub(pb, p1))) else {
+            return false;
+        };
+        if let Some(old) = old
+            && dot(old, new) <= 0.0
+        {
+            return false;
+        }
+        let angle = min_angle(p1, pa, pb);
+        if angle < MIN_NEW_ANGLE && angle < worst_old {
+            return false;
+        }
+    }
+    true
+}
+
+#[cfg(test)]
+mod tests;
