@@ -6,8 +6,7 @@ use stylize::identity::ObjectiveIdentity;
 pub use stylize::runner::{
     NPZ_FORMAT_VERSION, NoProgress, Progress, REGION_TINT, ResolvedRegion, RunHooks, RunOptions,
     RunOutcome, RunRequest, Stopped, Task, darap_options, objective_identity, parse_region_specs,
-    prepare_mesh, prepare_mesh_with_region, renderer, resolve_region, tint_region, turntable,
-    write_grid,
+    prepare_mesh, prepare_mesh_with_region, resolve_region, tint_region, turntable, write_grid,
 };
 
 use crate::signals::Interrupted;

@@ -18,7 +18,7 @@ use rand_chacha::ChaCha8Rng;
 use raster_diff::{Images, Renderer};
 
 use crate::checkpoint::{CHECKPOINT_VERSION, Checkpoint};
-use crate::config::{Backend, Config};
+use crate::config::Config;
 use crate::identity::{ObjectiveIdentity, TaskIdentity};
 use crate::lock::RunLock;
 use crate::pipeline::{
@@ -238,13 +238,6 @@ pub fn prepare_mesh_with_region(
 /// dARAP options from the configuration (the `[darap]` section is darap's own options).
 pub fn darap_options(config: &Config) -> darap::DarapOptions {
     config.darap
-}
-
-/// A renderer for the configured backend: `cpu` forces the CPU renderer; `auto` and `gpu` ask for
-/// the GPU backend, which falls back to the CPU when there is no hardware adapter. The string says
-/// what was chosen and why.
-pub fn renderer(config: &Config) -> (Box<dyn Renderer>, String) {
-    raster_diff::select_renderer(config.render.backend != Backend::Cpu)
 }
 
 struct RunObserver<'a> {
@@ -584,7 +577,7 @@ pub fn build_objective<'g>(
             }
         }
         Task::Text { guidance, .. } => {
-            let (renderer, why) = renderer(config);
+            let (renderer, why) = raster_diff::select_renderer(config.render.backend)?;
             let views = ViewSettings {
                 camera: config.camera.sampler.clone(),
                 views: config.camera.views,
