@@ -665,7 +665,7 @@ pub fn write_outputs(
     let normals =
         mesh_core::normals::vertex_normals_area_weighted(&deformed.positions, &deformed.faces);
     lock.ensure_held()?;
-    for ext in ["obj", "ply", "glb"] {
+    for ext in mesh_core::io::Format::WITH_NORMALS.map(mesh_core::io::Format::extension) {
         let path = dir.file(&format!("mesh.{ext}"));
         let written = crate::durable::replace_with(&path, |tmp| {
             mesh_core::io::write_mesh(tmp, &deformed, Some(&normals)).map_err(Error::from)
