@@ -11,7 +11,8 @@
 //!   resume;
 //! - [`saved`]: the reference's saved-deformation `.npz`; [`snapshots`]: the deformed mesh along
 //!   the run, for replay; [`run_pictures`]: the before/after sheet and the turntable (PNG, GIF);
-//! - `models`: DeepFloyd IF guidance from a model directory (feature `text`); [`eval`]: metrics
+//! - [`models`]: DeepFloyd IF guidance from a model directory (feature `text`; without it its
+//!   loading functions return [`Error::NotBuilt`]); [`eval`]: metrics
 //!   of finished runs (CLIP similarity with `text`);
 //! - [`error`]: the typed [`Error`] every public function returns;
 //! - [`malloc`]: the C allocator's policy that keeps the loop's large per-iteration buffers from
@@ -21,10 +22,10 @@
 //! batches; this crate depends on nothing of that kind (`cargo xtask check-deps`).
 //!
 //! Features (both default): `text`, the text-guided path through ONNX Runtime (`models`, CLIP in
-//! [`eval`]); `gpu`, raster-diff's wgpu backend ([`config::Backend::Auto`]/`Gpu` use the CPU
-//! renderer without it). Without them the crate builds in a fraction of the time (no ONNX
-//! Runtime, tokenizers or wgpu) and keeps the model-free styles, apply, render and the geometric
-//! metrics.
+//! [`eval`]; without it [`models`] only says so); `gpu`, raster-diff's wgpu backend (without it
+//! [`config::Backend::Auto`] renders on the CPU and `Gpu` is an error). Without them the crate
+//! builds in a fraction of the time (no ONNX Runtime, tokenizers or wgpu) and keeps the
+//! model-free styles, apply, render and the geometric metrics.
 
 pub mod checkpoint;
 pub mod config;
@@ -34,7 +35,6 @@ pub mod eval;
 pub mod identity;
 pub mod lock;
 pub mod malloc;
-#[cfg(feature = "text")]
 pub mod models;
 pub mod pipeline;
 pub mod run_pictures;
