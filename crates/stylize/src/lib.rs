@@ -9,7 +9,8 @@
 //! - [`rundir`], [`lock`], [`durable`], [`checkpoint`], [`identity`]: the run directory (locked,
 //!   every file replaced atomically and durably), checkpoints and the task identity that guards a
 //!   resume;
-//! - [`saved`]: the reference's saved-deformation `.npz`; [`snapshots`]: the deformed mesh along
+//! - [`saved`]: the reference's saved-deformation `.npz`, and the dARAP layer that re-applies it
+//!   ([`saved::ReadyLayer`], for `apply`, the viewer and the examples); [`snapshots`]: the deformed mesh along
 //!   the run, for replay; [`run_pictures`]: the before/after sheet and the turntable (PNG, GIF);
 //! - [`models`]: DeepFloyd IF guidance from a model directory (feature `text`; without it its
 //!   loading functions return [`Error::NotBuilt`]); [`eval`]: metrics
