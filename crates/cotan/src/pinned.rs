@@ -103,18 +103,6 @@ impl PinnedCholesky {
         Ok(out)
     }
 
-    /// Kept for compatibility: the solves no longer run in faer, they are sequential
-    /// substitutions on the crate's own copy of the factor (measured faster than faer's
-    /// two-thread solves on every mesh of `docs/benchmarks.md`).
-    #[deprecated(note = "the solves are sequential; the parallelism setting has no effect")]
-    pub fn with_parallelism(self, _par: Par) -> Self {
-        self
-    }
-
-    /// Kept for compatibility; see [`PinnedCholesky::with_parallelism`].
-    #[deprecated(note = "the solves are sequential; the parallelism setting has no effect")]
-    pub fn set_parallelism(&mut self, _par: Par) {}
-
     /// Size of the full matrix.
     pub fn size(&self) -> usize {
         self.n

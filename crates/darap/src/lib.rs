@@ -395,13 +395,6 @@ impl Darap {
         self.options.lambda = lambda;
     }
 
-    /// Kept for compatibility: the sparse solves are sequential substitutions (see
-    /// [`PinnedCholesky`]) and this setting has no effect. The local step and right-hand side use
-    /// the ambient rayon pool, whose size does not change their results (bit for bit): the whole
-    /// layer is deterministic.
-    #[deprecated(note = "the solves are sequential; the parallelism setting has no effect")]
-    pub fn set_solver_parallelism(&mut self, _par: faer::Par) {}
-
     /// Changes the rotation rule (nothing is recomputed).
     pub fn set_rotation_rule(&mut self, rule: RotationRule) {
         self.options.rotation_rule = rule;

@@ -2,6 +2,7 @@
 //!
 //! Images are `f32` RGB in `[0, 1]`, laid out `(view, row, column, channel)` with row 0 at the top.
 //!
+//! - [`backend`]: the backend choice ([`Backend`]: `auto`, `cpu`, `gpu`) and [`select_renderer`].
 //! - [`camera`]: the reference view sampler, turntable orbits, the adaptive distance multiplier.
 //! - [`cpu`]: the CPU reference backend [`CpuRenderer`] (forward and VJP, silhouette antialiasing).
 //! - [`image`]: PNG output and contact sheets.
@@ -9,12 +10,14 @@
 //! Conventions (projection, pixel centres, fill rule, shading) are in `docs/renderer.md` and in the
 //! module docs of [`cpu::raster`], [`cpu::shading`] and [`cpu::antialias`].
 
+pub mod backend;
 pub mod camera;
 pub mod cpu;
 #[cfg(feature = "gpu")]
 pub mod gpu;
 pub mod image;
 
+pub use backend::{Backend, select_renderer};
 pub use camera::{CameraConfig, adapt_multiplier, orbit_views, sample_views};
 pub use cpu::{CpuRenderer, RenderSettings};
 
@@ -59,6 +62,15 @@ pub enum RenderError {
         needed: u64,
         /// The device's limit.
         limit: u64,
+    },
+    /// The backend asked for cannot run here (`gpu` without an adapter, or in a build without
+    /// the `gpu` feature).
+    #[error("renderer backend `{backend}` is not available: {reason}")]
+    BackendUnavailable {
+        /// The backend asked for.
+        backend: Backend,
+        /// Why it cannot run.
+        reason: String,
     },
 }
 
@@ -115,49 +127,4 @@ pub trait Renderer: Send {
             self.name()
         )))
     }
-}
-
-/// Chooses a backend: returns the renderer and a sentence saying what was chosen and why.
-///
-/// With `prefer_gpu` and the `gpu` feature, the wgpu renderer is used when the adapter is a real
-/// (non-CPU) GPU; on a software adapter (lavapipe) or without any adapter the CPU renderer is
-/// returned, since it is faster than a software GPU.
-pub fn select_renderer(prefer_gpu: bool) -> (Box<dyn Renderer>, String) {
-    if prefer_gpu {
-        select_gpu()
-    } else {
-        let r = CpuRenderer::default();
-        let why = format!("{}: requested", r.name());
-        (Box::new(r), why)
-    }
-}
-
-#[cfg(feature = "gpu")]
-fn select_gpu() -> (Box<dyn Renderer>, String) {
-    let cpu = CpuRenderer::default();
-    match gpu::WgpuRenderer::new(RenderSettings::default()) {
-        Ok(g) if !g.is_software() => {
-            let why = format!("{}: a hardware adapter was found", g.name());
-            (Box::new(g), why)
-        }
-        Ok(g) => {
-            let why = format!(
-                "{}: the only adapter is a software one ({})",
-                cpu.name(),
-                g.adapter_info().name
-            );
-            (Box::new(cpu), why)
-        }
-        Err(e) => {
-            let why = format!("{}: no usable GPU adapter ({e})", cpu.name());
-            (Box::new(cpu), why)
-        }
-    }
-}
-
-#[cfg(not(feature = "gpu"))]
-fn select_gpu() -> (Box<dyn Renderer>, String) {
-    let cpu = CpuRenderer::default();
-    let why = format!("{}: built without the `gpu` feature", cpu.name());
-    (Box::new(cpu), why)
 }

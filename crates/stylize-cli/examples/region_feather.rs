@@ -15,9 +15,9 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use stylize::run_pictures::{tint_region, turntable, write_grid};
+use stylize::style::Style;
 use stylize_cli::config::{Config, RegionSection};
 use stylize_cli::runner::{LogMode, RunRequest, Task, execute, prepare_mesh_with_region};
-use stylize_cli::style::Style;
 
 const REGION: &str = "box:-1,-1,-1,0,1,1";
 
@@ -133,13 +133,10 @@ fn main() -> anyhow::Result<()> {
             .filter(|f| f.iter().all(|&v| inside[v as usize]))
             .collect();
         let targets = Style::Cube.face_targets(&rest.positions, &region_faces);
-        let align = stylize_cli::style::alignment::mean_alignment(
-            &deformed.positions,
-            &region_faces,
-            &targets,
-        );
+        let align =
+            stylize::style::alignment::mean_alignment(&deformed.positions, &region_faces, &targets);
         let align_rest =
-            stylize_cli::style::alignment::mean_alignment(&rest.positions, &region_faces, &targets);
+            stylize::style::alignment::mean_alignment(&rest.positions, &region_faces, &targets);
         println!(
             "| {k} | {max_change:.2}° | {:.2}° ({count} edges) | {seam_max:.2}° | {:.2}° ({seam_count} edges) | {align_rest:.4} → {align:.4} |",
             sum_change / count.max(1) as f64,

@@ -20,7 +20,7 @@
 //! and so is a run directory inside another row's (`a` and `a/previews`, `a` and `a/b/c`).
 //!
 //! Each row takes its run directory's lock, then: **skipped** when the directory holds a complete
-//! run of the same task (same identity, see [`crate::identity`]); an **error** when it holds a
+//! run of the same task (same identity, see [`stylize::identity`]); an **error** when it holds a
 //! complete run of a different task (an edited row; `--force` redoes it); **resumed** when it
 //! holds a checkpoint of the same task (a checkpoint of a different task is an error, never mixed
 //! in); started otherwise. A failing row is reported and the batch goes on; a row locked by another
@@ -33,12 +33,12 @@ use anyhow::{Context, bail};
 use serde::Deserialize;
 
 use crate::config::Config;
-use crate::identity::{ModelIdentity, ObjectiveIdentity};
-use crate::models::ModelSet;
 use crate::runner::{LogMode, RunOptions, RunRequest, Task, execute_with};
 use crate::signals::Interrupted;
-use crate::style::Style;
 use rundir::RunDir;
+use stylize::identity::{ModelIdentity, ObjectiveIdentity};
+use stylize::models::ModelSet;
+use stylize::style::Style;
 
 /// One manifest row.
 #[derive(Clone, Debug, PartialEq, Deserialize)]

@@ -3,8 +3,11 @@
 //! A quick-start build (the README's first command: `--no-default-features`)
 //! keeps every subcommand and option, so scripts and `--help` read the same; what needs a missing
 //! feature fails before any work with [`not_built`], which names the commands that build the full
-//! binary or add just that feature ([`cargo_run_adding`]). `gpu` has no such error: without it `render.backend = "auto"`/`"gpu"` uses the CPU
-//! renderer and says so in the run's log, as on a machine without a GPU.
+//! binary or add just that feature ([`cargo_run_adding`]); the library's `stylize::models`
+//! refuses to load models in such a build too (`stylize::Error::NotBuilt`), after these checks.
+//! Without `gpu`, `render.backend = "auto"` uses the CPU renderer and says so in the run's log,
+//! as on a machine without a GPU; `"gpu"` fails with raster-diff's error naming the missing
+//! feature.
 
 /// Every feature, and whether this binary was built with it.
 pub const ENABLED: &[(&str, bool)] = &[
@@ -57,62 +60,6 @@ pub fn not_built(feature: &str, what: &str) -> anyhow::Error {
          this feature to this build with `{} …` (docs/cli.md, \"Builds and features\")",
         cargo_run_adding(feature)
     )
-}
-
-/// Stands in for `stylize::models` in a build without the `text` feature: [`ModelSet::open`]
-/// fails with [`not_built`], so `run` and `batch` keep one code path for prompts, and refuse
-/// them at the point where the models would load.
-#[cfg(not(feature = "text"))]
-pub mod models {
-    use std::path::Path;
-
-    use csd::CascadedGuidance;
-    use stylize::config::Config;
-
-    /// No model set can exist without the `text` feature (an empty enum); the signatures are
-    /// `stylize::models::ModelSet`'s.
-    #[derive(Debug)]
-    pub enum ModelSet {}
-
-    impl ModelSet {
-        /// Always fails: this build has no ONNX Runtime.
-        pub fn open(_model: &Path, _config: &Config) -> stylize::Result<Self> {
-            let e = super::not_built("text", "a text prompt (--prompt, a prompt row)");
-            Err(stylize::Error::External(e.into()))
-        }
-
-        /// Unreachable (no value exists).
-        pub fn cpu_time_warning(&self, _config: &Config) -> Option<String> {
-            match *self {}
-        }
-
-        /// Unreachable (no value exists).
-        pub fn prompt_warnings(
-            &self,
-            _prompt: &str,
-            _config: &Config,
-        ) -> stylize::Result<Vec<String>> {
-            match *self {}
-        }
-
-        /// Unreachable (no value exists).
-        pub fn guidance_for(
-            &mut self,
-            _prompt: &str,
-            _config: &Config,
-        ) -> stylize::Result<CascadedGuidance<'_>> {
-            match *self {}
-        }
-
-        /// Unreachable (no value exists).
-        pub fn into_guidance(
-            self,
-            _prompt: &str,
-            _config: &Config,
-        ) -> stylize::Result<CascadedGuidance<'static>> {
-            match self {}
-        }
-    }
 }
 
 #[cfg(test)]

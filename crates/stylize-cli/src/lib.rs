@@ -1,6 +1,6 @@
 //! Library side of the `stylize` command line: config files, progress display, signals, batches,
-//! and one module per subcommand under [`cmd`]. The optimization itself is the `stylize` crate;
-//! its modules are re-exported here under their old paths so the commands read as before.
+//! and one module per subcommand under [`cmd`]. The optimization itself is the `stylize` crate,
+//! which the commands name directly (`stylize::style`, `stylize::models`, …).
 
 pub mod batch;
 pub mod cmd;
@@ -15,8 +15,3 @@ pub mod sanity;
 pub mod signals;
 pub mod view;
 
-#[cfg(not(feature = "text"))]
-pub use features::models;
-#[cfg(feature = "text")]
-pub use stylize::models;
-pub use stylize::{eval, identity, pipeline, run_pictures, style};

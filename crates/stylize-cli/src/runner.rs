@@ -6,7 +6,7 @@ use stylize::identity::ObjectiveIdentity;
 pub use stylize::runner::{
     NPZ_FORMAT_VERSION, NoProgress, Progress, ResolvedRegion, RunHooks, RunOptions, RunOutcome,
     RunRequest, Task, darap_options, objective_identity, parse_region_specs, prepare_mesh,
-    prepare_mesh_with_region, renderer, resolve_region,
+    prepare_mesh_with_region, resolve_region,
 };
 
 use crate::signals::Interrupted;

@@ -9,7 +9,7 @@
 //!   `R = I` and never count as flipped.
 //! - **volume ratio** and **face-area ratio** (mean and population standard deviation over faces):
 //!   the identity metrics of spec §9, computed exactly as `stylize eval` does
-//!   ([`crate::eval::pair_ratios`]: the result recentred and rescaled to the source's bounding-box
+//!   ([`stylize::eval::pair_ratios`]: the result recentred and rescaled to the source's bounding-box
 //!   diagonal).
 //!
 //! [`LambdaSanity::warnings`] names each symptom of a collapsing result: a volume ratio below
@@ -53,7 +53,7 @@ impl LambdaSanity {
     /// Diagnostics of `deformation` (the dARAP result at `lambda`) of the rest mesh `rest`.
     pub fn assess(rest: &TriMesh, deformation: &Deformation, lambda: f64) -> anyhow::Result<Self> {
         let result = TriMesh::new(deformation.positions.clone(), rest.faces.clone());
-        let (ratios, _skipped, volume_ratio) = crate::eval::pair_ratios(rest, &result)?;
+        let (ratios, _skipped, volume_ratio) = stylize::eval::pair_ratios(rest, &result)?;
         let n = ratios.len().max(1) as f64;
         let mean = ratios.iter().sum::<f64>() / n;
         let var = ratios.iter().map(|r| (r - mean) * (r - mean)).sum::<f64>() / n;

@@ -13,11 +13,11 @@ use darap::Darap;
 const IDENTITY: darap::Mat3 = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
 use npy::NpyData;
 use stylize::saved::SavedDeformation;
+use stylize::style::Style;
 use stylize_cli::config::{Config, RegionSection};
 use stylize_cli::runner::{
     LogMode, RunOutcome, RunRequest, Task, darap_options, execute, prepare_mesh_with_region,
 };
-use stylize_cli::style::Style;
 
 mod common;
 use common::ok;
@@ -166,7 +166,7 @@ fn cube_style_on_half_the_bunny_leaves_the_other_half_rigid() {
         .collect();
     let region_targets = Style::Cube.face_targets(&mesh.positions, &region_faces);
     let align = |p: &[[f64; 3]]| {
-        stylize_cli::style::alignment::mean_alignment(p, &region_faces, &region_targets)
+        stylize::style::alignment::mean_alignment(p, &region_faces, &region_targets)
     };
     assert!(
         align(&state.positions) > align(&mesh.positions) + 0.02,

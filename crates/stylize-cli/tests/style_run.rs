@@ -7,9 +7,9 @@ use std::path::{Path, PathBuf};
 
 use mesh_core::TriMesh;
 use stylize::saved::SavedDeformation;
+use stylize::style::Style;
 use stylize_cli::config::Config;
 use stylize_cli::runner::{LogMode, RunOutcome, RunRequest, Task, execute};
-use stylize_cli::style::Style;
 
 mod common;
 use common::ok;
@@ -70,7 +70,7 @@ fn cube_style_increases_face_alignment_with_the_cube_gauss_map() {
     let rest = ok(stylize_cli::runner::prepare_mesh(&mesh)).0;
     let targets = Style::Cube.face_targets(&rest.positions, &rest.faces);
     let measured =
-        stylize_cli::style::alignment::mean_alignment(&written.positions, &written.faces, &targets);
+        stylize::style::alignment::mean_alignment(&written.positions, &written.faces, &targets);
     assert!((measured - after).abs() < 1e-9, "{measured} vs {after}");
     assert!(after > before + 0.03, "alignment {before} → {after}");
 }

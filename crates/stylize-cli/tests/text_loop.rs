@@ -10,7 +10,7 @@ use optim::{Adam, AdamConfig, Schedule};
 use rand::{Rng, RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use raster_diff::{CameraConfig, CpuRenderer, Images, RenderError, Renderer, View};
-use stylize_cli::pipeline::{
+use stylize::pipeline::{
     LoopSpec, LoopState, Objective, RecordIterations, StepEval, SubStepsOneByOne, TextObjective,
     ViewSettings, run_loop,
 };

@@ -30,17 +30,9 @@ use serde::{Deserialize, Serialize};
 /// `recenter_only` / `none`, through darap's `serde` feature): one definition, one name table.
 pub use darap::{PostProcess, RotationRule};
 
-/// Rendering backend choice.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Backend {
-    /// GPU when available, else CPU.
-    Auto,
-    /// The CPU reference renderer.
-    Cpu,
-    /// Prefer the wgpu backend.
-    Gpu,
-}
+/// `render.backend` is raster-diff's own [`raster_diff::Backend`] (`auto` | `cpu` | `gpu`, through
+/// raster-diff's `serde` feature; [`raster_diff::select_renderer`] turns it into a renderer).
+pub use raster_diff::Backend;
 
 /// The model-free objective's variant (see `crate::style`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -121,7 +113,7 @@ pub struct RenderSection {
     pub width: usize,
     /// Render height in pixels: 512.
     pub height: usize,
-    /// `auto`, `cpu` or `gpu`.
+    /// `auto`, `cpu` or `gpu` ([`Backend`]).
     pub backend: Backend,
 }
 

@@ -70,6 +70,19 @@ pub enum Error {
     #[cfg(feature = "text")]
     #[error(transparent)]
     Model(Box<diffusion_onnx::OnnxError>),
+    /// Something this build of the library was compiled without (in a build without the `text`
+    /// feature: loading the text path's models).
+    #[error(
+        "{what} needs the `{feature}` feature of the stylize library, and this build was compiled \
+         without it: build it with `--features stylize/{feature}` (the stylize command line: \
+         `cargo run --release --bin stylize -- …`, default features)"
+    )]
+    NotBuilt {
+        /// The missing cargo feature (`text`).
+        feature: &'static str,
+        /// What needed it.
+        what: String,
+    },
     /// The optimizer refused a step.
     #[error(transparent)]
     Adam(#[from] optim::AdamError),

@@ -5,14 +5,10 @@
 //! - [`style`]: the model-free styles (cube, octahedron, exemplar) and their alignment loss;
 //! - [`config`]: every setting of a run, with the reference's defaults;
 //! - [`runner`]: one run from mesh file to complete run directory, with a [`runner::Progress`]
-//!   observer and a cancellation flag ([`runner::RunHooks`]), in a run directory of the
-//!   [`rundir`] crate (locked, every file replaced atomically and durably, claimed, resumed);
-//! - [`checkpoint`]: the loop's state in a checkpoint ([`rundir::checkpoint`] is the container);
-//!   [`identity`]: how the task identity that guards a resume is computed;
-//! - [`saved`]: the reference's saved-deformation `.npz`; [`snapshots`]: the deformed mesh along
 //!   the run, for replay; [`run_pictures`]: the before/after sheet, the turntable (PNG, GIF) and
 //!   the orbit, tint and grid helpers the previews share;
-//! - `models`: DeepFloyd IF guidance from a model directory (feature `text`); [`eval`]: metrics
+//! - [`models`]: DeepFloyd IF guidance from a model directory (feature `text`; without it its
+//!   loading functions return [`Error::NotBuilt`]); [`eval`]: metrics
 //!   of finished runs (CLIP similarity with `text`);
 //! - [`error`]: the typed [`Error`] every public function returns, and [`error::Stopped`];
 //! - [`malloc`]: the C allocator's policy that keeps the loop's large per-iteration buffers from
@@ -22,10 +18,10 @@
 //! batches; this crate depends on nothing of that kind (`cargo xtask check-deps`).
 //!
 //! Features (both default): `text`, the text-guided path through ONNX Runtime (`models`, CLIP in
-//! [`eval`]); `gpu`, raster-diff's wgpu backend ([`config::Backend::Auto`]/`Gpu` use the CPU
-//! renderer without it). Without them the crate builds in a fraction of the time (no ONNX
-//! Runtime, tokenizers or wgpu) and keeps the model-free styles, apply, render and the geometric
-//! metrics.
+//! [`eval`]; without it [`models`] only says so); `gpu`, raster-diff's wgpu backend (without it
+//! [`config::Backend::Auto`] renders on the CPU and `Gpu` is an error). Without them the crate
+//! builds in a fraction of the time (no ONNX Runtime, tokenizers or wgpu) and keeps the
+//! model-free styles, apply, render and the geometric metrics.
 
 pub mod checkpoint;
 pub mod config;
@@ -33,7 +29,6 @@ pub mod error;
 pub mod eval;
 pub mod identity;
 pub mod malloc;
-#[cfg(feature = "text")]
 pub mod models;
 pub mod pipeline;
 pub mod run_pictures;

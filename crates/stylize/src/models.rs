@@ -4,14 +4,28 @@
 //! [`ModelSet`] opens the UNet sessions once; [`ModelSet::guidance_for`] builds a guidance for
 //! one prompt that borrows those sessions (no lock: one run at a time holds them), so a batch loads
 //! the models a single time; [`ModelSet::into_guidance`] hands them to a single run.
+//!
+//! The module exists in every build. Without the `text` feature (no ONNX Runtime) [`ModelSet`]
+//! has the same methods but no value: [`ModelSet::open`] and [`load_guidance`] return
+//! [`Error::NotBuilt`] naming the feature and how to build it, so a caller keeps one code path
+//! for prompts and refuses them where the models would load. The helpers that take
+//! `diffusion-onnx` types (`prompt_warnings`, `cpu_time_warning`, `session_options`) exist only
+//! with `text`.
 
 use std::path::Path;
 
-use crate::error::{Context, Result, invalid};
-use csd::{CascadedGuidance, Denoiser, Embedding, GuidanceConfig};
+use csd::{CascadedGuidance, GuidanceConfig};
+#[cfg(feature = "text")]
+use csd::{Denoiser, Embedding};
+#[cfg(feature = "text")]
 use diffusion_onnx::{Device, EmbeddingCache, ModelDir, OnnxDenoiser, SessionOptions, Stage};
 
 use crate::config::Config;
+#[cfg(not(feature = "text"))]
+use crate::error::Error;
+use crate::error::Result;
+#[cfg(feature = "text")]
+use crate::error::{Context, invalid};
 
 /// The `csd` guidance settings from the configuration ([`GuidanceSection::guidance_config`]).
 ///
@@ -38,6 +52,7 @@ pub const CPU_FLOP_PER_SECOND: f64 = 1.5e11;
 /// Warnings about `prompt` and `config`'s negative prompt: one for each that is longer than the
 /// model's text encoder reads (T5: 76 content tokens and `</s>`), naming how many tokens are
 /// dropped from its end. Empty when both fit, or when the directory has no text encoder.
+#[cfg(feature = "text")]
 pub fn prompt_warnings(dir: &ModelDir, prompt: &str, config: &Config) -> Result<Vec<String>> {
     let Some(tokenizer) = diffusion_onnx::T5Tokenizer::of_model(dir)? else {
         return Ok(Vec::new());
@@ -68,6 +83,7 @@ pub fn prompt_warnings(dir: &ModelDir, prompt: &str, config: &Config) -> Result<
 /// parameters × [`FLOP_PER_PARAMETER_SAMPLE`] / [`CPU_FLOP_PER_SECOND`] × views × 2 (conditional and
 /// unconditional) × steps per batch.
 /// None on a GPU or for small models.
+#[cfg(feature = "text")]
 pub fn cpu_time_warning(dir: &ModelDir, device: &Device, config: &Config) -> Option<String> {
     if *device != Device::Cpu {
         return None;
@@ -99,6 +115,7 @@ pub fn cpu_time_warning(dir: &ModelDir, device: &Device, config: &Config) -> Opt
 
 /// The ONNX Runtime session settings of `config`: [`SessionOptions::low_memory`] with
 /// `guidance.onnx_low_memory`, else the defaults with `guidance.onnx_memory_arena`.
+#[cfg(feature = "text")]
 pub fn session_options(config: &Config) -> SessionOptions {
     if config.guidance.onnx_low_memory {
         SessionOptions::low_memory()
@@ -111,6 +128,7 @@ pub fn session_options(config: &Config) -> SessionOptions {
 }
 
 /// Opened model sessions, reusable across prompts.
+#[cfg(feature = "text")]
 pub struct ModelSet {
     dir: ModelDir,
     options: SessionOptions,
@@ -119,6 +137,7 @@ pub struct ModelSet {
     stage2: Option<OnnxDenoiser>,
 }
 
+#[cfg(feature = "text")]
 impl std::fmt::Debug for ModelSet {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("ModelSet")
@@ -128,6 +147,7 @@ impl std::fmt::Debug for ModelSet {
     }
 }
 
+#[cfg(feature = "text")]
 impl ModelSet {
     /// [`cpu_time_warning`] for these models and session settings (the command line prints it
     /// before a run starts).
@@ -208,6 +228,7 @@ impl ModelSet {
 
 /// The cascaded guidance over these UNets with the (conditional, unconditional) embeddings and the
 /// guidance settings and stage-II weight schedule of `config`.
+#[cfg(feature = "text")]
 fn cascaded<'m>(
     stage1: Box<dyn Denoiser + 'm>,
     stage2: Option<Box<dyn Denoiser + 'm>>,
@@ -221,6 +242,53 @@ fn cascaded<'m>(
     )
 }
 
+/// Stands in for the model set in a build without the `text` feature: no value exists (an empty
+/// enum), [`ModelSet::open`] fails with [`Error::NotBuilt`], and the other methods are those of
+/// the `text` build.
+#[cfg(not(feature = "text"))]
+#[derive(Debug)]
+pub enum ModelSet {}
+
+#[cfg(not(feature = "text"))]
+impl ModelSet {
+    /// Always fails with [`Error::NotBuilt`]: this build has no ONNX Runtime.
+    pub fn open(model: &Path, config: &Config) -> Result<Self> {
+        let _ = (model, config);
+        Err(Error::NotBuilt {
+            feature: "text",
+            what: "loading the models of a text prompt".into(),
+        })
+    }
+
+    /// Unreachable (no value exists).
+    pub fn cpu_time_warning(&self, _config: &Config) -> Option<String> {
+        match *self {}
+    }
+
+    /// Unreachable (no value exists).
+    pub fn prompt_warnings(&self, _prompt: &str, _config: &Config) -> Result<Vec<String>> {
+        match *self {}
+    }
+
+    /// Unreachable (no value exists).
+    pub fn guidance_for(
+        &mut self,
+        _prompt: &str,
+        _config: &Config,
+    ) -> Result<CascadedGuidance<'_>> {
+        match *self {}
+    }
+
+    /// Unreachable (no value exists).
+    pub fn into_guidance(
+        self,
+        _prompt: &str,
+        _config: &Config,
+    ) -> Result<CascadedGuidance<'static>> {
+        match self {}
+    }
+}
+
 /// Opens the models and builds the guidance for one prompt.
 pub fn load_guidance(
     model: &Path,
@@ -230,7 +298,33 @@ pub fn load_guidance(
     ModelSet::open(model, config)?.into_guidance(prompt, config)
 }
 
-#[cfg(test)]
+#[cfg(all(test, not(feature = "text")))]
+mod no_text_tests {
+    use super::*;
+
+    #[test]
+    fn loading_names_the_missing_feature() {
+        let e = load_guidance(Path::new("models/if"), "a chair", &Config::default())
+            .expect_err("no models without `text`");
+        let text = e.to_string();
+        assert!(
+            matches!(
+                e,
+                Error::NotBuilt {
+                    feature: "text",
+                    ..
+                }
+            ),
+            "{text}"
+        );
+        assert!(
+            text.contains("needs the `text` feature") && text.contains("--features"),
+            "{text}"
+        );
+    }
+}
+
+#[cfg(all(test, feature = "text"))]
 mod tests {
     use super::*;
 

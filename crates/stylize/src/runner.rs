@@ -19,7 +19,7 @@ use raster_diff::{Images, Renderer};
 use rundir::{Claim, ResumeMode, RunDir, RunLock, Start};
 
 use crate::checkpoint::{CHECKPOINT_VERSION, Checkpoint, CheckpointState};
-use crate::config::{Backend, Config};
+use crate::config::Config;
 use crate::identity::{ObjectiveIdentity, TaskIdentity, TaskIdentityExt};
 use crate::pipeline::{
     IterationRecord, LoopSpec, LoopState, Objective, Observer, StyleObjective, TextObjective,
@@ -224,13 +224,6 @@ pub fn prepare_mesh_with_region(
 /// dARAP options from the configuration (the `[darap]` section is darap's own options).
 pub fn darap_options(config: &Config) -> darap::DarapOptions {
     config.darap
-}
-
-/// A renderer for the configured backend: `cpu` forces the CPU renderer; `auto` and `gpu` ask for
-/// the GPU backend, which falls back to the CPU when there is no hardware adapter. The string says
-/// what was chosen and why.
-pub fn renderer(config: &Config) -> (Box<dyn Renderer>, String) {
-    raster_diff::select_renderer(config.render.backend != Backend::Cpu)
 }
 
 struct RunObserver<'a> {
@@ -512,7 +505,7 @@ pub fn build_objective<'g>(
             }
         }
         Task::Text { guidance, .. } => {
-            let (renderer, why) = renderer(config);
+            let (renderer, why) = raster_diff::select_renderer(config.render.backend)?;
             let views = ViewSettings {
                 camera: config.camera.sampler.clone(),
                 views: config.camera.views,
@@ -606,7 +599,7 @@ pub fn write_outputs(
     let normals =
         mesh_core::normals::vertex_normals_area_weighted(&deformed.positions, &deformed.faces);
     lock.ensure_held()?;
-    for ext in ["obj", "ply", "glb"] {
+    for ext in mesh_core::io::Format::WITH_NORMALS.map(mesh_core::io::Format::extension) {
         let path = dir.file(&format!("mesh.{ext}"));
         let written = rundir::durable::replace_with(&path, |tmp| {
             mesh_core::io::write_mesh(tmp, &deformed, Some(&normals)).map_err(Error::from)

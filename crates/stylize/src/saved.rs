@@ -1,11 +1,15 @@
-//! The reference's saved-deformation `.npz` (spec §8), read and written with the `npy` crate.
+//! The reference's saved-deformation `.npz` (spec §8), read and written with the `npy` crate, and
+//! made ready to re-apply ([`SavedDeformation::ready_layer`], [`ReadyLayer`]): what `apply`, the
+//! viewer and the examples share.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use serde_json::Value;
 
+use darap::{Darap, DarapError, DarapOptions, PostProcess, RotationRule};
+use mesh_core::TriMesh;
 use npy::npz::{NpzReader, NpzWriter};
-use npy::{NpyArray, NpyError};
+use npy::{NpyArray, NpyData, NpyError};
 
 /// Why a saved deformation cannot be read or written.
 #[derive(Debug, thiserror::Error)]
@@ -26,6 +30,118 @@ pub enum SavedError {
     /// [`SavedDeformation::set_extra`] was asked to set one of the five standard keys.
     #[error("`{0}` is a standard key of the saved-deformation format, not an extra")]
     StandardKey(String),
+    /// The file's `normalize_target_normals` is false (re-applying supports normalized target
+    /// normals only).
+    #[error(
+        "{}: `normalize_target_normals` is false; only normalized target normals are supported",
+        path.display()
+    )]
+    NotNormalized {
+        /// The file.
+        path: PathBuf,
+    },
+    /// The extra key `rotation_rule` is not a string, is empty, or names no rule.
+    #[error("{message}")]
+    RotationRule {
+        /// What is wrong, naming the key.
+        message: &'static str,
+        /// The unknown name, when there is one.
+        #[source]
+        source: Option<darap::UnknownName>,
+    },
+    /// The extra key `region_weights` is not one f64 per vertex.
+    #[error("{}: `region_weights` must hold one f64 per vertex ({vertices})", path.display())]
+    RegionWeights {
+        /// The file.
+        path: PathBuf,
+        /// The number of vertices.
+        vertices: usize,
+    },
+    /// The dARAP layer cannot be built on the saved rest mesh.
+    #[error("cannot build the dARAP layer for {}", path.display())]
+    Layer {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: DarapError,
+    },
+    /// The saved region weights are refused by the layer.
+    #[error("{}: invalid region_weights", path.display())]
+    InvalidRegion {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: DarapError,
+    },
+    /// The layer refused a region (see [`ReadyLayer::set_region`]).
+    #[error(transparent)]
+    Darap(#[from] DarapError),
+}
+
+/// Which vertices may rotate when a saved deformation is re-applied ([`ReadyLayer::set_region`]).
+#[derive(Clone, Debug, PartialEq)]
+pub enum Region {
+    /// Every vertex (the saved region ignored).
+    Whole,
+    /// The region the run saved (`region_weights`), else every vertex.
+    Saved,
+    /// The caller's selection: `free[v]` for each vertex of the saved file that may rotate,
+    /// feathered by `feather` rings (None: the saved run's `region_feather`, else 0) into weights
+    /// ([`mesh_core::region::feather_weights`]).
+    Free {
+        /// One flag per vertex, in the saved file's order.
+        free: Vec<bool>,
+        /// Feather rings.
+        feather: Option<u32>,
+    },
+}
+
+/// A saved deformation ready to re-apply (spec §8 "apply"): the rest mesh (the saved f32 `verts`
+/// as f64, normalized to the side-2 cube: the frame of every result), the saved target normals,
+/// and the prefactored dARAP layer (`spokes_and_rims_mine`, first vertex of each component
+/// pinned, [`PostProcess::RecenterRescale`]). λ changes without refactoring ([`Self::at_lambda`]).
+#[derive(Debug)]
+pub struct ReadyLayer {
+    /// The rest mesh, side-2 cube frame.
+    pub rest: TriMesh,
+    /// The saved target normals (raw, as f64; the layer normalizes them).
+    pub targets: Vec<[f64; 3]>,
+    /// The layer.
+    pub layer: Darap,
+}
+
+impl ReadyLayer {
+    /// Sets the region of the layer (see [`Region`]); `saved` is the deformation the layer was
+    /// built from and `path` names it in errors.
+    pub fn set_region(
+        &mut self,
+        saved: &SavedDeformation,
+        path: &Path,
+        region: Region,
+    ) -> Result<(), SavedError> {
+        let weights = match region {
+            Region::Whole => None,
+            Region::Saved => saved.region_weights(path)?,
+            Region::Free { free, feather } => {
+                let rings = feather.or(saved.region_feather()).unwrap_or(0) as usize;
+                Some(mesh_core::region::feather_weights(
+                    &free,
+                    &saved.faces,
+                    rings,
+                ))
+            }
+        };
+        if let Some(weights) = weights {
+            self.layer.set_region_weights(Some(weights))?;
+        }
+        Ok(())
+    }
+
+    /// The saved targets deformed at strength `lambda` (the layer keeps `lambda`).
+    pub fn at_lambda(&mut self, lambda: f64) -> Result<darap::Deformation, DarapError> {
+        self.layer.set_lambda(lambda);
+        self.layer.forward(&self.targets)
+    }
 }
 
 /// Value of the extra key `format_version` that we add to files we write.
@@ -239,6 +355,108 @@ impl SavedDeformation {
             .get("solve_method")
             .and_then(Value::as_str)
             .map(str::to_owned)
+    }
+
+    /// The extra key `rotation_rule` (the rule the run used), if recorded.
+    pub fn rotation_rule(&self) -> Result<Option<RotationRule>, SavedError> {
+        let Some(array) = self.extra("rotation_rule") else {
+            return Ok(None);
+        };
+        let bad = |message, source| SavedError::RotationRule { message, source };
+        let NpyData::Unicode(v) = &array.data else {
+            return Err(bad("key `rotation_rule` is not a string", None));
+        };
+        match v.first().map(|s| s.trim().to_ascii_lowercase()) {
+            Some(name) => name
+                .parse()
+                .map(Some)
+                .map_err(|e| bad("key `rotation_rule` of the saved file", Some(e))),
+            None => Err(bad("key `rotation_rule` of the saved file is empty", None)),
+        }
+    }
+
+    /// The region a localized run saved (`region_weights`: one f64 per vertex, 1 free … 0 held at
+    /// the identity), if any; `path` names the file in errors.
+    pub fn region_weights(&self, path: &Path) -> Result<Option<Vec<f64>>, SavedError> {
+        let n = self.verts.len();
+        match self.extra("region_weights").map(|a| &a.data) {
+            None => Ok(None),
+            Some(NpyData::F64(w)) if w.len() == n => Ok(Some(w.clone())),
+            Some(_) => Err(SavedError::RegionWeights {
+                path: path.to_path_buf(),
+                vertices: n,
+            }),
+        }
+    }
+
+    /// The feather rings a localized run saved (`region_feather`), if any (a negative or
+    /// oversized value reads as 0).
+    pub fn region_feather(&self) -> Option<u32> {
+        match self.extra("region_feather").map(|a| &a.data) {
+            Some(NpyData::I64(v)) => v.first().map(|&k| u32::try_from(k).unwrap_or(0)),
+            _ => None,
+        }
+    }
+
+    /// The rest mesh's positions in the frame of every result: the saved f32 `verts` as f64,
+    /// normalized to the side-2 cube.
+    pub fn rest_positions(&self) -> Vec<[f64; 3]> {
+        let mut rest = self.verts_f64();
+        mesh_core::normalize::side2_cube(&mut rest);
+        rest
+    }
+
+    /// The dARAP layer that re-applies this deformation, over the whole mesh (set a region with
+    /// [`ReadyLayer::set_region`]): built at strength `lambda` with `rotation_rule` (None: the
+    /// file's `rotation_rule` key, else `gis`). `path` names the file in errors. Refused when the
+    /// file's `normalize_target_normals` is false.
+    pub fn ready_layer(
+        &self,
+        path: &Path,
+        lambda: f64,
+        rotation_rule: Option<RotationRule>,
+    ) -> Result<ReadyLayer, SavedError> {
+        if !self.normalize_target_normals() {
+            return Err(SavedError::NotNormalized {
+                path: path.to_path_buf(),
+            });
+        }
+        let rule = match rotation_rule {
+            Some(r) => r,
+            None => self.rotation_rule()?.unwrap_or_default(),
+        };
+        let rest = self.rest_positions();
+        let options = DarapOptions {
+            lambda,
+            rotation_rule: rule,
+            post_process: PostProcess::RecenterRescale,
+        };
+        let layer =
+            Darap::new(&rest, &self.faces, options).map_err(|source| SavedError::Layer {
+                path: path.to_path_buf(),
+                source,
+            })?;
+        Ok(ReadyLayer {
+            rest: TriMesh::new(rest, self.faces.clone()),
+            targets: self.verts_normals_f64(),
+            layer,
+        })
+    }
+
+    /// [`Self::ready_layer`] as the run saved it: at the recorded λ (0 when none is recorded),
+    /// with the file's rotation rule and its region ([`Region::Saved`]).
+    pub fn ready_layer_as_saved(&self, path: &Path) -> Result<ReadyLayer, SavedError> {
+        let mut ready = self.ready_layer(path, self.lambda().unwrap_or(0.0), None)?;
+        ready
+            .set_region(self, path, Region::Saved)
+            .map_err(|e| match e {
+                SavedError::Darap(source) => SavedError::InvalidRegion {
+                    path: path.to_path_buf(),
+                    source,
+                },
+                e => e,
+            })?;
+        Ok(ready)
     }
 
     /// Rest vertices as f64.

@@ -292,3 +292,72 @@ fn npz_reads_only_the_entries_it_needs() {
     assert_eq!(r.declared_size("junk"), Some(32 << 20));
     assert!(r.require("verts").is_ok());
 }
+
+/// A file of `fixtures/golden/`.
+fn golden(name: &str) -> std::path::PathBuf {
+    std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../fixtures/golden")
+        .join(name)
+}
+
+#[test]
+fn ready_layer_reapplies_the_golden_deformation() {
+    let path = golden("bunny_targets.npz");
+    let s = SavedDeformation::read(&path).expect("golden npz reads");
+    let mut ready = s.ready_layer_as_saved(&path).expect("layer builds");
+    assert_eq!(ready.rest.faces, s.faces);
+    for (lambda, file) in [
+        (8.0, "bunny_lambda8_gis.obj"),
+        (5.0, "bunny_lambda5_gis.obj"),
+    ] {
+        let deformed = ready.at_lambda(lambda).expect("forward");
+        let want = read_mesh(golden(file)).expect("golden result reads");
+        let worst = deformed
+            .positions
+            .iter()
+            .zip(&want.positions)
+            .flat_map(|(a, b)| (0..3).map(move |k| (a[k] - b[k]).abs()))
+            .fold(0.0, f64::max);
+        assert!(worst < 1e-9, "λ = {lambda}: {worst}");
+    }
+    // Every vertex free is the same as no region at all.
+    let mut whole = s.ready_layer(&path, 8.0, None).expect("layer builds");
+    let free = vec![true; s.verts.len()];
+    let mut all_free = s.ready_layer(&path, 8.0, None).expect("layer builds");
+    all_free
+        .set_region(
+            &s,
+            &path,
+            stylize::saved::Region::Free {
+                free,
+                feather: None,
+            },
+        )
+        .expect("region");
+    let a = whole.at_lambda(8.0).expect("forward").positions;
+    let b = all_free.at_lambda(8.0).expect("forward").positions;
+    assert_eq!(a, b);
+}
+
+#[test]
+fn ready_layer_refuses_unnormalized_targets_and_bad_rules() {
+    let path = golden("bunny_targets.npz");
+    let mut s = SavedDeformation::read(&path).expect("golden npz reads");
+    s.set_extra("rotation_rule", NpyArray::scalar_str("kabsch"))
+        .expect("extra");
+    let e = s.ready_layer(&path, 8.0, None).expect_err("unknown rule");
+    assert!(matches!(e, SavedError::RotationRule { .. }), "{e}");
+    let mut cfg: serde_json::Value =
+        serde_json::from_str(&s.deform_by_csd_cfg).expect("golden config is JSON");
+    cfg["local_step_procrustes"]["normalize_target_normals"] = false.into();
+    s.deform_by_csd_cfg = cfg.to_string();
+    assert!(!s.normalize_target_normals());
+    let e = s.ready_layer(&path, 8.0, None).expect_err("unnormalized");
+    assert!(matches!(e, SavedError::NotNormalized { .. }), "{e}");
+    assert!(
+        e.to_string().ends_with(
+            "`normalize_target_normals` is false; only normalized target normals are supported"
+        ),
+        "{e}"
+    );
+}

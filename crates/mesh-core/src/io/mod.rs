@@ -1,4 +1,5 @@
-//! Mesh files: read by extension (`obj`, `off`, `ply`, `gltf`, `glb`), write `obj`, `ply`, `glb`.
+//! Mesh files: read by extension (`obj`, `off`, `ply`, `gltf`, `glb`), write `obj`, `off`, `ply`,
+//! `glb`; [`Format`] is the list of formats and what each can do.
 //!
 //! Readers return the file's vertices **in file order** (vertex `i` of the file is vertex `i` of the
 //! mesh, unreferenced ones included) and its polygons fan-triangulated. They do not validate: run
@@ -6,6 +7,7 @@
 //! indices are stored as read, so a file with an out-of-range index loads and validation reports it.
 //! Truncated or malformed files give a [`MeshError`] naming the file and what was expected.
 
+mod format;
 mod gltf;
 mod obj;
 mod off;
@@ -15,6 +17,7 @@ use std::path::Path;
 
 use crate::{MeshError, TriMesh};
 
+pub use format::Format;
 pub use gltf::{read_gltf, read_gltf_with_parts, write_glb};
 pub use obj::{read_obj, read_obj_with_parts, write_obj};
 pub use off::{read_off, write_off};
@@ -25,7 +28,10 @@ use crate::region::Parts;
 /// A mesh and, when the file stores one per vertex, its vertex normals.
 pub type MeshWithNormals = (TriMesh, Option<Vec<[f64; 3]>>);
 
+/// The readable [`Format`]s, as [`MeshError::UnsupportedFormat`] lists them (a test checks it
+/// against [`Format::can_read`]).
 const READ_FORMATS: &str = "obj, off, ply, gltf, glb";
+/// The writable [`Format`]s (checked against [`Format::can_write`]).
 const WRITE_FORMATS: &str = "obj, off, ply, glb";
 
 /// Lower-cased extension of `path` ("" when there is none).
@@ -47,12 +53,12 @@ pub fn read_mesh(path: impl AsRef<Path>) -> Result<TriMesh, MeshError> {
 pub fn read_mesh_with_normals(path: impl AsRef<Path>) -> Result<MeshWithNormals, MeshError> {
     let path = path.as_ref();
     let ext = extension(path);
-    let out = match ext.as_str() {
-        "obj" => read_obj(path)?,
-        "off" => read_off(path)?,
-        "ply" => read_ply(path)?,
-        "gltf" | "glb" => read_gltf(path)?,
-        _ => {
+    let out = match Format::from_extension(&ext) {
+        Some(Format::Obj) => read_obj(path)?,
+        Some(Format::Off) => read_off(path)?,
+        Some(Format::Ply) => read_ply(path)?,
+        Some(Format::Gltf | Format::Glb) => read_gltf(path)?,
+        None => {
             return Err(MeshError::UnsupportedFormat {
                 path: path.to_path_buf(),
                 extension: ext,
@@ -73,12 +79,11 @@ pub fn read_mesh_with_normals(path: impl AsRef<Path>) -> Result<MeshWithNormals,
 /// face properties (OFF offers none). Indices are in the file's numbering, as the mesh's.
 pub fn read_mesh_with_parts(path: impl AsRef<Path>) -> Result<(TriMesh, Parts), MeshError> {
     let path = path.as_ref();
-    let ext = extension(path);
-    let ((mesh, _), parts) = match ext.as_str() {
-        "obj" => read_obj_with_parts(path)?,
-        "ply" => read_ply_with_parts(path)?,
-        "gltf" | "glb" => read_gltf_with_parts(path)?,
-        _ => (read_mesh_with_normals(path)?, Parts::default()),
+    let ((mesh, _), parts) = match Format::from_path(path) {
+        Some(Format::Obj) => read_obj_with_parts(path)?,
+        Some(Format::Ply) => read_ply_with_parts(path)?,
+        Some(Format::Gltf | Format::Glb) => read_gltf_with_parts(path)?,
+        Some(Format::Off) | None => (read_mesh_with_normals(path)?, Parts::default()),
     };
     if mesh.faces.is_empty() {
         return Err(MeshError::Empty {
@@ -107,20 +112,20 @@ pub fn write_mesh(
         });
     }
     let ext = extension(path);
-    if !matches!(ext.as_str(), "obj" | "off" | "ply" | "glb") {
+    let Some(format) = Format::from_extension(&ext).filter(|f| f.can_write()) else {
         return Err(MeshError::UnsupportedFormat {
             path: path.to_path_buf(),
             extension: ext,
             supported: WRITE_FORMATS,
         });
-    }
+    };
     create_parent_dirs(path)?;
-    match ext.as_str() {
-        "obj" => write_obj(path, mesh, normals),
-        "off" => write_off(path, mesh),
-        "ply" => write_ply(path, mesh, normals, PlyEncoding::BinaryLittleEndian),
-        "glb" => write_glb(path, mesh, normals),
-        _ => Err(MeshError::UnsupportedFormat {
+    match format {
+        Format::Obj => write_obj(path, mesh, normals),
+        Format::Off => write_off(path, mesh),
+        Format::Ply => write_ply(path, mesh, normals, PlyEncoding::BinaryLittleEndian),
+        Format::Glb => write_glb(path, mesh, normals),
+        Format::Gltf => Err(MeshError::UnsupportedFormat {
             path: path.to_path_buf(),
             extension: ext,
             supported: WRITE_FORMATS,

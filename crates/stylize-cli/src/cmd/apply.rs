@@ -4,9 +4,9 @@
 //! share of vertices whose rotation flipped past 90°), and a warning on stderr when the result
 //! is collapsing.
 //!
-//! Reads the saved `.npz`, normalizes `verts` to the side-2 cube in f64, builds the dARAP layer
-//! with the requested λ (default: the saved `local_step_procrustes.lamb`), runs local step →
-//! global step → `recenter_rescale`, and writes the deformed mesh (in the normalized frame, as the
+//! Reads the saved `.npz`, builds its dARAP layer ([`SavedDeformation::ready_layer`]: `verts`
+//! normalized to the side-2 cube in f64) with the requested λ (default: the saved
+//! `local_step_procrustes.lamb`), runs local step → global step → `recenter_rescale`, and writes the deformed mesh (in the normalized frame, as the
 //! reference) with area-weighted vertex normals.
 //!
 //! **Mask file** (`--mask FILE`): plain text, one vertex index per line (0-based, the saved file's
@@ -27,10 +27,10 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail, ensure};
-use darap::{Darap, DarapOptions, PostProcess, RotationRule};
+use darap::RotationRule;
 use mesh_core::TriMesh;
-use npy::NpyData;
-use stylize::saved::SavedDeformation;
+use mesh_core::io::Format;
+use stylize::saved::{Region, SavedDeformation, SavedError};
 
 /// Arguments of `stylize apply`.
 #[derive(clap::Args, Debug, Clone)]
@@ -65,20 +65,18 @@ pub struct Args {
     pub force: bool,
 }
 
-const OUTPUT_FORMATS: [&str; 3] = ["obj", "ply", "glb"];
-
-/// The output path for each λ (the path itself when there is one λ).
+/// The output path for each λ (the path itself when there is one λ): a format written with
+/// normals ([`Format::WITH_NORMALS`]); with several λ the extension is written in lower case.
 pub fn output_paths(output: &Path, lambdas: &[f64]) -> anyhow::Result<Vec<PathBuf>> {
-    let ext = output
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(str::to_ascii_lowercase)
-        .unwrap_or_default();
-    ensure!(
-        OUTPUT_FORMATS.contains(&ext.as_str()),
-        "output {} must end in .obj, .ply or .glb",
-        output.display()
-    );
+    let format = Format::from_path(output).filter(|f| Format::WITH_NORMALS.contains(f));
+    let Some(format) = format else {
+        bail!(
+            "output {} must end in {}",
+            output.display(),
+            Format::list(&Format::WITH_NORMALS, ".", " or ")
+        );
+    };
+    let ext = format.extension();
     if lambdas.len() == 1 {
         return Ok(vec![output.to_path_buf()]);
     }
@@ -129,20 +127,12 @@ pub fn read_mask(path: &Path, num_vertices: usize) -> anyhow::Result<Vec<bool>> 
 }
 
 /// The region to apply: `--mask` / `--region` (feathered by `--region-feather`, else the saved
-/// rings), else the saved `region_weights`, else none (also with `--no-region`).
-fn region_weights(
-    args: &Args,
-    saved: &SavedDeformation,
-    rest: &[[f64; 3]],
-) -> anyhow::Result<Option<Vec<f64>>> {
+/// rings), else the saved `region_weights`, else none (also with `--no-region`). `rest` is the
+/// saved rest mesh in the side-2 cube frame (where `--region` boxes and spheres live).
+fn region(args: &Args, saved: &SavedDeformation, rest: &[[f64; 3]]) -> anyhow::Result<Region> {
     if args.no_region {
-        return Ok(None);
+        return Ok(Region::Whole);
     }
-    let saved_feather = match saved.extra("region_feather").map(|a| &a.data) {
-        Some(NpyData::I64(v)) => v.first().map(|&k| u32::try_from(k).unwrap_or(0)),
-        _ => None,
-    };
-    let feather = args.region_feather.or(saved_feather).unwrap_or(0) as usize;
     let free = if let Some(mask_path) = &args.mask {
         read_mask(mask_path, rest.len())?
     } else if !args.region.is_empty() {
@@ -156,58 +146,24 @@ fn region_weights(
         }
         region.free
     } else {
-        return saved_region_weights(saved, &args.saved);
+        return Ok(Region::Saved);
     };
-    Ok(Some(mesh_core::region::feather_weights(
-        &free,
-        &saved.faces,
-        feather,
-    )))
-}
-
-/// The region a localized run saved (`region_weights`: one f64 per vertex, 1 free … 0 held at the
-/// identity), if any; `path` names the file in errors.
-pub fn saved_region_weights(
-    saved: &SavedDeformation,
-    path: &Path,
-) -> anyhow::Result<Option<Vec<f64>>> {
-    let n = saved.verts.len();
-    match saved.extra("region_weights").map(|a| &a.data) {
-        None => Ok(None),
-        Some(NpyData::F64(w)) if w.len() == n => Ok(Some(w.clone())),
-        Some(_) => bail!(
-            "{}: `region_weights` must hold one f64 per vertex ({n})",
-            path.display()
-        ),
-    }
-}
-
-/// The rotation rule a saved file records (`rotation_rule` key), if any.
-pub fn saved_rotation_rule(saved: &SavedDeformation) -> anyhow::Result<Option<RotationRule>> {
-    let Some(array) = saved.extra("rotation_rule") else {
-        return Ok(None);
-    };
-    let NpyData::Unicode(v) = &array.data else {
-        bail!("key `rotation_rule` is not a string")
-    };
-    match v.first().map(|s| s.trim().to_ascii_lowercase()) {
-        Some(name) => name
-            .parse()
-            .map(Some)
-            .context("key `rotation_rule` of the saved file"),
-        None => bail!("key `rotation_rule` of the saved file is empty"),
-    }
+    Ok(Region::Free {
+        free,
+        feather: args.region_feather,
+    })
 }
 
 /// Runs `stylize apply`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     let saved = SavedDeformation::read(&args.saved)
         .with_context(|| format!("cannot read saved deformation {}", args.saved.display()))?;
-    ensure!(
-        saved.normalize_target_normals(),
-        "{}: `normalize_target_normals` is false; only normalized target normals are supported",
-        args.saved.display()
-    );
+    if !saved.normalize_target_normals() {
+        return Err(SavedError::NotNormalized {
+            path: args.saved.clone(),
+        }
+        .into());
+    }
     if let Some(kind) = saved.arap_energy_type()
         && kind != "spokes_and_rims_mine"
     {
@@ -238,7 +194,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let rule = match args.rotation_rule {
         Some(r) => r,
-        None => saved_rotation_rule(&saved)?.unwrap_or_default(),
+        None => saved.rotation_rule()?.unwrap_or_default(),
     };
 
     let outputs = output_paths(&args.output, &lambdas)?;
@@ -273,27 +229,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         );
     }
 
-    let mut rest = saved.verts_f64();
-    mesh_core::normalize::side2_cube(&mut rest);
-    let targets = saved.verts_normals_f64();
-    let rest_mesh = TriMesh::new(rest.clone(), saved.faces.clone());
-    let options = DarapOptions {
-        lambda: lambdas[0],
-        rotation_rule: rule,
-        post_process: PostProcess::RecenterRescale,
-    };
-    let mut layer = Darap::new(&rest, &saved.faces, options)
-        .with_context(|| format!("cannot build the dARAP layer for {}", args.saved.display()))?;
-    if let Some(weights) = region_weights(&args, &saved, &rest)? {
-        layer.set_region_weights(Some(weights))?;
-    }
+    let mut ready = saved.ready_layer(&args.saved, lambdas[0], Some(rule))?;
+    let region = region(&args, &saved, &ready.rest.positions)?;
+    ready.set_region(&saved, &args.saved, region)?;
 
     for (&lambda, out) in lambdas.iter().zip(&outputs) {
-        layer.set_lambda(lambda);
-        let deformed = layer
-            .forward(&targets)
+        let deformed = ready
+            .at_lambda(lambda)
             .with_context(|| format!("dARAP forward failed at λ = {lambda}"))?;
-        let sanity = crate::sanity::LambdaSanity::assess(&rest_mesh, &deformed, lambda)?;
+        let sanity = crate::sanity::LambdaSanity::assess(&ready.rest, &deformed, lambda)?;
         let mesh = TriMesh::new(deformed.positions, saved.faces.clone());
         let normals =
             mesh_core::normals::vertex_normals_area_weighted(&mesh.positions, &mesh.faces);

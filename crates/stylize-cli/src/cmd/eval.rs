@@ -10,7 +10,7 @@ use anyhow::Context;
 use anyhow::bail;
 use mesh_core::TriMesh;
 
-use crate::eval::{
+use stylize::eval::{
     ClipSettings, EvalReport, Prompt, evaluate, label, load_file_pair, load_run, table,
 };
 
@@ -112,7 +112,7 @@ fn add_clip(
     let mut clip = diffusion_onnx::ClipModel::open(dir, &diffusion_onnx::SessionOptions::default())
         .with_context(|| format!("--clip {}", dir.display()))?;
     let opened = start.elapsed().as_secs_f64();
-    let t = crate::eval::add_clip_scores(report, pairs, prompts, &mut clip, settings)?;
+    let t = stylize::eval::add_clip_scores(report, pairs, prompts, &mut clip, settings)?;
     eprintln!(
         "CLIP ({}): {} mesh(es) × {} views at {} px; open {opened:.3} s, render {:.3} s, \
          image embedding {:.3} s, text embedding {:.3} s",

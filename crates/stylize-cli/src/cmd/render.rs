@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use raster_diff::image::{Encoding, contact_sheet, write_png};
-use raster_diff::{Images, orbit_views, select_renderer};
+use raster_diff::{Backend, Images, orbit_views, select_renderer};
 
 /// Pixels rendered per batch (8 views of 1024²; at least one view): bounds the renderer's
 /// per-render memory.
@@ -162,7 +162,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     std::fs::create_dir_all(dir)
         .with_context(|| format!("creating output folder {}", dir.display()))?;
 
-    let (mut renderer, why) = select_renderer(!args.cpu);
+    let backend = if args.cpu {
+        Backend::Cpu
+    } else {
+        Backend::Auto
+    };
+    let (mut renderer, why) = select_renderer(backend)?;
     eprintln!("renderer: {why}");
     let views = orbit_views(args.turntable, args.elevation, args.distance, args.fov);
     let encoding = if args.srgb {

@@ -6,10 +6,10 @@ use anyhow::{Context, bail};
 
 use crate::cmd::shared::RunSettings;
 use crate::config::Config;
-use crate::identity::{ModelIdentity, ObjectiveIdentity};
 use crate::runner::{RunOptions, RunRequest, Task, execute_with};
 use crate::signals::{Interrupted, shell_quote};
-use crate::style::Style;
+use stylize::identity::{ModelIdentity, ObjectiveIdentity};
+use stylize::style::Style;
 
 /// Arguments of `stylize run`.
 #[derive(clap::Args, Debug)]
@@ -196,7 +196,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 log,
                 objective,
                 || {
-                    let set = crate::models::ModelSet::open(model, &config)?;
+                    let set = stylize::models::ModelSet::open(model, &config)?;
                     if let Some(w) = set.cpu_time_warning(&config) {
                         eprintln!("warning: {w}");
                     }

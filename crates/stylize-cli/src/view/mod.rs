@@ -5,9 +5,10 @@
 //! what it serves:
 //! - [`Item`]: one thing named on the command line — a run directory ([`RunItem`]) or a mesh file
 //!   (shown as is, normalized to the side-2 cube);
-//! - [`RunItem`] keeps one prefactored [`Darap`] per run (built on first use, rebuilt when the
-//!   run's `deformation.npz` changes, e.g. a run that was still being written completes) and
-//!   re-solves it at each λ with [`Darap::set_lambda`] (the factorization does not depend on λ).
+//! - [`RunItem`] keeps one prefactored dARAP layer per run ([`ReadyLayer`], built on first use
+//!   by [`SavedDeformation::ready_layer_as_saved`], rebuilt when the run's `deformation.npz`
+//!   changes, e.g. a run that was still being written completes) and re-solves it at each λ with
+//!   [`ReadyLayer::at_lambda`] (the factorization does not depend on λ).
 //!
 //! λ is accepted when finite and within `[0, LAMBDA_MAX]`.
 
@@ -22,10 +23,10 @@ use std::sync::{Arc, Mutex, OnceLock};
 use std::time::SystemTime;
 
 use anyhow::{Context, bail, ensure};
-use darap::{Darap, DarapOptions, PostProcess};
 use mesh_core::TriMesh;
+use mesh_core::io::Format;
 use serde::Serialize;
-use stylize::saved::SavedDeformation;
+use stylize::saved::{ReadyLayer, SavedDeformation};
 
 use crate::sanity::LambdaSanity;
 use replay::{ReplayState, SNAPSHOTS_FILE, Snapshots};
@@ -120,11 +121,9 @@ pub struct RunLabel {
 struct LoadedRun {
     /// (modification time, length) of `deformation.npz` when it was read.
     stamp: (SystemTime, u64),
-    /// The rest mesh, normalized to the side-2 cube (the frame of every result).
-    rest: TriMesh,
-    /// The saved target normals.
-    targets: Vec<[f64; 3]>,
-    layer: Darap,
+    /// The rest mesh (side-2 cube frame, the frame of every result), the saved target normals
+    /// and the layer, as the run saved them.
+    ready: ReadyLayer,
 }
 
 /// A run directory named on the command line.
@@ -302,8 +301,8 @@ impl RunItem {
     pub fn source(&self) -> Result<Shape, ViewError> {
         self.with_loaded(|l| {
             Ok(Shape {
-                positions: l.rest.positions.clone(),
-                faces: l.rest.faces.clone(),
+                positions: l.ready.rest.positions.clone(),
+                faces: l.ready.rest.faces.clone(),
                 sanity: None,
             })
         })
@@ -313,7 +312,8 @@ impl RunItem {
     /// them too; a zero vector stays zero).
     pub fn target_normals(&self) -> Result<Vec<[f64; 3]>, ViewError> {
         self.with_loaded(|l| {
-            Ok(l.targets
+            Ok(l.ready
+                .targets
                 .iter()
                 .map(|n| {
                     let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
@@ -331,17 +331,16 @@ impl RunItem {
     pub fn at_lambda(&self, lambda: f64) -> Result<Shape, ViewError> {
         let lambda = validate_lambda(lambda)?;
         self.with_loaded(|l| {
-            l.layer.set_lambda(lambda);
-            let deformation = l.layer.forward(&l.targets).map_err(|e| {
+            let deformation = l.ready.at_lambda(lambda).map_err(|e| {
                 ViewError::Failed(
                     anyhow::Error::from(e).context(format!("dARAP forward failed at λ = {lambda}")),
                 )
             })?;
-            let sanity =
-                LambdaSanity::assess(&l.rest, &deformation, lambda).map_err(ViewError::Failed)?;
+            let sanity = LambdaSanity::assess(&l.ready.rest, &deformation, lambda)
+                .map_err(ViewError::Failed)?;
             Ok(Shape {
                 positions: deformation.positions,
-                faces: l.rest.faces.clone(),
+                faces: l.ready.rest.faces.clone(),
                 sanity: Some(sanity),
             })
         })
@@ -425,7 +424,8 @@ impl RunItem {
             return Some((f.clone(), SNAPSHOTS_FILE));
         }
         self.with_loaded(|l| {
-            Ok((l.rest.positions.len() == snapshots.vertices).then(|| l.rest.faces.clone()))
+            let rest = &l.ready.rest;
+            Ok((rest.positions.len() == snapshots.vertices).then(|| rest.faces.clone()))
         })
         .ok()
         .flatten()
@@ -512,34 +512,9 @@ impl RunItem {
 fn load_run(npz: &Path, stamp: (SystemTime, u64)) -> anyhow::Result<LoadedRun> {
     let saved = SavedDeformation::read(npz)
         .with_context(|| format!("cannot read saved deformation {}", npz.display()))?;
-    ensure!(
-        saved.normalize_target_normals(),
-        "{}: `normalize_target_normals` is false; only normalized target normals are supported",
-        npz.display()
-    );
-    let rule = crate::cmd::apply::saved_rotation_rule(&saved)?.unwrap_or_default();
-    let mut rest = saved.verts_f64();
-    mesh_core::normalize::side2_cube(&mut rest);
-    let targets = saved.verts_normals_f64();
-    let options = DarapOptions {
-        lambda: saved.lambda().unwrap_or(0.0),
-        rotation_rule: rule,
-        post_process: PostProcess::RecenterRescale,
-    };
-    let mut layer = Darap::new(&rest, &saved.faces, options)
-        .with_context(|| format!("cannot build the dARAP layer for {}", npz.display()))?;
     // A localized run is shown with its saved region, as `apply` re-applies it.
-    if let Some(weights) = crate::cmd::apply::saved_region_weights(&saved, npz)? {
-        layer
-            .set_region_weights(Some(weights))
-            .with_context(|| format!("{}: invalid region_weights", npz.display()))?;
-    }
-    Ok(LoadedRun {
-        stamp,
-        rest: TriMesh::new(rest, saved.faces.clone()),
-        targets,
-        layer,
-    })
+    let ready = saved.ready_layer_as_saved(npz)?;
+    Ok(LoadedRun { stamp, ready })
 }
 
 /// A mesh file named on the command line (shown as is).
@@ -562,10 +537,17 @@ pub enum Item {
 
 /// Whether `path` names a mesh file the readers take (by extension, case-insensitive).
 fn is_mesh_path(path: &Path) -> bool {
-    path.extension()
-        .and_then(|e| e.to_str())
-        .map(str::to_ascii_lowercase)
-        .is_some_and(|e| matches!(e.as_str(), "obj" | "off" | "ply" | "gltf" | "glb"))
+    Format::from_path(path).is_some_and(Format::can_read)
+}
+
+/// `not a run directory, a mesh (.obj, …) or a batch manifest (…)`: what a command-line argument
+/// may be, naming every readable mesh format.
+fn what_an_item_is(manifests: &str) -> String {
+    let readable: Vec<Format> = Format::ALL.into_iter().filter(|f| f.can_read()).collect();
+    format!(
+        "not a run directory, a mesh ({}) or a batch manifest ({manifests})",
+        Format::list(&readable, ".", ", ")
+    )
 }
 
 impl Item {
@@ -579,12 +561,8 @@ impl Item {
         }
         if !is_mesh_path(path) {
             // Anything else is read as a batch manifest (`.toml`, else JSON Lines).
-            let rows = crate::batch::read_manifest(path).with_context(|| {
-                format!(
-                    "{name}: not a run directory, a mesh (.obj, .off, .ply, .gltf, .glb) or a \
-                     batch manifest (.toml, JSON Lines)"
-                )
-            })?;
+            let rows = crate::batch::read_manifest(path)
+                .with_context(|| format!("{name}: {}", what_an_item_is(".toml, JSON Lines")))?;
             return rows
                 .iter()
                 .enumerate()
@@ -612,10 +590,7 @@ impl Item {
     pub fn open_mesh(path: &Path) -> anyhow::Result<Self> {
         let name = path.display().to_string();
         if !is_mesh_path(path) {
-            bail!(
-                "{name}: not a run directory, a mesh (.obj, .off, .ply, .gltf, .glb) or a batch \
-                 manifest (.toml, .jsonl)"
-            );
+            bail!("{name}: {}", what_an_item_is(".toml, .jsonl"));
         }
         let mut mesh =
             mesh_core::io::read_mesh(path).with_context(|| format!("cannot read mesh {name}"))?;

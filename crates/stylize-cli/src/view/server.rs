@@ -37,6 +37,7 @@ use axum::extract::{Path, Query, State};
 use axum::http::{HeaderValue, StatusCode, Uri, header};
 use axum::response::{IntoResponse, Redirect, Response};
 use axum::routing::get;
+use mesh_core::io::Format;
 use serde::Deserialize;
 
 use super::replay::ReplayState;
@@ -263,15 +264,18 @@ async fn download(
     Path(id): Path<usize>,
     Query(q): Query<DownloadQuery>,
 ) -> Response {
-    let format = q.format.to_ascii_lowercase();
-    if !matches!(format.as_str(), "obj" | "ply" | "glb") {
+    let Some(format) =
+        Format::from_extension(&q.format).filter(|f| Format::WITH_NORMALS.contains(f))
+    else {
         return ViewError::BadRequest(format!(
-            "format must be obj, ply or glb, got {:?}",
+            "format must be {}, got {:?}",
+            Format::list(&Format::WITH_NORMALS, "", " or "),
             q.format
         ))
         .into_response();
-    }
-    let fmt = format.clone();
+    };
+    let format = format.extension();
+    let fmt = format;
     let made = on_item(viewer, id, move |item| {
         let shape = item.at_lambda(q.lambda)?;
         let mesh = mesh_core::TriMesh::new(shape.positions, shape.faces);
@@ -294,7 +298,7 @@ async fn download(
                 [
                     (
                         header::CONTENT_TYPE,
-                        HeaderValue::from_static(content_type(&format)),
+                        HeaderValue::from_static(content_type(format)),
                     ),
                     (header::CONTENT_DISPOSITION, disposition),
                 ],
