@@ -16,8 +16,7 @@ use std::path::PathBuf;
 use anyhow::Context;
 use stylize_cli::config::{Config, RegionSection};
 use stylize_cli::runner::{
-    LogMode, RunRequest, Task, execute, prepare_mesh_with_region, tint_region, turntable,
-    write_grid,
+    LogMode, RunRequest, execute, prepare_mesh_with_region, tint_region, turntable, write_grid,
 };
 use stylize_cli::style::Style;
 
@@ -90,7 +89,7 @@ fn main() -> anyhow::Result<()> {
                 halt_after: None,
             },
             LogMode::Quiet,
-            Task::Style(Style::Cube),
+            Style::Cube,
         )?;
         let (rest, _, region) = prepare_mesh_with_region(&mesh_path, &c.region)?;
         let region = region.context("region")?;

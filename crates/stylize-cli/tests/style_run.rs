@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use mesh_core::TriMesh;
 use stylize::saved::SavedDeformation;
 use stylize_cli::config::Config;
-use stylize_cli::runner::{LogMode, RunOutcome, RunRequest, Task, execute};
+use stylize_cli::runner::{LogMode, RunOutcome, RunRequest, execute};
 use stylize_cli::style::Style;
 
 mod common;
@@ -48,7 +48,7 @@ fn run(
         resume,
         halt_after,
     };
-    execute(&request, LogMode::Quiet, Task::Style(Style::Cube))
+    execute(&request, LogMode::Quiet, Style::Cube)
 }
 
 #[test]
