@@ -17,7 +17,7 @@ use anyhow::Context;
 use stylize::run_pictures::{tint_region, turntable, write_grid};
 use stylize::style::Style;
 use stylize_cli::config::{Config, RegionSection};
-use stylize_cli::runner::{LogMode, RunRequest, Task, execute, prepare_mesh_with_region};
+use stylize_cli::runner::{LogMode, RunRequest, execute, prepare_mesh_with_region};
 
 const REGION: &str = "box:-1,-1,-1,0,1,1";
 
@@ -88,7 +88,7 @@ fn main() -> anyhow::Result<()> {
                 halt_after: None,
             },
             LogMode::Quiet,
-            Task::Style(Style::Cube),
+            Style::Cube,
         )?;
         let (rest, _, region) = prepare_mesh_with_region(&mesh_path, &c.region)?;
         let region = region.context("region")?;

@@ -33,12 +33,13 @@ use anyhow::{Context, bail};
 use serde::Deserialize;
 
 use crate::config::Config;
-use crate::runner::{LogMode, RunOptions, RunRequest, Task, execute_with};
+use crate::runner::{LogMode, RunOptions, RunRequest, execute_with};
 use crate::signals::Interrupted;
 use rundir::RunDir;
-use stylize::identity::{ModelIdentity, ObjectiveIdentity};
+use stylize::identity::ModelIdentity;
 use stylize::models::ModelSet;
 use stylize::style::Style;
+use stylize::task::{Prompt, PromptTask};
 
 /// One manifest row.
 #[derive(Clone, Debug, PartialEq, Deserialize)]
@@ -434,22 +435,15 @@ fn run_row(
         resume_if_checkpoint: !options.force,
         skip_complete: !options.force,
         inputs: options.inputs.clone(),
-        model: None,
     };
     let outcome = match (&row.style, &row.prompt) {
         (Some(style), _) => {
             let style = Style::parse(style)?;
-            if let Style::Exemplar { path, .. } = &style {
-                run_options
-                    .inputs
-                    .push(("exemplar mesh".into(), path.clone()));
-            }
-            let objective = ObjectiveIdentity::of_style(&style);
             execute_with(
                 &request,
                 options.log,
-                objective,
-                || Ok(Task::Style(style)),
+                &style,
+                || Ok(style.clone()),
                 &run_options,
             )?
         }
@@ -468,19 +462,19 @@ fn run_row(
                      per row: the batch opens its models once (set them for the whole batch with --set)"
                 );
             }
-            run_options.model = Some(ModelIdentity::of_dir(model)?);
+            let kind = Prompt {
+                text: prompt.clone(),
+                model: Some(ModelIdentity::of_dir(model)?),
+            };
             run_options
                 .inputs
                 .push(("model manifest".into(), model.join("manifest.toml")));
-            let objective = ObjectiveIdentity::Prompt {
-                prompt: prompt.clone(),
-                model: None,
-            };
             let config = &config;
+            let prompt_kind = &kind;
             execute_with(
                 &request,
                 options.log,
-                objective,
+                &kind,
                 // `move`: the closure takes the `&mut` to the model set, so the guidance it builds
                 // may borrow the UNets for the whole run.
                 move || {
@@ -495,8 +489,8 @@ fn run_row(
                     });
                     let set = set.as_mut().map_err(|e| anyhow::anyhow!("{e:#}"))?;
                     let warnings = set.prompt_warnings(prompt, config)?;
-                    Ok(Task::Text {
-                        prompt: prompt.clone(),
+                    Ok(PromptTask {
+                        prompt: prompt_kind.clone(),
                         guidance: Box::new(set.guidance_for(prompt, config)?),
                         warnings,
                     })

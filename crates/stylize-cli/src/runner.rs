@@ -2,12 +2,12 @@
 //! SIGTERM stop it ([`crate::signals`]). The run itself is [`stylize::runner`] (re-exported here);
 //! the commands build its [`RunRequest`] directly and pass the [`LogMode`] beside it.
 
-use stylize::identity::ObjectiveIdentity;
 pub use stylize::runner::{
     NPZ_FORMAT_VERSION, NoProgress, Progress, ResolvedRegion, RunHooks, RunOptions, RunOutcome,
-    RunRequest, Task, darap_options, objective_identity, parse_region_specs, prepare_mesh,
-    prepare_mesh_with_region, resolve_region,
+    RunRequest, darap_options, parse_region_specs, prepare_mesh, prepare_mesh_with_region,
+    resolve_region,
 };
+use stylize::task::{Task, TaskKind};
 
 use crate::signals::Interrupted;
 
@@ -24,24 +24,30 @@ pub enum LogMode {
 }
 
 /// Runs one request to completion (or to `halt_after`) with the signal handlers installed and
-/// progress shown as `log` says.
-pub fn execute(request: &RunRequest, log: LogMode, task: Task<'_>) -> anyhow::Result<RunOutcome> {
-    let objective = objective_identity(&task);
-    let mut options = RunOptions::default();
-    if let Task::Style(stylize::style::Style::Exemplar { path, .. }) = &task {
-        options.inputs.push(("exemplar mesh".into(), path.clone()));
-    }
-    execute_with(request, log, objective, || Ok(task), &options)
+/// progress shown as `log` says; `task` is ready (its identity is its own).
+pub fn execute<'g>(
+    request: &RunRequest,
+    log: LogMode,
+    task: impl Task<'g> + 'g,
+) -> anyhow::Result<RunOutcome> {
+    crate::signals::install()?;
+    let mut progress = crate::progress::reporter(log);
+    let hooks = RunHooks {
+        progress: progress.as_mut(),
+        cancel: crate::signals::flag(),
+    };
+    let outcome = stylize::runner::execute_task(request, task, &RunOptions::default(), hooks);
+    outcome.map_err(interrupted)
 }
 
 /// [`stylize::runner::execute_with`] with the SIGINT/SIGTERM flag as its cancellation hook and
 /// the progress display of `log`; a stop becomes [`Interrupted`] (with the signal, for
 /// the message and the exit status).
-pub fn execute_with<'g>(
+pub fn execute_with<'g, T: Task<'g> + 'g>(
     request: &RunRequest,
     log: LogMode,
-    objective: ObjectiveIdentity,
-    make_task: impl FnOnce() -> anyhow::Result<Task<'g>>,
+    kind: &dyn TaskKind,
+    make_task: impl FnOnce() -> anyhow::Result<T>,
     options: &RunOptions,
 ) -> anyhow::Result<RunOutcome> {
     crate::signals::install()?;
@@ -51,15 +57,19 @@ pub fn execute_with<'g>(
         cancel: crate::signals::flag(),
     };
     let make_task = || make_task().map_err(stylize::Error::external);
-    stylize::runner::execute_with(request, objective, make_task, options, hooks).map_err(
-        |e| match e.kind() {
-            stylize::Error::Stopped(stopped) => Interrupted {
-                signal: crate::signals::pending().unwrap_or(signal_hook::consts::signal::SIGTERM),
-                dir: stopped.dir.clone(),
-                checkpoint_iteration: stopped.checkpoint_iteration,
-            }
-            .into(),
-            _ => anyhow::Error::from(e),
-        },
-    )
+    stylize::runner::execute_with(request, kind, make_task, options, hooks).map_err(interrupted)
+}
+
+/// A stop through the cancellation flag as [`Interrupted`] (with the pending signal); any other
+/// error as it is.
+fn interrupted(e: stylize::Error) -> anyhow::Error {
+    match e.kind() {
+        stylize::Error::Stopped(stopped) => Interrupted {
+            signal: crate::signals::pending().unwrap_or(signal_hook::consts::signal::SIGTERM),
+            dir: stopped.dir.clone(),
+            checkpoint_iteration: stopped.checkpoint_iteration,
+        }
+        .into(),
+        _ => anyhow::Error::from(e),
+    }
 }

@@ -7,7 +7,7 @@ use mesh_core::TriMesh;
 use stylize::style::Style;
 use stylize_cli::batch::{BatchOptions, RowStatus, Shard, read_manifest, run_batch};
 use stylize_cli::config::Config;
-use stylize_cli::runner::{LogMode, RunRequest, Task, execute};
+use stylize_cli::runner::{LogMode, RunRequest, execute};
 
 mod common;
 use common::ok;
@@ -86,7 +86,7 @@ fn partial_row_is_resumed() {
         resume: false,
         halt_after: Some(3),
     };
-    ok(execute(&request, LogMode::Quiet, Task::Style(Style::Cube)));
+    ok(execute(&request, LogMode::Quiet, Style::Cube));
     let results = run_batch(&rows[..1], &options(&config, Shard::ALL));
     assert_eq!(results[0].2, RowStatus::Done { resumed: true });
     assert!(tmp.path().join("runs/cube/run.json").is_file());
@@ -212,7 +212,7 @@ fn an_edited_row_is_never_skipped_or_mixed() {
         resume: false,
         halt_after: Some(3),
     };
-    ok(execute(&request, LogMode::Quiet, Task::Style(Style::Cube)));
+    ok(execute(&request, LogMode::Quiet, Style::Cube));
     let r = run_batch(&rows[2..], &options(&config, Shard::ALL));
     assert!(
         matches!(&r[0].2, RowStatus::Failed(m) if m.contains("refusing to resume")),

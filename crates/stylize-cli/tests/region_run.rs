@@ -16,7 +16,7 @@ use stylize::saved::SavedDeformation;
 use stylize::style::Style;
 use stylize_cli::config::{Config, RegionSection};
 use stylize_cli::runner::{
-    LogMode, RunOutcome, RunRequest, Task, darap_options, execute, prepare_mesh_with_region,
+    LogMode, RunOutcome, RunRequest, darap_options, execute, prepare_mesh_with_region,
 };
 
 mod common;
@@ -55,7 +55,7 @@ fn run(out: &Path, config: Config, resume: bool, halt: Option<u64>) -> anyhow::R
             halt_after: halt,
         },
         LogMode::Quiet,
-        Task::Style(Style::Cube),
+        Style::Cube,
     )
 }
 

@@ -9,7 +9,7 @@ use mesh_core::TriMesh;
 use stylize::saved::SavedDeformation;
 use stylize::style::Style;
 use stylize_cli::config::Config;
-use stylize_cli::runner::{LogMode, RunOutcome, RunRequest, Task, execute};
+use stylize_cli::runner::{LogMode, RunOutcome, RunRequest, execute};
 
 mod common;
 use common::ok;
@@ -48,7 +48,7 @@ fn run(
         resume,
         halt_after,
     };
-    execute(&request, LogMode::Quiet, Task::Style(Style::Cube))
+    execute(&request, LogMode::Quiet, Style::Cube)
 }
 
 #[test]

@@ -290,8 +290,9 @@ fn second_step_uses_accumulated_gradient_at_the_pre_step_x() {
 /// guidance's draws all come from the run's generator, so a resumed run must restore its state.
 #[test]
 fn text_run_resumed_from_checkpoint_equals_uninterrupted_run() {
+    use stylize::task::{Prompt, PromptTask};
     use stylize_cli::config::Config;
-    use stylize_cli::runner::{LogMode, RunRequest, Task, execute};
+    use stylize_cli::runner::{LogMode, RunRequest, execute};
 
     let tmp = ok(tempfile::tempdir());
     let (p, f) = mesh_core::shapes::icosphere(2).into_parts();
@@ -311,8 +312,8 @@ fn text_run_resumed_from_checkpoint_equals_uninterrupted_run() {
     config.run.preview_every = 0;
     config.run.turntable_views = 1;
     config.run.turntable_size = 16;
-    let task = || Task::Text {
-        prompt: "darker".into(),
+    let task = || PromptTask {
+        prompt: Prompt::new("darker"),
         guidance: Box::new(DarkerGuidance {
             calls: Arc::new(AtomicUsize::new(0)),
             random_scale: true,

@@ -7,7 +7,7 @@
 //! `OUT_DIR` (default `runs/bunny-cube`).
 
 use stylize::config::Config;
-use stylize::runner::{RunRequest, Task, execute};
+use stylize::runner::{RunRequest, execute};
 use stylize::style::Style;
 
 fn main() -> anyhow::Result<()> {
@@ -28,7 +28,7 @@ fn main() -> anyhow::Result<()> {
         resume: false,
         halt_after: None,
     };
-    let outcome = execute(&request, Task::Style(Style::Cube))?;
+    let outcome = execute(&request, Style::Cube)?;
     if let Some((before, after)) = outcome.alignment {
         println!("cube alignment {before:.3} -> {after:.3}");
     }

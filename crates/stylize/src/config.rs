@@ -469,16 +469,6 @@ impl Config {
         Ok(())
     }
 
-    /// The Adam step count and learning rate a run uses: `style.iterations`/`style.lr` on the
-    /// model-free path (`model_free`), `optim.iterations`/`optim.lr` on the text path.
-    pub fn iterations_and_lr(&self, model_free: bool) -> (u64, f64) {
-        if model_free {
-            (self.style.iterations, self.style.lr)
-        } else {
-            (self.optim.iterations, self.optim.lr)
-        }
-    }
-
     /// The parsed stage-II weight schedule.
     pub fn stage2_schedule(&self) -> Result<optim::Schedule> {
         optim::Schedule::parse(&self.guidance.stage2_weight).context("guidance.stage2_weight")

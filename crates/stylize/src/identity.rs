@@ -5,13 +5,16 @@
 //! - `mesh`: SHA-256 of the prepared mesh (repaired, normalized: exactly what is optimized) over
 //!   the vertex and face counts (u64 LE), the positions (f64 LE) and the faces (u32 LE); two meshes
 //!   with the same vertex count but different geometry or connectivity differ.
-//! - `objective`: `style` or `prompt`; `style` (`cube`, `octahedron`, `exemplar`) and for exemplars
-//!   the SHA-256 of the exemplar's target normals (its content, not its path); `prompt`; the model
-//!   name and the SHA-256 of the model directory's `manifest.toml` (the weights themselves are not
-//!   hashed).
-//! - `config.<section>.<key>`: every resolved configuration value the chosen path reads, except
-//!   those that only change cadence or presentation ([`PRESENTATION_KEYS`]). The model-free path
-//!   reads `[darap]`, `[style]`, `run.seed` and Adam's `optim.beta1/beta2/eps`; the text path reads
+//! - the task kind's own fields ([`TaskKind::identity_fields`]): `objective` (`style` or
+//!   `prompt`); for a style, `style` (`cube`, `octahedron`, `exemplar`) and for exemplars the
+//!   SHA-256 of the exemplar's target normals (its content, not its path); for a prompt, `prompt`,
+//!   the model name and the SHA-256 of the model directory's `manifest.toml` (the weights
+//!   themselves are not hashed).
+//! - `config.<section>.<key>`: every resolved configuration value the run reads, except those
+//!   that only change cadence or presentation ([`PRESENTATION_KEYS`]). Every run reads
+//!   [`COMMON_SECTIONS`] and [`COMMON_KEYS`] (`[darap]`, `run.seed` and Adam's
+//!   `optim.beta1/beta2/eps`); the kind says
+//!   what else it reads ([`TaskKind::reads`]): the model-free path `[style]`, the text path
 //!   everything except `[style]`.
 //!
 //! - `region.*` (only for a localized run, so that unlocalized identities are unchanged): the
@@ -23,6 +26,22 @@
 //! is the run directory's ([`rundir::identity`]), which stores and compares it without looking
 //! inside; how it is computed is this module's: [`TaskIdentityExt::new`] and
 //! [`TaskIdentityExt::with_region`].
+//!
+//! # The rule for new settings
+//!
+//! A resume (and a batch row that skips a complete run) compares the identity recorded in
+//! `task.json` with today's, field by field, so every field added to the identity would refuse to
+//! continue every run made before it. Hence:
+//!
+//! - A new setting joins the identity only when it changes the result, and only when it is set
+//!   away from its default: at its default it is absent, so identities of runs made before it
+//!   are unchanged (as the `region.*` fields are absent from unlocalized runs). A new
+//!   configuration key is listed in [`RECORDED_UNLESS_DEFAULT`]; a field written by hand goes
+//!   through [`insert_unless_default`]. (The test `identity_keys_of_default_runs_are_frozen`
+//!   fails when a new key would join the identity at its default.)
+//! - Settings that change speed or memory but not the result (devices, threads, memory limits,
+//!   cadences) are recorded in `run.json` and the checkpoint's `config.toml`, never in the
+//!   identity ([`PRESENTATION_KEYS`]).
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -32,7 +51,7 @@ use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
 use crate::config::Config;
-use crate::style::Style;
+use crate::task::TaskKind;
 
 pub use rundir::TaskIdentity;
 
@@ -50,31 +69,50 @@ pub const PRESENTATION_KEYS: &[&str] = &[
     "region.tint",
 ];
 
-/// Keys of the text path's sections that the model-free path reads as well.
-const STYLE_PATH_OPTIM_KEYS: &[&str] = &["optim.beta1", "optim.beta2", "optim.eps"];
+/// Sections every run reads whatever its kind: the runner builds dARAP from `[darap]` and
+/// `[region]` (the region is recorded by [`TaskIdentity::with_region`]).
+pub const COMMON_SECTIONS: &[&str] = &["darap", "region"];
 
-/// Whether a run on the model-free path (`style_path`) or the text path reads the result-changing
-/// key `name` (`section.key`). Presentation keys and `[region]` are read by both.
-fn path_reads(section: &str, name: &str, style_path: bool) -> bool {
-    if !style_path {
-        return section != "style";
+/// Keys every run reads whatever its kind: the runner seeds the generator from `run.seed` and runs
+/// Adam with `optim.beta1/beta2/eps`.
+pub const COMMON_KEYS: &[&str] = &["run.seed", "optim.beta1", "optim.beta2", "optim.eps"];
+
+/// Keys every run reads only for its pictures (previews, turntable, before/after): they are in
+/// the identity only when the kind reads them for its result, and never named as unread.
+const PICTURE_KEYS: &[&str] = &["camera.fov_deg"];
+
+/// Configuration keys added after identities were first written that change the result: they
+/// join the identity only when set away from their default (see the module documentation), so
+/// the identities of runs made before them are unchanged.
+pub const RECORDED_UNLESS_DEFAULT: &[&str] = &[];
+
+/// Inserts `name = value` into identity `fields` unless `value` is `default` (the rule for new
+/// settings of the module documentation). Returns whether it was inserted.
+pub fn insert_unless_default<T: PartialEq + std::fmt::Display>(
+    fields: &mut BTreeMap<String, String>,
+    name: &str,
+    value: &T,
+    default: &T,
+) -> bool {
+    if value == default {
+        return false;
     }
-    match section {
-        "darap" | "style" | "region" => true,
-        "run" => name == "run.seed" || PRESENTATION_KEYS.contains(&name),
-        _ => STYLE_PATH_OPTIM_KEYS.contains(&name),
-    }
+    fields.insert(name.to_string(), value.to_string());
+    true
 }
 
-/// Keys the model-free path reads only for its pictures (previews, turntable, before/after), so
-/// they are not in its identity yet are used.
-const STYLE_PATH_PICTURE_KEYS: &[&str] = &["camera.fov_deg"];
+/// Whether a run of `kind` reads the result-changing key `name` (`section.key`): every run reads
+/// [`COMMON_SECTIONS`] and [`COMMON_KEYS`], the kind says what else. Presentation keys are read by
+/// every run.
+fn run_reads(kind: &dyn TaskKind, section: &str, name: &str) -> bool {
+    COMMON_SECTIONS.contains(&section) || COMMON_KEYS.contains(&name) || kind.reads(section, name)
+}
 
-/// The settings of `config` that differ from their defaults although the chosen path
-/// (`style_path`: model-free) never reads them, as `section.key = value` — a `--set
-/// optim.iterations=…` on a `--style` run, a negative prompt without a prompt. Presentation and
-/// memory keys ([`PRESENTATION_KEYS`]) are not listed.
-pub fn unread_settings(config: &Config, style_path: bool) -> Result<Vec<String>> {
+/// The settings of `config` that differ from their defaults although a run of `kind` never
+/// reads them, as `section.key = value` — a `--set optim.iterations=…` on a `--style` run, a
+/// negative prompt without a prompt. Presentation and memory keys ([`PRESENTATION_KEYS`]) are not
+/// listed.
+pub fn unread_settings(config: &Config, kind: &dyn TaskKind) -> Result<Vec<String>> {
     let table = toml::Table::try_from(config)?;
     let defaults = toml::Table::try_from(Config::default())?;
     let mut unread = Vec::new();
@@ -86,8 +124,8 @@ pub fn unread_settings(config: &Config, style_path: bool) -> Result<Vec<String>>
         for (key, value) in keys {
             let name = format!("{section}.{key}");
             if PRESENTATION_KEYS.contains(&name.as_str())
-                || path_reads(section, &name, style_path)
-                || (style_path && STYLE_PATH_PICTURE_KEYS.contains(&name.as_str()))
+                || run_reads(kind, section, &name)
+                || PICTURE_KEYS.contains(&name.as_str())
             {
                 continue;
             }
@@ -100,21 +138,16 @@ pub fn unread_settings(config: &Config, style_path: bool) -> Result<Vec<String>>
 }
 
 /// The warning for [`unread_settings`] (`None` when there are none).
-pub fn unread_settings_warning(config: &Config, style_path: bool) -> Result<Option<String>> {
-    let unread = unread_settings(config, style_path)?;
+pub fn unread_settings_warning(config: &Config, kind: &dyn TaskKind) -> Result<Option<String>> {
+    let unread = unread_settings(config, kind)?;
     if unread.is_empty() {
         return Ok(None);
     }
-    let what = if style_path {
-        "a model-free style run, which reads [style] (its own iterations and lr), [darap], \
-         run.seed and optim.beta1/beta2/eps"
-    } else {
-        "a prompt run ([style] is the model-free path's)"
-    };
     Ok(Some(format!(
-        "{} {} not used by {what}",
+        "{} {} not used by {}",
         unread.join(", "),
-        if unread.len() == 1 { "is" } else { "are" }
+        if unread.len() == 1 { "is" } else { "are" },
+        kind.reads_summary()
     )))
 }
 
@@ -150,55 +183,8 @@ impl ModelIdentity {
     }
 }
 
-/// What is optimized, as recorded.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub enum ObjectiveIdentity {
-    /// The model-free path.
-    Style {
-        /// `cube`, `octahedron` or `exemplar`.
-        style: String,
-        /// For exemplars: SHA-256 of the target normals.
-        exemplar_sha256: Option<String>,
-    },
-    /// The text path.
-    Prompt {
-        /// The prompt.
-        prompt: String,
-        /// The model, when known.
-        model: Option<ModelIdentity>,
-    },
-}
-
-impl ObjectiveIdentity {
-    /// The identity of a style.
-    pub fn of_style(style: &Style) -> Self {
-        match style {
-            Style::Cube => Self::Style {
-                style: "cube".into(),
-                exemplar_sha256: None,
-            },
-            Style::Octahedron => Self::Style {
-                style: "octahedron".into(),
-                exemplar_sha256: None,
-            },
-            Style::Exemplar { normals, .. } => {
-                let mut h = Sha256::new();
-                h.update((normals.len() as u64).to_le_bytes());
-                for n in normals {
-                    for c in n {
-                        h.update(c.to_le_bytes());
-                    }
-                }
-                Self::Style {
-                    style: "exemplar".into(),
-                    exemplar_sha256: Some(hex(&h.finalize())),
-                }
-            }
-        }
-    }
-}
-
-fn hex(bytes: &[u8]) -> String {
+/// Lower-case hexadecimal of `bytes` (how digests are recorded).
+pub(crate) fn hex(bytes: &[u8]) -> String {
     bytes.iter().map(|b| format!("{b:02x}")).collect()
 }
 
@@ -223,11 +209,11 @@ pub fn mesh_sha256(positions: &[[f64; 3]], faces: &[[u32; 3]]) -> String {
 /// How a run's [`TaskIdentity`] is computed (see the module documentation): the record is
 /// [`rundir`]'s, its fields are stylize's.
 pub trait TaskIdentityExt: Sized {
-    /// The identity of optimizing `objective` on the prepared mesh with `config`.
+    /// The identity of optimizing a task of `kind` on the prepared mesh with `config`.
     fn new(
         positions: &[[f64; 3]],
         faces: &[[u32; 3]],
-        objective: &ObjectiveIdentity,
+        kind: &dyn TaskKind,
         config: &Config,
     ) -> Result<Self>;
 
@@ -239,37 +225,16 @@ impl TaskIdentityExt for TaskIdentity {
     fn new(
         positions: &[[f64; 3]],
         faces: &[[u32; 3]],
-        objective: &ObjectiveIdentity,
+        kind: &dyn TaskKind,
         config: &Config,
     ) -> Result<Self> {
         let mut fields = BTreeMap::new();
         fields.insert("mesh.sha256".to_string(), mesh_sha256(positions, faces));
         fields.insert("mesh.vertices".to_string(), positions.len().to_string());
         fields.insert("mesh.faces".to_string(), faces.len().to_string());
-        let quote = |s: &str| serde_json::Value::from(s).to_string();
-        let style_path = match objective {
-            ObjectiveIdentity::Style {
-                style,
-                exemplar_sha256,
-            } => {
-                fields.insert("objective".into(), "style".into());
-                fields.insert("style".into(), style.clone());
-                if let Some(h) = exemplar_sha256 {
-                    fields.insert("style.exemplar_sha256".into(), h.clone());
-                }
-                true
-            }
-            ObjectiveIdentity::Prompt { prompt, model } => {
-                fields.insert("objective".into(), "prompt".into());
-                fields.insert("prompt".into(), quote(prompt));
-                if let Some(m) = model {
-                    fields.insert("model.name".into(), quote(&m.name));
-                    fields.insert("model.manifest_sha256".into(), m.manifest_sha256.clone());
-                }
-                false
-            }
-        };
+        fields.extend(kind.identity_fields());
         let table = toml::Table::try_from(config)?;
+        let defaults = toml::Table::try_from(Config::default())?;
         for (section, keys) in &table {
             let Some(keys) = keys.as_table() else {
                 continue;
@@ -278,12 +243,18 @@ impl TaskIdentityExt for TaskIdentity {
                 // Recorded by `with_region`, only for localized runs.
                 continue;
             }
+            let default_keys = defaults.get(section).and_then(|d| d.as_table());
             for (key, value) in keys {
                 let name = format!("{section}.{key}");
                 if PRESENTATION_KEYS.contains(&name.as_str()) {
                     continue;
                 }
-                if path_reads(section, &name, style_path) {
+                if RECORDED_UNLESS_DEFAULT.contains(&name.as_str())
+                    && default_keys.and_then(|d| d.get(key)) == Some(value)
+                {
+                    continue;
+                }
+                if run_reads(kind, section, &name) {
                     fields.insert(format!("config.{name}"), value.to_string());
                 }
             }
@@ -312,6 +283,8 @@ impl TaskIdentityExt for TaskIdentity {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::style::Style;
+    use crate::task::Prompt;
 
     fn tri() -> (Vec<[f64; 3]>, Vec<[u32; 3]>) {
         (
@@ -320,7 +293,7 @@ mod tests {
         )
     }
 
-    fn id(objective: &ObjectiveIdentity, config: &Config) -> TaskIdentity {
+    fn id(objective: &dyn TaskKind, config: &Config) -> TaskIdentity {
         let (p, f) = tri();
         TaskIdentity::new(&p, &f, objective, config).unwrap_or_else(|e| panic!("{e:#}"))
     }
@@ -336,7 +309,7 @@ mod tests {
                 "run.turntable_views=3",
             ])
             .unwrap_or_else(|e| panic!("{e}"));
-        let style = unread_settings(&c, true).unwrap_or_default();
+        let style = unread_settings(&c, &Style::Cube).unwrap_or_default();
         assert_eq!(
             style,
             [
@@ -344,21 +317,31 @@ mod tests {
                 "optim.iterations = 2000"
             ]
         );
-        let text = unread_settings(&c, false).unwrap_or_default();
+        let text = unread_settings(&c, &Prompt::new("a cat")).unwrap_or_default();
         assert_eq!(text, ["style.lr = 0.05"]);
-        let w = unread_settings_warning(&c, true)
+        let w = unread_settings_warning(&c, &Style::Cube)
             .ok()
             .flatten()
             .unwrap_or_default();
         assert!(w.contains("are not used by a model-free style run"), "{w}");
-        assert!(unread_settings(&Config::default(), true).is_ok_and(|u| u.is_empty()));
-        assert!(unread_settings(&Config::default(), false).is_ok_and(|u| u.is_empty()));
+        assert!(unread_settings(&Config::default(), &Style::Cube).is_ok_and(|u| u.is_empty()));
+        assert!(
+            unread_settings(&Config::default(), &Prompt::new("a cat")).is_ok_and(|u| u.is_empty())
+        );
+        let w = unread_settings_warning(&c, &Prompt::new("a cat"))
+            .ok()
+            .flatten()
+            .unwrap_or_default();
+        assert_eq!(
+            w,
+            "style.lr = 0.05 is not used by a prompt run ([style] is the model-free path's)"
+        );
     }
 
     #[test]
     fn differences_name_each_field_and_presentation_keys_are_ignored() {
-        let cube = ObjectiveIdentity::of_style(&Style::Cube);
-        let octa = ObjectiveIdentity::of_style(&Style::Octahedron);
+        let cube = Style::Cube;
+        let octa = Style::Octahedron;
         let base = Config::default();
         let a = id(&cube, &base);
         assert!(a.differences(&a).is_empty());
@@ -382,15 +365,95 @@ mod tests {
         let mut t = base.clone();
         t.guidance.scale = 7.5;
         assert!(a.differences(&id(&cube, &t)).is_empty());
-        let p = |s: &str| ObjectiveIdentity::Prompt {
-            prompt: s.into(),
-            model: None,
-        };
+        let p = Prompt::new;
         let d = id(&p("a cat"), &base).differences(&id(&p("a dog"), &t));
         assert_eq!(d.len(), 2, "{d:?}");
         assert!(
             d.iter()
                 .any(|m| m.contains("\"a cat\"") && m.contains("\"a dog\""))
+        );
+    }
+
+    /// The identity rule for new settings (module documentation): the fields of a run at the
+    /// default configuration are exactly those identities have had so far, so a new key that
+    /// would join every identity at its default (refusing to resume every earlier run) fails here.
+    /// Such a key belongs in `RECORDED_UNLESS_DEFAULT` (or `PRESENTATION_KEYS` when it does not
+    /// change the result).
+    #[test]
+    fn identity_keys_of_default_runs_are_frozen() {
+        let names = |kind: &dyn TaskKind| -> Vec<String> {
+            id(kind, &Config::default()).fields.into_keys().collect()
+        };
+        let common = [
+            "mesh.faces",
+            "mesh.sha256",
+            "mesh.vertices",
+            "objective",
+            "config.darap.lambda",
+            "config.darap.post_process",
+            "config.darap.rotation_rule",
+            "config.optim.beta1",
+            "config.optim.beta2",
+            "config.optim.eps",
+            "config.run.seed",
+        ];
+        let sorted = |own: &[&str]| {
+            let mut all: Vec<String> = common.iter().chain(own).map(|s| s.to_string()).collect();
+            all.sort();
+            all
+        };
+        let style = sorted(&[
+            "style",
+            "config.style.iterations",
+            "config.style.lr",
+            "config.style.objective",
+        ]);
+        assert_eq!(names(&Style::Cube), style);
+        let text = sorted(&[
+            "prompt",
+            "config.camera.adapt_distance",
+            "config.camera.azimuth_deg",
+            "config.camera.distance",
+            "config.camera.elevation_deg",
+            "config.camera.fov_deg",
+            "config.camera.views",
+            "config.guidance.grad_clip",
+            "config.guidance.loss_scale",
+            "config.guidance.negative_prompt",
+            "config.guidance.scale",
+            "config.guidance.stage1_weight",
+            "config.guidance.stage2_weight",
+            "config.guidance.t_max",
+            "config.guidance.t_min",
+            "config.optim.iterations",
+            "config.optim.lr",
+            "config.optim.steps_per_batch",
+            "config.render.backend",
+            "config.render.height",
+            "config.render.width",
+        ]);
+        assert_eq!(names(&Prompt::new("a cat")), text);
+    }
+
+    #[test]
+    fn new_settings_join_only_away_from_their_default() {
+        let mut fields = BTreeMap::new();
+        assert!(!insert_unless_default(
+            &mut fields,
+            "config.remesh.iterations",
+            &0,
+            &0
+        ));
+        assert!(fields.is_empty());
+        assert!(insert_unless_default(
+            &mut fields,
+            "config.remesh.iterations",
+            &3,
+            &0
+        ));
+        assert_eq!(
+            fields.get("config.remesh.iterations").map(String::as_str),
+            Some("3")
         );
     }
 

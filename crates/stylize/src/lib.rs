@@ -3,6 +3,8 @@
 //! - [`pipeline`]: the loop ([`pipeline::run_loop`]) over an [`pipeline::Objective`] (the
 //!   model-free [`pipeline::StyleObjective`], the text-guided [`pipeline::TextObjective`]);
 //! - [`style`]: the model-free styles (cube, octahedron, exemplar) and their alignment loss;
+//! - [`task`]: kinds of task behind two traits ([`task::TaskKind`]: identity and settings read;
+//!   [`task::Task`]: schedule, objective, what it reports), with the style and prompt kinds;
 //! - [`config`]: every setting of a run, with the reference's defaults;
 //! - [`runner`]: one run from mesh file to complete run directory, with a [`runner::Progress`]
 //!   the run, for replay; [`run_pictures`]: the before/after sheet, the turntable (PNG, GIF) and
@@ -36,5 +38,6 @@ pub mod runner;
 pub mod saved;
 pub mod snapshots;
 pub mod style;
+pub mod task;
 
 pub use error::{Error, Result};

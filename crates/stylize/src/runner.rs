@@ -7,7 +7,6 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 use crate::error::{Context, Error, IoContext, Result, Stopped, invalid};
-use csd::Guidance;
 use darap::Darap;
 use mesh_core::TriMesh;
 use mesh_core::region::{RegionInput, RegionSpec};
@@ -20,14 +19,11 @@ use rundir::{Claim, ResumeMode, RunDir, RunLock, Start};
 
 use crate::checkpoint::{CHECKPOINT_VERSION, Checkpoint, CheckpointState};
 use crate::config::Config;
-use crate::identity::{ObjectiveIdentity, TaskIdentity, TaskIdentityExt};
-use crate::pipeline::{
-    IterationRecord, LoopSpec, LoopState, Objective, Observer, StyleObjective, TextObjective,
-    ViewSettings, run_loop,
-};
+use crate::identity::{TaskIdentity, TaskIdentityExt};
+use crate::pipeline::{IterationRecord, LoopSpec, LoopState, Objective, Observer, run_loop};
 use crate::run_pictures::{tint_region, turntable, write_grid};
 use crate::saved::SavedDeformation;
-use crate::style::Style;
+use crate::task::{BuiltTask, Figure, Task, TaskKind};
 
 /// Format version of our extra keys in `deformation.npz`.
 pub const NPZ_FORMAT_VERSION: i64 = crate::saved::FORMAT_VERSION;
@@ -67,31 +63,6 @@ impl std::fmt::Debug for RunHooks<'_> {
         f.debug_struct("RunHooks")
             .field("cancel", &self.cancel)
             .finish_non_exhaustive()
-    }
-}
-
-/// What to optimize.
-pub enum Task<'g> {
-    /// The model-free path.
-    Style(Style),
-    /// The text path: a prompt and a ready guidance (models loaded by the caller).
-    Text {
-        /// The prompt (recorded).
-        prompt: String,
-        /// The guidance (it may borrow models that outlive the run, `'g`).
-        guidance: Box<dyn Guidance + 'g>,
-        /// Warnings found while loading (a prompt longer than the text encoder reads:
-        /// [`crate::models::ModelSet::prompt_warnings`]); reported and kept in `run.json`.
-        warnings: Vec<String>,
-    },
-}
-
-impl std::fmt::Debug for Task<'_> {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            Task::Style(s) => write!(f, "Style({})", s.name()),
-            Task::Text { prompt, .. } => write!(f, "Text({prompt:?})"),
-        }
     }
 }
 
@@ -351,36 +322,40 @@ pub struct RunOptions {
     /// an error (batch rows).
     pub skip_complete: bool,
     /// Further files the run reads, with their role (config file, manifest, model manifest); the
-    /// input mesh and an exemplar are added by the runner. No output may replace any of them.
+    /// input mesh and the task's own ([`TaskKind::inputs`], an exemplar) are added by the runner.
+    /// No output may replace any of them.
     pub inputs: Vec<(String, PathBuf)>,
-    /// The model of a text run (part of the task identity).
-    pub model: Option<crate::identity::ModelIdentity>,
-}
-
-/// The identity of a ready task's objective (without model).
-pub fn objective_identity(task: &Task<'_>) -> ObjectiveIdentity {
-    match task {
-        Task::Style(s) => ObjectiveIdentity::of_style(s),
-        Task::Text { prompt, .. } => ObjectiveIdentity::Prompt {
-            prompt: prompt.clone(),
-            model: None,
-        },
-    }
 }
 
 /// Runs one request to completion (or to `halt_after`), reporting nothing and never cancelled.
-pub fn execute(request: &RunRequest, task: Task<'_>) -> Result<RunOutcome> {
-    let objective = objective_identity(&task);
-    let mut options = RunOptions::default();
-    if let Task::Style(Style::Exemplar { path, .. }) = &task {
-        options.inputs.push(("exemplar mesh".into(), path.clone()));
-    }
+pub fn execute<'g>(request: &RunRequest, task: impl Task<'g> + 'g) -> Result<RunOutcome> {
     let never = AtomicBool::new(false);
     let hooks = RunHooks {
         progress: &mut NoProgress,
         cancel: &never,
     };
-    execute_with(request, objective, || Ok(task), &options, hooks)
+    execute_task(request, task, &RunOptions::default(), hooks)
+}
+
+/// [`execute_with`] for a task that is ready at once (nothing to load): its identity is its own
+/// ([`Task`] is a [`TaskKind`]).
+pub fn execute_task<'g>(
+    request: &RunRequest,
+    task: impl Task<'g> + 'g,
+    options: &RunOptions,
+    hooks: RunHooks<'_>,
+) -> Result<RunOutcome> {
+    let prepared = prepare(request, &task)?;
+    let unread = crate::identity::unread_settings_warning(&request.config, &task)?;
+    execute_prepared(
+        request,
+        prepared,
+        task.inputs(),
+        unread,
+        || Ok(task),
+        options,
+        hooks,
+    )
 }
 
 /// Stage 1 of a run: what [`prepare`] checked and computed before the run directory is touched.
@@ -402,22 +377,15 @@ pub struct Prepared {
     pub region: Option<ResolvedRegion>,
 }
 
-/// Stage 1: validates the configuration, prepares the mesh, computes the task identity (with the
-/// model of `model`, for text runs) and precomputes dARAP — everything that can fail on bad input,
-/// before anything is written.
-pub fn prepare(
-    request: &RunRequest,
-    mut objective: ObjectiveIdentity,
-    model: Option<&crate::identity::ModelIdentity>,
-) -> Result<Prepared> {
+/// Stage 1: validates the configuration, prepares the mesh, computes the identity of a task of
+/// `kind` and precomputes dARAP — everything that can fail on bad input, before anything is
+/// written.
+pub fn prepare(request: &RunRequest, kind: &dyn TaskKind) -> Result<Prepared> {
     let config = &request.config;
     config.validate()?;
     let config_toml = config.to_toml_string()?;
     let (mesh, warnings, region) = prepare_mesh_with_region(&request.mesh, &config.region)?;
-    if let (ObjectiveIdentity::Prompt { model: slot, .. }, Some(m)) = (&mut objective, model) {
-        *slot = Some(m.clone());
-    }
-    let mut identity = TaskIdentity::new(&mesh.positions, &mesh.faces, &objective, config)?;
+    let mut identity = TaskIdentity::new(&mesh.positions, &mesh.faces, kind, config)?;
     if let Some(r) = &region {
         identity = identity.with_region(&config.region.specs, config.region.feather, &r.weights);
     }
@@ -440,6 +408,18 @@ pub fn prepare(
     })
 }
 
+/// What `deformation.npz` records of a task beside the mesh: its label in `dataset_cfg` and its
+/// optimizer's iterations and learning rate in `deform_by_csd_cfg`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TaskRecord {
+    /// `("style", name)` or `("prompt", text)` ([`Task::label`]).
+    pub label: (&'static str, String),
+    /// Iterations of the task's schedule.
+    pub iterations: u64,
+    /// Adam's learning rate of the task's schedule.
+    pub lr: f64,
+}
+
 /// Stage 2: the objective a task optimizes, with its loop and Adam settings.
 pub struct BuiltObjective<'g> {
     /// The objective the loop evaluates.
@@ -448,12 +428,14 @@ pub struct BuiltObjective<'g> {
     pub spec: LoopSpec,
     /// Adam's settings (the style path has its own learning rate).
     pub adam: AdamConfig,
-    /// The style path's objective again, for the alignment the run reports.
-    pub style: Option<StyleObjective>,
+    /// The task's summary figure (the style path's alignment), reported before and after.
+    pub alignment: Option<Figure<'g>>,
     /// The renderer chosen for a text run, and why.
     pub renderer_choice: Option<String>,
-    /// `("style", name)` or `("prompt", text)`, as recorded in `deformation.npz`.
-    pub label: (&'static str, String),
+    /// Warnings about the task on this mesh (a weak style), reported when the loop starts.
+    pub warnings: Vec<String>,
+    /// What `deformation.npz` records of the task.
+    pub record: TaskRecord,
 }
 
 impl std::fmt::Debug for BuiltObjective<'_> {
@@ -461,7 +443,7 @@ impl std::fmt::Debug for BuiltObjective<'_> {
         f.debug_struct("BuiltObjective")
             .field("objective", &self.objective.describe())
             .field("spec", &self.spec)
-            .field("label", &self.label)
+            .field("record", &self.record)
             .finish_non_exhaustive()
     }
 }
@@ -469,61 +451,42 @@ impl std::fmt::Debug for BuiltObjective<'_> {
 /// Stage 2: builds the objective of `task` on the prepared mesh (the text path picks its renderer
 /// here).
 pub fn build_objective<'g>(
-    task: Task<'g>,
+    task: Box<dyn Task<'g> + 'g>,
     mesh: &TriMesh,
     config: &Config,
     halt_after: Option<u64>,
 ) -> Result<BuiltObjective<'g>> {
-    let label = match &task {
-        Task::Style(s) => ("style", s.name()),
-        Task::Text { prompt, .. } => ("prompt", prompt.clone()),
+    let schedule = task.schedule(config);
+    let record = TaskRecord {
+        label: task.label(),
+        iterations: schedule.iterations,
+        lr: schedule.lr,
     };
-    let spec = |iterations, steps_per_batch| LoopSpec {
-        iterations,
-        steps_per_batch,
-        checkpoint_every: config.run.checkpoint_every,
-        preview_every: config.run.preview_every,
-        halt_after,
-    };
-    let adam = |lr| AdamConfig {
-        lr,
-        beta1: config.optim.beta1,
-        beta2: config.optim.beta2,
-        eps: config.optim.eps,
-    };
-    Ok(match task {
-        Task::Style(style) => {
-            let obj = StyleObjective::new(&style, &mesh.positions, &mesh.faces);
-            let (iterations, lr) = config.iterations_and_lr(true);
-            BuiltObjective {
-                objective: Box::new(obj.clone()),
-                spec: spec(iterations, 1),
-                adam: adam(lr),
-                style: Some(obj),
-                renderer_choice: None,
-                label,
-            }
-        }
-        Task::Text { guidance, .. } => {
-            let (renderer, why) = raster_diff::select_renderer(config.render.backend)?;
-            let views = ViewSettings {
-                camera: config.camera.sampler.clone(),
-                views: config.camera.views,
-                width: config.render.width,
-                height: config.render.height,
-                adapt_distance: config.camera.adapt_distance,
-            };
-            let obj = TextObjective::new(renderer, guidance, &mesh.faces, views);
-            let (iterations, lr) = config.iterations_and_lr(false);
-            BuiltObjective {
-                objective: Box::new(obj),
-                spec: spec(iterations, config.optim.steps_per_batch),
-                adam: adam(lr),
-                style: None,
-                renderer_choice: Some(why),
-                label,
-            }
-        }
+    let BuiltTask {
+        objective,
+        renderer_choice,
+        warnings,
+        alignment,
+    } = task.build(mesh, config)?;
+    Ok(BuiltObjective {
+        objective,
+        spec: LoopSpec {
+            iterations: schedule.iterations,
+            steps_per_batch: schedule.steps_per_batch,
+            checkpoint_every: config.run.checkpoint_every,
+            preview_every: config.run.preview_every,
+            halt_after,
+        },
+        adam: AdamConfig {
+            lr: schedule.lr,
+            beta1: config.optim.beta1,
+            beta2: config.optim.beta2,
+            eps: config.optim.eps,
+        },
+        alignment,
+        renderer_choice,
+        warnings,
+        record,
     })
 }
 
@@ -587,7 +550,7 @@ pub fn write_outputs(
     x: &[[f64; 3]],
     config: &Config,
     source: &Path,
-    label: &(&'static str, String),
+    record: &TaskRecord,
 ) -> Result<TriMesh> {
     let mesh = &prepared.mesh;
     let x_saved: Vec<[f64; 3]> = x.iter().map(|p| p.map(|c| f64::from(c as f32))).collect();
@@ -620,7 +583,7 @@ pub fn write_outputs(
         }
     }
     let region = prepared.region.as_ref();
-    write_deformation(dir, mesh, x, config, source, label.0, &label.1, region)?;
+    write_deformation(dir, mesh, x, config, source, record, region)?;
     let free = region
         .filter(|_| config.region.tint)
         .map(|r| r.free.as_slice());
@@ -660,26 +623,50 @@ pub fn write_outputs(
     Ok(deformed)
 }
 
-/// Runs one request: `objective` is the task's identity, `make_task` builds the task (e.g. loads
+/// Runs one request: `kind` gives the task's identity, `make_task` builds the task (e.g. loads
 /// the models) — called only once the run directory is claimed, so refusals come before any
 /// expensive loading.
 ///
 /// The stages: [`prepare`] (nothing written yet), claim the run directory, [`build_objective`],
 /// [`initial_state`], the loop ([`run_loop`] with checkpoints, previews and metrics), then
 /// [`write_outputs`] and `run.json`.
-pub fn execute_with<'g>(
+pub fn execute_with<'g, T: Task<'g> + 'g>(
     request: &RunRequest,
-    objective: ObjectiveIdentity,
-    make_task: impl FnOnce() -> Result<Task<'g>>,
+    kind: &dyn TaskKind,
+    make_task: impl FnOnce() -> Result<T>,
+    options: &RunOptions,
+    hooks: RunHooks<'_>,
+) -> Result<RunOutcome> {
+    let prepared = prepare(request, kind)?;
+    let unread = crate::identity::unread_settings_warning(&request.config, kind)?;
+    execute_prepared(
+        request,
+        prepared,
+        kind.inputs(),
+        unread,
+        make_task,
+        options,
+        hooks,
+    )
+}
+
+/// [`execute_with`] from stage 2 on: `task_inputs` are the kind's inputs, `unread` the warning
+/// about settings the kind does not read.
+fn execute_prepared<'g, T: Task<'g> + 'g>(
+    request: &RunRequest,
+    mut prepared: Prepared,
+    task_inputs: Vec<(String, PathBuf)>,
+    unread: Option<String>,
+    make_task: impl FnOnce() -> Result<T>,
     options: &RunOptions,
     hooks: RunHooks<'_>,
 ) -> Result<RunOutcome> {
     let RunHooks { progress, cancel } = hooks;
     let config = &request.config;
-    let mut prepared = prepare(request, objective, options.model.as_ref())?;
     let dir = RunDir::new(&request.out);
     let mut inputs = vec![("input mesh".to_string(), request.mesh.clone())];
     inputs.extend(options.inputs.iter().cloned());
+    inputs.extend(task_inputs);
     let (lock, start) = claim_run_dir(&dir, request, options, &prepared, &inputs)?;
     if matches!(start, Start::Complete) {
         return Ok(RunOutcome {
@@ -691,23 +678,17 @@ pub fn execute_with<'g>(
         });
     }
     let task = make_task_unless_stopped(&dir, &start, cancel, make_task, &mut inputs)?;
-    let style = match &task {
-        Task::Style(s) => Some(s.clone()),
-        Task::Text { warnings, .. } => {
-            for w in warnings {
-                progress.warning(&format!("warning: {w}"));
-                prepared.warnings.push(w.clone());
-            }
-            None
-        }
-    };
+    for w in task.warnings() {
+        progress.warning(&format!("warning: {w}"));
+        prepared.warnings.push(w);
+    }
     if config.darap.lambda == 0.0 {
         let w = "darap.lambda = 0: the target normals have no effect, so the optimization cannot \
                  change the mesh (the result is the input, normalized); λ 8 is the reference's";
         progress.warning(&format!("warning: {w}"));
         prepared.warnings.push(w.to_string());
     }
-    if let Some(w) = crate::identity::unread_settings_warning(config, style.is_some())? {
+    if let Some(w) = unread {
         progress.warning(&format!("warning: {w}"));
         prepared.warnings.push(w);
     }
@@ -715,19 +696,13 @@ pub fn execute_with<'g>(
         mut objective,
         spec,
         adam,
-        style: style_objective,
+        alignment: figure,
         renderer_choice,
-        label,
-    } = build_objective(task, &prepared.mesh, config, request.halt_after)?;
+        warnings: task_warnings,
+        record,
+    } = build_objective(Box::new(task), &prepared.mesh, config, request.halt_after)?;
     let mut state = initial_state(start, &dir, &prepared, config, adam)?;
-    if let (Some(style), Some(o)) = (&style, &style_objective)
-        && let Some(w) = crate::style::target_angle::weak_style_warning(
-            style,
-            &prepared.mesh.positions,
-            &prepared.mesh.faces,
-            o.targets(),
-        )
-    {
+    for w in task_warnings {
         progress.warning(&format!("warning: {w}"));
         prepared.warnings.push(w);
     }
@@ -744,9 +719,7 @@ pub fn execute_with<'g>(
         progress.warning(&format!("warning: {w}"));
         prepared.warnings.push(w);
     }
-    let alignment_before = style_objective
-        .as_ref()
-        .map(|o| o.mean_alignment(&prepared.mesh.positions));
+    let alignment_before = figure.as_ref().map(|f| f(&prepared.mesh.positions));
     let looped = ObservedLoop {
         dir: &dir,
         lock: &lock,
@@ -787,10 +760,10 @@ pub fn execute_with<'g>(
         &state.x,
         config,
         &request.mesh,
-        &label,
+        &record,
     )?;
-    let alignment = match (&style_objective, alignment_before) {
-        (Some(o), Some(before)) => Some((before, o.mean_alignment(&deformed.positions))),
+    let alignment = match (&figure, alignment_before) {
+        (Some(f), Some(before)) => Some((before, f(&deformed.positions))),
         _ => None,
     };
     lock.ensure_held()?;
@@ -840,14 +813,15 @@ fn claim_run_dir(
 }
 
 /// Stage 3 of [`execute_with`]: the caller's task (models load here), unless the run was
-/// cancelled before or while it loaded; an exemplar becomes an input no output may replace.
-fn make_task_unless_stopped<'g>(
+/// cancelled before or while it loaded; the task's inputs ([`TaskKind::inputs`], an exemplar)
+/// become inputs no output may replace.
+fn make_task_unless_stopped<'g, T: Task<'g>>(
     dir: &RunDir,
     start: &Start<CheckpointState>,
     cancel: &AtomicBool,
-    make_task: impl FnOnce() -> Result<Task<'g>>,
+    make_task: impl FnOnce() -> Result<T>,
     inputs: &mut Vec<(String, PathBuf)>,
-) -> Result<Task<'g>> {
+) -> Result<T> {
     let stopped_before = || {
         cancel.load(Ordering::SeqCst).then(|| Stopped {
             dir: dir.root().to_path_buf(),
@@ -864,8 +838,9 @@ fn make_task_unless_stopped<'g>(
     if let Some(s) = stopped_before() {
         return Err(s.into());
     }
-    if let Task::Style(Style::Exemplar { path, .. }) = &task {
-        inputs.push(("exemplar mesh".into(), path.clone()));
+    let task_inputs = task.inputs();
+    if !task_inputs.is_empty() {
+        inputs.extend(task_inputs);
         rundir::refuse_overwriting_inputs(
             &rundir::RUN_FILES
                 .iter()
@@ -1027,12 +1002,12 @@ fn write_deformation(
     x: &[[f64; 3]],
     config: &Config,
     source: &Path,
-    task_key: &str,
-    task_value: &str,
+    record: &TaskRecord,
     region: Option<&ResolvedRegion>,
 ) -> Result<()> {
     // The optimizer settings this run used (`[style]`'s on the model-free path).
-    let (n_iters, lr) = config.iterations_and_lr(task_key == "style");
+    let (n_iters, lr) = (record.iterations, record.lr);
+    let (task_key, task_value) = (record.label.0, &record.label.1);
     let csd_cfg = serde_json::json!({
         "local_step_procrustes": { "lamb": config.darap.lambda, "normalize_target_normals": true },
         "arap_energy_type": "spokes_and_rims_mine",

@@ -8,9 +8,8 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use mesh_core::TriMesh;
 use stylize::config::Config;
-use stylize::identity::ObjectiveIdentity;
 use stylize::runner::{
-    Progress, RunHooks, RunOptions, RunOutcome, RunRequest, Task, execute, execute_with,
+    Progress, RunHooks, RunOptions, RunOutcome, RunRequest, execute, execute_with,
 };
 use stylize::snapshots::{FILE_NAME, Snapshots};
 use stylize::style::Style;
@@ -52,7 +51,7 @@ fn request(mesh: &Path, out: &Path, config: Config, resume: bool, halt: Option<u
 }
 
 fn run(r: &RunRequest) -> stylize::Result<RunOutcome> {
-    execute(r, Task::Style(Style::Cube))
+    execute(r, Style::Cube)
 }
 
 /// Sets the cancel flag once iteration `at` is reported (as a signal handler would).
@@ -78,8 +77,8 @@ fn run_cancelled_at(r: &RunRequest, at: u64) -> stylize::Result<RunOutcome> {
     };
     execute_with(
         r,
-        ObjectiveIdentity::of_style(&Style::Cube),
-        || Ok(Task::Style(Style::Cube)),
+        &Style::Cube,
+        || Ok(Style::Cube),
         &RunOptions::default(),
         hooks,
     )

@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use stylize::config::Config;
-use stylize::runner::{RunRequest, Task, execute};
+use stylize::runner::{RunRequest, execute};
 use stylize::style::Style;
 
 fn ok<T, E: std::fmt::Debug>(r: Result<T, E>) -> T {
@@ -33,7 +33,7 @@ fn run_warnings(style: Style, out: &Path) -> Vec<String> {
         resume: false,
         halt_after: None,
     };
-    let outcome = ok(execute(&request, Task::Style(style)));
+    let outcome = ok(execute(&request, style));
     let summary: serde_json::Value = ok(serde_json::from_slice(&ok(std::fs::read(
         out.join("run.json"),
     ))));

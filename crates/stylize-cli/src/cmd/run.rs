@@ -6,10 +6,11 @@ use anyhow::{Context, bail};
 
 use crate::cmd::shared::RunSettings;
 use crate::config::Config;
-use crate::runner::{RunOptions, RunRequest, Task, execute_with};
+use crate::runner::{RunOptions, RunRequest, execute_with};
 use crate::signals::{Interrupted, shell_quote};
-use stylize::identity::{ModelIdentity, ObjectiveIdentity};
+use stylize::identity::ModelIdentity;
 use stylize::style::Style;
+use stylize::task::{Prompt, PromptTask};
 
 /// Arguments of `stylize run`.
 #[derive(clap::Args, Debug)]
@@ -161,17 +162,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     m.display()
                 );
             }
-            if let Style::Exemplar { path, .. } = &style {
-                options.inputs.push(("exemplar mesh".into(), path.clone()));
-            }
-            let objective = ObjectiveIdentity::of_style(&style);
-            execute_with(
-                &request,
-                log,
-                objective,
-                || Ok(Task::Style(style)),
-                &options,
-            )
+            execute_with(&request, log, &style, || Ok(style.clone()), &options)
         }
         (None, Some(prompt)) => {
             if !cfg!(feature = "text") {
@@ -183,26 +174,25 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                      Without models, try a model-free style: --style cube"
                 );
             };
-            options.model = Some(ModelIdentity::of_dir(model)?);
+            let kind = Prompt {
+                text: prompt.clone(),
+                model: Some(ModelIdentity::of_dir(model)?),
+            };
             options
                 .inputs
                 .push(("model manifest".into(), model.join("manifest.toml")));
-            let objective = ObjectiveIdentity::Prompt {
-                prompt: prompt.clone(),
-                model: None,
-            };
             execute_with(
                 &request,
                 log,
-                objective,
+                &kind,
                 || {
                     let set = stylize::models::ModelSet::open(model, &config)?;
                     if let Some(w) = set.cpu_time_warning(&config) {
                         eprintln!("warning: {w}");
                     }
                     let warnings = set.prompt_warnings(prompt, &config)?;
-                    Ok(Task::Text {
-                        prompt: prompt.clone(),
+                    Ok(PromptTask {
+                        prompt: kind.clone(),
                         guidance: Box::new(set.into_guidance(prompt, &config)?),
                         warnings,
                     })
