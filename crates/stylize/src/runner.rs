@@ -14,7 +14,7 @@ use npy::{NpyArray, NpyData};
 use optim::{Adam, AdamConfig};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use raster_diff::{Images, Renderer};
+use raster_diff::Images;
 use rundir::{Claim, ResumeMode, RunDir, RunLock, Start};
 
 use crate::checkpoint::{CHECKPOINT_VERSION, Checkpoint, CheckpointState};
