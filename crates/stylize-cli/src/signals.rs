@@ -145,5 +145,29 @@ mod tests {
         .context("run on m.obj");
         assert_eq!(exit_code(&e), 143);
         assert_eq!(exit_code(&anyhow::anyhow!("other")), 1);
+        // A lock held by another process, however it is wrapped: EX_TEMPFAIL.
+        let busy = || rundir::LockError::Busy {
+            dir: "r".into(),
+            path: "r/run.lock".into(),
+            detail: "empty".into(),
+        };
+        let wrapped = stylize::Error::Context {
+            context: "run on m.obj".into(),
+            source: Box::new(stylize::Error::from(busy())),
+        };
+        assert_eq!(exit_code(&anyhow::Error::new(wrapped)), 75);
+        assert_eq!(
+            exit_code(&anyhow::Error::new(rundir::Error::from(busy()))),
+            75
+        );
+        assert_eq!(exit_code(&anyhow::Error::new(busy())), 75);
+        let lost = rundir::LockError::Lost {
+            dir: "r".into(),
+            holder: None,
+        };
+        assert_eq!(
+            exit_code(&anyhow::Error::new(stylize::Error::from(lost))),
+            1
+        );
     }
 }
