@@ -296,25 +296,26 @@ pub(crate) fn faces_intersect(fa: [u32; 3], ta: &Tri, fb: [u32; 3], tb: &Tri) ->
     let (Some(_), Some(_)) = (ta.drop, tb.drop) else {
         return false;
     };
-    let mut shared = Vec::with_capacity(3);
+    // Shared corners as (index in a, index in b); no allocation on this hot path.
+    let mut shared = [(0usize, 0usize); 3];
+    let mut n = 0;
     for (i, &v) in fa.iter().enumerate() {
         if let Some(j) = fb.iter().position(|&w| w == v) {
-            shared.push((i, j));
+            shared[n] = (i, j);
+            n += 1;
         }
     }
-    match shared.len() {
+    match n {
         0 => triangles_intersect(ta, tb),
         1 => {
             let (i, j) = shared[0];
             vertex_adjacent_intersect(&rotate(ta, i), &rotate(tb, j))
         }
         2 => {
-            let (i0, j0) = shared[0];
-            let (i1, _) = shared[1];
+            let ((i0, j0), (i1, j1)) = (shared[0], shared[1]);
             let a = ta.p[3 - i0 - i1];
-            let b = tb.p[3 - j0 - shared[1].1];
-            let (u, v) = (ta.p[i0], ta.p[i1]);
-            edge_fold(u, v, a, b, ta)
+            let b = tb.p[3 - j0 - j1];
+            edge_fold(ta.p[i0], ta.p[i1], a, b, ta)
         }
         _ => true,
     }
@@ -344,10 +345,19 @@ fn edge_fold(u: [f64; 3], v: [f64; 3], a: [f64; 3], b: [f64; 3], ta: &Tri) -> bo
 
 /// `(v, a₁, b₁)` and `(v, a₂, b₂)` sharing corner `v`: do they meet other than at `v`?
 fn vertex_adjacent_intersect(ta: &Tri, tb: &Tri) -> bool {
-    let sb = plane_sides(ta, tb);
-    let sa = plane_sides(tb, ta);
-    let [_, a1, b1] = ta.p;
+    let [v, a1, b1] = ta.p;
     let [_, a2, b2] = tb.p;
+    // The shared corner is on both planes; when the other two corners of one face are strictly
+    // on one side of the other's plane, that face meets the plane only at the corner: no more.
+    let sb = [Sign::Zero, o3(v, a1, b1, a2), o3(v, a1, b1, b2)];
+    if sb[1] == sb[2] && sb[1] != Sign::Zero {
+        return false;
+    }
+    let [_, x, y] = tb.p;
+    let sa = [Sign::Zero, o3(v, x, y, a1), o3(v, x, y, b1)];
+    if sa[1] == sa[2] && sa[1] != Sign::Zero {
+        return false;
+    }
     segment_meets(a1, b1, sa[1], sa[2], tb)
         || segment_meets(a2, b2, sb[1], sb[2], ta)
         || enters_corner(a1, sa[1], tb)
