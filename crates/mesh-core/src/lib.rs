@@ -10,15 +10,18 @@
 //! Layers: plain slice functions ([`geometry`], [`normals`], [`normalize`], [`topology`],
 //! [`subdivide`], [`shapes`], [`region`]) work on `&[[f64; 3]]` / `&[[u32; 3]]`; [`bvh`] is the one
 //! box hierarchy over a mesh's triangles (closest points, rays, box and self-overlap queries, refit);
-//! [`remesh`] remeshes isotropically on it (no I/O); [`validate`] checks and repairs a
+//! [`remesh`] remeshes isotropically on it (no I/O); [`intersect`] finds the pairs of faces that
+//! intersect, exactly, on the BVH and the robust orientation tests of [`predicates`]; [`validate`] checks and repairs a
 //! [`TriMesh`]; with the default feature `io`, [`io`] reads and writes OBJ, OFF, PLY and glTF/GLB.
 //! NumPy files live in the `npy` crate, the reference's saved-deformation `.npz` in `stylize`.
 
 pub mod bvh;
 mod error;
 pub mod geometry;
+pub mod intersect;
 pub mod normalize;
 pub mod normals;
+pub mod predicates;
 pub mod region;
 pub mod remesh;
 pub mod shapes;

@@ -1,0 +1,478 @@
+//! Exact self-intersection detection: every pair of triangles of a mesh that intersect.
+//!
+//! Candidates come from the [`Bvh`]'s self-overlap traversal (pairs of faces whose closed boxes
+//! overlap); each candidate is decided by an exact triangle–triangle test built only on the
+//! [`predicates`](crate::predicates) (`orient3d`, and `orient2d` on a coordinate projection for
+//! coplanar configurations), so the answer is the exact answer for the given `f64` coordinates —
+//! no tolerance, no epsilon.
+//!
+//! # Definitions
+//!
+//! Triangles are closed point sets (edges and corners included). Adjacency is by vertex
+//! **index** (two faces are adjacent when their index triples share an index; two distinct
+//! vertices at the same position are not the same vertex — weld first, see
+//! [`validate`](crate::validate), or an unwelded seam reports its touching faces).
+//!
+//! - **Degenerate faces** (zero area: the three corners exactly collinear, repeated corners
+//!   included) have no interior; they are **reported separately** in
+//!   [`SelfIntersections::degenerate`] and are never part of a pair.
+//! - **Non-adjacent faces** (no shared index) intersect when the closed triangles share at least
+//!   one point: crossing, touching at a point or along an edge, and coplanar overlap all count.
+//! - **Faces sharing exactly one vertex** intersect when they meet anywhere other than that
+//!   vertex (the intersection of the two closed triangles is more than the shared corner).
+//! - **Faces sharing an edge** intersect when they meet anywhere other than the shared edge. For
+//!   two non-degenerate triangles this happens exactly when they **fold onto each other**: the two
+//!   opposite vertices are coplanar with the edge and on the same side of it, so the interiors
+//!   overlap. (A flat neighbour — coplanar, opposite sides — and any dihedral angle other than a
+//!   full fold do not count.)
+//! - **Faces with the same three vertices** (a duplicated face, either orientation) intersect.
+//!
+//! # The exact triangle–triangle test
+//!
+//! Two closed triangles meet iff an edge of one meets the other (the intersection is a convex
+//! set; one of its extreme points lies on the relative boundary of a triangle). An edge `pq`
+//! against a triangle `T`: if both endpoints are strictly on one side of `T`'s plane, no; if both
+//! are in the plane, a 2-D segment–triangle test on the projection that drops an axis along which
+//! `T` projects to a non-degenerate triangle (chosen exactly: `orient2d` of `T` there is non-zero);
+//! otherwise the segment crosses the plane in one point, which is in `T` iff
+//! `orient3d(p, q, tᵢ, tᵢ₊₁)` has no two opposite signs over the three edges of `T`. The adjacent
+//! cases reduce to the same predicates: a shared edge is a fold iff `orient3d(u, v, a, b) = 0` and
+//! `orient2d(u, v, a)`, `orient2d(u, v, b)` agree; a shared vertex `v` of `(v, a₁, b₁)` and
+//! `(v, a₂, b₂)` is exceeded iff an opposite edge `aᵢbᵢ` meets the other triangle or one of the
+//! edges leaving `v` enters the other triangle's corner cone at `v`.
+//!
+//! # Cost and limits
+//!
+//! The check costs one BVH refit (`O(F)`) plus the self-overlap traversal and one exact test per
+//! candidate. The candidate set is every pair of faces whose bounding boxes overlap: on a clean
+//! mesh about `O(F)` (each face's neighbours), in the worst case — every box overlapping every
+//! other, e.g. a mesh crumpled into a ball — `F(F − 1)/2`. Each test is `O(1)`: at most about 30
+//! filtered predicates, and the exact fallback's integers have at most about 6,300 bits, so there
+//! is no unbounded work per pair. Every finite `f64` coordinate is supported (see the predicates'
+//! range); NaN or infinite coordinates of a vertex used by a face, an out-of-range index and a
+//! mesh with no faces are refused with an [`IntersectError`].
+
+use crate::bvh::{Bvh, BvhError};
+use crate::predicates::{Sign, orient2d_projected, orient3d_unchecked};
+
+/// What the self-intersection check refuses.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum IntersectError {
+    /// The mesh has no faces.
+    #[error("self-intersection check: the mesh has no faces")]
+    Empty,
+    /// An out-of-range index, a non-finite vertex, or a refit with another vertex count.
+    #[error("self-intersection check: {0}")]
+    Mesh(#[from] BvhError),
+    /// [`new_pairs`] was given results for meshes with different face counts.
+    #[error(
+        "self-intersection check: the source has {source_faces} faces and the deformed mesh \
+         {deformed_faces} (new intersections need the same connectivity)"
+    )]
+    DifferentMeshes {
+        /// Faces of the source.
+        source_faces: usize,
+        /// Faces of the deformed mesh.
+        deformed_faces: usize,
+    },
+}
+
+/// The self-intersection figures of one connected component (faces joined through shared
+/// vertices along edges, as [`topology::connected_components`](crate::topology::connected_components)
+/// labels them; numbered in order of each component's smallest vertex index).
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct ComponentIntersections {
+    /// Faces in the component.
+    pub faces: usize,
+    /// Of those, faces in at least one intersecting pair.
+    pub involved_faces: usize,
+    /// Intersecting pairs with both faces in this component.
+    pub pairs_within: usize,
+    /// Intersecting pairs with one face here and the other in another component.
+    pub pairs_across: usize,
+}
+
+/// The answer of a self-intersection check (see the [module docs](self) for the definitions).
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct SelfIntersections {
+    /// Intersecting face pairs `(a, b)`, `a < b`, sorted.
+    pub pairs: Vec<(u32, u32)>,
+    /// Faces in at least one pair, sorted.
+    pub faces: Vec<u32>,
+    /// Zero-area faces (never paired), sorted.
+    pub degenerate: Vec<u32>,
+    /// Per connected component.
+    pub per_component: Vec<ComponentIntersections>,
+    /// Faces of the mesh checked.
+    pub num_faces: usize,
+    /// Candidate pairs the BVH produced (overlapping boxes) — the work done.
+    pub candidates: usize,
+}
+
+/// The pairs `deformed` has that `source` does not (same connectivity: same faces in the same
+/// order), sorted. Refuses results of meshes with different face counts.
+pub fn new_pairs(
+    source: &SelfIntersections,
+    deformed: &SelfIntersections,
+) -> Result<Vec<(u32, u32)>, IntersectError> {
+    if source.num_faces != deformed.num_faces {
+        return Err(IntersectError::DifferentMeshes {
+            source_faces: source.num_faces,
+            deformed_faces: deformed.num_faces,
+        });
+    }
+    let mut out = Vec::new();
+    let mut i = 0;
+    for &p in &deformed.pairs {
+        while i < source.pairs.len() && source.pairs[i] < p {
+            i += 1;
+        }
+        if i >= source.pairs.len() || source.pairs[i] != p {
+            out.push(p);
+        }
+    }
+    Ok(out)
+}
+
+/// All intersecting face pairs of `(positions, faces)` (a one-off [`SelfIntersectionChecker`]).
+pub fn self_intersections(
+    positions: &[[f64; 3]],
+    faces: &[[u32; 3]],
+) -> Result<SelfIntersections, IntersectError> {
+    Ok(SelfIntersectionChecker::new(positions, faces)?.check())
+}
+
+/// A reusable checker: keeps the BVH and the component labels of one connectivity, and only
+/// refits the tree when the positions move ([`check_moved`](Self::check_moved)), for callers that
+/// check the same mesh at many deformations (a λ slider).
+#[derive(Clone, Debug)]
+pub struct SelfIntersectionChecker {
+    bvh: Bvh,
+    face_component: Vec<u32>,
+    component_faces: Vec<usize>,
+}
+
+impl SelfIntersectionChecker {
+    /// Builds the tree over the mesh. Refuses an empty face list, an out-of-range index and a
+    /// non-finite vertex used by a face.
+    pub fn new(
+        positions: &[[f64; 3]],
+        faces: &[[u32; 3]],
+    ) -> Result<SelfIntersectionChecker, IntersectError> {
+        if faces.is_empty() {
+            return Err(IntersectError::Empty);
+        }
+        let bvh = Bvh::new(positions, faces)?;
+        let (labels, _) = crate::topology::connected_components(positions.len(), faces);
+        // Renumber the components that own faces, in order of their smallest vertex label.
+        let mut remap = vec![u32::MAX; labels.len()];
+        let mut used: Vec<u32> = faces.iter().map(|f| labels[f[0] as usize]).collect();
+        used.sort_unstable();
+        used.dedup();
+        for (k, &l) in used.iter().enumerate() {
+            remap[l as usize] = k as u32;
+        }
+        let face_component: Vec<u32> = faces
+            .iter()
+            .map(|f| remap[labels[f[0] as usize] as usize])
+            .collect();
+        let mut component_faces = vec![0usize; used.len()];
+        for &c in &face_component {
+            component_faces[c as usize] += 1;
+        }
+        Ok(SelfIntersectionChecker {
+            bvh,
+            face_component,
+            component_faces,
+        })
+    }
+
+    /// Number of faces.
+    pub fn num_faces(&self) -> usize {
+        self.bvh.len()
+    }
+
+    /// Moves the vertices (refits the tree; same vertex count). Refuses a different vertex count
+    /// or a non-finite vertex, leaving the checker unchanged.
+    pub fn update(&mut self, positions: &[[f64; 3]]) -> Result<(), IntersectError> {
+        Ok(self.bvh.refit(positions)?)
+    }
+
+    /// [`update`](Self::update) then [`check`](Self::check).
+    pub fn check_moved(
+        &mut self,
+        positions: &[[f64; 3]],
+    ) -> Result<SelfIntersections, IntersectError> {
+        self.update(positions)?;
+        Ok(self.check())
+    }
+
+    /// The self-intersections at the current positions.
+    pub fn check(&self) -> SelfIntersections {
+        let faces = self.bvh.faces();
+        let tris: Vec<Tri> = (0..faces.len() as u32)
+            .map(|f| Tri::new(self.bvh.triangle(f)))
+            .collect();
+        let degenerate: Vec<u32> = (0..faces.len() as u32)
+            .filter(|&f| tris[f as usize].drop.is_none())
+            .collect();
+        let mut pairs = Vec::new();
+        let mut candidates = 0usize;
+        self.bvh.for_each_overlapping_pair(|a, b| {
+            candidates += 1;
+            if faces_intersect(
+                faces[a as usize],
+                &tris[a as usize],
+                faces[b as usize],
+                &tris[b as usize],
+            ) {
+                pairs.push((a, b));
+            }
+        });
+        pairs.sort_unstable();
+        let mut involved: Vec<u32> = pairs.iter().flat_map(|&(a, b)| [a, b]).collect();
+        involved.sort_unstable();
+        involved.dedup();
+        let mut per_component: Vec<ComponentIntersections> = self
+            .component_faces
+            .iter()
+            .map(|&n| ComponentIntersections {
+                faces: n,
+                ..Default::default()
+            })
+            .collect();
+        for &f in &involved {
+            per_component[self.face_component[f as usize] as usize].involved_faces += 1;
+        }
+        for &(a, b) in &pairs {
+            let (ca, cb) = (
+                self.face_component[a as usize] as usize,
+                self.face_component[b as usize] as usize,
+            );
+            if ca == cb {
+                per_component[ca].pairs_within += 1;
+            } else {
+                per_component[ca].pairs_across += 1;
+                per_component[cb].pairs_across += 1;
+            }
+        }
+        SelfIntersections {
+            pairs,
+            faces: involved,
+            degenerate,
+            per_component,
+            num_faces: faces.len(),
+            candidates,
+        }
+    }
+}
+
+/// A face's corners and the axis its exact 2-D projection drops (`None`: degenerate).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Tri {
+    pub(crate) p: [[f64; 3]; 3],
+    pub(crate) drop: Option<usize>,
+}
+
+impl Tri {
+    pub(crate) fn new(p: [[f64; 3]; 3]) -> Tri {
+        // Try the axes in order of the float normal's magnitude; accept the first whose exact
+        // projected orientation is non-zero (the projection is then injective on the plane).
+        let u = crate::geometry::sub(p[1], p[0]);
+        let v = crate::geometry::sub(p[2], p[0]);
+        let n = crate::geometry::cross(u, v);
+        let mut axes = [0usize, 1, 2];
+        axes.sort_by(|&i, &j| n[j].abs().total_cmp(&n[i].abs()));
+        let drop = axes
+            .into_iter()
+            .find(|&k| orient2d_projected(p[0], p[1], p[2], k) != Sign::Zero);
+        Tri { p, drop }
+    }
+}
+
+/// Whether two faces (indices and their [`Tri`]s) intersect under the module's definitions.
+pub(crate) fn faces_intersect(fa: [u32; 3], ta: &Tri, fb: [u32; 3], tb: &Tri) -> bool {
+    let (Some(_), Some(_)) = (ta.drop, tb.drop) else {
+        return false;
+    };
+    // Shared corners as (index in a, index in b); no allocation on this hot path.
+    let mut shared = [(0usize, 0usize); 3];
+    let mut n = 0;
+    for (i, &v) in fa.iter().enumerate() {
+        if let Some(j) = fb.iter().position(|&w| w == v) {
+            shared[n] = (i, j);
+            n += 1;
+        }
+    }
+    match n {
+        0 => triangles_intersect(ta, tb),
+        1 => {
+            let (i, j) = shared[0];
+            vertex_adjacent_intersect(&rotate(ta, i), &rotate(tb, j))
+        }
+        2 => {
+            let ((i0, j0), (i1, j1)) = (shared[0], shared[1]);
+            let a = ta.p[3 - i0 - i1];
+            let b = tb.p[3 - j0 - j1];
+            edge_fold(ta.p[i0], ta.p[i1], a, b, ta)
+        }
+        _ => true,
+    }
+}
+
+/// The triangle with its corners cycled so that corner `i` comes first.
+fn rotate(t: &Tri, i: usize) -> Tri {
+    Tri {
+        p: [t.p[i], t.p[(i + 1) % 3], t.p[(i + 2) % 3]],
+        drop: t.drop,
+    }
+}
+
+#[inline]
+fn o3(a: [f64; 3], b: [f64; 3], c: [f64; 3], d: [f64; 3]) -> Sign {
+    orient3d_unchecked(a, b, c, d)
+}
+
+/// Faces `(u, v, a)` and `(v, u, b)` sharing edge `uv`: a fold (coplanar, same side).
+fn edge_fold(u: [f64; 3], v: [f64; 3], a: [f64; 3], b: [f64; 3], ta: &Tri) -> bool {
+    if o3(u, v, a, b) != Sign::Zero {
+        return false;
+    }
+    let Some(k) = ta.drop else { return false };
+    orient2d_projected(u, v, a, k) == orient2d_projected(u, v, b, k)
+}
+
+/// `(v, a₁, b₁)` and `(v, a₂, b₂)` sharing corner `v`: do they meet other than at `v`?
+fn vertex_adjacent_intersect(ta: &Tri, tb: &Tri) -> bool {
+    let [v, a1, b1] = ta.p;
+    let [_, a2, b2] = tb.p;
+    // The shared corner is on both planes; when the other two corners of one face are strictly
+    // on one side of the other's plane, that face meets the plane only at the corner: no more.
+    let sb = [Sign::Zero, o3(v, a1, b1, a2), o3(v, a1, b1, b2)];
+    if sb[1] == sb[2] && sb[1] != Sign::Zero {
+        return false;
+    }
+    let [_, x, y] = tb.p;
+    let sa = [Sign::Zero, o3(v, x, y, a1), o3(v, x, y, b1)];
+    if sa[1] == sa[2] && sa[1] != Sign::Zero {
+        return false;
+    }
+    segment_meets(a1, b1, sa[1], sa[2], tb)
+        || segment_meets(a2, b2, sb[1], sb[2], ta)
+        || enters_corner(a1, sa[1], tb)
+        || enters_corner(b1, sa[2], tb)
+        || enters_corner(a2, sb[1], ta)
+        || enters_corner(b2, sb[2], ta)
+}
+
+/// Whether the segment from `t`'s first corner to `a` (with `a`'s side of `t`'s plane) contains
+/// points of `t` other than that corner: `a` coplanar and inside the corner's cone.
+fn enters_corner(a: [f64; 3], side: Sign, t: &Tri) -> bool {
+    if side != Sign::Zero {
+        return false;
+    }
+    let Some(k) = t.drop else { return false };
+    let [v, x, y] = t.p;
+    let s = orient2d_projected(v, x, y, k);
+    let s1 = orient2d_projected(v, x, a, k);
+    let s2 = orient2d_projected(v, a, y, k);
+    (s1 == s || s1 == Sign::Zero) && (s2 == s || s2 == Sign::Zero) && a != v
+}
+
+/// The side of `t`'s plane each corner of `q` is on.
+fn plane_sides(t: &Tri, q: &Tri) -> [Sign; 3] {
+    let [a, b, c] = t.p;
+    [
+        o3(a, b, c, q.p[0]),
+        o3(a, b, c, q.p[1]),
+        o3(a, b, c, q.p[2]),
+    ]
+}
+
+fn strictly_one_side(s: &[Sign; 3]) -> bool {
+    s[0] != Sign::Zero && s[0] == s[1] && s[1] == s[2]
+}
+
+/// Two non-degenerate closed triangles share a point.
+pub(crate) fn triangles_intersect(ta: &Tri, tb: &Tri) -> bool {
+    let sb = plane_sides(ta, tb);
+    if strictly_one_side(&sb) {
+        return false;
+    }
+    let sa = plane_sides(tb, ta);
+    if strictly_one_side(&sa) {
+        return false;
+    }
+    if sb.iter().all(|&s| s == Sign::Zero) {
+        let Some(k) = ta.drop else { return false };
+        return (0..3).any(|i| segment_triangle_2d(tb.p[i], tb.p[(i + 1) % 3], ta, k))
+            || point_in_triangle_2d(ta.p[0], tb, k);
+    }
+    (0..3).any(|i| {
+        let j = (i + 1) % 3;
+        segment_meets(tb.p[i], tb.p[j], sb[i], sb[j], ta)
+    }) || (0..3).any(|i| {
+        let j = (i + 1) % 3;
+        segment_meets(ta.p[i], ta.p[j], sa[i], sa[j], tb)
+    })
+}
+
+/// The closed segment `pq` (with the sides of `t`'s plane its ends are on) meets triangle `t`.
+fn segment_meets(p: [f64; 3], q: [f64; 3], sp: Sign, sq: Sign, t: &Tri) -> bool {
+    if sp == sq && sp != Sign::Zero {
+        return false;
+    }
+    let Some(k) = t.drop else { return false };
+    if sp == Sign::Zero && sq == Sign::Zero {
+        return segment_triangle_2d(p, q, t, k);
+    }
+    // One crossing point, between p and q: inside iff no two opposite edge signs.
+    let [a, b, c] = t.p;
+    let s = [o3(p, q, a, b), o3(p, q, b, c), o3(p, q, c, a)];
+    !(s.contains(&Sign::Positive) && s.contains(&Sign::Negative))
+}
+
+/// Coplanar: the closed segment `pq` meets `t`, both seen on the plane that drops axis `k`.
+fn segment_triangle_2d(p: [f64; 3], q: [f64; 3], t: &Tri, k: usize) -> bool {
+    point_in_triangle_2d(p, t, k)
+        || point_in_triangle_2d(q, t, k)
+        || (0..3).any(|i| segments_meet_2d(p, q, t.p[i], t.p[(i + 1) % 3], k))
+}
+
+/// Coplanar: `x` in the closed non-degenerate triangle `t` (either orientation).
+fn point_in_triangle_2d(x: [f64; 3], t: &Tri, k: usize) -> bool {
+    let [a, b, c] = t.p;
+    let s = [
+        orient2d_projected(a, b, x, k),
+        orient2d_projected(b, c, x, k),
+        orient2d_projected(c, a, x, k),
+    ];
+    !(s.contains(&Sign::Positive) && s.contains(&Sign::Negative))
+}
+
+/// `r` lies in the axis box of `p` and `q` on the projection dropping `k` (for collinear points:
+/// on the closed segment).
+fn in_box_2d(p: [f64; 3], q: [f64; 3], r: [f64; 3], k: usize) -> bool {
+    (0..3)
+        .filter(|&i| i != k)
+        .all(|i| p[i].min(q[i]) <= r[i] && r[i] <= p[i].max(q[i]))
+}
+
+/// Coplanar: the closed segments `pq` and `rs` meet (projection dropping `k`).
+fn segments_meet_2d(p: [f64; 3], q: [f64; 3], r: [f64; 3], s: [f64; 3], k: usize) -> bool {
+    let o1 = orient2d_projected(p, q, r, k);
+    let o2 = orient2d_projected(p, q, s, k);
+    let o3 = orient2d_projected(r, s, p, k);
+    let o4 = orient2d_projected(r, s, q, k);
+    if o1.as_i8() * o2.as_i8() < 0 && o3.as_i8() * o4.as_i8() < 0 {
+        return true;
+    }
+    (o1 == Sign::Zero && in_box_2d(p, q, r, k))
+        || (o2 == Sign::Zero && in_box_2d(p, q, s, k))
+        || (o3 == Sign::Zero && in_box_2d(r, s, p, k))
+        || (o4 == Sign::Zero && in_box_2d(r, s, q, k))
+}
+
+#[cfg(test)]
+mod tests;

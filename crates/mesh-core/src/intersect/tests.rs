@@ -1,0 +1,566 @@
+use super::*;
+use crate::predicates::tests::Rng;
+
+type P = [f64; 3];
+
+/// Two separate triangles (no shared index): do they intersect?
+fn pair(t1: [P; 3], t2: [P; 3]) -> bool {
+    let positions: Vec<P> = t1.iter().chain(t2.iter()).copied().collect();
+    let r = self_intersections(&positions, &[[0, 1, 2], [3, 4, 5]]).expect("ok");
+    r.pairs == vec![(0, 1)]
+}
+
+fn scale_all(ts: &[P], s: f64) -> Vec<P> {
+    ts.iter().map(|p| p.map(|x| x * s)).collect()
+}
+
+/// The brute-force oracle: every pair `i < j` in index order, no BVH, no boxes.
+fn oracle(positions: &[P], faces: &[[u32; 3]]) -> Vec<(u32, u32)> {
+    let tris: Vec<Tri> = faces
+        .iter()
+        .map(|f| Tri::new(f.map(|v| positions[v as usize])))
+        .collect();
+    let mut out = Vec::new();
+    for i in 0..faces.len() {
+        for j in i + 1..faces.len() {
+            if faces_intersect(faces[i], &tris[i], faces[j], &tris[j]) {
+                out.push((i as u32, j as u32));
+            }
+        }
+    }
+    out
+}
+
+const BASE: [P; 3] = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
+
+/// Every hand-made case `(name, t1, t2, expected)`, non-adjacent.
+fn hand_cases() -> Vec<(&'static str, [P; 3], [P; 3], bool)> {
+    let e = 1.0 / (1u64 << 40) as f64;
+    vec![
+        (
+            "touching at a point (vertex on the interior)",
+            BASE,
+            [[0.25, 0.25, 0.0], [0.25, 1.25, 1.0], [1.25, 0.25, 1.0]],
+            true,
+        ),
+        (
+            "a hair above the point",
+            BASE,
+            [[0.25, 0.25, e], [0.25, 1.25, 1.0], [1.25, 0.25, 1.0]],
+            false,
+        ),
+        (
+            "crossing (one pierces the other)",
+            BASE,
+            [[0.2, 0.2, -1.0], [0.2, 0.2, 1.0], [0.3, 0.25, 0.0]],
+            true,
+        ),
+        (
+            "crossing edges (edge on edge, perpendicular)",
+            BASE,
+            [[0.5, -0.5, 0.0], [0.5, 0.5, 0.0], [0.5, 0.0, 1.0]],
+            true,
+        ),
+        (
+            "edge crossing an edge in space",
+            BASE,
+            [[0.5, 0.0, -1.0], [0.5, 0.0, 1.0], [0.5, -1.0, 0.0]],
+            true,
+        ),
+        (
+            "edges passing by a hair",
+            BASE,
+            [[0.5, -e, -1.0], [0.5, -e, 1.0], [0.5, -1.0, 0.0]],
+            false,
+        ),
+        (
+            "coplanar overlap",
+            BASE,
+            [[0.2, 0.2, 0.0], [1.2, 0.2, 0.0], [0.2, 1.2, 0.0]],
+            true,
+        ),
+        (
+            "coplanar, one inside the other",
+            BASE,
+            [[0.1, 0.1, 0.0], [0.2, 0.1, 0.0], [0.1, 0.2, 0.0]],
+            true,
+        ),
+        (
+            "coplanar touching along an edge (separate vertices)",
+            BASE,
+            [[1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]],
+            true,
+        ),
+        (
+            "coplanar touching at a corner",
+            BASE,
+            [[1.0, 0.0, 0.0], [2.0, 0.0, 0.0], [2.0, 1.0, 0.0]],
+            true,
+        ),
+        (
+            "coplanar, a hair apart",
+            BASE,
+            [[1.0 + e, 0.0, 0.0], [2.0, 0.0, 0.0], [2.0, 1.0, 0.0]],
+            false,
+        ),
+        (
+            "parallel planes",
+            BASE,
+            [[0.0, 0.0, e], [1.0, 0.0, e], [0.0, 1.0, e]],
+            false,
+        ),
+        (
+            "needles crossing",
+            [[0.0, 0.0, 0.0], [1.0, 1.0, 0.0], [1.0, 1.0 + e, 0.0]],
+            [[0.0, 1.0, -e], [1.0, 0.0, -e], [0.5, 0.5, e]],
+            true,
+        ),
+        (
+            "needles passing",
+            [[0.0, 0.0, 0.0], [1.0, 1.0, 0.0], [1.0, 1.0 + e, 0.0]],
+            [[0.0, 1.0, e], [1.0, 0.0, e], [0.5, 0.5, 2.0 * e]],
+            false,
+        ),
+    ]
+}
+
+#[test]
+fn hand_made_cases_at_every_scale() {
+    for (name, t1, t2, want) in hand_cases() {
+        assert_eq!(pair(t1, t2), want, "{name}");
+        assert_eq!(pair(t2, t1), want, "{name} (swapped)");
+        // 2^±332 ≈ 1e±100 (exact scalings: the same answer), and the ends of the range.
+        for e in [-332i32, 332, -1000, 1000] {
+            let s = 2f64.powi(e);
+            let a = scale_all(&t1, s);
+            let b = scale_all(&t2, s);
+            assert_eq!(
+                pair([a[0], a[1], a[2]], [b[0], b[1], b[2]]),
+                want,
+                "{name} at 2^{e}"
+            );
+        }
+    }
+}
+
+#[test]
+fn edge_adjacent_faces_count_only_when_folded() {
+    // Faces (0, 1, 2) and (1, 0, 3) share edge 0–1.
+    let e = 1.0 / (1u64 << 40) as f64;
+    let check = |d: P| {
+        let positions = vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.3, 1.0, 0.0], d];
+        self_intersections(&positions, &[[0, 1, 2], [1, 0, 3]])
+            .expect("ok")
+            .pairs
+            .len()
+    };
+    assert_eq!(check([0.6, 0.5, 0.0]), 1, "folded flat onto the other face");
+    assert_eq!(
+        check([5.0, 0.1, 0.0]),
+        1,
+        "folded, no vertex inside the other"
+    );
+    assert_eq!(check([0.6, -0.5, 0.0]), 0, "flat neighbour");
+    assert_eq!(check([0.6, 0.5, e]), 0, "almost folded");
+    assert_eq!(check([0.6, -0.5, 1.0]), 0, "a dihedral angle");
+    // The same at 1e-100 and 1e100.
+    for s in [2f64.powi(-332), 2f64.powi(332)] {
+        let positions = scale_all(
+            &[
+                [0.0, 0.0, 0.0],
+                [1.0, 0.0, 0.0],
+                [0.3, 1.0, 0.0],
+                [0.6, 0.5, 0.0],
+            ],
+            s,
+        );
+        assert_eq!(
+            self_intersections(&positions, &[[0, 1, 2], [1, 0, 3]])
+                .expect("ok")
+                .pairs
+                .len(),
+            1
+        );
+    }
+}
+
+#[test]
+fn vertex_adjacent_faces_count_when_they_meet_elsewhere() {
+    let check = |a: P, b: P, c: P, d: P| {
+        let positions = vec![[0.0, 0.0, 0.0], a, b, c, d];
+        self_intersections(&positions, &[[0, 1, 2], [0, 3, 4]])
+            .expect("ok")
+            .pairs
+            .len()
+    };
+    // A crossing through the shared vertex: both contain the direction +x.
+    assert_eq!(
+        check(
+            [1.0, 1.0, 0.0],
+            [1.0, -1.0, 0.0],
+            [0.1, 0.0, 0.1],
+            [0.1, 0.0, -0.1]
+        ),
+        1
+    );
+    // Meeting at the shared vertex only (a fan around it).
+    assert_eq!(
+        check(
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [-1.0, 0.0, 0.0],
+            [0.0, -1.0, 0.0]
+        ),
+        0
+    );
+    assert_eq!(
+        check(
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [0.0, 0.0, 1.0],
+            [-1.0, -1.0, 1.0]
+        ),
+        0
+    );
+    // Coplanar overlapping corners.
+    assert_eq!(
+        check(
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [1.0, 1.0, 0.0],
+            [-1.0, 2.0, 0.0]
+        ),
+        1
+    );
+    // Coplanar, touching along an edge ray from the vertex (separate end vertices).
+    assert_eq!(
+        check(
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [0.0, 2.0, 0.0],
+            [-1.0, 1.0, 0.0]
+        ),
+        1
+    );
+    // An opposite edge meeting the other face away from the vertex.
+    assert_eq!(
+        check(
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [0.4, 0.4, -1.0],
+            [0.4, 0.4, 1.0]
+        ),
+        1
+    );
+    // Coplanar, opposite cones.
+    assert_eq!(
+        check(
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [-1.0, 0.0, 0.0],
+            [0.0, -1.0, 0.0]
+        ),
+        0
+    );
+}
+
+#[test]
+fn duplicate_and_degenerate_faces() {
+    let positions = vec![
+        [0.0, 0.0, 0.0],
+        [1.0, 0.0, 0.0],
+        [0.0, 1.0, 0.0],
+        [0.5, 0.0, 0.0],
+    ];
+    // A duplicated face (reversed) and a zero-area face lying inside face 0.
+    let r =
+        self_intersections(&positions, &[[0, 1, 2], [0, 2, 1], [0, 3, 1], [2, 2, 1]]).expect("ok");
+    assert_eq!(r.pairs, vec![(0, 1)]);
+    assert_eq!(r.faces, vec![0, 1]);
+    assert_eq!(r.degenerate, vec![2, 3]);
+}
+
+#[test]
+fn a_triangle_through_a_tetrahedron() {
+    // The case of CGAL's `tetra_intersected_by_triangle.off`, built by hand.
+    let tet = crate::shapes::tetrahedron();
+    let mut positions = tet.positions.clone();
+    let mut faces = tet.faces.clone();
+    let clean = self_intersections(&positions, &faces).expect("ok");
+    assert!(clean.pairs.is_empty());
+    let n = positions.len() as u32;
+    positions.extend([[-3.0, -3.0, 0.25], [3.0, -3.0, 0.25], [0.0, 3.0, 0.25]]);
+    faces.push([n, n + 1, n + 2]);
+    let r = self_intersections(&positions, &faces).expect("ok");
+    let f = faces.len() as u32 - 1;
+    // The three side faces, not the base.
+    assert_eq!(r.pairs, vec![(1, f), (2, f), (3, f)]);
+    assert_eq!(r.per_component.len(), 2);
+    assert_eq!(r.per_component[1].pairs_across, r.pairs.len());
+    println!("triangle through a tetrahedron: pairs {:?}", r.pairs);
+    assert!(new_pairs(&r, &r).expect("ok").is_empty());
+}
+
+#[test]
+fn clean_closed_meshes_have_no_pairs() {
+    for level in 0..4 {
+        let m = crate::shapes::icosphere(level);
+        let r = self_intersections(&m.positions, &m.faces).expect("ok");
+        assert!(r.pairs.is_empty(), "icosphere({level}): {:?}", r.pairs);
+        assert!(r.degenerate.is_empty());
+        assert_eq!(r.per_component.len(), 1);
+    }
+    let m = crate::shapes::octahedron();
+    assert!(
+        self_intersections(&m.positions, &m.faces)
+            .expect("ok")
+            .pairs
+            .is_empty()
+    );
+}
+
+#[test]
+fn new_pairs_are_pairs_not_counts() {
+    let m = crate::shapes::icosphere(2);
+    let mut checker = SelfIntersectionChecker::new(&m.positions, &m.faces).expect("ok");
+    let source = checker.check();
+    // Push one vertex through the opposite side of the sphere.
+    let mut moved = m.positions.clone();
+    moved[0] = moved[0].map(|x| -1.5 * x);
+    let deformed = checker.check_moved(&moved).expect("ok");
+    let new = new_pairs(&source, &deformed).expect("ok");
+    assert!(!new.is_empty());
+    assert_eq!(new, deformed.pairs);
+    // The checker after a refit answers as a fresh check.
+    assert_eq!(deformed, self_intersections(&moved, &m.faces).expect("ok"));
+    // Back to the source: nothing new.
+    let back = checker.check_moved(&m.positions).expect("ok");
+    assert!(new_pairs(&source, &back).expect("ok").is_empty());
+    assert!(new_pairs(&back, &deformed).expect("ok") == deformed.pairs);
+}
+
+#[test]
+fn bad_input_is_refused_clearly() {
+    let p = vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
+    assert_eq!(self_intersections(&p, &[]), Err(IntersectError::Empty));
+    let e = self_intersections(&p, &[[0, 1, 3]]).expect_err("refused");
+    assert!(e.to_string().contains("face 0 uses vertex 3"), "{e}");
+    let mut bad = p.clone();
+    bad[1][2] = f64::NAN;
+    let e = self_intersections(&bad, &[[0, 1, 2]]).expect_err("refused");
+    assert!(e.to_string().contains("non-finite"), "{e}");
+    bad[1][2] = f64::INFINITY;
+    assert!(self_intersections(&bad, &[[0, 1, 2]]).is_err());
+    let mut c = SelfIntersectionChecker::new(&p, &[[0, 1, 2]]).expect("ok");
+    assert!(c.update(&p[..2]).is_err());
+    assert!(c.update(&bad).is_err());
+    assert!(
+        c.check().pairs.is_empty(),
+        "unchanged after a refused update"
+    );
+    let a = c.check();
+    let m = crate::shapes::tetrahedron();
+    let b = self_intersections(&m.positions, &m.faces).expect("ok");
+    assert!(matches!(
+        new_pairs(&a, &b),
+        Err(IntersectError::DifferentMeshes { .. })
+    ));
+    // Huge but finite coordinates are fine.
+    let huge = vec![[0.0, 0.0, 0.0], [f64::MAX, 0.0, 0.0], [0.0, f64::MAX, 0.0]];
+    assert!(
+        self_intersections(&huge, &[[0, 1, 2]])
+            .expect("ok")
+            .pairs
+            .is_empty()
+    );
+}
+
+/// A random soup on a coarse integer grid: many coplanar, collinear and touching configurations.
+fn random_soup(rng: &mut Rng, n: usize, grid: i64, shared: bool) -> (Vec<P>, Vec<[u32; 3]>) {
+    let nv = if shared { n } else { 3 * n };
+    let positions: Vec<P> = (0..nv)
+        .map(|_| [0; 3].map(|_| rng.int(grid) as f64 * 0.125))
+        .collect();
+    let faces = (0..n)
+        .map(|i| {
+            if shared {
+                [0; 3].map(|_| (rng.next_u64() % nv as u64) as u32)
+            } else {
+                [3 * i as u32, 3 * i as u32 + 1, 3 * i as u32 + 2]
+            }
+        })
+        .collect();
+    (positions, faces)
+}
+
+#[test]
+fn random_soups_match_the_brute_force_oracle() {
+    let mut rng = Rng::new(11);
+    let mut total = 0;
+    for round in 0..300 {
+        let grid = [2, 3, 8, 1000][round % 4];
+        let (p, f) = random_soup(&mut rng, 12 + round % 20, grid, round % 2 == 0);
+        let r = self_intersections(&p, &f).expect("ok");
+        assert_eq!(r.pairs, oracle(&p, &f), "round {round}");
+        total += r.pairs.len();
+        // At 1e±100 (exact power-of-two scaling) the answer is the same.
+        if round % 10 == 0 {
+            for e in [-332, 332] {
+                let q = scale_all(&p, 2f64.powi(e));
+                assert_eq!(self_intersections(&q, &f).expect("ok").pairs, r.pairs);
+            }
+        }
+    }
+    assert!(total > 100);
+}
+
+/// A jittered `k×k` grid in the plane z = 0, folded over along x = fold (the part beyond is
+/// mirrored back onto the rest, lifted by `lift`).
+fn folded_grid(rng: &mut Rng, k: usize, fold: f64, lift: f64) -> (Vec<P>, Vec<[u32; 3]>) {
+    let mut positions = Vec::new();
+    for j in 0..=k {
+        for i in 0..=k {
+            let jit = |r: &mut Rng| r.int(1) as f64 / 64.0;
+            let x = i as f64 / k as f64 + jit(rng);
+            let y = j as f64 / k as f64 + jit(rng);
+            let (x, z) = if x > fold {
+                (2.0 * fold - x, lift)
+            } else {
+                (x, 0.0)
+            };
+            positions.push([x, y, z]);
+        }
+    }
+    let mut faces = Vec::new();
+    let w = (k + 1) as u32;
+    for j in 0..k as u32 {
+        for i in 0..k as u32 {
+            let (a, b, c, d) = (
+                j * w + i,
+                j * w + i + 1,
+                (j + 1) * w + i,
+                (j + 1) * w + i + 1,
+            );
+            faces.push([a, b, d]);
+            faces.push([a, d, c]);
+        }
+    }
+    (positions, faces)
+}
+
+#[test]
+fn folded_grids_match_the_brute_force_oracle() {
+    let mut rng = Rng::new(12);
+    for round in 0..40 {
+        let lift = [0.0, 0.0, 1.0 / 128.0, -1.0 / 64.0][round % 4];
+        let fold = [0.5, 0.375, 0.625][round % 3];
+        let (p, f) = folded_grid(&mut rng, 6 + round % 4, fold, lift);
+        let r = self_intersections(&p, &f).expect("ok");
+        assert_eq!(r.pairs, oracle(&p, &f), "round {round}");
+        if lift == 0.0 {
+            assert!(!r.pairs.is_empty(), "a flat fold overlaps itself");
+        }
+    }
+}
+
+/// Möller–Trumbore in plain f64 (the BVH's ray test) on each edge as a segment: an independent
+/// test that is right for generic (non-degenerate, non-coplanar) random triangles.
+fn float_tri_tri(a: &[P; 3], b: &[P; 3]) -> bool {
+    let edge_hits = |t: &[P; 3], u: &[P; 3]| {
+        (0..3).any(|i| {
+            let (p, q) = (t[i], t[(i + 1) % 3]);
+            let d = crate::geometry::sub(q, p);
+            matches!(crate::bvh::ray_triangle(p, d, u), Some((s, _)) if s <= 1.0)
+        })
+    };
+    edge_hits(a, b) || edge_hits(b, a)
+}
+
+#[test]
+fn generic_triangles_agree_with_a_float_test() {
+    let mut rng = Rng::new(13);
+    let mut hits = 0;
+    for _ in 0..20_000 {
+        let t: Vec<P> = (0..6)
+            .map(|_| [rng.unit(), rng.unit(), rng.unit()])
+            .collect();
+        let (a, b) = ([t[0], t[1], t[2]], [t[3], t[4], t[5]]);
+        let want = float_tri_tri(&a, &b);
+        assert_eq!(
+            triangles_intersect(&Tri::new(a), &Tri::new(b)),
+            want,
+            "{a:?} {b:?}"
+        );
+        hits += usize::from(want);
+    }
+    assert!(hits > 1000);
+}
+
+/// A torus with `n × m` quads (`2nm` faces).
+fn torus(n: usize, m: usize) -> (Vec<P>, Vec<[u32; 3]>) {
+    let mut p = Vec::new();
+    for i in 0..n {
+        for j in 0..m {
+            let (u, v) = (
+                i as f64 / n as f64 * std::f64::consts::TAU,
+                j as f64 / m as f64 * std::f64::consts::TAU,
+            );
+            let r = 1.0 + 0.35 * v.cos();
+            p.push([r * u.cos(), r * u.sin(), 0.35 * v.sin()]);
+        }
+    }
+    let mut f = Vec::new();
+    let id = |i: usize, j: usize| ((i % n) * m + j % m) as u32;
+    for i in 0..n {
+        for j in 0..m {
+            f.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
+            f.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
+        }
+    }
+    (p, f)
+}
+
+#[test]
+fn tori_are_clean() {
+    let (p, f) = torus(24, 12);
+    assert!(self_intersections(&p, &f).expect("ok").pairs.is_empty());
+}
+
+/// Print-only timings of the checker's refit + query (the viewer's per-slider-move cost);
+/// `cargo test -p mesh-core --lib intersect::tests::timing -- --ignored --nocapture`.
+#[test]
+#[ignore = "print-only timing"]
+fn timing_refit_and_check() {
+    for (n, m) in [(200, 100), (295, 200)] {
+        let (p, f) = torus(n, m);
+        let t0 = std::time::Instant::now();
+        let mut checker = SelfIntersectionChecker::new(&p, &f).expect("ok");
+        let build = t0.elapsed();
+        let reps = 5;
+        let (mut refit, mut check) = (0.0, 0.0);
+        let mut last = None;
+        for k in 0..reps {
+            let s = 1.0 + 0.01 * k as f64;
+            let moved: Vec<P> = p
+                .iter()
+                .map(|q| [q[0] * s, q[1], q[2] * (1.0 + 0.1 * (3.0 * q[0]).sin())])
+                .collect();
+            let t = std::time::Instant::now();
+            checker.update(&moved).expect("ok");
+            refit += t.elapsed().as_secs_f64();
+            let t = std::time::Instant::now();
+            last = Some(checker.check());
+            check += t.elapsed().as_secs_f64();
+        }
+        let r = last.expect("ok");
+        println!(
+            "{} faces: build {:.1} ms, refit {:.2} ms, check {:.1} ms (mean of {reps}; {} candidates, {} pairs)",
+            f.len(),
+            build.as_secs_f64() * 1e3,
+            refit / reps as f64 * 1e3,
+            check / reps as f64 * 1e3,
+            r.candidates,
+            r.pairs.len()
+        );
+    }
+}

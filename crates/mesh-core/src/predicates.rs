@@ -1,0 +1,458 @@
+//! Robust orientation predicates: the sign of a 2×2 or 3×3 determinant of point differences,
+//! exact for every finite `f64` input.
+//!
+//! - [`orient3d`]`(a, b, c, d)` is the sign of `det[b − a, c − a, d − a] = ((b − a) × (c − a))·(d − a)`:
+//!   positive when `d` lies on the side the right-hand normal of the triangle `(a, b, c)` points
+//!   to, zero when the four points are coplanar.
+//! - [`orient2d`]`(a, b, c)` is the sign of `(b − a) × (c − a)` in the plane: positive when
+//!   `(a, b, c)` turn counter-clockwise, zero when collinear. [`orient2d_projected`] evaluates it on
+//!   the coordinate plane that drops one axis (the projection the coplanar triangle tests use).
+//!
+//! Each predicate is a **filtered fast path with an exact fallback**. The fast path evaluates the
+//! determinant in `f64` and accepts its sign when `|det|` exceeds Shewchuk's static forward error
+//! bound (`(3 + 16ε)ε·permanent` for the 2×2, `(7 + 56ε)ε·permanent` for the 3×3, `ε = 2⁻⁵³`, the
+//! permanent being the same expression with every term made non-negative). The bound assumes that
+//! no operation underflows or overflows, so the fast path is taken only when every non-zero
+//! coordinate difference lies in `[2⁻³³⁰, 2³³⁰]` (3×3) or `[2⁻⁵⁰⁰, 2⁵⁰⁰]` (2×2); with those limits
+//! no product overflows and an underflow can only happen in the last multiplication of a 3×3 term,
+//! where it adds at most `2⁻¹⁰⁷⁵` per term (covered by an absolute slack of `2⁻¹⁰⁷⁰`). A zero
+//! permanent means every term has an exactly zero factor, so the determinant is exactly zero.
+//!
+//! Otherwise — near-degenerate input, or coordinates outside those ranges — the determinant is
+//! evaluated **exactly**: every finite `f64` is `m·2ᵉ` with an integer `m < 2⁵³` and
+//! `−1074 ≤ e ≤ 971`, so all inputs of one call are integers after scaling by `2^(−e_min)`
+//! (`e_min` the smallest exponent of a lowest set bit among them). The differences, products and
+//! sums are then computed in arbitrary-precision integers (at most about 6,300 bits for the 3×3,
+//! so the fallback's time and memory are bounded). There is no dependency: the integer
+//! arithmetic is [`BigInt`]'s, a few schoolbook routines.
+//!
+//! **Guaranteed range:** every finite `f64` (subnormals, `±0` and values up to `f64::MAX`
+//! included); the answer is always the sign of the exact determinant of the given numbers. The
+//! checked entry points ([`orient3d`], [`orient2d`]) refuse NaN and infinities with
+//! [`NonFiniteInput`]; the `*_unchecked` forms are for callers that validated already (a
+//! non-finite input there gives an unspecified sign, never a panic).
+
+/// The sign of a determinant.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Sign {
+    /// Negative.
+    Negative = -1,
+    /// Exactly zero (degenerate: coplanar or collinear).
+    Zero = 0,
+    /// Positive.
+    Positive = 1,
+}
+
+impl Sign {
+    /// −1, 0 or 1.
+    #[inline]
+    pub fn as_i8(self) -> i8 {
+        self as i8
+    }
+
+    /// The opposite sign.
+    #[inline]
+    pub fn flip(self) -> Sign {
+        match self {
+            Sign::Negative => Sign::Positive,
+            Sign::Zero => Sign::Zero,
+            Sign::Positive => Sign::Negative,
+        }
+    }
+
+    fn of_f64(x: f64) -> Sign {
+        if x > 0.0 {
+            Sign::Positive
+        } else if x < 0.0 {
+            Sign::Negative
+        } else {
+            Sign::Zero
+        }
+    }
+}
+
+/// A predicate was given a NaN or infinite coordinate (the only input refused).
+#[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
+#[error("orientation predicate: non-finite coordinate {value} (every finite f64 is supported)")]
+pub struct NonFiniteInput {
+    /// The offending coordinate.
+    pub value: f64,
+}
+
+fn check(points: &[&[f64]]) -> Result<(), NonFiniteInput> {
+    for p in points {
+        for &c in p.iter() {
+            if !c.is_finite() {
+                return Err(NonFiniteInput { value: c });
+            }
+        }
+    }
+    Ok(())
+}
+
+const EPS: f64 = 1.0 / 9_007_199_254_740_992.0; // 2^-53
+const O3D_ERRBOUND_A: f64 = (7.0 + 56.0 * EPS) * EPS;
+const CCW_ERRBOUND_A: f64 = (3.0 + 16.0 * EPS) * EPS;
+/// 2^-330 and 2^330: the range of differences the 3×3 filter accepts.
+const O3D_TINY: f64 = f64::from_bits((1023 - 330) << 52);
+const O3D_HUGE: f64 = f64::from_bits((1023 + 330) << 52);
+/// 2^-500 and 2^500: the range of differences the 2×2 filter accepts.
+const CCW_TINY: f64 = f64::from_bits((1023 - 500) << 52);
+const CCW_HUGE: f64 = f64::from_bits((1023 + 500) << 52);
+/// Covers the underflow of the last product of each 3×3 term (≤ 2^-1075 each).
+const UNDERFLOW_SLACK: f64 = f64::from_bits(16); // 2^-1070 (a subnormal)
+
+#[inline]
+fn in_range(d: f64, tiny: f64, huge: f64) -> bool {
+    let m = d.abs();
+    m == 0.0 || (m >= tiny && m <= huge)
+}
+
+/// [`orient3d_unchecked`] after refusing non-finite input.
+pub fn orient3d(
+    a: [f64; 3],
+    b: [f64; 3],
+    c: [f64; 3],
+    d: [f64; 3],
+) -> Result<Sign, NonFiniteInput> {
+    check(&[&a, &b, &c, &d])?;
+    Ok(orient3d_unchecked(a, b, c, d))
+}
+
+/// The sign of `((b − a) × (c − a))·(d − a)` (see the [module docs](self)).
+#[inline]
+pub fn orient3d_unchecked(a: [f64; 3], b: [f64; 3], c: [f64; 3], d: [f64; 3]) -> Sign {
+    match orient3d_filter(a, b, c, d) {
+        Some(s) => s,
+        None => orient3d_exact(a, b, c, d),
+    }
+}
+
+/// The fast path alone: `Some(sign)` when the `f64` evaluation is provably right, else `None`.
+/// (Shewchuk's form `det[a − d, b − d, c − d]`, which is minus ours.)
+#[inline]
+pub fn orient3d_filter(a: [f64; 3], b: [f64; 3], c: [f64; 3], d: [f64; 3]) -> Option<Sign> {
+    let adx = a[0] - d[0];
+    let bdx = b[0] - d[0];
+    let cdx = c[0] - d[0];
+    let ady = a[1] - d[1];
+    let bdy = b[1] - d[1];
+    let cdy = c[1] - d[1];
+    let adz = a[2] - d[2];
+    let bdz = b[2] - d[2];
+    let cdz = c[2] - d[2];
+    if ![adx, bdx, cdx, ady, bdy, cdy, adz, bdz, cdz]
+        .iter()
+        .all(|&x| in_range(x, O3D_TINY, O3D_HUGE))
+    {
+        return None;
+    }
+    let bdxcdy = bdx * cdy;
+    let cdxbdy = cdx * bdy;
+    let cdxady = cdx * ady;
+    let adxcdy = adx * cdy;
+    let adxbdy = adx * bdy;
+    let bdxady = bdx * ady;
+    let det = adz * (bdxcdy - cdxbdy) + bdz * (cdxady - adxcdy) + cdz * (adxbdy - bdxady);
+    let permanent = (bdxcdy.abs() + cdxbdy.abs()) * adz.abs()
+        + (cdxady.abs() + adxcdy.abs()) * bdz.abs()
+        + (adxbdy.abs() + bdxady.abs()) * cdz.abs();
+    if permanent == 0.0 {
+        return Some(Sign::Zero);
+    }
+    let err = O3D_ERRBOUND_A * permanent + UNDERFLOW_SLACK;
+    if det > err {
+        Some(Sign::Negative)
+    } else if -det > err {
+        Some(Sign::Positive)
+    } else {
+        None
+    }
+}
+
+/// The exact path alone (slow; every finite input).
+pub fn orient3d_exact(a: [f64; 3], b: [f64; 3], c: [f64; 3], d: [f64; 3]) -> Sign {
+    let all = [a, b, c, d];
+    let e_min = min_exponent(all.iter().flatten().copied());
+    let big = |x: f64| BigInt::from_f64_scaled(x, e_min);
+    let p: Vec<[BigInt; 3]> = all
+        .iter()
+        .map(|q| [big(q[0]), big(q[1]), big(q[2])])
+        .collect();
+    let dif = |i: usize, k: usize| p[i][k].sub(&p[0][k]);
+    // det[b − a, c − a, d − a]
+    let (ux, uy, uz) = (dif(1, 0), dif(1, 1), dif(1, 2));
+    let (vx, vy, vz) = (dif(2, 0), dif(2, 1), dif(2, 2));
+    let (wx, wy, wz) = (dif(3, 0), dif(3, 1), dif(3, 2));
+    let nx = uy.mul(&vz).sub(&uz.mul(&vy));
+    let ny = uz.mul(&vx).sub(&ux.mul(&vz));
+    let nz = ux.mul(&vy).sub(&uy.mul(&vx));
+    nx.mul(&wx).add(&ny.mul(&wy)).add(&nz.mul(&wz)).sign()
+}
+
+/// [`orient2d_unchecked`] after refusing non-finite input.
+pub fn orient2d(a: [f64; 2], b: [f64; 2], c: [f64; 2]) -> Result<Sign, NonFiniteInput> {
+    check(&[&a, &b, &c])?;
+    Ok(orient2d_unchecked(a, b, c))
+}
+
+/// The sign of `(b − a) × (c − a)` (positive: counter-clockwise).
+#[inline]
+pub fn orient2d_unchecked(a: [f64; 2], b: [f64; 2], c: [f64; 2]) -> Sign {
+    match orient2d_filter(a, b, c) {
+        Some(s) => s,
+        None => orient2d_exact(a, b, c),
+    }
+}
+
+/// [`orient2d_unchecked`] on the coordinate plane that drops axis `drop` (0, 1 or 2): the plane
+/// `(y, z)`, `(z, x)` or `(x, y)` respectively, oriented so that the sign equals the sign of
+/// component `drop` of `(b − a) × (c − a)`.
+#[inline]
+pub fn orient2d_projected(a: [f64; 3], b: [f64; 3], c: [f64; 3], drop: usize) -> Sign {
+    let (i, j) = match drop {
+        0 => (1, 2),
+        1 => (2, 0),
+        _ => (0, 1),
+    };
+    orient2d_unchecked([a[i], a[j]], [b[i], b[j]], [c[i], c[j]])
+}
+
+/// The 2×2 fast path alone (`None`: not provably right).
+#[inline]
+pub fn orient2d_filter(a: [f64; 2], b: [f64; 2], c: [f64; 2]) -> Option<Sign> {
+    let acx = a[0] - c[0];
+    let bcx = b[0] - c[0];
+    let acy = a[1] - c[1];
+    let bcy = b[1] - c[1];
+    if ![acx, bcx, acy, bcy]
+        .iter()
+        .all(|&x| in_range(x, CCW_TINY, CCW_HUGE))
+    {
+        return None;
+    }
+    let detleft = acx * bcy;
+    let detright = acy * bcx;
+    let det = detleft - detright;
+    let permanent = detleft.abs() + detright.abs();
+    if permanent == 0.0 {
+        return Some(Sign::Zero);
+    }
+    let err = CCW_ERRBOUND_A * permanent;
+    if det > err || -det > err {
+        Some(Sign::of_f64(det))
+    } else {
+        None
+    }
+}
+
+/// The exact 2×2 path alone (slow; every finite input).
+pub fn orient2d_exact(a: [f64; 2], b: [f64; 2], c: [f64; 2]) -> Sign {
+    let e_min = min_exponent([a, b, c].iter().flatten().copied());
+    let big = |x: f64| BigInt::from_f64_scaled(x, e_min);
+    let (ax, ay) = (big(a[0]), big(a[1]));
+    let ux = big(b[0]).sub(&ax);
+    let uy = big(b[1]).sub(&ay);
+    let vx = big(c[0]).sub(&ax);
+    let vy = big(c[1]).sub(&ay);
+    ux.mul(&vy).sub(&uy.mul(&vx)).sign()
+}
+
+/// `(negative, odd mantissa, exponent)` with `|x| = mantissa·2^exponent`; `None` for zero.
+fn decompose(x: f64) -> Option<(bool, u64, i32)> {
+    let bits = x.to_bits();
+    let neg = bits >> 63 == 1;
+    let e = ((bits >> 52) & 0x7ff) as i32;
+    let frac = bits & ((1u64 << 52) - 1);
+    let (m, e) = if e == 0 {
+        (frac, -1074)
+    } else {
+        (frac | (1u64 << 52), e - 1075)
+    };
+    if m == 0 {
+        return None;
+    }
+    let tz = m.trailing_zeros();
+    Some((neg, m >> tz, e + tz as i32))
+}
+
+fn min_exponent(xs: impl Iterator<Item = f64>) -> i32 {
+    xs.filter_map(decompose)
+        .map(|(_, _, e)| e)
+        .min()
+        .unwrap_or(0)
+}
+
+/// A signed arbitrary-precision integer (sign and little-endian `u32` magnitude without leading
+/// zero limbs): the exact fallback's arithmetic. Only what the determinants need.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct BigInt {
+    neg: bool,
+    mag: Vec<u32>,
+}
+
+impl BigInt {
+    /// Zero.
+    pub fn zero() -> BigInt {
+        BigInt {
+            neg: false,
+            mag: Vec::new(),
+        }
+    }
+
+    /// `x · 2^(−e_min)` for a finite `x` whose lowest set bit is at least `2^e_min` (exact).
+    pub fn from_f64_scaled(x: f64, e_min: i32) -> BigInt {
+        let Some((neg, m, e)) = decompose(x) else {
+            return BigInt::zero();
+        };
+        let shift = (e - e_min).max(0) as usize;
+        let (limbs, bits) = (shift / 32, shift % 32);
+        let mut mag = vec![0u32; limbs];
+        let wide = (m as u128) << bits;
+        let mut w = wide;
+        while w != 0 {
+            mag.push(w as u32);
+            w >>= 32;
+        }
+        let mut r = BigInt { neg, mag };
+        r.trim();
+        r
+    }
+
+    /// From an `i128` (for tests and small references).
+    pub fn from_i128(x: i128) -> BigInt {
+        let neg = x < 0;
+        let mut u = x.unsigned_abs();
+        let mut mag = Vec::new();
+        while u != 0 {
+            mag.push(u as u32);
+            u >>= 32;
+        }
+        BigInt { neg, mag }
+    }
+
+    fn trim(&mut self) {
+        while self.mag.last() == Some(&0) {
+            self.mag.pop();
+        }
+        if self.mag.is_empty() {
+            self.neg = false;
+        }
+    }
+
+    /// The sign.
+    pub fn sign(&self) -> Sign {
+        if self.mag.is_empty() {
+            Sign::Zero
+        } else if self.neg {
+            Sign::Negative
+        } else {
+            Sign::Positive
+        }
+    }
+
+    fn cmp_mag(a: &[u32], b: &[u32]) -> std::cmp::Ordering {
+        a.len()
+            .cmp(&b.len())
+            .then_with(|| a.iter().rev().cmp(b.iter().rev()))
+    }
+
+    fn add_mag(a: &[u32], b: &[u32]) -> Vec<u32> {
+        let (long, short) = if a.len() >= b.len() { (a, b) } else { (b, a) };
+        let mut out = Vec::with_capacity(long.len() + 1);
+        let mut carry = 0u64;
+        for (i, &x) in long.iter().enumerate() {
+            let s = x as u64 + short.get(i).copied().unwrap_or(0) as u64 + carry;
+            out.push(s as u32);
+            carry = s >> 32;
+        }
+        if carry != 0 {
+            out.push(carry as u32);
+        }
+        out
+    }
+
+    /// `a − b` for `|a| ≥ |b|`.
+    fn sub_mag(a: &[u32], b: &[u32]) -> Vec<u32> {
+        let mut out = Vec::with_capacity(a.len());
+        let mut borrow = 0i64;
+        for (i, &x) in a.iter().enumerate() {
+            let mut s = x as i64 - b.get(i).copied().unwrap_or(0) as i64 - borrow;
+            borrow = 0;
+            if s < 0 {
+                s += 1 << 32;
+                borrow = 1;
+            }
+            out.push(s as u32);
+        }
+        out
+    }
+
+    /// `self + other`.
+    pub fn add(&self, other: &BigInt) -> BigInt {
+        let mut r = if self.neg == other.neg {
+            BigInt {
+                neg: self.neg,
+                mag: Self::add_mag(&self.mag, &other.mag),
+            }
+        } else if Self::cmp_mag(&self.mag, &other.mag) != std::cmp::Ordering::Less {
+            BigInt {
+                neg: self.neg,
+                mag: Self::sub_mag(&self.mag, &other.mag),
+            }
+        } else {
+            BigInt {
+                neg: other.neg,
+                mag: Self::sub_mag(&other.mag, &self.mag),
+            }
+        };
+        r.trim();
+        r
+    }
+
+    /// `−self`.
+    pub fn neg(&self) -> BigInt {
+        let mut r = self.clone();
+        if !r.mag.is_empty() {
+            r.neg = !r.neg;
+        }
+        r
+    }
+
+    /// `self − other`.
+    pub fn sub(&self, other: &BigInt) -> BigInt {
+        self.add(&other.neg())
+    }
+
+    /// `self · other` (schoolbook).
+    pub fn mul(&self, other: &BigInt) -> BigInt {
+        if self.mag.is_empty() || other.mag.is_empty() {
+            return BigInt::zero();
+        }
+        let mut out = vec![0u32; self.mag.len() + other.mag.len()];
+        for (i, &x) in self.mag.iter().enumerate() {
+            let mut carry = 0u64;
+            for (j, &y) in other.mag.iter().enumerate() {
+                let t = x as u64 * y as u64 + out[i + j] as u64 + carry;
+                out[i + j] = t as u32;
+                carry = t >> 32;
+            }
+            let mut k = i + other.mag.len();
+            while carry != 0 {
+                let t = out[k] as u64 + carry;
+                out[k] = t as u32;
+                carry = t >> 32;
+                k += 1;
+            }
+        }
+        let mut r = BigInt {
+            neg: self.neg != other.neg,
+            mag: out,
+        };
+        r.trim();
+        r
+    }
+}
+
+#[cfg(test)]
+pub(crate) mod tests;
