@@ -326,7 +326,8 @@ pub fn bounding_orbit(positions: &[[f64; 3]], n: usize, fov: f64) -> Vec<raster_
     raster_diff::orbit_views(n.max(1), 20.0, distance, fov)
 }
 
-/// Renders `n` turntable views of a mesh on the CPU renderer, from [`bounding_orbit`].
+/// Renders `n` turntable views of a mesh on the CPU renderer, from [`bounding_orbit`], as RGB
+/// images (the renderer's grey values in every channel, ready to be tinted).
 pub fn turntable(
     renderer: &mut raster_diff::CpuRenderer,
     positions: &[[f64; 3]],
@@ -338,6 +339,7 @@ pub fn turntable(
     let views = bounding_orbit(positions, n, fov);
     renderer
         .render(positions, faces, &views, size, size)
+        .map(Images::into_rgb)
         .context("turntable render")
 }
 
