@@ -7,9 +7,7 @@
 use csd::resize::{PlaneResize, Resize2d};
 use csd::schedule::fill_standard_normal;
 use csd::sds::classifier_free_guidance;
-use csd::{
-    CascadedGuidance, Denoiser, Embedding, Guidance, GuidanceConfig, GuidanceError, Images, Tensor,
-};
+use csd::{CascadedGuidance, Denoiser, Embedding, GuidanceConfig, GuidanceError, Images, Tensor};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use std::time::Instant;
@@ -86,43 +84,37 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     // The same minus the time inside the (fake) denoiser calls, which allocate and zero their
     // outputs (16×6×256² f32 for stage II): the guidance's own overhead, as `metrics.jsonl`
     // reports it (`guidance − guidance_denoiser`).
-    // With `grey_gradient`, the evaluation as the loop asks for it when the renderer's output is
-    // grey (`evaluate_many_grey`, one evaluation: dL/d(grey) instead of dL/d(RGB)).
-    let mut outside = |batch: &Images, grey_gradient: bool| {
+    // A one-channel batch is evaluated as the loop does for the CPU renderer's grey renders
+    // (dL/d(grey) instead of dL/d(RGB)).
+    let mut outside = |batch: &Images| {
         let mut ms: Vec<f64> = (0..reps)
             .map(|_| {
                 let t = Instant::now();
-                let denoiser_seconds = if grey_gradient {
-                    guidance
-                        .evaluate_many_grey(batch, 1, 1, &mut rng)
-                        .expect("fake guidance evaluates")[0]
-                        .denoiser_seconds
-                } else {
-                    guidance
-                        .evaluate_with_weight(batch, 0.3, &mut rng)
-                        .expect("fake guidance evaluates")
-                        .denoiser_seconds
-                };
+                let denoiser_seconds = guidance
+                    .evaluate_with_weight(batch, 0.3, &mut rng)
+                    .expect("fake guidance evaluates")
+                    .denoiser_seconds;
                 (t.elapsed().as_secs_f64() - denoiser_seconds) * 1e3
             })
             .collect();
         ms.sort_by(f64::total_cmp);
         ms[ms.len() / 2]
     };
-    let rgb_outside = outside(&batch, false);
+    let rgb_outside = outside(&batch);
     // Grey renders (three equal channels, what the renderers produce): x, z0, x0 and ẑ are
     // computed once per view and their planes copied.
     let grey: Vec<f32> = images.chunks_exact(3).flat_map(|p| [p[0]; 3]).collect();
     let grey_batch = Images::new(views, n, n, grey)?;
-    let grey_outside = outside(&grey_batch, false);
-    let grey_gradient_outside = outside(&grey_batch, true);
+    let grey_outside = outside(&grey_batch);
+    let one_channel = images.iter().step_by(3).copied().collect();
+    let grey_gradient_outside = outside(&Images::with_channels(views, n, n, 1, one_channel)?);
     row(
         "evaluate, stage I + II, outside the denoiser calls",
         rgb_outside,
     );
     row("  the same, grey renders", grey_outside);
     row(
-        "  the same, grey renders, dL/d(grey) (the loop's CPU path)",
+        "  the same, one-channel grey renders, dL/d(grey) (the loop's CPU path)",
         grey_gradient_outside,
     );
     row(

@@ -16,16 +16,13 @@
 use crate::resize::{PlaneResize, Resize2d};
 use crate::schedule::{NoiseSchedule, TimestepRange, fill_standard_normal};
 use crate::sds::{check_denoiser_output, classifier_free_guidance, nan_to_num, split_cond_uncond};
-use crate::{
-    Denoiser, Embedding, GreyGuidanceOutput, Guidance, GuidanceError, GuidanceOutput, Images,
-    Tensor,
-};
+use crate::{Denoiser, Embedding, Guidance, GuidanceError, GuidanceOutput, Images, Tensor};
 use optim::Schedule;
 use rand::RngCore;
 use rayon::prelude::*;
 use std::time::Instant;
 
-/// Image channels the guidance works on (RGB).
+/// Image channels the guidance works on (RGB; a grey render is taken as its RGB expansion).
 pub const CHANNELS: usize = 3;
 
 /// Settings of [`CascadedGuidance`]. `Default` gives the reference's values.
@@ -584,13 +581,12 @@ struct Core {
     stage2: Option<Stage2Core>,
 }
 
-/// The switches of [`CascadedGuidance::evaluate_core`]: [`Stages::keep_outputs`],
-/// [`Stages::grey_gradient`], and `reuse_encoding` (see `evaluate_core`).
+/// The switches of [`CascadedGuidance::evaluate_core`]: [`Stages::keep_outputs`] and
+/// `reuse_encoding` (see `evaluate_core`).
 #[derive(Clone, Copy, Debug)]
 struct CoreOptions {
     keep_outputs: bool,
     reuse_encoding: bool,
-    grey_gradient: bool,
 }
 
 /// What every stage of one evaluation reads.
@@ -604,21 +600,24 @@ struct Stages<'a> {
     views: usize,
     /// Keep the denoiser outputs (for a trace).
     keep_outputs: bool,
-    /// Accumulate ∂L/∂x as one plane per view, Σ_c ∂L/∂x_c (for
+    /// Accumulate ∂L/∂x as one plane per view, Σ_c ∂L/∂x_c (for grey renders, decoded by
     /// [`Stages::decode_grey_gradient`]): each stage sums its gradient's three channels at its own
     /// resolution and maps one plane back instead of three (the adjoint resizes are linear, so the
-    /// same values up to `f32` rounding).
+    /// same values up to `f32` rounding as the channel sums of the RGB expansion's gradient).
     grey_gradient: bool,
 }
 
 impl Stages<'_> {
     /// x = 2·R(img) − 1: renders (view, row, col, channel) straight into planar x; the height pass
-    /// runs over whole interleaved rows. A grey view (three equal channels) is resized once, from
-    /// its first channel, and the plane copied: the same values, since R acts on each channel
-    /// alone with the same operations. Non-finite renders show up as non-finite x (an error).
+    /// runs over whole interleaved rows. A grey view (a one-channel render, or three equal
+    /// channels) is resized once and the plane copied: the same values, since R acts on each
+    /// channel alone with the same operations. (A one-channel render whose resize runs width first
+    /// is resized as its RGB expansion, which is what that order's bits are defined by.)
+    /// Non-finite renders show up as non-finite x (an error).
     fn encode_renders(&self, images: &Images, w: &mut Workspace) -> Result<(), GuidanceError> {
         let (b, pr) = (self.views, self.cfg.resolution * self.cfg.resolution);
         let plane_in = images.height * images.width;
+        let channels_in = images.channels;
         let ops = self.ops;
         w.derived = Derived::default();
         w.scratch.resize_with(b, Vec::new);
@@ -627,7 +626,7 @@ impl Stages<'_> {
         w.x.resize(b * CHANNELS * pr, 0.0);
         let bad_x: usize =
             w.x.par_chunks_mut(CHANNELS * pr)
-                .zip(images.rgb.par_chunks(CHANNELS * plane_in))
+                .zip(images.rgb.par_chunks(channels_in * plane_in))
                 .zip(w.scratch.par_iter_mut())
                 .zip(w.plane_scratch.par_chunks_mut(CHANNELS))
                 .zip(w.grey.par_iter_mut())
@@ -635,14 +634,29 @@ impl Stages<'_> {
                     let (first, _) = &mut planes[0];
                     // The shortcut has the per-channel path's bits only when the plane resize
                     // runs height first too; otherwise the channels are not even compared.
-                    *grey = ops.resize.height_first() && first_channel_if_grey(src, first);
-                    if *grey {
-                        ops.resize.apply_plane(first, &mut xv[..pr], tmp);
+                    let height_first = ops.resize.height_first();
+                    // One plane resized and copied to the three planes of x.
+                    let once = |plane: &[f32], xv: &mut [f32], tmp: &mut Vec<f32>| {
+                        ops.resize.apply_plane(plane, &mut xv[..pr], tmp);
                         let (x_first, rest) = xv.split_at_mut(pr);
                         rest.chunks_exact_mut(pr)
                             .for_each(|p| p.copy_from_slice(x_first));
+                    };
+                    if channels_in == CHANNELS {
+                        *grey = height_first && first_channel_if_grey(src, first);
+                        if *grey {
+                            once(first, xv, tmp);
+                        } else {
+                            ops.resize.apply_from_interleaved(src, CHANNELS, xv, tmp);
+                        }
+                    } else if height_first {
+                        *grey = true;
+                        once(src, xv, tmp);
                     } else {
-                        ops.resize.apply_from_interleaved(src, CHANNELS, xv, tmp);
+                        *grey = false;
+                        first.clear();
+                        first.extend(src.iter().flat_map(|&v| [v; CHANNELS]));
+                        ops.resize.apply_from_interleaved(first, CHANNELS, xv, tmp);
                     }
                     let mut bad = 0;
                     for v in xv.iter_mut() {
@@ -656,7 +670,9 @@ impl Stages<'_> {
             w.derived.x = true;
             return Ok(());
         }
-        let count = crate::count_non_finite(&images.rgb);
+        // Counted in the RGB images the UNets see (a grey value stands for three).
+        let expansion = CHANNELS / channels_in;
+        let count = crate::count_non_finite(&images.rgb) * expansion;
         Err(GuidanceError::NonFinite {
             tensor: if count > 0 {
                 "the rendered images given to the guidance".into()
@@ -666,7 +682,7 @@ impl Stages<'_> {
             },
             count: if count > 0 { count } else { bad_x },
             total: if count > 0 {
-                images.rgb.len()
+                images.rgb.len() * expansion
             } else {
                 w.x.len()
             },
@@ -942,11 +958,11 @@ impl Stages<'_> {
         grad
     }
 
-    /// dL/d(grey) = Σ_c ∂L/∂img_c = 2·Rᵀ(Σ_c ∂L/∂x_c) (Rᵀ is linear): reads the channel sums
-    /// the stages accumulated ([`Self::grey_gradient`]; each summed its gradient's channels at its
-    /// own resolution, in `f32`, in channel order) and maps one plane per view back, with the same
-    /// final NaN/∞ guard as [`Self::decode_gradient`].
-    fn decode_grey_gradient(&self, images: &Images, w: &mut Workspace) -> Vec<f32> {
+    /// dL/d(grey) = Σ_c ∂L/∂img_c = 2·Rᵀ(Σ_c ∂L/∂x_c) (Rᵀ is linear) of grey `images`: reads
+    /// the channel sums the stages accumulated ([`Self::grey_gradient`]; each summed its
+    /// gradient's channels at its own resolution, in `f32`, in channel order) and maps one plane
+    /// per view back, with the same final NaN/∞ guard as [`Self::decode_gradient`].
+    fn decode_grey_gradient(&self, images: &Images, w: &mut Workspace) -> Images {
         let pr = self.cfg.resolution * self.cfg.resolution;
         let plane_in = images.height * images.width;
         // Zeroed in parallel (every value is overwritten below).
@@ -959,7 +975,21 @@ impl Stages<'_> {
                 self.ops.resize_t.apply_plane(gx, out, &mut planes[0].0);
                 out.iter_mut().for_each(|v| *v = nan_to_num(2.0 * *v));
             });
-        grey
+        Images {
+            rgb: grey,
+            ..*images
+        }
+    }
+
+    /// ∂L/∂img in the channel count of `images`: [`Self::decode_grey_gradient`] for grey
+    /// images (then the stages accumulated [`Self::grey_gradient`] sums), else
+    /// [`Self::decode_gradient`].
+    fn decode(&self, images: &Images, w: &mut Workspace) -> Images {
+        if self.grey_gradient {
+            self.decode_grey_gradient(images, w)
+        } else {
+            self.decode_gradient(images, w)
+        }
     }
 
     /// The shared part of a stage's trace from its UNet output and workspace buffers.
@@ -1135,13 +1165,10 @@ impl<'m> CascadedGuidance<'m> {
     /// Checks one call's inputs.
     fn check_call(&self, images: &Images, stage2_weight: f64) -> Result<(), GuidanceError> {
         let (views, height, width) = (images.count, images.height, images.width);
-        if views == 0
-            || height == 0
-            || width == 0
-            || images.rgb.len() != views * height * width * CHANNELS
-        {
+        let channels = images.channels;
+        if views == 0 || height == 0 || width == 0 || images.check().is_err() {
             return Err(GuidanceError::InvalidInput(format!(
-                "{} image values for {views} views of {height}×{width}×{CHANNELS}",
+                "{} image values for {views} views of {height}×{width}×{channels}",
                 images.rgb.len()
             )));
         }
@@ -1159,9 +1186,10 @@ impl<'m> CascadedGuidance<'m> {
     }
 
     /// One evaluation into the workspace buffers, stage by stage: encode the renders, stage I,
-    /// stage II (when its weight is positive), ∂L/∂x in the layout `grey_gradient` picks (see
-    /// [`Stages::grey_gradient`]; the caller decodes it with the matching decoding). Returns the
-    /// output and what a trace needs; the denoiser outputs are kept only with `keep_outputs`.
+    /// stage II (when its weight is positive), ∂L/∂x in the layout the renders' channel count
+    /// picks (see [`Stages::grey_gradient`]; the caller decodes it with [`Stages::decode`]).
+    /// Returns the output and what a trace needs; the denoiser outputs are kept only with
+    /// `keep_outputs`.
     ///
     /// With `reuse_encoding`, `images` must be the renders of the previous call (the caller's
     /// promise; [`Guidance::evaluate_many`] is the only caller that makes it): x = 2·R(img) − 1
@@ -1176,7 +1204,6 @@ impl<'m> CascadedGuidance<'m> {
         CoreOptions {
             keep_outputs,
             reuse_encoding,
-            grey_gradient,
         }: CoreOptions,
     ) -> Result<(Core, Stages<'_>, &mut Workspace), GuidanceError> {
         self.check_call(images, stage2_weight)?;
@@ -1208,7 +1235,7 @@ impl<'m> CascadedGuidance<'m> {
             uncond,
             views: images.count,
             keep_outputs,
-            grey_gradient,
+            grey_gradient: images.is_grey(),
         };
         if !(reuse_encoding && work.derived.x) {
             stages.encode_renders(images, work)?;
@@ -1228,7 +1255,7 @@ impl<'m> CascadedGuidance<'m> {
             stage2_weight,
             denoiser_seconds: stage1.denoiser_seconds
                 + stage2.as_ref().map_or(0.0, |s| s.denoiser_seconds),
-            // Decoded by the caller, as RGB or as channel sums.
+            // Decoded by the caller, in the renders' channel count.
             grad_images: Images {
                 rgb: Vec::new(),
                 ..*images
@@ -1253,20 +1280,18 @@ impl<'m> CascadedGuidance<'m> {
         stage2_weight: f64,
         rng: &mut dyn RngCore,
     ) -> Result<GuidanceOutput, GuidanceError> {
-        self.evaluate_untraced(images, stage2_weight, rng, false, RgbGradient(images))
+        self.evaluate_untraced(images, stage2_weight, rng, false)
     }
 
-    /// One evaluation with fresh draws and no trace, its gradient laid out and decoded by
-    /// `decode`; `reuse_encoding` as in [`Self::evaluate_core`] (the renders' encoding from the
-    /// previous call on the same renders).
-    fn evaluate_untraced<D: Decode>(
+    /// One evaluation with fresh draws and no trace; `reuse_encoding` as in
+    /// [`Self::evaluate_core`] (the renders' encoding from the previous call on the same renders).
+    fn evaluate_untraced(
         &mut self,
         images: &Images,
         stage2_weight: f64,
         rng: &mut dyn RngCore,
         reuse_encoding: bool,
-        decode: D,
-    ) -> Result<D::Out, GuidanceError> {
+    ) -> Result<GuidanceOutput, GuidanceError> {
         let (core, stages, work) = self.evaluate_core(
             images,
             stage2_weight,
@@ -1275,30 +1300,16 @@ impl<'m> CascadedGuidance<'m> {
             CoreOptions {
                 keep_outputs: false,
                 reuse_encoding,
-                grey_gradient: D::GREY,
             },
         )?;
-        Ok(decode.decode(&stages, core.output, work))
-    }
-
-    /// `count` evaluations of the same renders at `iteration`'s stage-II weight, one after the
-    /// other from `rng`, the renders encoded once; gradients decoded by `decode`.
-    fn evaluations<D: Decode + Copy>(
-        &mut self,
-        images: &Images,
-        iteration: u64,
-        count: usize,
-        rng: &mut dyn RngCore,
-        decode: D,
-    ) -> Result<Vec<D::Out>, GuidanceError> {
-        let weight = self.stage2_weight.at(iteration);
-        (0..count)
-            .map(|k| self.evaluate_untraced(images, weight, rng, k > 0, decode))
-            .collect()
+        let mut output = core.output;
+        output.grad_images = stages.decode(images, work);
+        Ok(output)
     }
 
     /// Like [`Self::evaluate_with_weight`], returning every intermediate; `injected` replaces chosen
-    /// random draws.
+    /// random draws. Grey images are traced as their RGB expansion ([`Images::to_rgb`]): the
+    /// trace's tensors and gradient are RGB.
     pub fn evaluate_traced(
         &mut self,
         images: &Images,
@@ -1306,6 +1317,13 @@ impl<'m> CascadedGuidance<'m> {
         rng: &mut dyn RngCore,
         injected: &InjectedDraws,
     ) -> Result<GuidanceTrace, GuidanceError> {
+        let expanded;
+        let images = if images.is_grey() {
+            expanded = images.to_rgb();
+            &expanded
+        } else {
+            images
+        };
         let (mut core, stages, work) = self.evaluate_core(
             images,
             stage2_weight,
@@ -1314,7 +1332,6 @@ impl<'m> CascadedGuidance<'m> {
             CoreOptions {
                 keep_outputs: true,
                 reuse_encoding: false,
-                grey_gradient: false,
             },
         )?;
         core.output.grad_images = stages.decode_gradient(images, work);
@@ -1356,59 +1373,10 @@ impl Guidance for CascadedGuidance<'_> {
         count: usize,
         rng: &mut dyn RngCore,
     ) -> Result<Vec<GuidanceOutput>, GuidanceError> {
-        self.evaluations(images, iteration, count, rng, RgbGradient(images))
-    }
-
-    /// [`Guidance::evaluate_many`]'s evaluations with one plane per view mapped back to the
-    /// render's size: each stage sums its gradient's channels before its
-    /// adjoint resize (docs/guidance.md, "The seam").
-    fn evaluate_many_grey(
-        &mut self,
-        images: &Images,
-        iteration: u64,
-        count: usize,
-        rng: &mut dyn RngCore,
-    ) -> Result<Vec<GreyGuidanceOutput>, GuidanceError> {
-        self.evaluations(images, iteration, count, rng, GreyGradient(images))
-    }
-}
-
-/// How [`CascadedGuidance::evaluate_untraced`] lays out ∂L/∂x and turns it into the caller's
-/// gradient: the layout and the decoding that reads it come together, so they cannot disagree.
-trait Decode {
-    type Out;
-    /// Whether ∂L/∂x is accumulated as channel sums ([`Stages::grey_gradient`]).
-    const GREY: bool;
-    fn decode(self, stages: &Stages<'_>, out: GuidanceOutput, work: &mut Workspace) -> Self::Out;
-}
-
-/// dL/d(RGB) of the renders, in `grad_images` ([`Stages::decode_gradient`]).
-#[derive(Clone, Copy)]
-struct RgbGradient<'a>(&'a Images);
-
-impl Decode for RgbGradient<'_> {
-    type Out = GuidanceOutput;
-    const GREY: bool = false;
-    fn decode(
-        self,
-        stages: &Stages<'_>,
-        mut out: GuidanceOutput,
-        work: &mut Workspace,
-    ) -> Self::Out {
-        out.grad_images = stages.decode_gradient(self.0, work);
-        out
-    }
-}
-
-/// dL/d(grey) of the renders ([`Stages::decode_grey_gradient`]).
-#[derive(Clone, Copy)]
-struct GreyGradient<'a>(&'a Images);
-
-impl Decode for GreyGradient<'_> {
-    type Out = GreyGuidanceOutput;
-    const GREY: bool = true;
-    fn decode(self, stages: &Stages<'_>, out: GuidanceOutput, work: &mut Workspace) -> Self::Out {
-        GreyGuidanceOutput::with_gradient(&out, stages.decode_grey_gradient(self.0, work))
+        let weight = self.stage2_weight.at(iteration);
+        (0..count)
+            .map(|k| self.evaluate_untraced(images, weight, rng, k > 0))
+            .collect()
     }
 }
 

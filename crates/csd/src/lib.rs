@@ -199,59 +199,22 @@ pub struct GuidanceOutput {
     /// from the evaluation's time to get the guidance's own overhead (resizes, noise, CFG, SDS).
     /// 0 for a guidance without a denoiser.
     pub denoiser_seconds: f64,
-    /// dL/dimages, same sizes as the input images.
+    /// dL/dimages, same sizes and channel count as the input images (for grey images: dL/d(grey),
+    /// the sum over the three channels of the RGB image they stand for).
     pub grad_images: Images,
 }
 
-/// What the loop receives from [`Guidance::evaluate_many_grey`]: a [`GuidanceOutput`]'s terms, with
-/// the image gradient summed over the channels.
-#[derive(Clone, Debug, Default)]
-pub struct GreyGuidanceOutput {
-    /// As [`GuidanceOutput::loss_stage1`].
-    pub loss_stage1: f64,
-    /// As [`GuidanceOutput::loss_stage2`].
-    pub loss_stage2: f64,
-    /// As [`GuidanceOutput::stage2_weight`].
-    pub stage2_weight: f64,
-    /// As [`GuidanceOutput::denoiser_seconds`].
-    pub denoiser_seconds: f64,
-    /// dL/d(grey) = Σ_c dL/d(channel c) per pixel, `(view, row, column)`: the whole gradient of a
-    /// render whose three channels are one grey value. In `f32`, like the images' gradient.
-    pub grad_grey: Vec<f32>,
-}
-
-impl GreyGuidanceOutput {
-    /// The channel sums of `out`'s gradient (in `f64`, channels in order, then rounded to `f32`),
-    /// checked against the renders `images` it belongs to.
-    pub fn from_rgb(out: GuidanceOutput, images: &Images) -> Result<Self, GuidanceError> {
-        let grad_grey = out
-            .grad_images
-            .grey_gradient(images.count, images.height, images.width)
-            .map_err(|e| GuidanceError::InvalidInput(format!("image gradient: {e}")))?
-            .into_iter()
-            .map(|v| v as f32)
-            .collect();
-        Ok(Self::with_gradient(&out, grad_grey))
-    }
-
-    /// `out`'s terms (not its gradient) with `grad_grey`.
-    pub(crate) fn with_gradient(out: &GuidanceOutput, grad_grey: Vec<f32>) -> Self {
-        Self {
-            loss_stage1: out.loss_stage1,
-            loss_stage2: out.loss_stage2,
-            stage2_weight: out.stage2_weight,
-            denoiser_seconds: out.denoiser_seconds,
-            grad_grey,
-        }
-    }
-}
-
 /// The seam between the loop and the semantic loss: renders in, dL/drenders out.
+///
+/// Renders are grey (one channel) or RGB ([`Images::channels`]); a grey render stands for the RGB
+/// image with its value in all three channels ([`Images::to_rgb`]), so its gradient is dL/d(grey) =
+/// Σ_c dL/d(channel c). [`CascadedGuidance`] forms that sum with less work than the RGB gradient
+/// (each stage sums its gradient's channels before its resize adjoint).
 pub trait Guidance: Send {
     /// Evaluates the loss and its image gradient at optimization iteration `iteration` (1-based;
     /// a guidance with iteration-dependent weights, like [`CascadedGuidance`]'s stage-II schedule,
     /// reads them here). `images` hold values in `[0, 1]`; the returned `grad_images` has their
-    /// sizes. All randomness (timesteps, noise) comes from `rng`.
+    /// sizes and channel count. All randomness (timesteps, noise) comes from `rng`.
     fn evaluate(
         &mut self,
         images: &Images,
@@ -274,25 +237,6 @@ pub trait Guidance: Send {
     ) -> Result<Vec<GuidanceOutput>, GuidanceError> {
         (0..count)
             .map(|_| self.evaluate(images, iteration, rng))
-            .collect()
-    }
-
-    /// [`Guidance::evaluate_many`] with each gradient summed over the channels: dL/d(grey) per
-    /// pixel, all that the backward of a renderer whose output is grey needs. The same losses,
-    /// from the same draws; the gradient is the channel sum of `evaluate_many`'s up to rounding
-    /// (the default computes that sum in `f64` and rounds it to `f32`). [`CascadedGuidance`] sums the channels
-    /// before its last resize's adjoint, which is linear, and so maps one plane per view back to
-    /// the render's size instead of three.
-    fn evaluate_many_grey(
-        &mut self,
-        images: &Images,
-        iteration: u64,
-        count: usize,
-        rng: &mut dyn rand::RngCore,
-    ) -> Result<Vec<GreyGuidanceOutput>, GuidanceError> {
-        self.evaluate_many(images, iteration, count, rng)?
-            .into_iter()
-            .map(|out| GreyGuidanceOutput::from_rgb(out, images))
             .collect()
     }
 }

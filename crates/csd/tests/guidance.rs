@@ -1014,6 +1014,7 @@ fn imgs(data: &[f32], views: usize, h: usize, w: usize) -> Images {
         count: views,
         height: h,
         width: w,
+        channels: 3,
         rgb: data.to_vec(),
     }
 }
@@ -1253,22 +1254,24 @@ fn grey_renders_take_the_shortcut_with_the_same_bits_as_the_rgb_path() {
 }
 
 #[test]
-fn evaluate_many_grey_gives_the_channel_sums_of_evaluate_many() {
-    // The same draws and losses; dL/d(grey) = Σ_c dL/d(channel c), which the grey path forms
-    // before the resize adjoints (each stage's and the last one) instead of after (equal up to
-    // f32 rounding: about 2e-7 of the largest value here). Two render
-    // sizes: 512² (the resize to 224 runs height first) and 40×36 (width first).
+fn grey_images_get_the_channel_sums_of_their_rgb_expansions_gradient() {
+    // The same draws and losses as the RGB expansion's evaluations; dL/d(grey) = Σ_c dL/d(channel
+    // c), which the grey path forms before the resize adjoints (each stage's and the last one)
+    // instead of after (equal up to f32 rounding: about 2e-7 of the largest value here), as a
+    // one-channel gradient. Two render sizes: 512² (the resize to 224 runs height first) and
+    // 40×36 (width first).
     use csd::Guidance;
     for (views, h, w) in [(2, 512, 512), (3, 40, 36)] {
-        let a = imgs(&renders(views, h, w), views, h, w);
+        let grey: Vec<f32> = renders(views, h, w).into_iter().step_by(3).collect();
+        let a = Images::with_channels(views, h, w, 1, grey).expect("grey batch");
         let (mut rgb_guidance, mut grey_guidance) = (echo_guidance(), echo_guidance());
         let mut rng = ChaCha8Rng::seed_from_u64(5);
         let mut rng2 = ChaCha8Rng::seed_from_u64(5);
         let want = rgb_guidance
-            .evaluate_many(&a, 7, 2, &mut rng)
+            .evaluate_many(&a.to_rgb(), 7, 2, &mut rng)
             .expect("runs");
         let got = grey_guidance
-            .evaluate_many_grey(&a, 7, 2, &mut rng2)
+            .evaluate_many(&a, 7, 2, &mut rng2)
             .expect("runs");
         assert_eq!(got.len(), 2);
         for (k, (g, e)) in got.iter().zip(&want).enumerate() {
@@ -1277,12 +1280,14 @@ fn evaluate_many_grey_gives_the_channel_sums_of_evaluate_many() {
                 (e.loss_stage1, e.loss_stage2, e.stage2_weight),
                 "{h}×{w}, evaluation {k}"
             );
-            let sums = e.grad_images.grey_gradient(views, h, w).expect("shape");
-            assert_eq!(g.grad_grey.len(), sums.len());
+            assert!(g.grad_images.same_shape(&a), "{h}×{w}: a grey gradient");
+            let sums = e.grad_images.channel_sums();
+            assert_eq!(g.grad_images.rgb.len(), sums.len());
             let scale = sums.iter().fold(0.0f64, |m, v| m.max(v.abs()));
             assert!(scale > 0.0);
             let worst = g
-                .grad_grey
+                .grad_images
+                .rgb
                 .iter()
                 .zip(&sums)
                 .fold(0.0f64, |m, (&a, b)| m.max((f64::from(a) - b).abs()));
@@ -1290,14 +1295,17 @@ fn evaluate_many_grey_gives_the_channel_sums_of_evaluate_many() {
                 worst <= 1e-6 * scale,
                 "{h}×{w}, evaluation {k}: {worst:e} against max {scale:e}"
             );
-            // The trait's default: the channel sums of evaluate_many in f64, rounded to f32.
-            let default = csd::GreyGuidanceOutput::from_rgb(e.clone(), &a).expect("shape");
-            let rounded: Vec<f32> = sums.iter().map(|&v| v as f32).collect();
-            assert_eq!(default.grad_grey, rounded);
         }
         assert_eq!(
             rand::RngCore::next_u64(&mut rng),
             rand::RngCore::next_u64(&mut rng2)
         );
     }
+    // Another channel count is refused.
+    let two = Images {
+        channels: 2,
+        ..imgs(&vec![0.5; 2 * 8 * 8 * 2], 2, 8, 8)
+    };
+    let e = echo_guidance().evaluate(&two, 1, &mut ChaCha8Rng::seed_from_u64(1));
+    assert!(matches!(e, Err(csd::GuidanceError::InvalidInput(_))));
 }

@@ -1,12 +1,15 @@
-//! [`Images`]: a batch of `f32` RGB images, the value that crosses the seam between the renderer
-//! (`raster-diff`, which produces images and takes dL/dimages back) and the guidance (`csd`, which
-//! takes images and returns dL/dimages).
+//! [`Images`]: a batch of `f32` images with one (grey) or three (RGB) channels, the value that
+//! crosses the seam between the renderer (`raster-diff`, which produces images and takes
+//! dL/dimages back) and the guidance (`csd`, which takes images and returns dL/dimages).
 //!
 //! It lives in its own dependency-free crate so that the guidance can name the renderer's type
 //! without depending on the renderer (and so on meshes, `glam` and, with its `gpu` feature, `wgpu`).
 //!
-//! Layout: `(view, row, column, channel)` row-major, row 0 at the top, 3 channels; rendered values
-//! are in `[0, 1]`, gradients are any finite values.
+//! Layout: `(view, row, column, channel)` row-major, row 0 at the top, [`Images::channels`]
+//! channels per pixel (1: grey, 3: RGB); rendered values are in `[0, 1]`, gradients are any finite
+//! values. A gradient has the channel count of the images it belongs to. A grey image stands for
+//! the RGB image whose three channels are its value ([`Images::to_rgb`]), so dL/d(grey) is the
+//! sum of dL/d(channel) over the three channels.
 //!
 //! ```
 //! use image_batch::Images;
@@ -14,14 +17,20 @@
 //! assert_eq!(images.view(1).len(), 4 * 3 * 3);
 //! let grad = images.zeros_like();
 //! assert!(grad.same_shape(&images));
+//! let grey = Images::with_channels(2, 4, 3, 1, vec![0.5; 2 * 4 * 3])?;
+//! assert_eq!(grey.to_rgb(), images);
 //! # Ok::<(), image_batch::ImagesError>(())
 //! ```
 
-/// Channels per pixel (RGB).
+/// Channels per pixel of an RGB batch (the default, [`Images::new`]).
 pub const CHANNELS: usize = 3;
 
-/// A batch of RGB images, `(view, row, column, channel)` row-major.
-#[derive(Clone, Debug, Default, PartialEq)]
+/// Channels per pixel of a grey batch.
+pub const GREY: usize = 1;
+
+/// A batch of images, `(view, row, column, channel)` row-major, with 1 (grey) or 3 (RGB)
+/// channels.
+#[derive(Clone, Debug, PartialEq)]
 pub struct Images {
     /// Number of views.
     pub count: usize,
@@ -29,15 +38,31 @@ pub struct Images {
     pub height: usize,
     /// Image width in pixels.
     pub width: usize,
-    /// `count * height * width * 3` values.
+    /// Channels per pixel: [`GREY`] (1) or [`CHANNELS`] (3, RGB).
+    pub channels: usize,
+    /// `count * height * width * channels` values (RGB triples for an RGB batch, one grey value
+    /// per pixel for a grey one).
     pub rgb: Vec<f32>,
+}
+
+/// An empty RGB batch.
+impl Default for Images {
+    fn default() -> Self {
+        Self {
+            count: 0,
+            height: 0,
+            width: 0,
+            channels: CHANNELS,
+            rgb: Vec::new(),
+        }
+    }
 }
 
 /// A batch whose sizes and values disagree.
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
 pub enum ImagesError {
-    /// `rgb` does not hold `count·height·width·3` values.
-    #[error("{count} images of {height}×{width}×3 need {expected} values, got {actual}")]
+    /// `rgb` does not hold `count·height·width·channels` values.
+    #[error("{count} images of {height}×{width}×{channels} need {expected} values, got {actual}")]
     WrongLength {
         /// Views.
         count: usize,
@@ -45,11 +70,16 @@ pub enum ImagesError {
         height: usize,
         /// Columns.
         width: usize,
-        /// `count·height·width·3`.
+        /// Channels per pixel.
+        channels: usize,
+        /// `count·height·width·channels`.
         expected: usize,
         /// `rgb.len()`.
         actual: usize,
     },
+    /// A channel count other than 1 (grey) or 3 (RGB).
+    #[error("images have {0} channels per pixel; 1 (grey) or 3 (RGB) are supported")]
+    Channels(usize),
     /// A gradient batch does not have the shape of the images it belongs to.
     #[error("gradient images are {}×{}×{}, the last render was {}×{}×{}", got.0, got.1, got.2, expected.0, expected.1, expected.2)]
     ShapeMismatch {
@@ -58,37 +88,73 @@ pub enum ImagesError {
         /// (count, height, width) of the render.
         expected: (usize, usize, usize),
     },
+    /// A gradient batch has another channel count than the images it belongs to.
+    #[error("gradient images have {got} channels per pixel, the last render had {expected}")]
+    ChannelMismatch {
+        /// Channels of the gradient.
+        got: usize,
+        /// Channels of the render.
+        expected: usize,
+    },
     /// A gradient batch has the right sizes but not the right number of values.
     #[error("gradient images have the wrong number of values")]
     GradientLength,
 }
 
 impl Images {
-    /// A batch from its sizes and values; an error when `rgb.len() != count·height·width·3`.
+    /// An RGB batch from its sizes and values; an error when `rgb.len() != count·height·width·3`.
     pub fn new(
         count: usize,
         height: usize,
         width: usize,
         rgb: Vec<f32>,
     ) -> Result<Self, ImagesError> {
+        Self::with_channels(count, height, width, CHANNELS, rgb)
+    }
+
+    /// A batch of `channels` channels per pixel (1: grey, 3: RGB) from its sizes and values; an
+    /// error for another channel count or when `values.len() != count·height·width·channels`.
+    pub fn with_channels(
+        count: usize,
+        height: usize,
+        width: usize,
+        channels: usize,
+        values: Vec<f32>,
+    ) -> Result<Self, ImagesError> {
         let images = Self {
             count,
             height,
             width,
-            rgb,
+            channels,
+            rgb: values,
         };
         images.check()?;
         Ok(images)
     }
 
-    /// Checks that `rgb` holds `count·height·width·3` values.
+    /// Values per view, `height·width·channels`.
+    pub fn view_len(&self) -> usize {
+        self.height * self.width * self.channels
+    }
+
+    /// Whether this is a grey batch (one channel).
+    pub fn is_grey(&self) -> bool {
+        self.channels == GREY
+    }
+
+    /// Checks that the channel count is 1 or 3 and that `rgb` holds `count·height·width·channels`
+    /// values.
     pub fn check(&self) -> Result<(), ImagesError> {
-        let expected = self.count * self.height * self.width * CHANNELS;
+        if self.channels != GREY && self.channels != CHANNELS {
+            return Err(ImagesError::Channels(self.channels));
+        }
+        let expected = self.count * self.view_len();
         if self.rgb.len() != expected {
             return Err(ImagesError::WrongLength {
                 count: self.count,
                 height: self.height,
                 width: self.width,
+                channels: self.channels,
                 expected,
                 actual: self.rgb.len(),
             });
@@ -96,61 +162,75 @@ impl Images {
         Ok(())
     }
 
-    /// Zeros with the same sizes (e.g. a gradient buffer).
+    /// Zeros with the same sizes and channel count (e.g. a gradient buffer).
     pub fn zeros_like(&self) -> Self {
         Self {
-            count: self.count,
-            height: self.height,
-            width: self.width,
-            rgb: vec![0.0; self.count * self.height * self.width * CHANNELS],
+            rgb: vec![0.0; self.count * self.view_len()],
+            ..*self
         }
     }
 
-    /// Whether `other` has the same count, height, width and number of values.
+    /// Whether `other` has the same count, height, width, channel count and number of values.
     pub fn same_shape(&self, other: &Images) -> bool {
-        (self.count, self.height, self.width, self.rgb.len())
-            == (other.count, other.height, other.width, other.rgb.len())
+        (
+            self.count,
+            self.height,
+            self.width,
+            self.channels,
+            self.rgb.len(),
+        ) == (
+            other.count,
+            other.height,
+            other.width,
+            other.channels,
+            other.rgb.len(),
+        )
     }
 
     /// Values of one view, `(row, column, channel)`; empty when `index` is out of range.
     pub fn view(&self, index: usize) -> &[f32] {
-        let n = self.height * self.width * CHANNELS;
+        let n = self.view_len();
         self.rgb.get(index * n..(index + 1) * n).unwrap_or(&[])
     }
 
-    /// RGB images from grey values laid out `(view, row, column)`: each grey value fills all three
-    /// channels (the reference shading is grey: kd is the same in every channel).
-    pub fn from_grey(count: usize, height: usize, width: usize, grey: &[f64]) -> Self {
-        let mut rgb = vec![0.0; grey.len() * CHANNELS];
-        grey_to_rgb(grey, &mut rgb);
-        Self {
-            count,
-            height,
-            width,
+    /// The RGB batch these images stand for: an RGB batch is returned as it is, a grey one with
+    /// each value in all three channels.
+    pub fn to_rgb(&self) -> Images {
+        if self.channels == CHANNELS {
+            return self.clone();
+        }
+        self.expanded()
+    }
+
+    /// [`Images::to_rgb`], consuming the batch (an RGB batch is moved, not copied).
+    pub fn into_rgb(self) -> Images {
+        if self.channels == CHANNELS {
+            return self;
+        }
+        self.expanded()
+    }
+
+    /// Each value in all three channels.
+    fn expanded(&self) -> Images {
+        let mut rgb = Vec::with_capacity(self.rgb.len() * CHANNELS);
+        for &v in &self.rgb {
+            rgb.extend_from_slice(&[v; CHANNELS]);
+        }
+        Images {
+            channels: CHANNELS,
             rgb,
+            ..*self
         }
     }
 
-    /// dL/d(grey) from these dL/d(RGB) images, checked against the shape of the render they belong
-    /// to (`count` views of `height`×`width`). All three channels carry the same grey value, so
-    /// dL/d(grey) is the channel sum, summed in f64.
-    pub fn grey_gradient(
-        &self,
-        count: usize,
-        height: usize,
-        width: usize,
-    ) -> Result<Vec<f64>, ImagesError> {
-        self.check_gradient_shape(count, height, width)?;
-        Ok(grey_sums(&self.rgb))
-    }
-
-    /// Checks that these dL/d(RGB) images have the shape of the render they belong to (`count`
-    /// views of `height`×`width`), as [`Images::grey_gradient`] does.
+    /// Checks that these gradient images have the shape of the images they belong to (`count`
+    /// views of `height`×`width` with `channels` channels).
     pub fn check_gradient_shape(
         &self,
         count: usize,
         height: usize,
         width: usize,
+        channels: usize,
     ) -> Result<(), ImagesError> {
         if (self.count, self.height, self.width) != (count, height, width) {
             return Err(ImagesError::ShapeMismatch {
@@ -158,32 +238,41 @@ impl Images {
                 expected: (count, height, width),
             });
         }
-        if self.rgb.len() != count * height * width * CHANNELS {
+        if self.channels != channels {
+            return Err(ImagesError::ChannelMismatch {
+                got: self.channels,
+                expected: channels,
+            });
+        }
+        if self.rgb.len() != count * height * width * channels {
             return Err(ImagesError::GradientLength);
         }
         Ok(())
     }
 
-    /// dL/d(grey) of view `index` alone, `(row, column)`: the part of
-    /// [`Images::grey_gradient`] that belongs to that view (empty when `index` is out of range).
-    pub fn view_grey_gradient(&self, index: usize) -> Vec<f64> {
-        grey_sums(self.view(index))
+    /// Per pixel, the sum of its channels in f64, `(view, row, column)`: of gradient images,
+    /// dL/d(grey) for a render whose channels are one grey value (a grey batch's values widened).
+    pub fn channel_sums(&self) -> Vec<f64> {
+        channel_sums(&self.rgb, self.channels)
+    }
+
+    /// [`Images::channel_sums`] of view `index` alone, `(row, column)` (empty when `index` is out
+    /// of range).
+    pub fn view_channel_sums(&self, index: usize) -> Vec<f64> {
+        channel_sums(self.view(index), self.channels)
     }
 }
 
-/// Writes grey values into RGB pixels, `rgb[3i + c] = grey[i] as f32` for every channel `c`
-/// (what [`Images::from_grey`] does, for a caller that owns the destination, e.g. one view's
-/// slice of a batch filled in parallel). Stops at the shorter of the two.
-pub fn grey_to_rgb(grey: &[f64], rgb: &mut [f32]) {
-    for (&g, px) in grey.iter().zip(rgb.chunks_exact_mut(CHANNELS)) {
-        px.fill(g as f32);
-    }
-}
-
-/// Per pixel, the sum of its three channels in f64.
-fn grey_sums(rgb: &[f32]) -> Vec<f64> {
-    rgb.chunks_exact(CHANNELS)
-        .map(|c| f64::from(c[0]) + f64::from(c[1]) + f64::from(c[2]))
+/// Per pixel, the sum of its `channels` values in f64, added in channel order from the first
+/// (`c0 + c1 + c2`; one channel: its value).
+fn channel_sums(values: &[f32], channels: usize) -> Vec<f64> {
+    values
+        .chunks_exact(channels.max(1))
+        .map(|c| {
+            c[1..]
+                .iter()
+                .fold(f64::from(c[0]), |sum, &v| sum + f64::from(v))
+        })
         .collect()
 }
 
@@ -201,21 +290,49 @@ mod tests {
                 count: 2,
                 height: 2,
                 width: 2,
+                channels: 3,
                 expected: 24,
                 actual: 12
             })
         );
+        assert_eq!(
+            e.map_err(|e| e.to_string()),
+            Err("2 images of 2×2×3 need 24 values, got 12".into())
+        );
+        assert!(Images::with_channels(2, 2, 3, 1, vec![0.0; 12]).is_ok());
+        assert_eq!(
+            Images::with_channels(1, 2, 2, 2, vec![0.0; 8]),
+            Err(ImagesError::Channels(2))
+        );
+        assert_eq!(Images::default().channels, CHANNELS);
     }
 
     #[test]
-    fn grey_round_trip_sums_channels_and_checks_shape() {
-        let img = Images::from_grey(1, 1, 2, &[0.25, 0.5]);
-        assert_eq!(img.rgb, vec![0.25, 0.25, 0.25, 0.5, 0.5, 0.5]);
-        assert_eq!(img.grey_gradient(1, 1, 2), Ok(vec![0.75, 1.5]));
-        let e = img.grey_gradient(1, 2, 1);
+    fn grey_expands_to_rgb_and_channel_sums_check_the_shape() {
+        let img = Images::with_channels(1, 1, 2, 1, vec![0.25, 0.5]).unwrap_or_default();
+        let rgb = img.to_rgb();
+        assert_eq!(rgb.rgb, vec![0.25, 0.25, 0.25, 0.5, 0.5, 0.5]);
         assert_eq!(
-            e.map_err(|e| e.to_string()),
+            (rgb.channels, rgb.count, rgb.height, rgb.width),
+            (3, 1, 1, 2)
+        );
+        assert_eq!(img.clone().into_rgb(), rgb);
+        assert_eq!(rgb.clone().into_rgb(), rgb);
+        assert_eq!(rgb.channel_sums(), vec![0.75, 1.5]);
+        assert_eq!(img.channel_sums(), vec![0.25, 0.5]);
+        assert_eq!(rgb.view_channel_sums(0), vec![0.75, 1.5]);
+        assert_eq!(rgb.check_gradient_shape(1, 1, 2, 3), Ok(()));
+        assert_eq!(
+            rgb.check_gradient_shape(1, 2, 1, 3)
+                .map_err(|e| e.to_string()),
             Err("gradient images are 1×1×2, the last render was 1×2×1".into())
+        );
+        assert_eq!(
+            img.check_gradient_shape(1, 1, 2, 3),
+            Err(ImagesError::ChannelMismatch {
+                got: 1,
+                expected: 3
+            })
         );
     }
 
@@ -226,5 +343,8 @@ mod tests {
         assert!(img.view(2).is_empty());
         let z = img.zeros_like();
         assert!(z.same_shape(&img) && z.rgb.iter().all(|&v| v == 0.0));
+        let grey = Images::with_channels(3, 1, 2, 1, vec![1.0; 6]).unwrap_or_default();
+        assert_eq!(grey.view(2).len(), 2);
+        assert!(!grey.same_shape(&img) && grey.zeros_like().same_shape(&grey));
     }
 }

@@ -1,4 +1,5 @@
-//! Image output: PNG files and contact sheets.
+//! Image output: PNG files and contact sheets, of grey or RGB batches (a grey batch is written as
+//! RGB with three equal channels).
 //!
 //! Colour: the renderer's values are written **as they are** — 8-bit sRGB-tagged PNG with
 //! byte = round(255 · clamp(v, 0, 1)), no transfer curve applied. Those are the pixels the
@@ -39,26 +40,32 @@ pub fn to_byte(v: f32, encoding: Encoding) -> u8 {
     (v * 255.0).round() as u8
 }
 
-/// RGB8 bytes of view `index`.
+/// RGB8 bytes of view `index` (a grey view's byte in all three channels).
 pub fn view_bytes(
     images: &Images,
     index: usize,
     encoding: Encoding,
 ) -> Result<Vec<u8>, RenderError> {
-    let n = images.height * images.width * 3;
+    let n = images.view_len();
     if index >= images.count || images.rgb.len() < (index + 1) * n {
         return Err(RenderError::InvalidInput(format!(
             "no view {index} in {} images",
             images.count
         )));
     }
-    Ok(images.rgb[index * n..(index + 1) * n]
-        .iter()
-        .map(|&v| to_byte(v, encoding))
-        .collect())
+    let values = &images.rgb[index * n..(index + 1) * n];
+    Ok(if images.is_grey() {
+        values
+            .iter()
+            .flat_map(|&v| [to_byte(v, encoding); 3])
+            .collect()
+    } else {
+        values.iter().map(|&v| to_byte(v, encoding)).collect()
+    })
 }
 
-/// Encodes view `index` as an 8-bit RGB PNG (sRGB chunk set) into `writer`.
+/// Encodes view `index` as an 8-bit RGB PNG (sRGB chunk set) into `writer`; a grey view is
+/// written as RGB with three equal channels.
 pub fn write_png<W: Write>(
     writer: W,
     images: &Images,
@@ -80,21 +87,22 @@ pub fn write_png<W: Write>(
     wr.finish().map_err(io)
 }
 
-/// Lays the views out in a grid of `columns` columns (row-major, view 0 top-left) on white.
+/// Lays the views out in a grid of `columns` columns (row-major, view 0 top-left) on white; the
+/// sheet has the images' channel count.
 pub fn contact_sheet(images: &Images, columns: usize) -> Images {
     let columns = columns.clamp(1, images.count.max(1));
     let rows = images.count.div_ceil(columns);
-    let (h, w) = (images.height, images.width);
+    let (h, w, c) = (images.height, images.width, images.channels);
     let (sh, sw) = (rows * h, columns * w);
-    let mut rgb = vec![1.0f32; sh * sw * 3];
+    let mut values = vec![1.0f32; sh * sw * c];
     for v in 0..images.count {
         let (r0, c0) = ((v / columns) * h, (v % columns) * w);
         for y in 0..h {
-            let src = (v * h + y) * w * 3;
-            let dst = ((r0 + y) * sw + c0) * 3;
+            let src = (v * h + y) * w * c;
+            let dst = ((r0 + y) * sw + c0) * c;
             if let (Some(s), Some(d)) = (
-                images.rgb.get(src..src + w * 3),
-                rgb.get_mut(dst..dst + w * 3),
+                images.rgb.get(src..src + w * c),
+                values.get_mut(dst..dst + w * c),
             ) {
                 d.copy_from_slice(s);
             }
@@ -104,7 +112,8 @@ pub fn contact_sheet(images: &Images, columns: usize) -> Images {
         count: 1,
         height: sh,
         width: sw,
-        rgb,
+        channels: c,
+        rgb: values,
     }
 }
 
@@ -120,6 +129,7 @@ mod tests {
             count: 3,
             height: 1,
             width: 2,
+            channels: 3,
             rgb,
         };
         let sheet = contact_sheet(&imgs, 2);
@@ -142,6 +152,7 @@ mod tests {
             count: 1,
             height: 1,
             width: 2,
+            channels: 3,
             rgb,
         };
         let mut buf = Vec::new();
@@ -153,6 +164,28 @@ mod tests {
         assert_eq!((info.width, info.height), (2, 1));
         assert_eq!(&out[..6], &[0, 128, 255, 255, 0, 0]);
         assert!(write_png(Vec::new(), &imgs, 1, Encoding::Direct).is_err());
+    }
+
+    #[test]
+    fn a_grey_batch_gives_the_sheet_and_png_bytes_of_its_rgb_expansion() {
+        let grey = Images::with_channels(3, 2, 2, 1, (0..12).map(|v| v as f32 / 11.0).collect())
+            .expect("grey batch");
+        let sheet = contact_sheet(&grey, 2);
+        assert_eq!(sheet.channels, 1);
+        assert_eq!(sheet.to_rgb(), contact_sheet(&grey.to_rgb(), 2));
+        let png = |images: &Images| {
+            let mut buf = Vec::new();
+            write_png(&mut buf, images, 0, Encoding::Direct).expect("encode");
+            buf
+        };
+        assert_eq!(png(&sheet), png(&sheet.to_rgb()));
+        for v in 0..3 {
+            assert_eq!(
+                view_bytes(&grey, v, Encoding::SrgbFromLinear).expect("bytes"),
+                view_bytes(&grey.to_rgb(), v, Encoding::SrgbFromLinear).expect("bytes")
+            );
+        }
+        assert!(view_bytes(&grey, 3, Encoding::Direct).is_err());
     }
 
     #[test]

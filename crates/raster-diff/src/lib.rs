@@ -1,6 +1,8 @@
 //! Differentiable triangle rasterizer with the reference cameras and shading.
 //!
-//! Images are `f32` RGB in `[0, 1]`, laid out `(view, row, column, channel)` with row 0 at the top.
+//! Images are `f32` in `[0, 1]`, laid out `(view, row, column, channel)` with row 0 at the top:
+//! grey (one channel) from the CPU backend, RGB from the wgpu backend (the same grey value in
+//! every channel; the shading is grey).
 //!
 //! - [`backend`]: the backend choice ([`Backend`]: `auto`, `cpu`, `gpu`) and [`select_renderer`].
 //! - [`camera`]: the reference view sampler, turntable orbits, the adaptive distance multiplier.
@@ -36,7 +38,7 @@ pub struct View {
     pub light_pos: [f64; 3],
 }
 
-/// A batch of rendered RGB images, `(view, row, column, channel)` row-major: the type the guidance
+/// A batch of rendered images, `(view, row, column, channel)` row-major, grey or RGB: the type the guidance
 /// takes too (it lives in the dependency-free `image-batch` crate so that `csd` can name it without
 /// depending on the renderer).
 pub use image_batch::{Images, ImagesError};
@@ -82,10 +84,13 @@ impl From<ImagesError> for RenderError {
 
 /// The seam between the optimization loop and a rendering backend.
 ///
+/// A backend's renders have the channel count it chooses ([`Images::channels`]): the CPU backend's
+/// are grey (one channel, its shading's value), the wgpu backend's RGB (the grey value in all three
+/// channels). `backward` takes image gradients of the render's channel count.
+///
 /// `backward` is the vector-Jacobian product of the **most recent** `render` call: it may be
 /// called several times for one render. The loop takes two Adam steps per render batch and maps
-/// both sub-steps' image gradients back with one [`backward_many`](Renderer::backward_many)
-/// ([`backward_many_grey`](Renderer::backward_many_grey) when the backend's output is grey).
+/// both sub-steps' image gradients back with one [`backward_many`](Renderer::backward_many).
 pub trait Renderer: Send {
     /// Backend name for logs ("cpu", "wgpu (lavapipe)", …).
     fn name(&self) -> String;
@@ -98,7 +103,8 @@ pub trait Renderer: Send {
         width: usize,
         height: usize,
     ) -> Result<Images, RenderError>;
-    /// Maps dL/dimages (same layout as the last render's output) to dL/dvertices.
+    /// Maps dL/dimages (same layout and channel count as the last render's output) to
+    /// dL/dvertices.
     fn backward(&mut self, d_images: &Images) -> Result<Vec<[f64; 3]>, RenderError>;
     /// [`backward`](Self::backward) for several image gradients of the same render: one
     /// dL/dvertices per gradient, in order, each equal to what `backward` returns for it alone.
@@ -106,25 +112,5 @@ pub trait Renderer: Send {
     /// not depend on the gradient (the CPU backend visits every pixel once).
     fn backward_many(&mut self, d_images: &[&Images]) -> Result<Vec<Vec<[f64; 3]>>, RenderError> {
         d_images.iter().map(|d| self.backward(d)).collect()
-    }
-    /// Whether this backend's renders are grey (the three channels of every pixel one value),
-    /// so that [`backward_many_grey`](Self::backward_many_grey) is available and a gradient
-    /// need only be dL/d(grey). The default is `false`.
-    fn output_is_grey(&self) -> bool {
-        false
-    }
-    /// [`backward_many`](Self::backward_many) from dL/d(grey) = Σ_c dL/d(channel c) per pixel,
-    /// `(view, row, column)`, for a backend whose [`output_is_grey`](Self::output_is_grey): the
-    /// same dL/dvertices as `backward_many` with RGB gradients whose channel sums (in `f64`) are
-    /// these values. The default is an error (a backend without grey output).
-    fn backward_many_grey(
-        &mut self,
-        d_greys: &[&[f32]],
-    ) -> Result<Vec<Vec<[f64; 3]>>, RenderError> {
-        let _ = d_greys;
-        Err(RenderError::InvalidInput(format!(
-            "the {} renderer takes RGB image gradients, not dL/d(grey)",
-            self.name()
-        )))
     }
 }

@@ -84,7 +84,7 @@ fn rect(x0: f64, x1: f64, y0: f64, y1: f64, z: f64) -> (Vec<[f64; 3]>, Vec<[u32;
 fn weights(img: &Images, pixels: impl Iterator<Item = usize>) -> Images {
     let mut rgb = vec![0.0; img.rgb.len()];
     for p in pixels {
-        rgb[3 * p] = 1.0; // the backward sums the channels: dL/d(grey) = 1
+        rgb[img.channels * p] = 1.0; // channel 0 (RGB: the backward sums the channels): dL/d(grey) = 1
     }
     Images { rgb, ..img.clone() }
 }
@@ -107,7 +107,7 @@ fn facing_quad_matches_lambert_closed_form() {
                 let (sx, sy) = (col as f64 + 0.5, row as f64 + 0.5);
                 let d = DVec3::new((sx - 0.5 * w as f64) / k, -(sy - 0.5 * h as f64) / k, -1.0);
                 let p = DVec3::new(0.0, 0.0, 2.0) + d * 2.0;
-                let got = f64::from(img.rgb[3 * (row * w + col)]);
+                let got = f64::from(img.rgb[img.channels * (row * w + col)]);
                 if p.x.abs() < 1.5 && p.y.abs() < 1.5 {
                     covered += 1;
                     let want = RADIANCE_SCALE * (DVec3::from(light) - p).normalize().z.max(0.0);
@@ -194,9 +194,9 @@ fn silhouette_gradient_moves_the_edge_towards_darker_target() {
                 );
                 continue;
             }
-            let c19 = img.rgb[3 * (16 * w + 19)];
+            let c19 = img.rgb[img.channels * (16 * w + 19)];
             let want = 1.0 + 0.24 * (c19 - 1.0);
-            let got = img.rgb[3 * (16 * w + 20)];
+            let got = img.rgb[img.channels * (16 * w + 20)];
             assert!((got - want).abs() < 1e-5, "{name}: {got} vs {want}");
             assert!(
                 g[1][0] < -1e-3 && g[2][0] < -1e-3,
@@ -235,14 +235,14 @@ fn occlusion_boundary_gradient_moves_the_front_edge() {
             ids[16 * w + 20] >= 2 && ids[16 * w + 20] != NO_TRIANGLE,
             "{name}: back quad (faces 2, 3) at column 20"
         );
-        let front = img.rgb[3 * (16 * w + 18)];
-        let back = img.rgb[3 * (16 * w + 22)];
+        let front = img.rgb[img.channels * (16 * w + 18)];
+        let back = img.rgb[img.channels * (16 * w + 22)];
         assert!((front - back).abs() > 0.05, "{name}: {front} vs {back}");
         // L = Σ (c − c_front)² / 2 over column 20: dL/dc = c − c_front.
         let mut d = weights(&img, std::iter::empty());
         for row in 13..19 {
             let p = row * w + 20;
-            d.rgb[3 * p] = img.rgb[3 * p] - front;
+            d.rgb[img.channels * p] = img.rgb[img.channels * p] - front;
         }
         let g = b.renderer().backward(&d).expect("backward");
         assert!(
@@ -273,7 +273,7 @@ fn antialiasing_makes_the_image_continuous_as_an_edge_crosses_a_pixel_centre() {
             let mut at = |x_edge: f64| {
                 let (v, f) = rect(-0.5, x_edge, -0.5, 0.5, 0.0);
                 let img = b.renderer().render(&v, &f, &view, w, h).expect("render");
-                (img.rgb[3 * (16 * w + 20)], b.ids()[16 * w + 20])
+                (img.rgb[img.channels * (16 * w + 20)], b.ids()[16 * w + 20])
             };
             let (before, id_before) = at(0.5625 - 1e-5);
             let (after, id_after) = at(0.5625 + 1e-5);

@@ -50,7 +50,7 @@ fn facing_quad_matches_lambert_closed_form() {
     let view = front_view(2.0, light);
     let (w, h) = (24, 16);
     let mut r = no_aa();
-    let grey = r.render_grey(&v, &f, &[view], w, h).expect("render");
+    let grey = r.render_f64(&v, &f, &[view], w, h).expect("render");
     let k = 0.5 * h as f64; // fov 90° → k = H/2.
     let mut covered = 0;
     for row in 0..h {
@@ -83,10 +83,10 @@ fn two_sided_shading_lights_reversed_faces_identically() {
     let flipped: Vec<[u32; 3]> = f.iter().map(|t| [t[0], t[2], t[1]]).collect();
     let view = front_view(2.5, [1.0, 1.0, 2.0]);
     let a = no_aa()
-        .render_grey(&v, &f, std::slice::from_ref(&view), 20, 20)
+        .render_f64(&v, &f, std::slice::from_ref(&view), 20, 20)
         .expect("render");
     let b = no_aa()
-        .render_grey(&v, &flipped, &[view], 20, 20)
+        .render_f64(&v, &flipped, &[view], 20, 20)
         .expect("render");
     for (x, y) in a.iter().zip(&b) {
         assert!((x - y).abs() < 1e-12);
@@ -106,7 +106,7 @@ fn shared_edge_pixels_are_covered_exactly_once() {
         near: 0.1,
     });
     let ids_of = |r: &mut CpuRenderer, faces: &[[u32; 3]]| {
-        r.render_grey(&v, faces, std::slice::from_ref(&view), n, n)
+        r.render_f64(&v, faces, std::slice::from_ref(&view), n, n)
             .expect("render");
         r.triangle_ids().expect("state")
     };
@@ -136,11 +136,11 @@ fn depth_test_keeps_the_nearest_surface_in_any_face_order() {
     f.extend(f2.iter().map(|t| [t[0] + 4, t[1] + 4, t[2] + 4]));
     let view = front_view(2.0, [0.0, 0.0, 2.0]);
     let mut r = no_aa();
-    r.render_grey(&v, &f, std::slice::from_ref(&view), 32, 32)
+    r.render_f64(&v, &f, std::slice::from_ref(&view), 32, 32)
         .expect("render");
     let ids = r.triangle_ids().expect("state");
     let reversed: Vec<[u32; 3]> = f.iter().rev().copied().collect();
-    r.render_grey(&v, &reversed, &[view], 32, 32)
+    r.render_f64(&v, &reversed, &[view], 32, 32)
         .expect("render");
     let ids_rev = r.triangle_ids().expect("state");
     let centre = 16 * 32 + 16;
@@ -180,7 +180,7 @@ fn silhouette_gradient_moves_the_edge_towards_darker_target() {
     }
     let mut aa = CpuRenderer::default();
     let grey = aa
-        .render_grey(&v, &f, std::slice::from_ref(&view), w, h)
+        .render_f64(&v, &f, std::slice::from_ref(&view), w, h)
         .expect("render");
     let ids = aa.triangle_ids().expect("state");
     assert_eq!(ids[16 * w + 20], NO_TRIANGLE);
@@ -192,7 +192,7 @@ fn silhouette_gradient_moves_the_edge_towards_darker_target() {
         "column 20 is 24 % covered: {} vs {want}",
         grey[16 * w + 20]
     );
-    let g = aa.backward_grey(&d).expect("backward");
+    let g = aa.backward_f64(&d).expect("backward");
     assert!(
         g[1][0] < -1e-3 && g[2][0] < -1e-3,
         "right vertices pulled right: {:?} {:?}",
@@ -207,8 +207,8 @@ fn silhouette_gradient_moves_the_edge_towards_darker_target() {
     );
     // Without antialiasing the same loss sees no silhouette and has no gradient.
     let mut plain = no_aa();
-    plain.render_grey(&v, &f, &[view], w, h).expect("render");
-    let g0 = plain.backward_grey(&d).expect("backward");
+    plain.render_f64(&v, &f, &[view], w, h).expect("render");
+    let g0 = plain.backward_f64(&d).expect("backward");
     assert!(g0.iter().flatten().all(|x| *x == 0.0));
 }
 
@@ -238,9 +238,9 @@ fn sphere_gradient_matches_central_differences() {
         })
         .collect();
     let mut r = CpuRenderer::default();
-    r.render_grey(&v, &f, &views, w, h).expect("render");
+    r.render_f64(&v, &f, &views, w, h).expect("render");
     let ids0 = r.triangle_ids().expect("state");
-    let g = r.backward_grey(&gw).expect("backward");
+    let g = r.backward_f64(&gw).expect("backward");
     let an: f64 = g
         .iter()
         .zip(&dir)
@@ -253,7 +253,7 @@ fn sphere_gradient_matches_central_differences() {
             .zip(&dir)
             .map(|(p, d)| [p[0] + s * d[0], p[1] + s * d[1], p[2] + s * d[2]])
             .collect();
-        let img = r.render_grey(&vs, &f, &views, w, h).expect("render");
+        let img = r.render_f64(&vs, &f, &views, w, h).expect("render");
         assert_eq!(
             r.triangle_ids().expect("state"),
             ids0,
@@ -275,7 +275,7 @@ fn bad_inputs_give_typed_errors() {
     let view = front_view(2.0, [0.0, 0.0, 2.0]);
     let mut r = CpuRenderer::default();
     assert!(matches!(
-        r.backward_grey(&[]),
+        r.backward_f64(&[]),
         Err(RenderError::NoForwardState)
     ));
     let bad_face = vec![[0, 1, 9]];
@@ -304,9 +304,13 @@ fn bad_inputs_give_typed_errors() {
         count: 1,
         height: 4,
         width: 8,
-        rgb: vec![0.0; 96],
+        channels: 1,
+        rgb: vec![0.0; 32],
     };
     assert!(r.backward(&wrong).is_err());
+    // The renders are grey: an RGB gradient of the right size is refused too.
+    assert_eq!(img.channels, 1);
+    assert!(r.backward(&img.to_rgb()).is_err());
     assert!(r.backward(&img).is_ok());
 }
 
@@ -355,7 +359,7 @@ fn antialiasing_makes_the_image_continuous_as_an_edge_crosses_a_pixel_centre() {
             ..RenderSettings::default()
         });
         let g = r
-            .render_grey(&v, &f, std::slice::from_ref(&view), w, h)
+            .render_f64(&v, &f, std::slice::from_ref(&view), w, h)
             .expect("render");
         (
             g[16 * w + 20],
@@ -420,8 +424,8 @@ fn backward_many_is_one_backward_per_gradient_bit_for_bit() {
     let grad = |k: usize| Images {
         rgb: (0..img.rgb.len())
             .map(|i| {
-                // Gradient 1 is zero on every other pixel (all three channels).
-                if k == 1 && (i / 3) % 2 == 0 {
+                // Gradient 1 is zero on every other pixel.
+                if k == 1 && i % 2 == 0 {
                     0.0
                 } else {
                     (((i * (7 + k) * 7919) % 1000) as f32 / 500.0 - 1.0) * 1e-2
@@ -445,10 +449,11 @@ fn backward_many_is_one_backward_per_gradient_bit_for_bit() {
     assert!(r.backward_many(&[]).expect("no gradients").is_empty());
     // A wrongly shaped gradient among them is an error, not a partial result.
     let short = Images {
-        rgb: vec![0.0; 3],
+        rgb: vec![0.0; 1],
         count: 1,
         height: 1,
         width: 1,
+        channels: 1,
     };
     assert!(r.backward_many(&[&g0, &short]).is_err());
 }

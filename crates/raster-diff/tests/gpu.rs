@@ -60,6 +60,17 @@ fn rel_l2(a: &[[f64; 3]], b: &[[f64; 3]]) -> f64 {
     norm(&diff) / norm(a).max(1e-300)
 }
 
+/// The RGB gradient (for the wgpu backend's RGB renders) with the CPU backend's grey gradient `d`
+/// in channel 0 and zeros in the others: its channel sums are `d`, exactly.
+fn rgb_gradient(d: &Images) -> Images {
+    assert_eq!(d.channels, 1);
+    Images {
+        channels: 3,
+        rgb: d.rgb.iter().flat_map(|&v| [v, 0.0, 0.0]).collect(),
+        ..d.clone()
+    }
+}
+
 /// Pixels whose triangle id differs between the backends, and the largest image difference over
 /// pixels where the id of the pixel and of its four neighbours agree (antialiasing mixes a pixel
 /// with its neighbours, so a coverage difference legitimately changes them too).
@@ -82,7 +93,7 @@ fn compare_images(
             && (row == 0 || same(i - w))
             && (row + 1 == h || same(i + w));
         if ok {
-            max_diff = max_diff.max((ic.rgb[3 * i] - ig.rgb[3 * i]).abs());
+            max_diff = max_diff.max((ic.rgb[ic.channels * i] - ig.rgb[ig.channels * i]).abs());
         }
     }
     (differing, max_diff)
@@ -132,7 +143,7 @@ fn wgpu_images_and_gradients_match_cpu() {
             ..ic.clone()
         };
         let gc = c.backward(&d).expect("cpu backward");
-        let gg = g.backward(&d).expect("gpu backward");
+        let gg = g.backward(&rgb_gradient(&d)).expect("gpu backward");
         let rel = rel_l2(&gc, &gg);
         println!("AA {antialias}: VJP relative L2 difference {rel:e}");
         assert!(norm(&gc) > 1e-3, "non-trivial gradient");
@@ -195,6 +206,7 @@ fn wgpu_bad_inputs_give_typed_errors() {
         count: 1,
         height: 8,
         width: 8,
+        channels: 3,
         rgb: vec![0.0; 192],
     };
     assert!(matches!(g.backward(&d), Err(RenderError::NoForwardState)));
@@ -242,6 +254,17 @@ fn wgpu_bad_inputs_give_typed_errors() {
     };
     assert!(matches!(
         g.backward(&wrong),
+        Err(RenderError::InvalidInput(_))
+    ));
+    // The renders are RGB: a grey gradient of the right size is refused too.
+    assert_eq!(img.channels, 3);
+    let grey = Images {
+        channels: 1,
+        rgb: vec![0.0; 64],
+        ..img.clone()
+    };
+    assert!(matches!(
+        g.backward(&grey),
         Err(RenderError::InvalidInput(_))
     ));
     assert!(g.backward(&img).is_ok());
@@ -312,7 +335,7 @@ fn wgpu_matches_cpu_on_a_non_square_scene_with_occlusion() {
         ..ic.clone()
     };
     let gc = c.backward(&d).expect("cpu backward");
-    let gg = g.backward(&d).expect("gpu backward");
+    let gg = g.backward(&rgb_gradient(&d)).expect("gpu backward");
     let rel = rel_l2(&gc, &gg);
     println!("VJP relative L2 difference {rel:e}");
     assert!(norm(&gc) > 1e-3, "non-trivial gradient");

@@ -18,9 +18,11 @@ use stylize::pipeline::{
 mod common;
 use common::ok;
 
-/// Loss = mean pixel value (pushes pixels darker); its gradient is 1/N everywhere, scaled by a
-/// factor drawn from the RNG (so two sub-steps give different gradients, like fresh noise). Its
-/// stage-II "loss" is the weight of its schedule at the iteration (as `CascadedGuidance` reads it).
+/// Loss = mean value of the RGB images (pushes pixels darker; grey images are taken as their RGB
+/// expansion); its gradient is 1/N everywhere, scaled by a factor drawn from the RNG (so two
+/// sub-steps give different gradients, like fresh noise), and for grey images the channel sums
+/// of that. Its stage-II "loss" is the weight of its schedule at the iteration (as
+/// `CascadedGuidance` reads it).
 struct DarkerGuidance {
     calls: Arc<AtomicUsize>,
     random_scale: bool,
@@ -40,15 +42,23 @@ impl Guidance for DarkerGuidance {
         } else {
             1.0
         };
-        let n = images.rgb.len() as f64;
-        let mean = images.rgb.iter().map(|&v| f64::from(v)).sum::<f64>() / n;
+        let rgb = images.to_rgb();
+        let n = rgb.rgb.len() as f64;
+        let mean = rgb.rgb.iter().map(|&v| f64::from(v)).sum::<f64>() / n;
         let stage2_weight = self.stage2_weight.at(iteration);
-        let mut grad_images = images.zeros_like();
+        let mut grad_rgb = rgb.zeros_like();
         // Four low mantissa bits cleared: the three channels' sum is then exact in f32, so a grey
-        // renderer's path (dL/d(grey) in f32) sees the values the RGB path sums in f64.
-        grad_images
+        // render's gradient (dL/d(grey) in f32) holds the values an RGB renderer sums in f64.
+        grad_rgb
             .rgb
             .fill(f32::from_bits(((scale / n) as f32).to_bits() & !0xF));
+        let grad_images = if images.is_grey() {
+            let sums = grad_rgb.channel_sums().iter().map(|&v| v as f32).collect();
+            Images::with_channels(images.count, images.height, images.width, 1, sums)
+                .map_err(|e| GuidanceError::InvalidInput(e.to_string()))?
+        } else {
+            grad_rgb
+        };
         Ok(GuidanceOutput {
             loss_stage1: scale * mean,
             loss_stage2: stage2_weight,
@@ -56,6 +66,35 @@ impl Guidance for DarkerGuidance {
             denoiser_seconds: 0.0,
             grad_images,
         })
+    }
+}
+
+/// The CPU renderer's grey renders as RGB images (each value in all three channels); its
+/// backward takes RGB gradients and maps their channel sums back.
+struct RgbRenderer(CpuRenderer);
+
+impl Renderer for RgbRenderer {
+    fn name(&self) -> String {
+        "rgb cpu".into()
+    }
+    fn render(
+        &mut self,
+        vertices: &[[f64; 3]],
+        faces: &[[u32; 3]],
+        views: &[View],
+        width: usize,
+        height: usize,
+    ) -> Result<Images, RenderError> {
+        let grey = self.0.render(vertices, faces, views, width, height)?;
+        assert_eq!(grey.channels, 1);
+        Ok(grey.into_rgb())
+    }
+    fn backward(&mut self, d_images: &Images) -> Result<Vec<[f64; 3]>, RenderError> {
+        assert_eq!(d_images.channels, 3);
+        let sums = d_images.channel_sums().iter().map(|&v| v as f32).collect();
+        let d_grey =
+            Images::with_channels(d_images.count, d_images.height, d_images.width, 1, sums)?;
+        self.0.backward(&d_grey)
     }
 }
 
@@ -507,22 +546,18 @@ fn batched_sub_steps_equal_sub_steps_one_by_one_bit_for_bit() {
 
 #[test]
 fn a_grey_renderer_takes_grey_gradients_with_the_rgb_paths_results() {
-    // The CPU renderer's output is grey, so the loop asks the guidance for dL/d(grey) and the
-    // renderer maps it back (`evaluate_many_grey`, `backward_many_grey`); `CountingRenderer`
-    // does not say so and takes the RGB path. With a guidance that only implements `evaluate`,
-    // dL/d(grey) is the default's channel sums (exact here, see `DarkerGuidance`) — what the RGB
-    // path's backward sums — so the two runs agree bit for bit.
+    // The CPU renderer's output is grey (one channel), so the guidance returns dL/d(grey) and the
+    // renderer maps it back; `RgbRenderer` hands the same renders over as RGB and sums the RGB
+    // gradient's channels. `DarkerGuidance` forms dL/d(grey) as the channel sums of its RGB
+    // gradient (exact here) — what the RGB renderer's backward sums — so the two runs agree bit
+    // for bit.
     let darap = layer();
     let objective = |grey: bool| {
         let renderer: Box<dyn Renderer> = if grey {
             Box::new(CpuRenderer::default())
         } else {
-            Box::new(CountingRenderer {
-                inner: CpuRenderer::default(),
-                renders: Arc::new(AtomicUsize::new(0)),
-            })
+            Box::new(RgbRenderer(CpuRenderer::default()))
         };
-        assert_eq!(renderer.output_is_grey(), grey);
         TextObjective::new(
             renderer,
             Box::new(DarkerGuidance {

@@ -20,7 +20,7 @@
 use std::time::Instant;
 
 use crate::error::{Context, Result, invalid};
-use csd::{GreyGuidanceOutput, Guidance, GuidanceOutput};
+use csd::Guidance;
 use darap::Darap;
 use optim::Adam;
 use rand_chacha::ChaCha8Rng;
@@ -485,70 +485,37 @@ impl<'g> TextObjective<'g> {
             invalid!("no renders")
         };
         let t = Instant::now();
-        // Records the guidance's timings, checks its evaluation count and starts the backward's
-        // clock.
-        let guidance_done = |timings: &mut Vec<(&'static str, f64)>, denoiser: f64, n: usize| {
-            timings.push(("guidance", t.elapsed().as_secs_f64()));
-            timings.push(("guidance_denoiser", denoiser));
-            if n != count as usize {
-                invalid!("guidance returned {n} evaluations for {count} sub-steps");
+        let outs = self
+            .guidance
+            .evaluate_many(images, iteration, count as usize, rng)
+            .context("guidance")?;
+        timings.push(("guidance", t.elapsed().as_secs_f64()));
+        timings.push((
+            "guidance_denoiser",
+            outs.iter().map(|o| o.denoiser_seconds).sum(),
+        ));
+        if outs.len() != count as usize {
+            invalid!(
+                "guidance returned {} evaluations for {count} sub-steps",
+                outs.len()
+            );
+        }
+        for out in &outs {
+            if !out.grad_images.same_shape(images) {
+                invalid!(
+                    "guidance returned {} gradient values for {} image values",
+                    out.grad_images.rgb.len(),
+                    images.rgb.len()
+                );
             }
-            Ok(Instant::now())
-        };
-        // A grey renderer needs only dL/d(grey), which the guidance forms with less work.
-        let (outs, grads) = if self.renderer.output_is_grey() {
-            let outs = self
-                .guidance
-                .evaluate_many_grey(images, iteration, count as usize, rng)
-                .context("guidance")?;
-            let denoiser = outs.iter().map(|o| o.denoiser_seconds).sum();
-            let t = guidance_done(&mut timings, denoiser, outs.len())?;
-            let pixels = images.count * images.height * images.width;
-            for out in &outs {
-                if out.grad_grey.len() != pixels {
-                    invalid!(
-                        "guidance returned {} grey gradient values for {pixels} pixels",
-                        out.grad_grey.len()
-                    );
-                }
-            }
-            let d_greys: Vec<&[f32]> = outs.iter().map(|o| o.grad_grey.as_slice()).collect();
-            let grads = self
-                .renderer
-                .backward_many_grey(&d_greys)
-                .context("renderer backward")?;
-            timings.push(("render_backward", t.elapsed().as_secs_f64()));
-            (
-                outs.into_iter().map(Scores::from).collect::<Vec<_>>(),
-                grads,
-            )
-        } else {
-            let outs = self
-                .guidance
-                .evaluate_many(images, iteration, count as usize, rng)
-                .context("guidance")?;
-            let denoiser = outs.iter().map(|o| o.denoiser_seconds).sum();
-            let t = guidance_done(&mut timings, denoiser, outs.len())?;
-            for out in &outs {
-                if !out.grad_images.same_shape(images) {
-                    invalid!(
-                        "guidance returned {} gradient values for {} image values",
-                        out.grad_images.rgb.len(),
-                        images.rgb.len()
-                    );
-                }
-            }
-            let d_images: Vec<&Images> = outs.iter().map(|o| &o.grad_images).collect();
-            let grads = self
-                .renderer
-                .backward_many(&d_images)
-                .context("renderer backward")?;
-            timings.push(("render_backward", t.elapsed().as_secs_f64()));
-            (
-                outs.into_iter().map(Scores::from).collect::<Vec<_>>(),
-                grads,
-            )
-        };
+        }
+        let t = Instant::now();
+        let d_images: Vec<&Images> = outs.iter().map(|o| &o.grad_images).collect();
+        let grads = self
+            .renderer
+            .backward_many(&d_images)
+            .context("renderer backward")?;
+        timings.push(("render_backward", t.elapsed().as_secs_f64()));
         if grads.len() != outs.len() {
             invalid!(
                 "the renderer returned {} gradients for {} image gradients",
@@ -575,33 +542,6 @@ impl<'g> TextObjective<'g> {
                 grad_positions,
             })
             .collect())
-    }
-}
-
-/// The logged terms of one guidance evaluation (its gradient has gone to the renderer).
-struct Scores {
-    loss_stage1: f64,
-    loss_stage2: f64,
-    stage2_weight: f64,
-}
-
-impl From<GuidanceOutput> for Scores {
-    fn from(o: GuidanceOutput) -> Self {
-        Self {
-            loss_stage1: o.loss_stage1,
-            loss_stage2: o.loss_stage2,
-            stage2_weight: o.stage2_weight,
-        }
-    }
-}
-
-impl From<GreyGuidanceOutput> for Scores {
-    fn from(o: GreyGuidanceOutput) -> Self {
-        Self {
-            loss_stage1: o.loss_stage1,
-            loss_stage2: o.loss_stage2,
-            stage2_weight: o.stage2_weight,
-        }
     }
 }
 

@@ -112,6 +112,7 @@ pub fn turntable(
     let views = bounding_orbit(positions, n, fov);
     renderer
         .render(positions, faces, &views, size, size)
+        .map(Images::into_rgb)
         .context("turntable render")
 }
 
@@ -138,6 +139,7 @@ pub fn before_after(
     let mut render = |p: &[[f64; 3]]| {
         renderer
             .render(p, faces, &orbit, size, size)
+            .map(Images::into_rgb)
             .context("before/after render")
     };
     let (src, res) = (render(source)?, render(result)?);
@@ -208,6 +210,7 @@ fn crop(images: &Images, size: usize, x0: usize, y0: usize, side: usize) -> Imag
         count: images.count,
         height: side,
         width: side,
+        channels: 3,
         rgb: Vec::with_capacity(images.count * side * side * 3),
     };
     for v in 0..images.count {
@@ -255,6 +258,7 @@ pub fn filled_orbit(
             for chunk in orbit.chunks(per_chunk) {
                 let images = renderer
                     .render(positions, faces, chunk, side, side)
+                    .map(Images::into_rgb)
                     .context("turntable render")?;
                 each(images, renderer.triangle_ids())?;
             }
@@ -305,6 +309,7 @@ pub fn filled_orbit(
         count: 0,
         height: size,
         width: size,
+        channels: 3,
         rgb: Vec::with_capacity(orbit.len() * size * size * 3),
     };
     chunks(big, &mut |mut images, ids| {
@@ -577,6 +582,7 @@ mod tests {
             count: 0,
             height: 4,
             width: 4,
+            channels: 3,
             rgb: Vec::new(),
         };
         assert!(encode_gif(Vec::new(), &empty, 5, Encoding::Direct).is_err());
@@ -584,6 +590,7 @@ mod tests {
             count: 1,
             height: 70_000,
             width: 1,
+            channels: 3,
             rgb: Vec::new(),
         };
         let e = encode_gif(Vec::new(), &huge, 5, Encoding::Direct)

@@ -9,7 +9,8 @@
 //! per-stage gradients held fixed (detached, as in `target = (z − grad).detach()`):
 //! ℓ(img) = S·a/B·⟨grad_I, D(2R(img) − 1)⟩ + S·w_II/B·⟨grad_II, U(2R(img) − 1)⟩, whose derivative is what
 //! `CascadedGuidance` must return. The grey checks take ℓ as a function of one value per pixel spread
-//! over the three channels: its derivative is `evaluate_many_grey`'s dL/d(grey).
+//! over the three channels: its derivative is the gradient the guidance returns for the one-channel
+//! (grey) images of those values, dL/d(grey).
 
 use super::{Report, Tolerance};
 use csd::resize::Resize2d;
@@ -134,7 +135,8 @@ fn to_nchw(img: &[f64], views: usize, h: usize, w: usize) -> Vec<f64> {
 }
 
 /// The image the chain is checked at: per pixel and channel, or (`Grey`) one value per pixel
-/// spread over the three channels, whose gradient is `evaluate_many_grey`'s dL/d(grey).
+/// spread over the three channels, whose gradient is the guidance's for the one-channel images of
+/// those values, dL/d(grey).
 #[derive(Clone, Copy, PartialEq)]
 enum Input {
     Rgb,
@@ -182,9 +184,23 @@ fn check_guidance_chain(
         // The same draws (same seed), so the same per-stage gradients as the trace's.
         Input::Grey => guidance(false)?
             .with_stage2_weight(optim::Schedule::constant(stage2_weight))
-            .evaluate_many_grey(&batch, 1, 1, &mut ChaCha8Rng::seed_from_u64(seed + 1))?
+            .evaluate_many(
+                &Images {
+                    channels: 1,
+                    ..imgs(
+                        &theta.iter().map(|&v| v as f32).collect::<Vec<_>>(),
+                        views,
+                        h,
+                        w,
+                    )
+                },
+                1,
+                1,
+                &mut ChaCha8Rng::seed_from_u64(seed + 1),
+            )?
             .remove(0)
-            .grad_grey
+            .grad_images
+            .rgb
             .iter()
             .map(|&v| v as f64)
             .collect(),
@@ -334,7 +350,7 @@ pub fn suite(report: &mut Report) -> anyhow::Result<()> {
     )?;
     check_guidance_chain(
         report,
-        "csd/guidance grey gradient (evaluate_many_grey), 2 views 96x80, w_II 0.3 (f32)",
+        "csd/guidance grey gradient (1-channel images), 2 views 96x80, w_II 0.3 (f32)",
         (2, 96, 80),
         0.3,
         56,
@@ -358,7 +374,7 @@ pub fn suite(report: &mut Report) -> anyhow::Result<()> {
     )?;
     check_guidance_chain(
         report,
-        "csd/guidance grey gradient (evaluate_many_grey), 2 views 512x512, w_II 1 (f32)",
+        "csd/guidance grey gradient (1-channel images), 2 views 512x512, w_II 1 (f32)",
         (2, 512, 512),
         1.0,
         76,
@@ -373,6 +389,7 @@ fn imgs(data: &[f32], views: usize, h: usize, w: usize) -> Images {
         count: views,
         height: h,
         width: w,
+        channels: 3,
         rgb: data.to_vec(),
     }
 }

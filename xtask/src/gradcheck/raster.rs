@@ -63,7 +63,7 @@ fn image_check(
     let mut r = CpuRenderer::new(settings);
     // The loss is ⟨G, image(θ) − image(θ₀)⟩: the constant offset does not change the gradient but
     // keeps the large constant part (white background) out of the difference quotient's rounding.
-    let base = r.render_grey(&v, &f, &views, W, H)?;
+    let base = r.render_f64(&v, &f, &views, W, H)?;
     let ids = r
         .triangle_ids()
         .ok_or_else(|| anyhow::anyhow!("no render state"))?;
@@ -78,7 +78,7 @@ fn image_check(
             }
         })
         .collect();
-    let grad = flatten(&r.backward_grey(&g)?);
+    let grad = flatten(&r.backward_f64(&g)?);
     let coverage_changed = Cell::new(false);
     let failed_render = Cell::new(false);
     let theta = flatten(&v);
@@ -92,7 +92,7 @@ fn image_check(
         },
         seed + 3,
         |t| {
-            let Ok(img) = r.render_grey(&unflatten(t), &f, &views, W, H) else {
+            let Ok(img) = r.render_f64(&unflatten(t), &f, &views, W, H) else {
                 failed_render.set(true);
                 return f64::NAN;
             };
@@ -201,8 +201,8 @@ pub fn suite(report: &mut Report) -> anyhow::Result<()> {
         }
         let mut r = CpuRenderer::default();
         let views = views(52);
-        let img = r.render_grey(&v, &f, &views, W, H)?;
-        let g = r.backward_grey(&vec![1.0; img.len()])?;
+        let img = r.render_f64(&v, &f, &views, W, H)?;
+        let g = r.backward_f64(&vec![1.0; img.len()])?;
         let name = "raster/degenerate triangles stay finite";
         if img.iter().any(|x| !x.is_finite()) || g.iter().flatten().any(|x| !x.is_finite()) {
             report.fail(name, "non-finite image or gradient".into());
@@ -505,11 +505,18 @@ fn wgpu_suite(report: &mut Report, mut gpu: raster_diff::gpu::WgpuRenderer) -> a
     let gpu_ids = gpu.triangle_ids()?;
     let differing = ids.iter().zip(&gpu_ids).filter(|(a, b)| a != b).count();
     let mut rng = ChaCha8Rng::seed_from_u64(63);
+    // The CPU renders are grey and the wgpu ones RGB: the same cotangent is the grey one for the
+    // CPU and, for the wgpu backend (which sums the channels), that one in channel 0.
     let d = Images {
         rgb: ic.rgb.iter().map(|_| rng.random::<f32>() - 0.5).collect(),
         ..ic
     };
-    let (gc, gg) = (cpu.backward(&d)?, gpu.backward(&d)?);
+    let d_rgb = Images {
+        channels: 3,
+        rgb: d.rgb.iter().flat_map(|&v| [v, 0.0, 0.0]).collect(),
+        ..d.clone()
+    };
+    let (gc, gg) = (cpu.backward(&d)?, gpu.backward(&d_rgb)?);
     let norm = |x: &mut dyn Iterator<Item = f64>| x.map(|a| a * a).sum::<f64>().sqrt();
     let diff = norm(
         &mut gc

@@ -1,8 +1,8 @@
 //! The CPU reference backend: exact, deterministic, multithreaded over views (rayon).
 //!
-//! Geometry is f64 throughout; the f32 images of the [`Renderer`] trait are the f64 values cast at
-//! the end. [`CpuRenderer::render_grey`] / [`CpuRenderer::backward_grey`] expose the f64 grey
-//! image (all three channels are equal) for gradient checks.
+//! Geometry is f64 throughout; the grey (one-channel) f32 images of the [`Renderer`] trait are the
+//! f64 values cast at the end. [`CpuRenderer::render_f64`] / [`CpuRenderer::backward_f64`] are the
+//! same render and backward in f64, for gradient checks.
 //!
 //! Gradient accumulation is deterministic: every view accumulates into its own buffers, which are
 //! summed in view order; within a view pixels are visited in a fixed order.
@@ -147,8 +147,9 @@ impl CpuRenderer {
         }
     }
 
-    /// Renders the grey value of every pixel, `(view, row, column)` row-major, in f64.
-    pub fn render_grey(
+    /// Renders the grey value of every pixel, `(view, row, column)` row-major, in f64: the
+    /// [`Renderer::render`] of this backend before its values are rounded to f32.
+    pub fn render_f64(
         &mut self,
         vertices: &[[f64; 3]],
         faces: &[[u32; 3]],
@@ -250,22 +251,20 @@ impl CpuRenderer {
         Ok(())
     }
 
-    /// VJP of the most recent [`render_grey`](Self::render_grey): dL/d(grey) → dL/dvertices.
-    pub fn backward_grey(&self, d_grey: &[f64]) -> Result<Vec<[f64; 3]>, RenderError> {
-        let mut out = self.backward_grey_many(&[d_grey])?;
+    /// VJP of the most recent render ([`render_f64`](Self::render_f64) or
+    /// [`Renderer::render`]) with dL/d(grey) in f64, `(view, row, column)`: → dL/dvertices.
+    pub fn backward_f64(&self, d_grey: &[f64]) -> Result<Vec<[f64; 3]>, RenderError> {
+        let mut out = self.backward_many_f64(&[d_grey])?;
         Ok(out.pop().unwrap_or_default())
     }
 
-    /// [`backward_grey`](Self::backward_grey) for several gradients of the same render at once:
+    /// [`backward_f64`](Self::backward_f64) for several gradients of the same render at once:
     /// one dL/dvertices per entry of `d_greys`, in order. The per-pixel work that does not depend
     /// on the gradient (the fragment, the shading and its Jacobian) is done once and shared, so
     /// two gradients cost much less than two calls. Each result is what a call with that gradient
     /// alone returns, bit for bit. (The loop's path is the trait's
-    /// [`backward_many_grey`](Renderer::backward_many_grey), which takes `f32` values.)
-    pub fn backward_grey_many(
-        &self,
-        d_greys: &[&[f64]],
-    ) -> Result<Vec<Vec<[f64; 3]>>, RenderError> {
+    /// [`backward_many`](Renderer::backward_many), which takes `f32` grey images.)
+    pub fn backward_many_f64(&self, d_greys: &[&[f64]]) -> Result<Vec<Vec<[f64; 3]>>, RenderError> {
         let st = self.state.as_ref().ok_or(RenderError::NoForwardState)?;
         let npix = st.width * st.height;
         check_grey_lengths(d_greys.iter().map(|d| d.len()), st.views.len() * npix)?;
@@ -613,6 +612,7 @@ impl Renderer for CpuRenderer {
         format!("cpu ({} threads)", rayon::current_num_threads())
     }
 
+    /// Grey images (one channel): the shading's value of every pixel, rounded to f32.
     fn render(
         &mut self,
         vertices: &[[f64; 3]],
@@ -621,17 +621,27 @@ impl Renderer for CpuRenderer {
         width: usize,
         height: usize,
     ) -> Result<Images, RenderError> {
-        let mut rgb = Vec::new();
+        let mut grey = Vec::new();
         self.render_into(
             vertices,
             faces,
             views,
             (width, height),
-            image_batch::CHANNELS,
-            &mut rgb,
-            image_batch::grey_to_rgb,
+            image_batch::GREY,
+            &mut grey,
+            |g, d| {
+                for (d, &g) in d.iter_mut().zip(g) {
+                    *d = g as f32;
+                }
+            },
         )?;
-        Ok(Images::new(views.len(), height, width, rgb)?)
+        Ok(Images::with_channels(
+            views.len(),
+            height,
+            width,
+            image_batch::GREY,
+            grey,
+        )?)
     }
 
     fn backward(&mut self, d_images: &Images) -> Result<Vec<[f64; 3]>, RenderError> {
@@ -639,35 +649,16 @@ impl Renderer for CpuRenderer {
         Ok(out.pop().unwrap_or_default())
     }
 
-    /// One pass over the pixels for all the gradients (see [`CpuRenderer::backward_grey_many`]);
-    /// each image's dL/d(grey) is formed view by view inside the parallel pass.
+    /// One pass over the pixels for all the gradients (see [`CpuRenderer::backward_many_f64`]),
+    /// each grey gradient widened to `f64` view by view inside the parallel pass (the
+    /// antialiasing's adjoint then works in that buffer).
     fn backward_many(&mut self, d_images: &[&Images]) -> Result<Vec<Vec<[f64; 3]>>, RenderError> {
         let st = self.state.as_ref().ok_or(RenderError::NoForwardState)?;
         for d in d_images {
-            d.check_gradient_shape(st.views.len(), st.height, st.width)?;
+            d.check_gradient_shape(st.views.len(), st.height, st.width, image_batch::GREY)?;
         }
         Ok(backward_views(st, d_images.len(), |g, vi| {
-            Cow::Owned(d_images[g].view_grey_gradient(vi))
-        }))
-    }
-
-    /// All three channels are the shaded grey value.
-    fn output_is_grey(&self) -> bool {
-        true
-    }
-
-    /// [`CpuRenderer::backward_grey_many`] of the values widened to `f64`, view by view inside
-    /// the parallel pass (the antialiasing's adjoint then works in that buffer).
-    fn backward_many_grey(
-        &mut self,
-        d_greys: &[&[f32]],
-    ) -> Result<Vec<Vec<[f64; 3]>>, RenderError> {
-        let st = self.state.as_ref().ok_or(RenderError::NoForwardState)?;
-        let npix = st.width * st.height;
-        check_grey_lengths(d_greys.iter().map(|d| d.len()), st.views.len() * npix)?;
-        Ok(backward_views(st, d_greys.len(), |g, vi| {
-            let view = &d_greys[g][vi * npix..(vi + 1) * npix];
-            Cow::Owned(view.iter().map(|&v| f64::from(v)).collect())
+            Cow::Owned(d_images[g].view(vi).iter().map(|&v| f64::from(v)).collect())
         }))
     }
 }
@@ -695,34 +686,6 @@ mod tests {
         }
     }
 
-    #[test]
-    fn grey_gradients_give_the_rgb_backward_bit_for_bit() {
-        let (v, f) = mesh_core::shapes::icosphere(2).into_parts();
-        let views = crate::orbit_views(2, 20.0, 3.0, 50.0);
-        let mut r = CpuRenderer::default();
-        assert!(r.output_is_grey());
-        let img = r.render(&v, &f, &views, 48, 40).expect("render");
-        // Values in channel 0 and zeros in the others: the channel sums are exact in f32.
-        let gradient = |k: usize| {
-            let mut d = img.zeros_like();
-            for (i, x) in d.rgb.iter_mut().enumerate().step_by(3) {
-                *x = ((i * (k + 3)) % 17) as f32 * 0.01 - 0.08;
-            }
-            d
-        };
-        let (d1, d2) = (gradient(1), gradient(2));
-        let want = r.backward_many(&[&d1, &d2]).expect("backward");
-        let sums = |d: &Images| -> Vec<f32> {
-            let g = d.grey_gradient(2, 40, 48).expect("shape");
-            g.iter().map(|&v| v as f32).collect()
-        };
-        let (g1, g2) = (sums(&d1), sums(&d2));
-        let got = r.backward_many_grey(&[&g1, &g2]).expect("backward");
-        assert_eq!(got, want);
-        assert!(want[0].iter().any(|g| g != &[0.0; 3]));
-        assert!(r.backward_many_grey(&[&g1[1..]]).is_err());
-    }
-
     /// The per-pixel loops run under [`simd::dispatch`] (AVX2 where the CPU has it); calling a
     /// kernel with `pulp::Scalar` compiles it for the baseline instruction set. Same bits.
     #[test]
@@ -734,10 +697,10 @@ mod tests {
         let views = crate::orbit_views(3, 20.0, 3.0, 50.0);
         let mut r = CpuRenderer::default();
         let img = r.render(&v, &f, &views, 96, 80).expect("render");
-        let d: Vec<f64> = (0..img.rgb.len() / 3)
+        let d: Vec<f64> = (0..img.rgb.len())
             .map(|i| ((i % 13) as f64 - 6.0) * 1e-2)
             .collect();
-        let dispatched = r.backward_grey(&d).expect("backward");
+        let dispatched = r.backward_f64(&d).expect("backward");
         let st = r.state.as_ref().expect("state");
         let bits = |x: &[DVec3]| {
             x.iter()

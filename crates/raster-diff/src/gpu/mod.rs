@@ -162,6 +162,8 @@ impl WgpuRenderer {
     }
 }
 
+/// RGB images (the grey shading's value in all three channels, as the guidance's RGB path takes
+/// them); `backward` takes RGB gradients and maps their channel sums back.
 impl Renderer for WgpuRenderer {
     fn name(&self) -> String {
         format!(
@@ -301,6 +303,7 @@ impl Renderer for WgpuRenderer {
             count: views.len(),
             height,
             width,
+            channels: image_batch::CHANNELS,
             rgb,
         })
     }
@@ -309,8 +312,10 @@ impl Renderer for WgpuRenderer {
         let st = self.state.as_ref().ok_or(RenderError::NoForwardState)?;
         let b = self.buffers.as_ref().ok_or(RenderError::NoForwardState)?;
         let s = st.shape;
+        // The three channels are one grey value: dL/d(grey) is the channel sum.
+        d_images.check_gradient_shape(s.views, s.height, s.width, image_batch::CHANNELS)?;
         let d_grey: Vec<f32> = d_images
-            .grey_gradient(s.views, s.height, s.width)?
+            .channel_sums()
             .into_iter()
             .map(|g| g as f32)
             .collect();

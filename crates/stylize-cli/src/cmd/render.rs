@@ -179,12 +179,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         count: 0,
         height: args.size,
         width: args.size,
+        channels: 3,
         rgb: Vec::new(),
     };
     let batch = (BATCH_PIXELS / (args.size * args.size)).max(1);
     for (b, chunk) in views.chunks(batch).enumerate() {
+        // RGB whichever backend rendered them (the CPU one renders grey): the sheet and the GIF
+        // are RGB.
         let images = renderer
             .render(&mesh.positions, &mesh.faces, chunk, args.size, args.size)
+            .map(Images::into_rgb)
             .with_context(|| format!("rendering {}", args.mesh.display()))?;
         for i in 0..images.count {
             save(&frame_path(dir, b * batch + i), &images, i, encoding)?;
