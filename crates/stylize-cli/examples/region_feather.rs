@@ -15,9 +15,10 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use stylize::run_pictures::{tint_region, turntable, write_grid};
+use stylize::runner::{RunRequest, prepare_mesh_with_region};
 use stylize::style::Style;
 use stylize_cli::config::{Config, RegionSection};
-use stylize_cli::runner::{LogMode, RunRequest, execute, prepare_mesh_with_region};
+use stylize_cli::runner::{LogMode, execute};
 
 const REGION: &str = "box:-1,-1,-1,0,1,1";
 

@@ -33,11 +33,12 @@ use anyhow::{Context, bail};
 use serde::Deserialize;
 
 use crate::config::Config;
-use crate::runner::{LogMode, RunOptions, RunRequest, execute_with};
+use crate::runner::{LogMode, execute_with};
 use crate::signals::Interrupted;
 use rundir::RunDir;
 use stylize::identity::ModelIdentity;
 use stylize::models::ModelSet;
+use stylize::runner::{RunOptions, RunRequest};
 use stylize::style::Style;
 use stylize::task::{Prompt, PromptTask};
 

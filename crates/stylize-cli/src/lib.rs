@@ -14,4 +14,3 @@ pub mod runner;
 pub mod sanity;
 pub mod signals;
 pub mod view;
-

@@ -1,12 +1,8 @@
 //! The command line's side of a run: how its progress is shown ([`LogMode`]) and how SIGINT /
-//! SIGTERM stop it ([`crate::signals`]). The run itself is [`stylize::runner`] (re-exported here);
-//! the commands build its [`RunRequest`] directly and pass the [`LogMode`] beside it.
+//! SIGTERM stop it ([`crate::signals`]). The run itself is [`stylize::runner`]; the commands build
+//! its [`RunRequest`] directly and pass the [`LogMode`] beside it.
 
-pub use stylize::runner::{
-    NPZ_FORMAT_VERSION, NoProgress, Progress, ResolvedRegion, RunHooks, RunOptions, RunOutcome,
-    RunRequest, darap_options, parse_region_specs, prepare_mesh, prepare_mesh_with_region,
-    resolve_region,
-};
+use stylize::runner::{RunHooks, RunOptions, RunOutcome, RunRequest};
 use stylize::task::{Task, TaskKind};
 
 use crate::signals::Interrupted;

@@ -4,10 +4,11 @@
 use std::path::Path;
 
 use mesh_core::TriMesh;
+use stylize::runner::RunRequest;
 use stylize::style::Style;
 use stylize_cli::batch::{BatchOptions, RowStatus, Shard, read_manifest, run_batch};
 use stylize_cli::config::Config;
-use stylize_cli::runner::{LogMode, RunRequest, execute};
+use stylize_cli::runner::{LogMode, execute};
 
 mod common;
 use common::ok;

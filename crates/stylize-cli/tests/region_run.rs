@@ -12,12 +12,11 @@ use darap::Darap;
 /// The 3×3 identity (row-major, as `darap::Mat3`).
 const IDENTITY: darap::Mat3 = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
 use npy::NpyData;
+use stylize::runner::{RunOutcome, RunRequest, darap_options, prepare_mesh_with_region};
 use stylize::saved::SavedDeformation;
 use stylize::style::Style;
 use stylize_cli::config::{Config, RegionSection};
-use stylize_cli::runner::{
-    LogMode, RunOutcome, RunRequest, darap_options, execute, prepare_mesh_with_region,
-};
+use stylize_cli::runner::{LogMode, execute};
 
 mod common;
 use common::ok;

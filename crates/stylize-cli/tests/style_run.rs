@@ -6,10 +6,11 @@
 use std::path::{Path, PathBuf};
 
 use mesh_core::TriMesh;
+use stylize::runner::{RunOutcome, RunRequest};
 use stylize::saved::SavedDeformation;
 use stylize::style::Style;
 use stylize_cli::config::Config;
-use stylize_cli::runner::{LogMode, RunOutcome, RunRequest, execute};
+use stylize_cli::runner::{LogMode, execute};
 
 mod common;
 use common::ok;
@@ -67,7 +68,7 @@ fn cube_style_increases_face_alignment_with_the_cube_gauss_map() {
     assert!(before > 0.5 && before < 0.95, "before {before}");
     // Measured independently of the loop: re-read the written mesh and score it.
     let written = ok(mesh_core::io::read_mesh(tmp.path().join("run/mesh.obj")));
-    let rest = ok(stylize_cli::runner::prepare_mesh(&mesh)).0;
+    let rest = ok(stylize::runner::prepare_mesh(&mesh)).0;
     let targets = Style::Cube.face_targets(&rest.positions, &rest.faces);
     let measured =
         stylize::style::alignment::mean_alignment(&written.positions, &written.faces, &targets);

@@ -329,9 +329,10 @@ fn second_step_uses_accumulated_gradient_at_the_pre_step_x() {
 /// guidance's draws all come from the run's generator, so a resumed run must restore its state.
 #[test]
 fn text_run_resumed_from_checkpoint_equals_uninterrupted_run() {
+    use stylize::runner::RunRequest;
     use stylize::task::{Prompt, PromptTask};
     use stylize_cli::config::Config;
-    use stylize_cli::runner::{LogMode, RunRequest, execute};
+    use stylize_cli::runner::{LogMode, execute};
 
     let tmp = ok(tempfile::tempdir());
     let (p, f) = mesh_core::shapes::icosphere(2).into_parts();

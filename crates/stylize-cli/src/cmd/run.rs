@@ -6,9 +6,10 @@ use anyhow::{Context, bail};
 
 use crate::cmd::shared::RunSettings;
 use crate::config::Config;
-use crate::runner::{RunOptions, RunRequest, execute_with};
+use crate::runner::execute_with;
 use crate::signals::{Interrupted, shell_quote};
 use stylize::identity::ModelIdentity;
+use stylize::runner::{RunOptions, RunRequest};
 use stylize::style::Style;
 use stylize::task::{Prompt, PromptTask};
 
