@@ -36,11 +36,10 @@ use crate::config::Config;
 use crate::runner::{LogMode, execute_with};
 use crate::signals::Interrupted;
 use rundir::RunDir;
-use stylize::identity::ModelIdentity;
 use stylize::models::ModelSet;
 use stylize::runner::{RunOptions, RunRequest};
 use stylize::style::Style;
-use stylize::task::{Prompt, PromptTask};
+use stylize::task::{ModelIdentity, Prompt, PromptTask};
 
 /// One manifest row.
 #[derive(Clone, Debug, PartialEq, Deserialize)]

@@ -44,10 +44,8 @@
 //!   identity ([`PRESENTATION_KEYS`]).
 
 use std::collections::BTreeMap;
-use std::path::Path;
 
-use crate::error::{IoContext, Result};
-use serde::{Deserialize, Serialize};
+use crate::error::Result;
 use sha2::{Digest, Sha256};
 
 use crate::config::Config;
@@ -151,40 +149,9 @@ pub fn unread_settings_warning(config: &Config, kind: &dyn TaskKind) -> Result<O
     )))
 }
 
-/// The model a text run uses, as recorded.
-#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
-pub struct ModelIdentity {
-    /// The manifest's `name` (or the folder's name).
-    pub name: String,
-    /// SHA-256 of `manifest.toml`.
-    pub manifest_sha256: String,
-}
-
-impl ModelIdentity {
-    /// Reads `DIR/manifest.toml` of a model directory.
-    pub fn of_dir(dir: &Path) -> Result<Self> {
-        let path = dir.join("manifest.toml");
-        let bytes = mesh_core::io::ensure_regular_file(&path)
-            .and_then(|()| std::fs::read(&path))
-            .io_context("cannot read", &path)?;
-        let name = std::str::from_utf8(&bytes)
-            .ok()
-            .and_then(|t| toml::from_str::<toml::Table>(t).ok())
-            .and_then(|t| t.get("name").and_then(|v| v.as_str()).map(str::to_string))
-            .unwrap_or_else(|| {
-                dir.file_name()
-                    .map(|n| n.to_string_lossy().into_owned())
-                    .unwrap_or_default()
-            });
-        Ok(Self {
-            name,
-            manifest_sha256: hex(&Sha256::digest(&bytes)),
-        })
-    }
-}
-
-/// Lower-case hexadecimal of `bytes` (how digests are recorded).
-pub(crate) fn hex(bytes: &[u8]) -> String {
+/// Lower-case hexadecimal of `bytes` (how digests are recorded; [`crate::task::hex`] is the task
+/// kinds' own copy, so that `task` needs nothing of this module).
+fn hex(bytes: &[u8]) -> String {
     bytes.iter().map(|b| format!("{b:02x}")).collect()
 }
 

@@ -136,7 +136,7 @@ fn region(args: &Args, saved: &SavedDeformation, rest: &[[f64; 3]]) -> anyhow::R
     let free = if let Some(mask_path) = &args.mask {
         read_mask(mask_path, rest.len())?
     } else if !args.region.is_empty() {
-        let specs = crate::runner::parse_region_specs(&args.region)?;
+        let specs = stylize::runner::parse_region_specs(&args.region)?;
         let parts = mesh_core::region::Parts::default();
         let input = mesh_core::region::RegionInput::unrepaired(rest, &saved.faces, &parts);
         let region = mesh_core::region::select(&specs, &input)

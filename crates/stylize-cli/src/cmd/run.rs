@@ -8,10 +8,9 @@ use crate::cmd::shared::RunSettings;
 use crate::config::Config;
 use crate::runner::execute_with;
 use crate::signals::{Interrupted, shell_quote};
-use stylize::identity::ModelIdentity;
 use stylize::runner::{RunOptions, RunRequest};
 use stylize::style::Style;
-use stylize::task::{Prompt, PromptTask};
+use stylize::task::{ModelIdentity, Prompt, PromptTask};
 
 /// Arguments of `stylize run`.
 #[derive(clap::Args, Debug)]

@@ -18,7 +18,7 @@
 mod prompt;
 mod style;
 
-pub use prompt::{Prompt, PromptTask};
+pub use prompt::{ModelIdentity, Prompt, PromptTask};
 
 use std::path::PathBuf;
 
@@ -117,4 +117,10 @@ pub trait Task<'g>: TaskKind {
 
     /// The objective on the prepared (repaired, normalized) mesh.
     fn build(self: Box<Self>, mesh: &TriMesh, config: &Config) -> Result<BuiltTask<'g>>;
+}
+
+/// Lower-case hexadecimal of `bytes`: how the kinds record digests in their identity fields
+/// (the same text as [`crate::identity`]'s mesh digest).
+pub(crate) fn hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
 }

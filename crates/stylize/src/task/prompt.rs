@@ -1,13 +1,16 @@
 //! The text kind: a prompt ([`Prompt`], known before the models load) and its guidance
 //! ([`PromptTask`], ready).
 
+use std::path::Path;
+
 use csd::Guidance;
 use mesh_core::TriMesh;
+use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
 
 use super::{BuiltTask, Schedule, Task, TaskKind};
 use crate::config::Config;
-use crate::error::Result;
-use crate::identity::ModelIdentity;
+use crate::error::{IoContext, Result};
 use crate::pipeline::{TextObjective, ViewSettings};
 
 /// A text prompt and the model that guides it (the text kind before the models load).
@@ -123,6 +126,38 @@ impl<'g> Task<'g> for PromptTask<'g> {
             renderer_choice: Some(why),
             warnings: Vec::new(),
             alignment: None,
+        })
+    }
+}
+
+/// The model a text run uses, as recorded.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ModelIdentity {
+    /// The manifest's `name` (or the folder's name).
+    pub name: String,
+    /// SHA-256 of `manifest.toml`.
+    pub manifest_sha256: String,
+}
+
+impl ModelIdentity {
+    /// Reads `DIR/manifest.toml` of a model directory.
+    pub fn of_dir(dir: &Path) -> Result<Self> {
+        let path = dir.join("manifest.toml");
+        let bytes = mesh_core::io::ensure_regular_file(&path)
+            .and_then(|()| std::fs::read(&path))
+            .io_context("cannot read", &path)?;
+        let name = std::str::from_utf8(&bytes)
+            .ok()
+            .and_then(|t| toml::from_str::<toml::Table>(t).ok())
+            .and_then(|t| t.get("name").and_then(|v| v.as_str()).map(str::to_string))
+            .unwrap_or_else(|| {
+                dir.file_name()
+                    .map(|n| n.to_string_lossy().into_owned())
+                    .unwrap_or_default()
+            });
+        Ok(Self {
+            name,
+            manifest_sha256: super::hex(&Sha256::digest(&bytes)),
         })
     }
 }

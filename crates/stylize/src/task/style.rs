@@ -27,7 +27,7 @@ impl TaskKind for Style {
                         h.update(c.to_le_bytes());
                     }
                 }
-                ("exemplar", Some(crate::identity::hex(&h.finalize())))
+                ("exemplar", Some(super::hex(&h.finalize())))
             }
         };
         let mut fields = vec![
