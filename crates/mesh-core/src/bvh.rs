@@ -202,27 +202,36 @@ pub struct Bvh {
     num_vertices: usize,
 }
 
-fn triangles(positions: &[[f64; 3]], faces: &[[u32; 3]]) -> Result<Vec<[[f64; 3]; 3]>, BvhError> {
-    let mut tris = Vec::with_capacity(faces.len());
-    for (fi, f) in faces.iter().enumerate() {
-        let mut t = [[0.0; 3]; 3];
-        for (k, &v) in f.iter().enumerate() {
-            let p = *positions.get(v as usize).ok_or(BvhError::FaceIndex {
-                face: fi,
-                index: v,
-                num_vertices: positions.len(),
-            })?;
-            if !p.iter().all(|c| c.is_finite()) {
-                return Err(BvhError::NonFinite {
-                    vertex: v as usize,
-                    position: p,
-                });
-            }
-            t[k] = p;
+/// The corners of face `fi`, refusing an index out of range and a non-finite corner.
+pub(crate) fn face_triangle(
+    positions: &[[f64; 3]],
+    fi: usize,
+    f: [u32; 3],
+) -> Result<[[f64; 3]; 3], BvhError> {
+    let mut t = [[0.0; 3]; 3];
+    for (k, &v) in f.iter().enumerate() {
+        let p = *positions.get(v as usize).ok_or(BvhError::FaceIndex {
+            face: fi,
+            index: v,
+            num_vertices: positions.len(),
+        })?;
+        if !p.iter().all(|c| c.is_finite()) {
+            return Err(BvhError::NonFinite {
+                vertex: v as usize,
+                position: p,
+            });
         }
-        tris.push(t);
+        t[k] = p;
     }
-    Ok(tris)
+    Ok(t)
+}
+
+fn triangles(positions: &[[f64; 3]], faces: &[[u32; 3]]) -> Result<Vec<[[f64; 3]; 3]>, BvhError> {
+    faces
+        .iter()
+        .enumerate()
+        .map(|(fi, &f)| face_triangle(positions, fi, f))
+        .collect()
 }
 
 impl Bvh {

@@ -26,14 +26,9 @@ pub fn execute<'g>(
     log: LogMode,
     task: impl Task<'g> + 'g,
 ) -> anyhow::Result<RunOutcome> {
-    crate::signals::install()?;
-    let mut progress = crate::progress::reporter(log);
-    let hooks = RunHooks {
-        progress: progress.as_mut(),
-        cancel: crate::signals::flag(),
-    };
-    let outcome = stylize::runner::execute_task(request, task, &RunOptions::default(), hooks);
-    outcome.map_err(interrupted)
+    with_hooks(log, |hooks| {
+        stylize::runner::execute_task(request, task, &RunOptions::default(), hooks)
+    })
 }
 
 /// [`stylize::runner::execute_with`] with the SIGINT/SIGTERM flag as its cancellation hook and
@@ -46,14 +41,25 @@ pub fn execute_with<'g, T: Task<'g> + 'g>(
     make_task: impl FnOnce() -> anyhow::Result<T>,
     options: &RunOptions,
 ) -> anyhow::Result<RunOutcome> {
+    let make_task = || make_task().map_err(stylize::Error::external);
+    with_hooks(log, |hooks| {
+        stylize::runner::execute_with(request, kind, make_task, options, hooks)
+    })
+}
+
+/// Installs the signal handlers and runs `run` with the SIGINT/SIGTERM flag and the progress
+/// display of `log` as its hooks; a stop becomes [`Interrupted`].
+fn with_hooks(
+    log: LogMode,
+    run: impl FnOnce(RunHooks<'_>) -> stylize::Result<RunOutcome>,
+) -> anyhow::Result<RunOutcome> {
     crate::signals::install()?;
     let mut progress = crate::progress::reporter(log);
     let hooks = RunHooks {
         progress: progress.as_mut(),
         cancel: crate::signals::flag(),
     };
-    let make_task = || make_task().map_err(stylize::Error::external);
-    stylize::runner::execute_with(request, kind, make_task, options, hooks).map_err(interrupted)
+    run(hooks).map_err(interrupted)
 }
 
 /// A stop through the cancellation flag as [`Interrupted`] (with the pending signal); any other

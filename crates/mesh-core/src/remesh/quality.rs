@@ -2,26 +2,13 @@
 
 use super::RemeshError;
 use super::min_angle;
-use crate::bvh::{Bvh, BvhError};
+use crate::bvh::Bvh;
 use crate::geometry::{norm, sub};
 
 /// Refuses an out-of-range index or a non-finite vertex used by a face.
 pub(super) fn check_faces(positions: &[[f64; 3]], faces: &[[u32; 3]]) -> Result<(), RemeshError> {
-    for (fi, f) in faces.iter().enumerate() {
-        for &v in f {
-            let p = *positions.get(v as usize).ok_or(BvhError::FaceIndex {
-                face: fi,
-                index: v,
-                num_vertices: positions.len(),
-            })?;
-            if !p.iter().all(|c| c.is_finite()) {
-                return Err(BvhError::NonFinite {
-                    vertex: v as usize,
-                    position: p,
-                }
-                .into());
-            }
-        }
+    for (fi, &f) in faces.iter().enumerate() {
+        crate::bvh::face_triangle(positions, fi, f)?;
     }
     Ok(())
 }
