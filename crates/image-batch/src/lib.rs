@@ -255,12 +255,6 @@ impl Images {
     pub fn channel_sums(&self) -> Vec<f64> {
         channel_sums(&self.rgb, self.channels)
     }
-
-    /// [`Images::channel_sums`] of view `index` alone, `(row, column)` (empty when `index` is out
-    /// of range).
-    pub fn view_channel_sums(&self, index: usize) -> Vec<f64> {
-        channel_sums(self.view(index), self.channels)
-    }
 }
 
 /// Per pixel, the sum of its `channels` values in f64, added in channel order from the first
@@ -320,7 +314,6 @@ mod tests {
         assert_eq!(rgb.clone().into_rgb(), rgb);
         assert_eq!(rgb.channel_sums(), vec![0.75, 1.5]);
         assert_eq!(img.channel_sums(), vec![0.25, 0.5]);
-        assert_eq!(rgb.view_channel_sums(0), vec![0.75, 1.5]);
         assert_eq!(rgb.check_gradient_shape(1, 1, 2, 3), Ok(()));
         assert_eq!(
             rgb.check_gradient_shape(1, 2, 1, 3)
