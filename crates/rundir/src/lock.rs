@@ -15,7 +15,13 @@
 //! - its heartbeat is older than `stale_after` by our clock **and** the file does not change during
 //!   an observation window of two of the holder's heartbeat intervals plus one second (a quarter of
 //!   `stale_after` when that is shorter), so a holder whose clock is behind ours is not mistaken
-//!   for a dead one.
+//!   for a dead one; or
+//! - its heartbeat lies more than `stale_after` in our future (a holder whose clock is ahead by a
+//!   day, a forged `1e300`): then the file's mtime stands in for it (set by the holder's last
+//!   write, by the file server's clock) with the same rule, and when the mtime too is that far
+//!   ahead, the lock is stale once the file has not changed for `stale_after` by our monotonic
+//!   clock. A dead holder's lock is thus taken over after at most about `stale_after` whatever
+//!   its clock said, never "once our clock catches up".
 //!
 //! Taking over a stale lock is race-free among any number of contenders: a contender first creates
 //! `run.lock.takeover-<token>` with `O_EXCL` (only one can, per stale lock), re-reads `run.lock` to
@@ -161,8 +167,8 @@ fn held_message(dir: &Path, h: &Holder) -> String {
     format!(
         "run directory {} is in use: locked by pid {} on host {} since {} (last heartbeat {}){}; \
          two processes must not write one run directory. If that process is gone, its lock is \
-         taken over automatically once its heartbeat is older than {} s ({STALE_ENV}), or at once \
-         on the same host",
+         taken over automatically once it has not renewed its heartbeat for {} s ({STALE_ENV}), \
+         whatever its clock says, or at once on the same host",
         dir.display(),
         h.pid,
         h.host,
@@ -278,7 +284,8 @@ fn process_start(pid: u32) -> Option<u64> {
 
 /// Formats Unix seconds as `YYYY-MM-DD HH:MM:SS UTC`.
 pub fn format_utc(unix: f64) -> String {
-    if !unix.is_finite() || unix < 0.0 {
+    // Beyond 9999-12-31: no calendar date worth printing (a broken clock or a forged record).
+    if !unix.is_finite() || !(0.0..253_402_300_800.0).contains(&unix) {
         return "an unknown time".into();
     }
     let secs = unix as i64;
@@ -460,6 +467,7 @@ impl RunLock {
                 })
                 .map_err(io_err(&path))?
         };
+        held_locks().push((path.clone(), ino));
         Ok(Self {
             dir: dir.to_path_buf(),
             path,
@@ -500,11 +508,38 @@ impl Drop for RunLock {
         if let Some(t) = self.thread.take() {
             let _ = t.join();
         }
+        let mut held = held_locks();
+        held.retain(|(p, ino)| !(p == &self.path && *ino == self.ino));
         if !self.lost.load(Ordering::SeqCst) && owns(&self.path, self.ino) {
             let _ = std::fs::remove_file(&self.path);
             let _ = crate::durable::sync_dir(&self.dir);
         }
     }
+}
+
+/// The locks this process holds (path, device and inode), for [`release_all_before_exit`].
+fn held_locks() -> std::sync::MutexGuard<'static, Vec<(PathBuf, (u64, u64))>> {
+    static HELD: std::sync::Mutex<Vec<(PathBuf, (u64, u64))>> = std::sync::Mutex::new(Vec::new());
+    HELD.lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
+/// Removes every lock file this process still holds (and still owns), for a process that is about
+/// to exit without unwinding (`std::process::exit` after a second SIGINT): the [`RunLock`] values
+/// are never dropped then, and their locks would otherwise be left for a take-over. Returns the
+/// run directories released. After this call the locks' [`RunLock::ensure_held`] fail, so a run
+/// still going writes nothing more (the caller exits at once anyway).
+pub fn release_all_before_exit() -> Vec<PathBuf> {
+    let held = held_locks();
+    let mut released = Vec::new();
+    for (path, ino) in held.iter() {
+        if owns(path, *ino) && std::fs::remove_file(path).is_ok() {
+            let dir = path.parent().unwrap_or(Path::new(".")).to_path_buf();
+            let _ = crate::durable::sync_dir(&dir);
+            released.push(dir);
+        }
+    }
+    released
 }
 
 fn owns(path: &Path, ino: (u64, u64)) -> bool {
@@ -537,19 +572,64 @@ fn assess(path: &Path, me: &LockRecord, settings: LockSettings) -> Result<Verdic
     {
         return Ok(Verdict::Stale(seen));
     }
-    let last = seen.record.as_ref().map_or(seen.mtime, |r| r.heartbeat);
-    let age = now_unix() - last;
-    if !age.is_finite() || age <= settings.stale_after.as_secs_f64() {
-        return Ok(Verdict::Live(seen));
-    }
-    // Looks stale by the clocks: confirm by watching the file for two of the holder's heartbeats.
+    let stale = settings.stale_after.as_secs_f64();
     let interval = seen
         .record
         .as_ref()
-        .map_or(settings.heartbeat.as_secs_f64(), |r| r.interval)
-        .clamp(0.01, settings.stale_after.as_secs_f64());
-    let margin = (settings.stale_after.as_secs_f64() / 4.0).min(1.0);
-    let window = Duration::from_secs_f64(2.0 * interval + margin);
+        .map(|r| r.interval)
+        .filter(|i| i.is_finite())
+        .unwrap_or(settings.heartbeat.as_secs_f64())
+        .clamp(0.01, stale / 2.0);
+    let margin = (stale / 4.0).min(1.0);
+    // Watching two of the holder's heartbeats confirms a silence the clocks suggest.
+    let confirm = Duration::from_secs_f64(2.0 * interval + margin);
+    let watch = match silence(&seen, now_unix(), stale) {
+        Silence::Recent => return Ok(Verdict::Live(seen)),
+        Silence::Long => confirm,
+        // No clock can be trusted (the holder's and the file server's are both ahead of ours):
+        // the lock is stale only if the file does not change for the whole limit by our clock.
+        Silence::Unknown => settings.stale_after.max(confirm),
+    };
+    observe(path, seen, watch, interval)
+}
+
+/// What the clocks say about how long a lock's holder has been silent.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Silence {
+    /// It wrote within the limit.
+    Recent,
+    /// Its last write is older than the limit.
+    Long,
+    /// Neither the recorded heartbeat nor the file's mtime is a usable time.
+    Unknown,
+}
+
+/// How long the holder of `seen` has been silent at `now` (Unix seconds, our clock), judged by the
+/// recorded heartbeat (the holder's clock) or — when there is no readable record, or its heartbeat
+/// lies more than `stale` seconds in our future or is not a number — by the file's mtime (the file
+/// server's clock; it is set by the holder's last write, so a holder whose own clock is ahead, by
+/// a day or by 1e300 s, still ages). A time at most `stale` seconds in our future counts as recent
+/// (ordinary skew); one further ahead is not evidence of anything.
+fn silence(seen: &Seen, now: f64, stale: f64) -> Silence {
+    let judge = |t: f64| {
+        let age = now - t;
+        if !age.is_finite() || age < -stale {
+            None
+        } else if age <= stale {
+            Some(Silence::Recent)
+        } else {
+            Some(Silence::Long)
+        }
+    };
+    seen.record
+        .as_ref()
+        .and_then(|r| judge(r.heartbeat))
+        .or_else(|| judge(seen.mtime))
+        .unwrap_or(Silence::Unknown)
+}
+
+/// Watches the lock file for `window`: stale if it stays byte-for-byte `seen`, live if it changes.
+fn observe(path: &Path, seen: Seen, window: Duration, interval: f64) -> Result<Verdict, LockError> {
     let step = Duration::from_secs_f64((interval / 2.0).clamp(0.01, 1.0));
     let start = std::time::Instant::now();
     while start.elapsed() < window {
@@ -577,7 +657,7 @@ fn held_error(dir: &Path, path: &Path, seen: &Seen, settings: LockSettings) -> L
                     age: if age.is_finite() && age >= 0.0 {
                         format!("{age:.0} s ago")
                     } else {
-                        "in the future by this host's clock".into()
+                        "in the future by this host's clock: the holder's clock is ahead".into()
                     },
                     command: r.command.clone(),
                     stale_secs: settings.stale_after.as_secs_f64(),
@@ -814,8 +894,128 @@ mod tests {
         );
     }
 
+    /// A foreign lock whose heartbeat is `ahead` seconds in our future and whose file was last
+    /// written `mtime_age` seconds ago (negative: in our future too).
+    fn ahead(dir: &Path, heartbeat_ahead: f64, mtime_age: f64) {
+        let mut r = foreign("node-17", 0.0);
+        r.heartbeat = now_unix() + heartbeat_ahead;
+        r.since = r.heartbeat;
+        write_foreign(dir, &r);
+        let f = ok(File::options().write(true).open(dir.join(LOCK_FILE)));
+        let t = if mtime_age >= 0.0 {
+            SystemTime::now() - Duration::from_secs_f64(mtime_age)
+        } else {
+            SystemTime::now() + Duration::from_secs_f64(-mtime_age)
+        };
+        ok(f.set_modified(t));
+    }
+
+    #[test]
+    fn a_dead_holder_whose_clock_was_ahead_is_taken_over_by_the_file_age() {
+        for heartbeat_ahead in [86_400.0, 1e300, 1e18] {
+            let dir = ok(tempfile::tempdir());
+            ahead(dir.path(), heartbeat_ahead, 10.0);
+            let start = std::time::Instant::now();
+            let lock = RunLock::acquire_with(dir.path(), fast())
+                .unwrap_or_else(|e| panic!("heartbeat +{heartbeat_ahead}: {e}"));
+            // The short confirmation window (two of the holder's 50 ms beats and a margin).
+            assert!(
+                start.elapsed() < Duration::from_secs(2),
+                "{heartbeat_ahead}"
+            );
+            let seen = ok(read_seen(&dir.path().join(LOCK_FILE)));
+            assert_eq!(seen.record.map(|r| r.pid), Some(std::process::id()));
+            drop(lock);
+        }
+    }
+
+    #[test]
+    fn a_dead_holder_with_every_clock_ahead_is_taken_over_after_the_limit_unchanged() {
+        let dir = ok(tempfile::tempdir());
+        ahead(dir.path(), 1e300, -86_400.0);
+        let start = std::time::Instant::now();
+        let lock = ok(RunLock::acquire_with(dir.path(), fast()));
+        // Watched unchanged for the whole limit (400 ms) by our monotonic clock, not less.
+        assert!(
+            start.elapsed() >= fast().stale_after,
+            "{:?}",
+            start.elapsed()
+        );
+        drop(lock);
+    }
+
+    #[test]
+    fn a_live_holder_whose_clock_is_a_day_ahead_keeps_its_lock() {
+        let dir = ok(tempfile::tempdir());
+        // The file looks as old as can be, but the holder keeps writing it.
+        ahead(dir.path(), 86_400.0, 10.0);
+        let path = dir.path().join(LOCK_FILE);
+        let writer = std::thread::spawn(move || {
+            let f = ok(std::fs::OpenOptions::new().write(true).open(&path));
+            let mut r = foreign("node-17", -86_400.0);
+            for _ in 0..60 {
+                r.beat += 1;
+                let _ = write_record(&f, &r);
+                std::thread::sleep(Duration::from_millis(25));
+            }
+        });
+        for _ in 0..3 {
+            let e = RunLock::acquire_with(dir.path(), fast())
+                .err()
+                .map(|e| e.to_string())
+                .unwrap_or_default();
+            assert!(e.contains("node-17") && e.contains("ahead"), "{e}");
+        }
+        ok(writer.join().map_err(|_| "writer panicked"));
+    }
+
+    #[test]
+    fn silence_is_judged_by_a_usable_clock() {
+        let seen = |heartbeat: Option<f64>, mtime: f64| Seen {
+            raw: Vec::new(),
+            record: heartbeat.map(|h| {
+                let mut r = foreign("n", 0.0);
+                r.heartbeat = h;
+                r
+            }),
+            mtime,
+        };
+        let now = 1e9;
+        let s = 60.0;
+        assert_eq!(
+            silence(&seen(Some(now - 10.0), 0.0), now, s),
+            Silence::Recent
+        );
+        assert_eq!(silence(&seen(Some(now - 61.0), now), now, s), Silence::Long);
+        // Ordinary skew: a little ahead is recent.
+        assert_eq!(
+            silence(&seen(Some(now + 30.0), 0.0), now, s),
+            Silence::Recent
+        );
+        // Far ahead: the mtime decides.
+        assert_eq!(
+            silence(&seen(Some(now + 1e5), now - 100.0), now, s),
+            Silence::Long
+        );
+        assert_eq!(
+            silence(&seen(Some(1e300), now - 5.0), now, s),
+            Silence::Recent
+        );
+        assert_eq!(
+            silence(&seen(Some(f64::MAX), now + 1e6), now, s),
+            Silence::Unknown
+        );
+        // No record: the mtime.
+        assert_eq!(silence(&seen(None, now - 100.0), now, s), Silence::Long);
+        assert_eq!(
+            silence(&seen(None, f64::INFINITY), now, s),
+            Silence::Unknown
+        );
+    }
+
     #[test]
     fn utc_formatting() {
+        assert_eq!(format_utc(1e300), "an unknown time");
         assert_eq!(format_utc(0.0), "1970-01-01 00:00:00 UTC");
         assert_eq!(format_utc(1_709_210_096.0), "2024-02-29 12:34:56 UTC");
     }
