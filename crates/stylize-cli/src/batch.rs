@@ -24,8 +24,9 @@
 //! complete run of a different task (an edited row; `--force` redoes it); **resumed** when it
 //! holds a checkpoint of the same task (a checkpoint of a different task is an error, never mixed
 //! in); started otherwise. A failing row is reported and the batch goes on; a row locked by another
-//! process fails (naming the holder) and the batch goes on. SIGINT/SIGTERM stops the batch after
-//! the current row's checkpoint.
+//! process is left to it ([`RowStatus::InUse`], naming the holder) and the batch goes on.
+//! SIGINT/SIGTERM/SIGHUP stops the batch after the current row's checkpoint
+//! ([`RowStatus::Interrupted`]).
 
 use std::path::{Path, PathBuf};
 
@@ -290,33 +291,28 @@ impl Shard {
         }
     }
 
-    /// From Slurm job-array variables: index = `SLURM_ARRAY_TASK_ID − SLURM_ARRAY_TASK_MIN`
-    /// (MIN defaults to 0), count = `SLURM_ARRAY_TASK_COUNT`. `None` when not in a job array.
-    pub fn from_env(get: impl Fn(&str) -> Option<String>) -> anyhow::Result<Option<Self>> {
-        let (Some(id), Some(count)) = (get("SLURM_ARRAY_TASK_ID"), get("SLURM_ARRAY_TASK_COUNT"))
-        else {
-            return Ok(None);
-        };
-        let num = |name: &str, v: &str| -> anyhow::Result<usize> {
-            v.trim()
-                .parse()
-                .with_context(|| format!("{name}={v:?} is not a non-negative integer"))
-        };
-        let id = num("SLURM_ARRAY_TASK_ID", &id)?;
-        let count = num("SLURM_ARRAY_TASK_COUNT", &count)?;
-        let min = match get("SLURM_ARRAY_TASK_MIN") {
-            Some(m) => num("SLURM_ARRAY_TASK_MIN", &m)?,
-            None => 0,
-        };
-        let index = id
-            .checked_sub(min)
-            .context("SLURM_ARRAY_TASK_ID is below SLURM_ARRAY_TASK_MIN")?;
-        if count == 0 || index >= count {
+    /// The shard of a batch: `--shard` when given (`explicit`), every row otherwise — except
+    /// inside a Slurm job array (`SLURM_ARRAY_TASK_ID` set), where a missing `--shard` is an
+    /// error: the array's own variables cannot say how many shards the manifest was split into
+    /// (re-submitting `--array=2` of `0-2` gives `SLURM_ARRAY_TASK_COUNT=1`, and shard 0/1 would
+    /// be every row), so the count must be written down: `--shard "$SLURM_ARRAY_TASK_ID/16"`.
+    pub fn resolve(
+        explicit: Option<&str>,
+        get: impl Fn(&str) -> Option<String>,
+    ) -> anyhow::Result<Self> {
+        if let Some(s) = explicit {
+            return Self::parse(s);
+        }
+        if let Some(id) = get("SLURM_ARRAY_TASK_ID") {
             bail!(
-                "job array task {index} (id {id} − min {min}) is not below the task count {count}: use a contiguous --array"
+                "this is task {} of a Slurm job array, but no --shard was given: pass the shard \
+                 count explicitly, e.g. --shard \"$SLURM_ARRAY_TASK_ID/N\" with --array=0-(N-1) \
+                 (the array's own variables change when a subset of it is re-submitted; see \
+                 docs/cluster.md), or --shard 0/1 for every row",
+                id.trim()
             );
         }
-        Ok(Some(Self { index, count }))
+        Ok(Self::ALL)
     }
 
     /// Whether row `i` belongs to this shard.
@@ -337,6 +333,39 @@ pub enum RowStatus {
     },
     /// Failed with this message.
     Failed(String),
+    /// Another process holds the row's run directory lock (another task of an overlapping array,
+    /// an earlier incarnation of a requeued task): left to it; the message names the holder.
+    InUse(String),
+    /// Stopped by a signal: its checkpoint is written and the next run of the batch resumes it
+    /// (the message says where it stopped). The batch stops after such a row.
+    Interrupted(String),
+}
+
+impl RowStatus {
+    /// A one-word name of the outcome (`done`, `resumed`, `skipped`, `failed`, `in-use`,
+    /// `interrupted`), as in the `outcome` field of the batch's JSON row lines.
+    pub fn outcome(&self) -> &'static str {
+        match self {
+            RowStatus::Skipped => "skipped",
+            RowStatus::Done { resumed: false } => "done",
+            RowStatus::Done { resumed: true } => "resumed",
+            RowStatus::Failed(_) => "failed",
+            RowStatus::InUse(_) => "in-use",
+            RowStatus::Interrupted(_) => "interrupted",
+        }
+    }
+
+    /// The outcome in words, as in the per-row line (`done (resumed)`, `FAILED: …`).
+    pub fn describe(&self) -> String {
+        match self {
+            RowStatus::Skipped => "skipped (complete)".into(),
+            RowStatus::Done { resumed: true } => "done (resumed)".into(),
+            RowStatus::Done { resumed: false } => "done".into(),
+            RowStatus::Failed(e) => format!("FAILED: {e}"),
+            RowStatus::InUse(e) => format!("IN USE elsewhere, left to its holder: {e}"),
+            RowStatus::Interrupted(e) => format!("INTERRUPTED, will resume: {e}"),
+        }
+    }
 }
 
 /// Options of a batch.
@@ -361,8 +390,8 @@ pub struct BatchOptions {
 pub type RowResult = (usize, Row, RowStatus, Vec<String>);
 
 /// Runs the rows of `manifest` that belong to the shard; returns a [`RowResult`] per row.
-/// A row interrupted by SIGINT/SIGTERM is the last one (its status is `Failed` with the
-/// interruption; [`run_batch_until_interrupted`] also returns it).
+/// A row interrupted by a signal is the last one (its status is [`RowStatus::Interrupted`];
+/// [`run_batch_until_interrupted`] also returns the interruption).
 pub fn run_batch(rows: &[Row], options: &BatchOptions) -> Vec<RowResult> {
     run_batch_until_interrupted(rows, options).0
 }
@@ -372,6 +401,17 @@ pub fn run_batch_until_interrupted(
     rows: &[Row],
     options: &BatchOptions,
 ) -> (Vec<RowResult>, Option<Interrupted>) {
+    run_batch_reporting(rows, options, &mut |_, _| {})
+}
+
+/// [`run_batch_until_interrupted`], calling `row_ended` with each row's result and its wall time as
+/// soon as the row ends (so a long job's log shows every finished row, and a killed job's log
+/// says which rows finished).
+pub fn run_batch_reporting(
+    rows: &[Row],
+    options: &BatchOptions,
+    row_ended: &mut dyn FnMut(&RowResult, std::time::Duration),
+) -> (Vec<RowResult>, Option<Interrupted>) {
     let mut models: Option<anyhow::Result<ModelSet>> = None;
     let mut out = Vec::new();
     for (i, row) in rows
@@ -379,7 +419,8 @@ pub fn run_batch_until_interrupted(
         .enumerate()
         .filter(|(i, _)| options.shard.takes(*i))
     {
-        let (status, warnings, stop) = match run_row(row, options, &mut models) {
+        let started = std::time::Instant::now();
+        let (status, warnings, stop) = match run_row(i, row, options, &mut models) {
             Ok((s, warnings)) => (s, warnings, None),
             Err(e) => {
                 let stop = e.downcast_ref::<Interrupted>().map(|i| Interrupted {
@@ -387,10 +428,21 @@ pub fn run_batch_until_interrupted(
                     dir: i.dir.clone(),
                     checkpoint_iteration: i.checkpoint_iteration,
                 });
-                (RowStatus::Failed(format!("{e:#}")), Vec::new(), stop)
+                let message = format!("{e:#}");
+                let status = if stop.is_some() {
+                    RowStatus::Interrupted(message)
+                } else if crate::signals::exit_code(&e) == crate::signals::EXIT_IN_USE {
+                    RowStatus::InUse(message)
+                } else {
+                    RowStatus::Failed(message)
+                };
+                (status, Vec::new(), stop)
             }
         };
         out.push((i, row.clone(), status, warnings));
+        if let Some(last) = out.last() {
+            row_ended(last, started.elapsed());
+        }
         if stop.is_some() {
             return (out, stop);
         }
@@ -409,6 +461,7 @@ pub fn run_batch_until_interrupted(
 }
 
 fn run_row(
+    index: usize,
     row: &Row,
     options: &BatchOptions,
     models: &mut Option<anyhow::Result<ModelSet>>,
@@ -436,16 +489,12 @@ fn run_row(
         skip_complete: !options.force,
         inputs: options.inputs.clone(),
     };
+    // Progress lines of a batch name their row.
+    let log = options.log.for_row(index);
     let outcome = match (&row.style, &row.prompt) {
         (Some(style), _) => {
             let style = Style::parse(style)?;
-            execute_with(
-                &request,
-                options.log,
-                &style,
-                || Ok(style.clone()),
-                &run_options,
-            )?
+            execute_with(&request, log, &style, || Ok(style.clone()), &run_options)?
         }
         (None, Some(prompt)) => {
             if !cfg!(feature = "text") {
@@ -473,7 +522,7 @@ fn run_row(
             let prompt_kind = &kind;
             execute_with(
                 &request,
-                options.log,
+                log,
                 &kind,
                 // `move`: the closure takes the `&mut` to the model set, so the guidance it builds
                 // may borrow the UNets for the whole run.
@@ -524,7 +573,7 @@ mod tests {
     }
 
     #[test]
-    fn slurm_variables_give_the_shard() {
+    fn the_shard_is_explicit_inside_a_job_array() {
         let env = |vars: &'static [(&'static str, &'static str)]| {
             move |k: &str| {
                 vars.iter()
@@ -532,25 +581,22 @@ mod tests {
                     .map(|(_, v)| v.to_string())
             }
         };
-        assert_eq!(Shard::from_env(env(&[])).ok().flatten(), None);
-        let s = Shard::from_env(env(&[
+        assert_eq!(Shard::resolve(None, env(&[])).ok(), Some(Shard::ALL));
+        // A re-submitted subset (`--array=2` of 0-2): the array says 1 task, the flag says 3.
+        let resubmitted: &[(&str, &str)] = &[
             ("SLURM_ARRAY_TASK_ID", "2"),
-            ("SLURM_ARRAY_TASK_COUNT", "4"),
-        ]));
-        assert_eq!(s.ok().flatten(), Some(Shard { index: 2, count: 4 }));
-        let s = Shard::from_env(env(&[
-            ("SLURM_ARRAY_TASK_ID", "4"),
-            ("SLURM_ARRAY_TASK_COUNT", "4"),
-            ("SLURM_ARRAY_TASK_MIN", "1"),
-        ]));
-        assert_eq!(s.ok().flatten(), Some(Shard { index: 3, count: 4 }));
-        assert!(
-            Shard::from_env(env(&[
-                ("SLURM_ARRAY_TASK_ID", "4"),
-                ("SLURM_ARRAY_TASK_COUNT", "4")
-            ]))
-            .is_err()
+            ("SLURM_ARRAY_TASK_COUNT", "1"),
+            ("SLURM_ARRAY_TASK_MIN", "2"),
+        ];
+        let e = Shard::resolve(None, env(resubmitted))
+            .map(|_| ())
+            .expect_err("an error");
+        assert!(format!("{e:#}").contains("--shard"), "{e:#}");
+        assert_eq!(
+            Shard::resolve(Some("2/3"), env(resubmitted)).ok(),
+            Some(Shard { index: 2, count: 3 })
         );
+        assert!(Shard::resolve(Some("3/3"), env(resubmitted)).is_err());
     }
 
     #[test]

@@ -101,8 +101,11 @@ fn main() -> std::process::ExitCode {
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e:#}");
-            // 128 + signal after SIGINT/SIGTERM, 75 when a run directory is locked, else 1.
+            // A closed terminal (SIGHUP) must not turn the exit status into a panic's.
+            use std::io::Write;
+            let _ = writeln!(std::io::stderr(), "error: {e:#}");
+            // 128 + signal after SIGHUP/SIGINT/SIGTERM, 75 when a run directory is locked by
+            // another process (for a batch: rows left to other processes), else 1.
             std::process::ExitCode::from(stylize_cli::signals::exit_code(&e))
         }
     }

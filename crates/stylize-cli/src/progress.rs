@@ -22,6 +22,7 @@ pub fn reporter(mode: LogMode) -> Box<dyn Progress> {
     match mode {
         LogMode::Quiet => Box::new(Quiet),
         LogMode::Jsonl => Box::new(JsonLines),
+        LogMode::BatchJsonl { row } => Box::new(RowJsonLines::new(row, LINE_INTERVAL)),
         LogMode::Bar if std::io::stderr().is_terminal() => Box::new(Bar(None)),
         LogMode::Bar => Box::new(Lines::new(std::io::stderr(), LINE_INTERVAL)),
     }
@@ -51,6 +52,57 @@ struct JsonLines;
 impl Progress for JsonLines {
     fn iteration(&mut self, _record: &IterationRecord, json: &str) {
         println!("{json}");
+    }
+
+    fn warning(&mut self, message: &str) {
+        eprintln!("{message}");
+    }
+}
+
+/// A batch row's `metrics.jsonl` lines on stdout with `"row"` first, thinned to the first and
+/// last iteration and at most one per `interval` between.
+struct RowJsonLines {
+    row: usize,
+    interval: Duration,
+    total: u64,
+    last_line: Option<Instant>,
+}
+
+impl RowJsonLines {
+    fn new(row: usize, interval: Duration) -> Self {
+        Self {
+            row,
+            interval,
+            total: 0,
+            last_line: None,
+        }
+    }
+}
+
+/// `json` (an object) with `"row": row` as its first field.
+pub fn with_row(row: usize, json: &str) -> String {
+    match json.trim_start().strip_prefix('{') {
+        Some(rest) if rest.trim_start().starts_with('}') => format!("{{\"row\":{row}}}"),
+        Some(rest) => format!("{{\"row\":{row},{rest}"),
+        None => json.to_string(),
+    }
+}
+
+impl Progress for RowJsonLines {
+    fn start(&mut self, total: u64, _at: u64, _headline: &[String]) {
+        self.total = total;
+        self.last_line = None;
+    }
+
+    fn iteration(&mut self, record: &IterationRecord, json: &str) {
+        let now = Instant::now();
+        let due = self
+            .last_line
+            .is_none_or(|last| now.duration_since(last) >= self.interval);
+        if due || record.iteration >= self.total {
+            self.last_line = Some(now);
+            println!("{}", with_row(self.row, json));
+        }
     }
 
     fn warning(&mut self, message: &str) {
@@ -228,6 +280,18 @@ mod tests {
                 "iter 10/10  loss 0.05000  eta 0s",
             ]
         );
+    }
+
+    #[test]
+    fn batch_json_lines_name_their_row() {
+        assert_eq!(
+            with_row(3, r#"{"iteration":1,"loss":0.5}"#),
+            r#"{"row":3,"iteration":1,"loss":0.5}"#
+        );
+        assert_eq!(with_row(0, "{}"), r#"{"row":0}"#);
+        let v: serde_json::Value =
+            serde_json::from_str(&with_row(7, r#"{"iteration":2}"#)).unwrap_or_default();
+        assert_eq!(v["row"], 7);
     }
 
     #[test]

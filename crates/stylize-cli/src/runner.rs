@@ -15,8 +15,26 @@ pub enum LogMode {
     Bar,
     /// One JSON object per iteration on stdout (the `metrics.jsonl` line).
     Jsonl,
+    /// A batch row's JSON lines on stdout: the `metrics.jsonl` line with `"row"` (the manifest
+    /// row) first, for the first and last iteration of the session and at most one per
+    /// [`crate::progress::LINE_INTERVAL`] between (a Slurm log holds every row's progress, not
+    /// every iteration; the run's own `metrics.jsonl` has them all).
+    BatchJsonl {
+        /// The row's index in the manifest.
+        row: usize,
+    },
     /// Nothing but errors.
     Quiet,
+}
+
+impl LogMode {
+    /// The mode for batch row `row`: JSON lines name their row.
+    pub fn for_row(self, row: usize) -> Self {
+        match self {
+            LogMode::Jsonl | LogMode::BatchJsonl { .. } => LogMode::BatchJsonl { row },
+            other => other,
+        }
+    }
 }
 
 /// Runs one request to completion (or to `halt_after`) with the signal handlers installed and

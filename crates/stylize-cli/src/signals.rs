@@ -1,36 +1,107 @@
-//! SIGINT and SIGTERM during a run (Slurm sends SIGTERM some time before SIGKILL): the first one
-//! only sets a flag; the loop finishes its current iteration, writes a checkpoint, and the command
-//! exits with 128 + the signal number (130 for SIGINT, 143 for SIGTERM) after printing how to
-//! resume. A second signal terminates at once with the same status (the run directory lock is
-//! then left behind; on the same host it is taken over at once, see [`rundir::lock`]).
+//! SIGTERM, SIGHUP and SIGINT during a run. Slurm sends SIGTERM some time before SIGKILL (and under
+//! `srun` may deliver it twice); an SSH session that drops sends SIGHUP.
+//!
+//! - **Any number of SIGTERM and SIGHUP, and the first SIGINT,** only ask the run to stop: the loop
+//!   finishes its current iteration (a stop is honoured at the next iteration boundary — on the
+//!   text path an iteration takes about a second on a GPU and can take a minute on CPUs; model
+//!   loading checks the request before and after the models load), writes a checkpoint, releases the run
+//!   directory's lock, and the command prints its summary and exits with 128 + the last
+//!   signal's number (129 SIGHUP, 130 SIGINT, 143 SIGTERM). A repeated TERM/HUP changes nothing
+//!   but a line in the log, so it can never cut a checkpoint short.
+//! - **A second SIGINT** (a person pressing Ctrl-C again) means "now": the process removes the
+//!   locks it holds ([`rundir::lock::release_all_before_exit`]) and exits 130 at once, without
+//!   finishing the iteration. The run directory keeps its last durable checkpoint (checkpoints and
+//!   outputs are written to a temporary name, `fsync`ed and renamed, so an exit at any instant
+//!   leaves either the old or the new file, never a torn one); a leftover temporary file is
+//!   removed by the next run.
+//! - SIGKILL cannot be handled: the last periodic checkpoint stays, the lock is left behind and is
+//!   taken over ([`rundir::lock`]).
+//!
+//! Each signal is noted on stderr as it arrives (`received SIGTERM: stopping after the current
+//! iteration ...`), so a Slurm log shows when the scheduler asked.
 
+use std::io::{Read, Write};
+use std::os::unix::net::UnixStream;
 use std::path::PathBuf;
 use std::sync::Once;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
-use signal_hook::consts::signal::{SIGINT, SIGTERM};
+use signal_hook::consts::signal::{SIGHUP, SIGINT, SIGTERM};
 
 static RECEIVED: AtomicBool = AtomicBool::new(false);
 static WHICH: AtomicUsize = AtomicUsize::new(0);
 static INSTALL: Once = Once::new();
+/// SIGINTs seen by the watcher thread.
+static INTERRUPTS: AtomicUsize = AtomicUsize::new(0);
 
-/// Installs the handlers (once per process; later calls do nothing).
+/// The signals that ask a run to stop.
+pub const STOP_SIGNALS: [i32; 3] = [SIGINT, SIGTERM, SIGHUP];
+
+/// Installs the handlers (once per process; later calls do nothing): each of [`STOP_SIGNALS`]
+/// sets the stop flag and wakes a watcher thread that notes it on stderr (and acts on a second
+/// SIGINT).
 pub fn install() -> anyhow::Result<()> {
     let mut result = Ok(());
     INSTALL.call_once(|| {
-        result = (|| -> std::io::Result<()> {
-            // Order matters: the conditional exit must see the flag as it was before this signal.
-            signal_hook::flag::register_conditional_shutdown(SIGINT, 128 + SIGINT, &RECEIVED)?;
-            signal_hook::flag::register_conditional_shutdown(SIGTERM, 128 + SIGTERM, &RECEIVED)?;
-            signal_hook::flag::register_usize(SIGINT, &WHICH, SIGINT as usize)?;
-            signal_hook::flag::register_usize(SIGTERM, &WHICH, SIGTERM as usize)?;
-            signal_hook::flag::register(SIGINT, &RECEIVED)?;
-            signal_hook::flag::register(SIGTERM, &RECEIVED)?;
-            Ok(())
-        })()
-        .map_err(|e| anyhow::anyhow!("cannot install the SIGINT/SIGTERM handlers: {e}"));
+        result = STOP_SIGNALS
+            .iter()
+            .try_for_each(|&signal| watch(signal))
+            .map_err(|e| anyhow::anyhow!("cannot install the SIGINT/SIGTERM/SIGHUP handlers: {e}"));
     });
     result
+}
+
+/// The handlers of one signal: the flag and its number (set inside the handler, so the loop sees
+/// them at once), and a self-pipe to a thread for what is not async-signal-safe (printing, the
+/// immediate exit).
+fn watch(signal: i32) -> std::io::Result<()> {
+    signal_hook::flag::register_usize(signal, &WHICH, signal as usize)?;
+    signal_hook::flag::register(signal, &RECEIVED)?;
+    let (mut reader, writer) = UnixStream::pair()?;
+    signal_hook::low_level::pipe::register(signal, writer)?;
+    std::thread::Builder::new()
+        .name(format!("{}-watch", name(signal)))
+        .spawn(move || {
+            let mut byte = [0u8; 64];
+            loop {
+                match reader.read(&mut byte) {
+                    Ok(0) => return,
+                    Ok(n) => (0..n).for_each(|_| arrived(signal)),
+                    Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                    Err(_) => return,
+                }
+            }
+        })?;
+    Ok(())
+}
+
+/// What the watcher does for one delivered signal (outside the handler).
+fn arrived(signal: i32) {
+    let mut err = std::io::stderr().lock();
+    if signal == SIGINT && INTERRUPTS.fetch_add(1, Ordering::SeqCst) >= 1 {
+        let released = rundir::lock::release_all_before_exit();
+        // A log that cannot be written to (a closed terminal) must not stop the exit.
+        let _ = writeln!(
+            err,
+            "second SIGINT: exiting now without finishing the iteration; the last checkpoint \
+             written stays valid (released {} run directory lock{})",
+            released.len(),
+            if released.len() == 1 { "" } else { "s" }
+        );
+        let _ = err.flush();
+        // `_exit`: no destructors, no atexit handlers racing the threads still running.
+        signal_hook::low_level::exit(128 + SIGINT);
+    }
+    let _ = writeln!(
+        err,
+        "received {}: stopping after the current iteration, with a checkpoint{}",
+        name(signal),
+        if signal == SIGINT {
+            " (SIGINT again to exit at once)"
+        } else {
+            ""
+        }
+    );
 }
 
 /// The flag the handlers set (the run's cancellation hook, [`stylize::runner::RunHooks::cancel`]).
@@ -38,7 +109,7 @@ pub fn flag() -> &'static AtomicBool {
     &RECEIVED
 }
 
-/// The signal received so far, if any.
+/// The signal received (the last one when several came), if any.
 pub fn pending() -> Option<i32> {
     if !RECEIVED.load(Ordering::SeqCst) {
         return None;
@@ -54,6 +125,7 @@ pub fn name(signal: i32) -> &'static str {
     match signal {
         SIGINT => "SIGINT",
         SIGTERM => "SIGTERM",
+        SIGHUP => "SIGHUP",
         _ => "a signal",
     }
 }
@@ -93,11 +165,32 @@ impl Interrupted {
     }
 }
 
-/// The exit status for an error: 128 + signal for [`Interrupted`], 75 (`EX_TEMPFAIL`) when a run
-/// directory is locked by another process, 1 otherwise.
+/// Exit status: a run or batch failed (an error that running again will not fix by itself).
+pub const EXIT_FAILED: u8 = 1;
+/// Exit status (`EX_TEMPFAIL`): a run directory is locked by another live process (an overlapping
+/// array task, an earlier incarnation of a requeued task); its rows are left to that process.
+pub const EXIT_IN_USE: u8 = 75;
+
+/// An outcome that is not a success and not a plain failure, with its own exit status (a batch
+/// whose only trouble was rows in use elsewhere: [`EXIT_IN_USE`]).
+#[derive(Debug, thiserror::Error)]
+#[error("{message}")]
+pub struct Exit {
+    /// The exit status.
+    pub code: u8,
+    /// What happened.
+    pub message: String,
+}
+
+/// The exit status for an error: 128 + signal for [`Interrupted`] (129 SIGHUP, 130 SIGINT, 143
+/// SIGTERM: stopped with a checkpoint, the same command resumes), [`EXIT_IN_USE`] when a run
+/// directory is locked by another process, [`EXIT_FAILED`] otherwise.
 pub fn exit_code(e: &anyhow::Error) -> u8 {
     if let Some(i) = e.downcast_ref::<Interrupted>() {
         return i.exit_code();
+    }
+    if let Some(x) = e.downcast_ref::<Exit>() {
+        return x.code;
     }
     use rundir::LockError;
     let locked = |l: &LockError| matches!(l, LockError::Held { .. } | LockError::Busy { .. });
@@ -110,9 +203,9 @@ pub fn exit_code(e: &anyhow::Error) -> u8 {
                 .and_then(stylize::Error::lock_error)
                 .is_some_and(locked)
     }) {
-        return 75;
+        return EXIT_IN_USE;
     }
-    1
+    EXIT_FAILED
 }
 
 /// Quotes one argument for a POSIX shell (only when needed).

@@ -231,20 +231,37 @@ fn batch_says_one_row_prints_repair_warnings_and_takes_log_format() {
             "{w:?} not in:\n{err}"
         );
     }
-    // --log-format jsonl: one JSON object per iteration on stdout.
-    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
-    let lines: Vec<&str> = stdout.lines().collect();
-    assert_eq!(lines.len(), 3, "{stdout}");
-    for l in lines {
-        let v: serde_json::Value = ok(serde_json::from_str(l));
-        assert!(v.get("iteration").is_some(), "{l}");
-    }
+    // --log-format jsonl in a batch: every line names its row; iteration lines for the first and
+    // the last iteration (and at most one per 5 s between: these 3 iterations take less), then
+    // the row's outcome line.
+    let jsonl = |out: &std::process::Output| -> Vec<serde_json::Value> {
+        String::from_utf8_lossy(&out.stdout)
+            .lines()
+            .map(|l| ok(serde_json::from_str(l)))
+            .collect()
+    };
+    let lines = jsonl(&out);
+    assert!(lines.iter().all(|v| v["row"] == 0), "{lines:?}");
+    let iterations: Vec<u64> = lines
+        .iter()
+        .filter_map(|v| v["iteration"].as_u64())
+        .collect();
+    assert_eq!(iterations.first(), Some(&1), "{lines:?}");
+    assert_eq!(iterations.last(), Some(&3), "{lines:?}");
+    let end = lines.last().cloned().unwrap_or_default();
+    assert_eq!(
+        (end["event"].as_str(), end["outcome"].as_str()),
+        (Some("row"), Some("done")),
+        "{end}"
+    );
+    assert!(end["seconds"].as_f64().is_some_and(|t| t >= 0.0), "{end}");
+    assert!(err.contains("row 0 ") && err.contains(": done ("), "{err}");
     // The old `--jsonl` flag still works (hidden), `--force` to run the row again.
     let mut args = vec!["batch", s(&manifest), "--jsonl", "--force"];
     args.extend(settings);
     let out = stylize(&args);
     must(&out);
-    assert_eq!(String::from_utf8_lossy(&out.stdout).lines().count(), 3);
+    assert_eq!(jsonl(&out).last().map(|v| v["event"] == "row"), Some(true));
 }
 
 #[test]

@@ -4,18 +4,21 @@ use std::path::PathBuf;
 
 use anyhow::bail;
 
-use crate::batch::{BatchOptions, RowStatus, Shard, read_manifest, run_batch_until_interrupted};
+use crate::batch::{BatchOptions, RowResult, RowStatus, Shard, read_manifest, run_batch_reporting};
 use crate::cmd::run::resolve_config;
 use crate::cmd::shared::{LogFormat, RunSettings, count_noun};
-use crate::signals::shell_quote;
+use crate::runner::LogMode;
+use crate::signals::{EXIT_IN_USE, Exit, shell_quote};
 
 /// Arguments of `stylize batch`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// Manifest: `.toml` with `[[run]]` tables, or JSON Lines (see docs/cli.md).
     pub manifest: PathBuf,
-    /// Run only shard `i/n` (0-based). Default: from SLURM_ARRAY_TASK_ID / SLURM_ARRAY_TASK_COUNT
-    /// when set, else every row.
+    /// Run only shard `i/n` (0-based): the rows with `index % n == i`. Default: every row.
+    /// Required inside a Slurm job array: `--shard "$SLURM_ARRAY_TASK_ID/N"` with
+    /// `--array=0-(N-1)` (the count is never taken from the array's variables, which change when
+    /// a subset is re-submitted).
     #[arg(long)]
     pub shard: Option<String>,
     /// Redo every row from scratch: complete rows, rows of a different task, partial rows
@@ -38,10 +41,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         settings.log_format = LogFormat::Jsonl;
     }
     let config = resolve_config(settings.config.as_deref(), &settings.set, None, None)?;
-    let shard = match &args.shard {
-        Some(s) => Shard::parse(s)?,
-        None => Shard::from_env(|k| std::env::var(k).ok())?.unwrap_or(Shard::ALL),
-    };
+    let shard = Shard::resolve(args.shard.as_deref(), |k| std::env::var(k).ok())?;
     let rows = read_manifest(&args.manifest)?;
     let log = settings.log_mode();
     let mut inputs = vec![("manifest".to_string(), args.manifest.clone())];
@@ -56,42 +56,37 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         force: args.force,
         inputs,
     };
-    let (results, interrupted) = run_batch_until_interrupted(&rows, &options);
-    let mut failed = 0;
-    for (i, row, status, warnings) in &results {
-        let what = match status {
-            RowStatus::Skipped => "skipped (complete)".to_string(),
-            RowStatus::Done { resumed: true } => "done (resumed)".to_string(),
-            RowStatus::Done { resumed: false } => "done".to_string(),
-            RowStatus::Failed(e) => {
-                failed += 1;
-                format!("FAILED: {e}")
-            }
-        };
-        eprintln!(
-            "row {i} {} → {}: {what}",
-            row.mesh.display(),
-            row.out.display()
-        );
-        for w in warnings {
-            eprintln!("  warning: {w}");
-        }
-    }
-    eprintln!(
-        "shard {}/{}: {}, {} failed",
+    let jsonl = matches!(log, LogMode::Jsonl);
+    let (results, interrupted) = run_batch_reporting(&rows, &options, &mut |result, took| {
+        report_row(result, took, jsonl);
+    });
+    let count = |outcome: &str| {
+        results
+            .iter()
+            .filter(|(_, _, s, _)| s.outcome() == outcome)
+            .count()
+    };
+    let (failed, in_use) = (count("failed"), count("in-use"));
+    let summary = format!(
+        "shard {}/{}: {}, {failed} failed ({} done, {} resumed, {} skipped as complete, {in_use} in \
+         use elsewhere, {} interrupted)",
         shard.index,
         shard.count,
         count_noun(results.len(), "row", "rows"),
-        failed
+        count("done"),
+        count("resumed"),
+        count("skipped"),
+        count("interrupted"),
     );
+    say(&summary);
     if let Some(i) = interrupted {
         let command: Vec<String> = std::env::args().map(|a| shell_quote(&a)).collect();
-        eprintln!(
+        say(&format!(
             "batch stopped by {}; run the same command again to resume (complete rows are \
              skipped, the interrupted row continues from its checkpoint):\n  {}",
             crate::signals::name(i.signal),
             command.join(" ")
-        );
+        ));
         return Err(i.into());
     }
     if failed > 0 {
@@ -100,5 +95,57 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             count_noun(results.len(), "row", "rows")
         );
     }
+    if in_use > 0 {
+        return Err(Exit {
+            code: EXIT_IN_USE,
+            message: format!(
+                "{} of {} in use by other processes (left to them; run again to check)",
+                count_noun(in_use, "row", "rows"),
+                results.len()
+            ),
+        }
+        .into());
+    }
     Ok(())
+}
+
+/// A line on stderr; a log that cannot be written to (a closed terminal) is no reason to lose the
+/// exit status.
+fn say(line: &str) {
+    use std::io::Write;
+    let _ = writeln!(std::io::stderr(), "{line}");
+}
+
+/// The line of one ended row (stderr), and with `jsonl` its JSON object (stdout): `{"row": i,
+/// "event": "row", "outcome": …, "seconds": …, "mesh": …, "out": …}` with `"error"` when the row
+/// did not end well.
+fn report_row(result: &RowResult, took: std::time::Duration, jsonl: bool) {
+    let (i, row, status, warnings) = result;
+    say(&format!(
+        "row {i} {} → {}: {} ({:.1} s)",
+        row.mesh.display(),
+        row.out.display(),
+        status.describe(),
+        took.as_secs_f64()
+    ));
+    for w in warnings {
+        say(&format!("  warning: {w}"));
+    }
+    if jsonl {
+        let mut line = serde_json::json!({
+            "row": i,
+            "event": "row",
+            "outcome": status.outcome(),
+            "seconds": took.as_secs_f64(),
+            "mesh": row.mesh.display().to_string(),
+            "out": row.out.display().to_string(),
+        });
+        if let RowStatus::Failed(e) | RowStatus::InUse(e) | RowStatus::Interrupted(e) = status {
+            line["error"] = e.clone().into();
+        }
+        use std::io::Write;
+        let mut out = std::io::stdout().lock();
+        let _ = writeln!(out, "{line}");
+        let _ = out.flush();
+    }
 }
