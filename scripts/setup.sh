@@ -2,13 +2,15 @@
 # Installs what building and testing need beyond the Rust toolchain, from package registries only.
 #   - Debian: mesa-vulkan-drivers + libvulkan1 (lavapipe: wgpu on the CPU, for the GPU backend's tests)
 #             chromium (headless; the `stylize view` page's browser test, WebGL through SwiftShader)
+#             slurmctld slurmd slurm-client munge (a real single-node Slurm for the job template's
+#             trials, scripts/slurm/test-real-slurm.sh; started by that script, never as services)
 #   - PyPI:   ONNX Runtime's shared library (scripts/setup-onnxruntime.sh → .deps/onnxruntime/)
 # Idempotent: re-running skips what is already there. Needs root (or sudo) for apt-get.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
 need_apt=()
-for pkg in mesa-vulkan-drivers libvulkan1 chromium; do
+for pkg in mesa-vulkan-drivers libvulkan1 chromium slurmctld slurmd slurm-client munge; do
   dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || need_apt+=("$pkg")
 done
 if ((${#need_apt[@]})); then
@@ -16,6 +18,11 @@ if ((${#need_apt[@]})); then
   SUDO=""; [ "$(id -u)" -ne 0 ] && SUDO="sudo"
   $SUDO apt-get update -qq
   DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends "${need_apt[@]}" >/dev/null
+fi
+
+# munge's key (Debian's package creates one; a minimal image may not have run that step).
+if [ "$(id -u)" -eq 0 ] && [ ! -s /etc/munge/munge.key ] && command -v mungekey >/dev/null; then
+  mungekey --create --keyfile=/etc/munge/munge.key && chown munge:munge /etc/munge/munge.key && chmod 600 /etc/munge/munge.key
 fi
 
 if [ -x scripts/setup-onnxruntime.sh ] || [ -f scripts/setup-onnxruntime.sh ]; then

@@ -24,6 +24,9 @@ cargo test --workspace --all-targets --locked --no-run
 # The same targets as built above (a plain `cargo test` would build the examples a second time,
 # in normal mode), then the doc tests, which `--all-targets` leaves out.
 step "cargo test";                 cargo test --workspace --all-targets --locked
+# A real single-node Slurm (started and stopped by the script) runs the job template's trials on
+# the binary just built; skipped loudly where the daemons cannot start, a failure under CI as root.
+step "real Slurm trials (scripts/slurm/test-real-slurm.sh)"; bash scripts/slurm/test-real-slurm.sh target/debug/stylize
 step "cargo test --doc";           cargo test --workspace --doc --locked
 # The README's quick-start build (docs/cli.md, "Builds and features"): lints, and its own test.
 # Selected alone, its dependencies would get fewer features than in the workspace's build and Cargo

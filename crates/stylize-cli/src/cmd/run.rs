@@ -208,8 +208,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             if let Some(i) = e.downcast_ref::<Interrupted>()
                 && i.checkpoint_iteration.is_some()
             {
-                eprintln!("{i}");
-                eprintln!("resume with:\n  {}", resume_command(&args));
+                // After SIGHUP the terminal may be gone: a failed write must not panic.
+                use std::io::Write;
+                let mut err = std::io::stderr().lock();
+                let _ = writeln!(err, "{i}");
+                let _ = writeln!(err, "resume with:\n  {}", resume_command(&args));
             }
             return Err(e).with_context(|| format!("run on {}", args.mesh.display()));
         }
