@@ -53,7 +53,7 @@ impl Lcg {
 
 /// How a trial stops the process.
 #[derive(Clone, Copy, Debug)]
-enum Kill {
+enum Stop {
     Term,
     /// Two SIGTERMs this many milliseconds apart.
     DoubleTerm(u64),
@@ -64,24 +64,24 @@ enum Kill {
     DoubleInt(u64),
 }
 
-impl Kill {
+impl Stop {
     fn pick(rng: &mut Lcg) -> Self {
         match rng.below(5) {
-            0 => Kill::Term,
-            1 => Kill::DoubleTerm(1 + rng.below(5)),
-            2 => Kill::Hup,
-            3 => Kill::TermThenKill(rng.below(300)),
-            _ => Kill::DoubleInt(1 + rng.below(20)),
+            0 => Stop::Term,
+            1 => Stop::DoubleTerm(1 + rng.below(5)),
+            2 => Stop::Hup,
+            3 => Stop::TermThenKill(rng.below(300)),
+            _ => Stop::DoubleInt(1 + rng.below(20)),
         }
     }
 
     fn name(self) -> &'static str {
         match self {
-            Kill::Term => "TERM",
-            Kill::DoubleTerm(_) => "TERM+TERM",
-            Kill::Hup => "HUP",
-            Kill::TermThenKill(_) => "TERM+KILL",
-            Kill::DoubleInt(_) => "INT+INT",
+            Stop::Term => "TERM",
+            Stop::DoubleTerm(_) => "TERM+TERM",
+            Stop::Hup => "HUP",
+            Stop::TermThenKill(_) => "TERM+KILL",
+            Stop::DoubleInt(_) => "INT+INT",
         }
     }
 }
@@ -140,20 +140,20 @@ fn metrics_values(dir: &Path) -> Vec<serde_json::Value> {
 
 /// One trial's attempt: what was sent, and how the process ended.
 struct Attempt {
-    kill: Kill,
+    kill: Stop,
     delay_ms: u64,
     status: ExitStatus,
 }
 
 /// Whether `status` is one the documented ones for `kill` (0 when the run ended first).
-fn status_is_documented(kill: Kill, status: ExitStatus) -> bool {
+fn status_is_documented(kill: Stop, status: ExitStatus) -> bool {
     use std::os::unix::process::ExitStatusExt;
     let code = status.code();
     match kill {
-        Kill::Term | Kill::DoubleTerm(_) => matches!(code, Some(0 | 143)),
-        Kill::Hup => matches!(code, Some(0 | 129)),
-        Kill::DoubleInt(_) => matches!(code, Some(0 | 130)),
-        Kill::TermThenKill(_) => matches!(code, Some(0 | 143)) || status.signal() == Some(9),
+        Stop::Term | Stop::DoubleTerm(_) => matches!(code, Some(0 | 143)),
+        Stop::Hup => matches!(code, Some(0 | 129)),
+        Stop::DoubleInt(_) => matches!(code, Some(0 | 130)),
+        Stop::TermThenKill(_) => matches!(code, Some(0 | 143)) || status.signal() == Some(9),
     }
 }
 
@@ -204,23 +204,23 @@ fn trials(count: usize) {
                 );
                 break;
             }
-            let kill_kind = Kill::pick(&mut rng);
+            let kill_kind = Stop::pick(&mut rng);
             let delay_ms = rng.below(span_ms);
             std::thread::sleep(Duration::from_millis(delay_ms));
             match kill_kind {
-                Kill::Term => kill(&child, "TERM"),
-                Kill::Hup => kill(&child, "HUP"),
-                Kill::DoubleTerm(ms) => {
+                Stop::Term => kill(&child, "TERM"),
+                Stop::Hup => kill(&child, "HUP"),
+                Stop::DoubleTerm(ms) => {
                     kill(&child, "TERM");
                     std::thread::sleep(Duration::from_millis(ms));
                     kill(&child, "TERM");
                 }
-                Kill::DoubleInt(ms) => {
+                Stop::DoubleInt(ms) => {
                     kill(&child, "INT");
                     std::thread::sleep(Duration::from_millis(ms));
                     kill(&child, "INT");
                 }
-                Kill::TermThenKill(ms) => {
+                Stop::TermThenKill(ms) => {
                     kill(&child, "TERM");
                     std::thread::sleep(Duration::from_millis(ms));
                     kill(&child, "KILL");
