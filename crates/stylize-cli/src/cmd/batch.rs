@@ -36,6 +36,8 @@ pub struct Args {
 
 /// Runs `stylize batch`.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    // First: a stop request from now on is honoured (not the default action, which would kill).
+    crate::signals::install()?;
     let mut settings = args.settings.clone();
     if args.jsonl {
         settings.log_format = LogFormat::Jsonl;

@@ -109,6 +109,8 @@ pub fn resume_command(args: &Args) -> String {
 
 /// Runs `stylize run`.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    // First: a stop request from now on is honoured (not the default action, which would kill).
+    crate::signals::install()?;
     if args.style.is_none() && args.prompt.is_none() {
         bail!(
             "give --style NAME (model-free: cube, octahedron, exemplar:MESH) or --prompt TEXT \
