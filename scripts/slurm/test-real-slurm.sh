@@ -48,12 +48,18 @@ chmod 755 "$work"
 daemons=()
 cleanup() {
   local pid
+  # Our cluster's jobs first (SLURM_CONF is ours), so slurmd ends their processes itself.
+  if [ -n "${SLURM_CONF:-}" ] && squeue -h -o %i 2>/dev/null | grep -q .; then
+    scancel --full $(squeue -h -o %A 2>/dev/null | sort -u) 2>/dev/null
+    for _ in $(seq 30); do squeue -h -o %i 2>/dev/null | grep -q . || break; sleep 0.5; done
+  fi
   for pid in "${daemons[@]}"; do kill "$pid" 2>/dev/null; done
   for pid in "${daemons[@]}"; do
     for _ in $(seq 50); do kill -0 "$pid" 2>/dev/null || break; sleep 0.1; done
     kill -KILL "$pid" 2>/dev/null
   done
-  # Job processes slurmd started (they are not the daemons' children after slurmstepd forks).
+  # Anything of a job that outlived it (slurmstepd daemonizes): only processes whose command line
+  # names this run's private folder.
   pkill -KILL -f "$work/" 2>/dev/null
   rm -rf "$work"
 }

@@ -4,10 +4,11 @@
 //! - **Any number of SIGTERM and SIGHUP, and the first SIGINT,** only ask the run to stop: the loop
 //!   finishes its current iteration (a stop is honoured at the next iteration boundary — on the
 //!   text path an iteration takes about a second on a GPU and can take a minute on CPUs; model
-//!   loading checks the request before and after the models load), writes a checkpoint, releases the run
-//!   directory's lock, and the command prints its summary and exits with 128 + the last
+//!   loading checks the request before and after the models load), writes a checkpoint, releases
+//!   the run directory's lock, and the command prints its summary and exits with 128 + the last
 //!   signal's number (129 SIGHUP, 130 SIGINT, 143 SIGTERM). A repeated TERM/HUP changes nothing
-//!   but a line in the log, so it can never cut a checkpoint short.
+//!   but a line in the log, so it can never cut a checkpoint short. `run` and `batch` install the
+//!   handlers first thing, before any lock is taken.
 //! - **A second SIGINT** (a person pressing Ctrl-C again) means "now": the process removes the
 //!   locks it holds ([`rundir::lock::release_all_before_exit`]) and exits 130 at once, without
 //!   finishing the iteration. The run directory keeps its last durable checkpoint (checkpoints and
