@@ -70,7 +70,7 @@ impl Stop {
             0 => Stop::Term,
             1 => Stop::DoubleTerm(1 + rng.below(5)),
             2 => Stop::Hup,
-            3 => Stop::TermThenKill(rng.below(300)),
+            3 => Stop::TermThenKill(rng.below(30)),
             _ => Stop::DoubleInt(1 + rng.below(20)),
         }
     }
@@ -318,4 +318,80 @@ fn signal_kill_soak() {
         .and_then(|v| v.parse().ok())
         .unwrap_or(150);
     trials(count);
+}
+
+/// A batch's exit status says its outcome: 75 when its only trouble was a row in use elsewhere
+/// (the row line and the JSON row line say so), 1 when a row failed (even with another in use).
+#[test]
+fn batch_exit_statuses_per_outcome() {
+    let tmp = ok(tempfile::tempdir());
+    write_mesh(tmp.path());
+    // A live holder on another node (fresh heartbeat): the row is left to it.
+    let held = tmp.path().join("held");
+    ok(std::fs::create_dir_all(&held));
+    let now = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_secs_f64())
+        .unwrap_or(0.0);
+    let record = serde_json::json!({
+        "host": "node-42", "pid": 777, "since": now - 60.0, "heartbeat": now,
+        "interval": 5.0, "beat": 3, "token": "0123abcd", "command": "stylize batch elsewhere"
+    });
+    ok(std::fs::write(held.join("run.lock"), record.to_string()));
+    let row = |mesh: &str, out: &str| {
+        format!(
+            "{{\"mesh\": \"{mesh}\", \"style\": \"cube\", \"out\": \"{out}\", \"overrides\": \
+             [\"style.iterations=2\", \"run.turntable_size=16\", \"run.turntable_views=1\"]}}\n"
+        )
+    };
+    let manifest = tmp.path().join("m.jsonl");
+    ok(std::fs::write(
+        &manifest,
+        row("m.obj", "done") + &row("m.obj", "held"),
+    ));
+    let out = common::stylize(&["batch", s(&manifest), "--log-format", "jsonl"]);
+    let e = common::stderr(&out);
+    assert_eq!(out.status.code(), Some(75), "{e}");
+    assert!(e.contains("row 0 ") && e.contains(": done ("), "{e}");
+    assert!(
+        e.contains("row 1 ") && e.contains("IN USE elsewhere") && e.contains("node-42"),
+        "{e}"
+    );
+    let outcomes: Vec<(u64, String)> = String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
+        .filter(|v| v["event"] == "row")
+        .map(|v| {
+            (
+                v["row"].as_u64().unwrap_or(99),
+                v["outcome"].as_str().unwrap_or_default().to_string(),
+            )
+        })
+        .collect();
+    assert_eq!(
+        outcomes,
+        [(0, "done".to_string()), (1, "in-use".to_string())]
+    );
+    // A failing row (a missing mesh) outranks the row in use: 1.
+    ok(std::fs::write(
+        &manifest,
+        row("missing.obj", "bad") + &row("m.obj", "held"),
+    ));
+    let out = common::stylize(&["batch", s(&manifest), "--quiet"]);
+    let e = common::stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{e}");
+    assert!(
+        e.contains("FAILED") && e.contains("IN USE elsewhere"),
+        "{e}"
+    );
+    // Inside a job array, --shard is required (the array's variables are not a shard count).
+    let out = ok(Command::new(env!("CARGO_BIN_EXE_stylize"))
+        .args(["batch", s(&manifest), "--quiet"])
+        .env("SLURM_ARRAY_TASK_ID", "2")
+        .env("SLURM_ARRAY_TASK_COUNT", "1")
+        .output());
+    let e = common::stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{e}");
+    assert!(e.contains("--shard \"$SLURM_ARRAY_TASK_ID/N\""), "{e}");
+    assert!(!tmp.path().join("bad").exists(), "nothing ran");
 }
