@@ -78,9 +78,10 @@ fn watch(signal: i32) -> std::io::Result<()> {
 
 /// What the watcher does for one delivered signal (outside the handler).
 fn arrived(signal: i32) {
-    let mut err = std::io::stderr().lock();
     if signal == SIGINT && INTERRUPTS.fetch_add(1, Ordering::SeqCst) >= 1 {
+        // The locks first: the message may wait for stderr.
         let released = rundir::lock::release_all_before_exit();
+        let mut err = std::io::stderr().lock();
         // A log that cannot be written to (a closed terminal) must not stop the exit.
         let _ = writeln!(
             err,
@@ -94,7 +95,7 @@ fn arrived(signal: i32) {
         signal_hook::low_level::exit(128 + SIGINT);
     }
     let _ = writeln!(
-        err,
+        std::io::stderr().lock(),
         "received {}: stopping after the current iteration, with a checkpoint{}",
         name(signal),
         if signal == SIGINT {
