@@ -403,12 +403,19 @@ impl RunLock {
         // stale lock (which can only happen once per stale lock).
         let mut blocked_by: Option<PathBuf> = None;
         for _ in 0..8 {
-            match std::fs::OpenOptions::new()
-                .write(true)
-                .create_new(true)
-                .open(&path)
-            {
-                Ok(file) => return Self::hold(dir, path, file, me, settings),
+            match create_registered(&path) {
+                Ok((file, ino)) => {
+                    return Self::hold(dir, path.clone(), file, ino, me, settings).inspect_err(
+                        |_| {
+                            // Not held after all: neither registered nor left behind.
+                            let mut held = held_locks();
+                            held.retain(|(p, i)| !(p == &path && *i == ino));
+                            if owns(&path, ino) {
+                                let _ = std::fs::remove_file(&path);
+                            }
+                        },
+                    );
+                }
                 Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
                 Err(e) => return Err(io_err(&path)(e)),
             }
@@ -437,13 +444,12 @@ impl RunLock {
         dir: &Path,
         path: PathBuf,
         file: File,
+        ino: (u64, u64),
         mut me: LockRecord,
         settings: LockSettings,
     ) -> Result<Self, LockError> {
         write_record(&file, &me).map_err(io_err(&path))?;
         let _ = crate::durable::sync_dir(dir);
-        let meta = file.metadata().map_err(io_err(&path))?;
-        let ino = (meta.dev(), meta.ino());
         let file = Arc::new(file);
         let lost = Arc::new(AtomicBool::new(false));
         let (stop, stopped) = mpsc::channel::<()>();
@@ -467,7 +473,6 @@ impl RunLock {
                 })
                 .map_err(io_err(&path))?
         };
-        held_locks().push((path.clone(), ino));
         Ok(Self {
             dir: dir.to_path_buf(),
             path,
@@ -517,6 +522,27 @@ impl Drop for RunLock {
     }
 }
 
+/// Creates the lock file exclusively and registers it as held in one step under the registry's
+/// mutex, so [`release_all_before_exit`] (which takes the mutex) never misses a lock file this
+/// process has created.
+fn create_registered(path: &Path) -> std::io::Result<(File, (u64, u64))> {
+    let mut held = held_locks();
+    let file = std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(path)?;
+    let meta = match file.metadata() {
+        Ok(m) => m,
+        Err(e) => {
+            let _ = std::fs::remove_file(path);
+            return Err(e);
+        }
+    };
+    let ino = (meta.dev(), meta.ino());
+    held.push((path.to_path_buf(), ino));
+    Ok((file, ino))
+}
+
 /// The locks this process holds (path, device and inode), for [`release_all_before_exit`].
 fn held_locks() -> std::sync::MutexGuard<'static, Vec<(PathBuf, (u64, u64))>> {
     static HELD: std::sync::Mutex<Vec<(PathBuf, (u64, u64))>> = std::sync::Mutex::new(Vec::new());
@@ -528,7 +554,9 @@ fn held_locks() -> std::sync::MutexGuard<'static, Vec<(PathBuf, (u64, u64))>> {
 /// to exit without unwinding (`std::process::exit` after a second SIGINT): the [`RunLock`] values
 /// are never dropped then, and their locks would otherwise be left for a take-over. Returns the
 /// run directories released. After this call the locks' [`RunLock::ensure_held`] fail, so a run
-/// still going writes nothing more (the caller exits at once anyway).
+/// still going writes nothing more, and the registry stays locked for the rest of the process: a
+/// thread about to take a lock waits (forever; the caller exits at once), so no lock file can
+/// appear between this call and the exit.
 pub fn release_all_before_exit() -> Vec<PathBuf> {
     let held = held_locks();
     let mut released = Vec::new();
@@ -539,6 +567,8 @@ pub fn release_all_before_exit() -> Vec<PathBuf> {
             released.push(dir);
         }
     }
+    // Keep the registry locked until the exit.
+    std::mem::forget(held);
     released
 }
 
