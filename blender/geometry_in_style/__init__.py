@@ -560,8 +560,8 @@ class GIS_PT_panel(bpy.types.Panel):
         except core.StylizeError as e:
             exe, caps = None, None
             box = layout.box()
-            for chunk in _wrap(str(e)):
-                box.label(text=chunk, icon="ERROR" if chunk is _wrap(str(e))[0] else "NONE")
+            for k, chunk in enumerate(_wrap(str(e))):
+                box.label(text=chunk, icon="ERROR" if k == 0 else "NONE")
         col = layout.column()
         col.prop(s, "style")
         if s.style == "EXEMPLAR":

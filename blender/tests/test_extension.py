@@ -264,3 +264,70 @@ def test_missing_binary_is_reported(ext, monkeypatch) -> None:
     finally:
         prefs.stylize_path = saved_path
     assert ext.RUN_DIR_KEY not in obj
+
+
+class Layout:
+    """Records what a panel's draw() puts in its layout (headless Blender has no UI to look at)."""
+
+    def __init__(self, rows=None):
+        self.rows = rows if rows is not None else []
+
+    def _child(self, *_a, **_k):
+        return Layout(self.rows)
+
+    box = column = row = _child
+
+    def prop(self, data, name, **_k):
+        self.rows.append(("prop", name))
+
+    def prop_search(self, data, name, *_a, **_k):
+        self.rows.append(("prop", name))
+
+    def label(self, text="", icon="NONE"):
+        self.rows.append(("label", text, icon))
+
+    def operator(self, idname, text=None, icon="NONE"):
+        self.rows.append(("operator", idname, text))
+
+
+def draw_panel(ext, obj) -> list:
+    bpy.context.view_layer.objects.active = obj
+
+    class Panel:
+        layout = Layout()
+
+    ext.GIS_PT_panel.draw(Panel, bpy.context)
+    return Panel.layout.rows
+
+
+def test_panel_rows_follow_the_state(ext, monkeypatch) -> None:
+    obj = quad_sphere("PanelBall")
+    rows = draw_panel(ext, obj)
+    props = [r[1] for r in rows if r[0] == "prop"]
+    assert props[:4] == ["style", "iterations", "lam", "region"], props
+    assert ("operator", "gis.stylize", "Stylize") in rows
+    assert "strength" not in props  # no run yet
+    obj.gis.style = "EXEMPLAR"
+    obj.gis.region = "GROUP"
+    props = [r[1] for r in draw_panel(ext, obj) if r[0] == "prop"]
+    assert {"exemplar", "vertex_group", "feather"} <= set(props)
+    # After a run: the slider, the sanity line, Write λ.
+    obj.gis.style = "CUBE"
+    obj.gis.region = "ALL"
+    obj.gis.iterations = 5
+    assert bpy.ops.gis.stylize() == {"FINISHED"}
+    rows = draw_panel(ext, obj)
+    assert ("prop", "strength") in rows and ("operator", "gis.write_lambda", None) in rows
+    assert any(r[0] == "label" and r[1].startswith("λ = ") for r in rows), rows
+    # A missing binary: an error box first, with the message.
+    prefs = bpy.context.preferences.addons[MODULE].preferences
+    saved_path = prefs.stylize_path
+    try:
+        prefs.stylize_path = "/nonexistent/stylize"
+        rows = draw_panel(ext, obj)
+    finally:
+        prefs.stylize_path = saved_path
+    assert rows[0][0] == "label" and rows[0][2] == "ERROR", rows[:3]
+    first_prop = next(i for i, r in enumerate(rows) if r[0] == "prop")
+    message = " ".join(r[1] for r in rows[:first_prop])
+    assert "does not exist: /nonexistent/stylize" in message, message
