@@ -375,6 +375,8 @@ pub struct Prepared {
     pub setup_seconds: f64,
     /// The region of a localized run (`[region]`), already set on `darap`.
     pub region: Option<ResolvedRegion>,
+    /// The scale of `mesh_heat.glb` (its largest displacement, [`crate::heat`]) once written.
+    pub heat_max_displacement: Option<f64>,
 }
 
 /// Stage 1: validates the configuration, prepares the mesh, computes the identity of a task of
@@ -405,6 +407,7 @@ pub fn prepare(request: &RunRequest, kind: &dyn TaskKind) -> Result<Prepared> {
         darap,
         config_toml,
         setup_seconds: setup.elapsed().as_secs_f64(),
+        heat_max_displacement: None,
     })
 }
 
@@ -582,6 +585,15 @@ pub fn write_outputs(
             Err(e) => return Err(e).with_context(|| format!("cannot write {}", path.display())),
         }
     }
+    // The displacement heat map (crate::heat), beside the plain mesh files.
+    let heat_path = dir.file("mesh_heat.glb");
+    let mut heat_max = 0.0;
+    rundir::durable::replace_with(&heat_path, |tmp| {
+        heat_max = crate::heat::write_heat_glb(tmp, &mesh.positions, &deformed, Some(&normals))?;
+        Ok::<(), Error>(())
+    })
+    .with_context(|| format!("cannot write {}", heat_path.display()))?;
+    prepared.heat_max_displacement = Some(heat_max);
     let region = prepared.region.as_ref();
     write_deformation(dir, mesh, x, config, source, record, region)?;
     let free = region
@@ -979,6 +991,12 @@ fn write_summary(
         "renderer": renderer_choice,
         "seconds": { "setup": prepared.setup_seconds, "loop": loop_seconds },
         "warnings": prepared.warnings,
+        "heat": prepared.heat_max_displacement.map(|max| serde_json::json!({
+            "file": "mesh_heat.glb",
+            "quantity": "displacement magnitude |p - (r - centroid(r))|, normalized side-2 frame",
+            "colormap": "viridis, 5 stops, piecewise linear in sRGB; COLOR_0 linear RGB",
+            "max_displacement": max,
+        })),
         "region": prepared.region.as_ref().map(|r| serde_json::json!({
             "specs": config.region.specs,
             "feather": config.region.feather,
