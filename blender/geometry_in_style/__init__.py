@@ -324,7 +324,7 @@ class Job:
         _jobs.pop(self.object_name, None)
         obj = bpy.data.objects.get(self.object_name)
         code = self.code
-        if self.process.cancelled or code in (130, 143):
+        if code in (130, 143) or (self.process.cancelled and code != 0):
             state = core.run_state(self.run_dir)
             raise core.StylizeError(
                 "Stylize cancelled"
@@ -414,7 +414,9 @@ class GIS_OT_stylize(bpy.types.Operator):
         try:
             target = self._job.finish()
         except core.StylizeError as e:
-            context.active_object.gis.status = str(e)
+            obj = bpy.data.objects.get(self._job.object_name)
+            if obj is not None:
+                obj.gis.status = str(e)
             self.report({"WARNING"} if "cancelled" in str(e) else {"ERROR"}, str(e))
             return {"CANCELLED"}
         first = self._job.process.first_iteration
