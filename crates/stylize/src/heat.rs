@@ -80,24 +80,28 @@ pub fn heat_colors(displacement: &[f64]) -> (Vec<[f32; 3]>, f64) {
     (colors, max)
 }
 
-/// Writes `result` (with `normals`) as a GLB whose vertex colours are the heat map of its
-/// displacement from `rest` (same vertex order); returns `d_max`.
+/// Writes `written` (the result as the run's mesh files hold it, with `normals`) as a GLB whose
+/// vertex colours are the heat map of the displacement of `result` from `rest` (both in the
+/// normalized side-2 frame, the same vertex order as `written`); returns `d_max`. The colours do
+/// not depend on the frame `written` is in.
 pub fn write_heat_glb(
     path: &Path,
     rest: &[[f64; 3]],
-    result: &TriMesh,
+    result: &[[f64; 3]],
+    written: &TriMesh,
     normals: Option<&[[f64; 3]]>,
 ) -> Result<f64, mesh_core::MeshError> {
-    if rest.len() != result.positions.len() {
+    if rest.len() != result.len() || result.len() != written.positions.len() {
         return Err(mesh_core::MeshError::Invalid(format!(
-            "{}: rest mesh has {} vertices, result {}",
+            "{}: rest mesh has {} vertices, result {}, written mesh {}",
             path.display(),
             rest.len(),
-            result.positions.len()
+            result.len(),
+            written.positions.len()
         )));
     }
-    let (colors, max) = heat_colors(&displacement(rest, &result.positions));
-    mesh_core::io::write_glb_with_colors(path, result, normals, Some(&colors))?;
+    let (colors, max) = heat_colors(&displacement(rest, result));
+    mesh_core::io::write_glb_with_colors(path, written, normals, Some(&colors))?;
     Ok(max)
 }
 

@@ -589,7 +589,13 @@ pub fn write_outputs(
     let heat_path = dir.file("mesh_heat.glb");
     let mut heat_max = 0.0;
     rundir::durable::replace_with(&heat_path, |tmp| {
-        heat_max = crate::heat::write_heat_glb(tmp, &mesh.positions, &deformed, Some(&normals))?;
+        heat_max = crate::heat::write_heat_glb(
+            tmp,
+            &mesh.positions,
+            &deformed.positions,
+            &deformed,
+            Some(&normals),
+        )?;
         Ok::<(), Error>(())
     })
     .with_context(|| format!("cannot write {}", heat_path.display()))?;
