@@ -331,3 +331,26 @@ def test_panel_rows_follow_the_state(ext, monkeypatch) -> None:
     first_prop = next(i for i, r in enumerate(rows) if r[0] == "prop")
     message = " ".join(r[1] for r in rows[:first_prop])
     assert "does not exist: /nonexistent/stylize" in message, message
+
+
+def test_region_from_selected_vertices_and_vertex_group(ext) -> None:
+    obj = quad_sphere("Regions")
+    for v in obj.data.vertices:
+        v.select = v.index % 3 == 0
+    obj.gis.region = "SELECTED"
+    assert ext.region_indices(obj, obj.gis) == [i for i in range(len(obj.data.vertices)) if i % 3 == 0]
+    for v in obj.data.vertices:
+        v.select = False
+    with pytest.raises(ext.core.StylizeError, match="no vertex is selected"):
+        ext.region_indices(obj, obj.gis)
+    group = obj.vertex_groups.new(name="some")
+    group.add([1, 4], 0.5, "REPLACE")
+    group.add([5], 0.0, "REPLACE")  # weight 0: not in the region
+    obj.gis.region = "GROUP"
+    obj.gis.vertex_group = "some"
+    assert ext.region_indices(obj, obj.gis) == [1, 4]
+    obj.gis.vertex_group = "missing"
+    with pytest.raises(ext.core.StylizeError, match="no vertex group 'missing'"):
+        ext.region_indices(obj, obj.gis)
+    obj.gis.region = "ALL"
+    assert ext.region_indices(obj, obj.gis) is None
