@@ -30,6 +30,7 @@ pub mod config;
 pub mod error;
 pub mod eval;
 pub mod identity;
+pub mod intersections;
 pub mod malloc;
 pub mod models;
 pub mod pipeline;
