@@ -203,7 +203,10 @@ mod tests {
         crossing.intersections.new_faces = 5;
         let w = crossing.warnings();
         assert_eq!(w.len(), 1, "{w:?}");
-        assert!(w[0].contains("3 new self-intersecting face pairs (5 faces)"), "{w:?}");
+        assert!(
+            w[0].contains("3 new self-intersecting face pairs (5 faces)"),
+            "{w:?}"
+        );
         assert!(!crossing.is_safe());
     }
 }

@@ -200,8 +200,8 @@ pub fn evaluate(pairs: &[(String, TriMesh, TriMesh)]) -> Result<EvalReport> {
         let (ratios, skipped, volume) =
             pair_ratios(source, result).with_context(|| name.clone())?;
         let (m, s) = mean_std(&ratios);
-        let intersections = crate::intersections::compare(source, result)
-            .with_context(|| name.clone())?;
+        let intersections =
+            crate::intersections::compare(source, result).with_context(|| name.clone())?;
         out.push(PairMetrics {
             name: name.clone(),
             faces: ratios.len(),
@@ -462,8 +462,16 @@ pub fn table(report: &EvalReport) -> String {
         report.volume_ratio_mean,
         format!(
             "{} ({})",
-            report.pairs.iter().map(|p| p.intersections.faces).sum::<usize>(),
-            report.pairs.iter().map(|p| p.intersections.new_faces).sum::<usize>()
+            report
+                .pairs
+                .iter()
+                .map(|p| p.intersections.faces)
+                .sum::<usize>(),
+            report
+                .pairs
+                .iter()
+                .map(|p| p.intersections.new_faces)
+                .sum::<usize>()
         )
     );
     if with_clip {

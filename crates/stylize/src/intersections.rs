@@ -162,10 +162,7 @@ mod tests {
         for z in [0.0, dz] {
             positions.extend([[0.0, 0.0, z], [1.0, 0.0, z], [1.0, 1.0, z], [0.0, 1.0, z]]);
         }
-        TriMesh::new(
-            positions,
-            vec![[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]],
-        )
+        TriMesh::new(positions, vec![[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]])
     }
 
     #[test]
@@ -194,7 +191,12 @@ mod tests {
         p[5][1] = f64::NAN;
         let e = s.check(&p).unwrap_err().to_string();
         assert!(e.contains("result mesh"), "{e}");
-        assert!(s.check(&p[..3]).unwrap_err().to_string().contains("vertices"));
+        assert!(
+            s.check(&p[..3])
+                .unwrap_err()
+                .to_string()
+                .contains("vertices")
+        );
         // The checker is still usable after a refusal.
         let ok = s.check(&two_sheets(0.0).positions).unwrap();
         assert!(ok.figures.new_pairs > 0);

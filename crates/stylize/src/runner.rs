@@ -968,7 +968,9 @@ pub fn new_self_intersections(
             Some(f)
         }
         Err(e) => {
-            warnings.push(format!("the self-intersection check of the result failed: {e}"));
+            warnings.push(format!(
+                "the self-intersection check of the result failed: {e}"
+            ));
             None
         }
     }

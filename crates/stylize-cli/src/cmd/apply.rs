@@ -372,7 +372,16 @@ fn max_safe(
         }
     }
     if !found.safe_again.is_empty() {
-        let list: Vec<String> = found.safe_again.iter().map(|l| format!("{l}")).collect();
+        const SHOWN: usize = 5;
+        let mut list: Vec<String> = found
+            .safe_again
+            .iter()
+            .take(SHOWN)
+            .map(|l| format!("{l}"))
+            .collect();
+        if found.safe_again.len() > SHOWN {
+            list.push(format!("… ({} grid points in all)", found.safe_again.len()));
+        }
         eprintln!(
             "warning: max-safe: safety is not monotone over the scan: after the first crossing the result is safe again at λ = {} (the answer is the first crossing)",
             list.join(", ")
