@@ -4,7 +4,9 @@
 //
 // URL parameters: ?item=ID (which item first), ?lambda=L (after loading, set λ to L through the
 // slider's own input handler — the browser test uses it). <html data-state> is "loading" while a
-// request is pending and "ready" when the shown shape matches the slider; data-lambda is the λ shown.
+// request is pending and "ready" when the shown shape matches the slider; data-lambda is the λ shown,
+// data-intersecting-faces / data-new-intersecting-faces its self-intersection counts, data-max-safe
+// the strongest safe λ up to the slider's end once the server has found it.
 import * as THREE from 'three';
 import { OrbitControls } from './vendor/three/OrbitControls.js';
 import { renderPlots, renderInfo } from './plots.js';
@@ -522,8 +524,9 @@ async function applyResult(lambda) {
     ` · flipped ${fmt(100 * head.flipped_fraction, 1)}%` +
     ` · self-intersecting faces ${head.intersections ? head.intersections.faces : '—'} (${head.intersections ? head.intersections.new_faces : '—'} new)` +
     ` · ${head.vertices} vertices · updated in ${ms.toFixed(0)} ms`;
-  ui.metrics.dataset.intersectingFaces = String(head.intersections ? head.intersections.faces : '');
-  ui.metrics.dataset.newIntersectingFaces = String(head.intersections ? head.intersections.new_faces : '');
+  // For scripts and the browser test: the counts of the shown result.
+  document.documentElement.dataset.intersectingFaces = String(head.intersections ? head.intersections.faces : '');
+  document.documentElement.dataset.newIntersectingFaces = String(head.intersections ? head.intersections.new_faces : '');
   showIntersections(head);
   render();
   ui.metrics.dataset.ms = ms.toFixed(1);

@@ -334,8 +334,8 @@ fn max_safe(
     source: &mut stylize::intersections::SourceIntersections,
     upper: f64,
 ) -> anyhow::Result<f64> {
-    let mut unsafe_warnings = Vec::new();
-    let found = crate::max_safe::search(upper, |lambda| {
+    let mut unsafe_warnings: Vec<(f64, Vec<String>)> = Vec::new();
+    let searched = crate::max_safe::search(upper, |lambda| {
         let deformed = ready
             .at_lambda(lambda)
             .with_context(|| format!("dARAP forward failed at λ = {lambda}"))?;
@@ -345,7 +345,22 @@ fn max_safe(
             unsafe_warnings.push((lambda, s.warnings()));
         }
         Ok(safe)
-    })?;
+    });
+    let found = match searched {
+        Ok(f) => f,
+        Err(e) => {
+            // Unsafe at λ = 0 (e.g. a layer that does not reproduce the rest mesh): say why.
+            let why: Vec<String> = unsafe_warnings
+                .iter()
+                .filter(|(l, _)| *l == 0.0)
+                .flat_map(|(_, w)| w.iter().cloned())
+                .collect();
+            if why.is_empty() {
+                return Err(e);
+            }
+            bail!("{e}: {}", why.join("; "));
+        }
+    };
     match found.first_unsafe {
         None => println!(
             "max-safe: every λ scanned up to {upper} is safe ({} evaluations): λ = {upper}",
