@@ -180,3 +180,35 @@ fn max_safe_crossing_twice_slab_through_plate() {
     assert!((1.0..8.0).contains(&lambda), "{lambda}");
     assert!(stderr.contains("not monotone"), "{stderr}");
 }
+
+#[test]
+fn bad_max_safe_arguments_are_clear_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let saved =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/golden/bunny_targets.npz");
+    let out = dir.path().join("x.obj");
+    for (spec, says) in [
+        ("max-safe:0", "upper end"),
+        ("max-safe:-3", "upper end"),
+        ("max-safe:NaN", "upper end"),
+        ("max-safe:inf", "upper end"),
+        ("max-safe:1e9", "upper end"),
+        ("max-safe:abc", "not a number"),
+        ("max-safe12", "max-safe:UPPER"),
+        ("max-safe,5", "stands alone"),
+        ("fast", "neither a number nor max-safe"),
+    ] {
+        let (ok, _, stderr) = stylize(&[
+            "apply",
+            saved.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+            "--lambda",
+            spec,
+        ]);
+        assert!(!ok, "{spec} accepted");
+        assert!(stderr.contains(says), "{spec}: {stderr}");
+        assert!(!stderr.contains("panicked"), "{spec}: {stderr}");
+        assert!(!out.exists(), "{spec} wrote a file");
+    }
+}
