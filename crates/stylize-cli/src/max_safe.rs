@@ -102,12 +102,23 @@ pub fn search(
 mod tests {
     use super::*;
 
+    fn ok(r: anyhow::Result<SafeLambda>) -> SafeLambda {
+        r.unwrap_or_else(|e| panic!("{e:#}"))
+    }
+
+    fn refused(r: anyhow::Result<SafeLambda>) -> String {
+        match r {
+            Ok(f) => panic!("accepted: {f:?}"),
+            Err(e) => e.to_string(),
+        }
+    }
+
     #[test]
     fn one_crossing_is_found_within_one_percent() {
         for crossing in [0.3, 4.9, 7.77, 9.99] {
-            let r = search(10.0, |l| Ok(l < crossing)).unwrap();
+            let r = ok(search(10.0, |l| Ok(l < crossing)));
             assert!(r.lambda < crossing, "{r:?}");
-            let hi = r.first_unsafe.unwrap();
+            let hi = r.first_unsafe.unwrap_or(f64::NAN);
             assert!(hi >= crossing && hi - r.lambda <= 0.01 * r.lambda, "{r:?}");
             assert!(r.lambda * 1.01 >= crossing, "{r:?}");
             assert!(r.safe_again.is_empty());
@@ -118,7 +129,7 @@ mod tests {
     #[test]
     fn two_crossings_give_the_first_and_say_it_is_not_monotone() {
         // Unsafe on [3, 4.5), safe again on [4.5, 8), unsafe from 8.
-        let r = search(10.0, |l| Ok(!(3.0..4.5).contains(&l) && l < 8.0)).unwrap();
+        let r = ok(search(10.0, |l| Ok(!(3.0..4.5).contains(&l) && l < 8.0)));
         assert!(r.lambda < 3.0 && r.lambda * 1.01 >= 3.0, "{r:?}");
         assert!(!r.safe_again.is_empty(), "{r:?}");
         assert!(r.safe_again.iter().all(|l| (4.5..8.0).contains(l)), "{r:?}");
@@ -126,12 +137,12 @@ mod tests {
 
     #[test]
     fn all_safe_returns_the_upper_end_and_nothing_safe_returns_zero() {
-        let r = search(6.0, |_| Ok(true)).unwrap();
+        let r = ok(search(6.0, |_| Ok(true)));
         assert_eq!((r.lambda, r.first_unsafe), (6.0, None));
         assert_eq!(r.evaluations, 1 + SCAN_STEPS);
-        let r = search(6.0, |l| Ok(l == 0.0)).unwrap();
+        let r = ok(search(6.0, |l| Ok(l == 0.0)));
         assert_eq!(r.lambda, 0.0);
-        assert!(r.first_unsafe.unwrap() > 0.0);
+        assert!(r.first_unsafe.is_some_and(|hi| hi > 0.0), "{r:?}");
         assert_eq!(r.evaluations, 1 + SCAN_STEPS + MAX_BISECTIONS);
     }
 
@@ -140,13 +151,12 @@ mod tests {
         for upper in [0.0, -1.0, f64::NAN, f64::INFINITY] {
             assert!(search(upper, |_| Ok(true)).is_err(), "{upper}");
         }
-        let e = search(5.0, |_| Ok(false)).unwrap_err().to_string();
+        let e = refused(search(5.0, |_| Ok(false)));
         assert!(e.contains("λ = 0"), "{e}");
-        let e = search(5.0, |l| {
+        let e = refused(search(5.0, |l| {
             anyhow::ensure!(l < 2.0, "boom");
             Ok(true)
-        })
-        .unwrap_err();
-        assert_eq!(e.to_string(), "boom");
+        }));
+        assert_eq!(e, "boom");
     }
 }
