@@ -98,6 +98,36 @@ pub fn search(
     })
 }
 
+/// The end of a run: when the result at the run's λ is not safe, one line with the strongest safe
+/// λ below it (None when the result is safe — the common case costs one evaluation — or the run
+/// saved no usable λ). Reads the run's `deformation.npz` (with its saved region) as `apply` does.
+pub fn end_of_run(run_dir: &std::path::Path) -> anyhow::Result<Option<String>> {
+    let npz = run_dir.join("deformation.npz");
+    let saved = stylize::saved::SavedDeformation::read(&npz)?;
+    let Ok(lambda) = saved.recorded_lambda() else {
+        return Ok(None);
+    };
+    if lambda <= 0.0 {
+        return Ok(None);
+    }
+    let mut ready = saved.ready_layer_as_saved(&npz)?;
+    let mut source = stylize::intersections::SourceIntersections::new(&ready.rest)?;
+    let mut is_safe = |l: f64| -> anyhow::Result<bool> {
+        let d = ready.at_lambda(l)?;
+        Ok(crate::sanity::LambdaSanity::assess(&ready.rest, &mut source, &d, l)?.is_safe())
+    };
+    if is_safe(lambda)? {
+        return Ok(None);
+    }
+    let found = search(lambda, is_safe)?;
+    Ok(Some(format!(
+        "the result at the run's λ = {lambda} is not safe (see the warnings); the strongest safe λ \
+         up to it is {} — `stylize apply {} -o OUT.obj --lambda max-safe` writes it",
+        found.lambda,
+        npz.display()
+    )))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

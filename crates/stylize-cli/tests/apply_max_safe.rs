@@ -212,3 +212,59 @@ fn bad_max_safe_arguments_are_clear_errors() {
         assert!(!out.exists(), "{spec} wrote a file");
     }
 }
+
+/// The end of a run: a result with new self-intersections warns, records the figures in
+/// `run.json` and names the strongest safe λ below the run's; a safe one stays quiet. (20
+/// iterations of the cube style on the bunny: about 3 s each in the dev profile.)
+#[test]
+fn the_end_of_a_run_reports_new_intersections_and_the_strongest_safe_lambda() {
+    let dir = tempfile::tempdir().unwrap();
+    let mesh = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/meshes/bunny.obj");
+    let run = |lambda: &str, name: &str| {
+        let out = dir.path().join(name);
+        let (ok, _, stderr) = stylize(&[
+            "run",
+            mesh.to_str().unwrap(),
+            "--style",
+            "cube",
+            "-o",
+            out.to_str().unwrap(),
+            "--set",
+            &format!("darap.lambda={lambda}"),
+            "--set",
+            "style.iterations=20",
+        ]);
+        assert!(ok, "{stderr}");
+        let summary: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("run.json")).unwrap()).unwrap();
+        (stderr, summary)
+    };
+    let (stderr, summary) = run("30", "strong");
+    let x = &summary["self_intersections"];
+    assert!(x["new_pairs"].as_u64().unwrap() > 0, "{summary}");
+    assert!(
+        summary["warnings"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|w| w.as_str().unwrap().contains("new self-intersecting")),
+        "{summary}"
+    );
+    let line = stderr
+        .lines()
+        .find(|l| l.contains("the strongest safe λ up to it is "))
+        .unwrap_or_else(|| panic!("{stderr}"));
+    let safe: f64 = line
+        .split("up to it is ")
+        .nth(1)
+        .unwrap()
+        .split_whitespace()
+        .next()
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert!(safe > 0.0 && safe < 30.0, "{line}");
+    let (stderr, summary) = run("5", "gentle");
+    assert!(summary.get("self_intersections").is_none(), "{summary}");
+    assert!(!stderr.contains("strongest safe"), "{stderr}");
+}

@@ -115,6 +115,7 @@ function showIntersections(head) {
 // The strongest safe λ up to the slider's end (server: api/items/ID/max-safe), shown on the
 // slider's track (green up to it, red beyond) and behind the "max safe λ" button.
 let safe = null;   // { upper, lambda, first_unsafe, safe_again, ... } of the current item
+const AUTO_MAX_SAFE_FACES = 20000;
 async function loadMaxSafe() {
   const item = current;
   const upper = Number(ui.lambda.max);
@@ -137,7 +138,7 @@ async function loadMaxSafe() {
 function clearMaxSafe() {
   safe = null;
   ui.lambda.style.background = '';
-  ui.maxSafe.hidden = true;
+  ui.maxSafe.hidden = true;  // shown again for runs
   ui.safeNote.textContent = '';
   delete document.documentElement.dataset.maxSafe;
 }
@@ -304,8 +305,11 @@ async function loadItem(id) {
   if (current.kind === 'run') await refreshReplay();
   clearMaxSafe();
   if (run) {
+    ui.maxSafe.hidden = false;
     await request({ kind: 'lambda', value: Number(ui.lambda.value) });
-    loadMaxSafe().catch((e) => { ui.safeNote.textContent = e.message; });
+    // The search re-solves ~40 λ on the server and holds the run meanwhile (slider moves wait):
+    // automatic on small meshes only, else on the button's first click.
+    if (head.faces <= AUTO_MAX_SAFE_FACES) loadMaxSafe().catch((e) => { ui.safeNote.textContent = e.message; });
   } else {
     render();
     setState('ready');
@@ -563,7 +567,10 @@ ui.lambda.addEventListener('input', () => {
   stopPlaying();
   request({ kind: 'lambda', value: l });
 });
-ui.maxSafe.addEventListener('click', () => {
+ui.maxSafe.addEventListener('click', async () => {
+  if (!safe) {
+    try { await loadMaxSafe(); } catch (e) { ui.safeNote.textContent = e.message; return; }
+  }
   if (safe) {
     ui.lambda.value = String(safe.lambda);
     ui.lambda.dispatchEvent(new Event('input'));
