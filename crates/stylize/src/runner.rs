@@ -784,6 +784,7 @@ fn execute_prepared<'g, T: Task<'g> + 'g>(
         (Some(f), Some(before)) => Some((before, f(&deformed.positions))),
         _ => None,
     };
+    let intersections = new_self_intersections(&prepared.mesh, &deformed, &mut prepared.warnings);
     lock.ensure_held()?;
     write_summary(
         &dir,
@@ -794,6 +795,7 @@ fn execute_prepared<'g, T: Task<'g> + 'g>(
         alignment,
         renderer_choice.as_deref(),
         looped.loop_seconds,
+        intersections.as_ref(),
     )?;
     drop(lock);
     Ok(RunOutcome {
@@ -965,8 +967,36 @@ impl ObservedLoop<'_> {
     }
 }
 
+/// The end of a run's check for self-intersections the result has and the source does not
+/// ([`crate::intersections`]): when there are any, a warning (pushed to `warnings`) and the figures
+/// (returned, for `run.json`'s `self_intersections`). A check that cannot run becomes a warning —
+/// never a failure of a finished run.
+pub fn new_self_intersections(
+    source: &TriMesh,
+    result: &TriMesh,
+    warnings: &mut Vec<String>,
+) -> Option<crate::intersections::IntersectionFigures> {
+    match crate::intersections::compare(source, result) {
+        Ok(f) => {
+            let w = f.warning()?;
+            warnings.push(format!(
+                "the result has {w}: a self-intersecting mesh breaks printing, booleans and \
+                 simulation; try a smaller λ (`stylize apply deformation.npz --lambda max-safe`)"
+            ));
+            Some(f)
+        }
+        Err(e) => {
+            warnings.push(format!(
+                "the self-intersection check of the result failed: {e}"
+            ));
+            None
+        }
+    }
+}
+
 /// Stage 6 of [`execute_with`]: `run.json`, the run's summary (written last: it marks the run
-/// complete).
+/// complete). `intersections`: the result's new self-intersections, recorded as
+/// `self_intersections` when there are any.
 #[allow(clippy::too_many_arguments)]
 fn write_summary(
     dir: &RunDir,
@@ -977,10 +1007,11 @@ fn write_summary(
     alignment: Option<(f64, f64)>,
     renderer_choice: Option<&str>,
     loop_seconds: f64,
+    intersections: Option<&crate::intersections::IntersectionFigures>,
 ) -> Result<()> {
     let config = &request.config;
     let mesh = &prepared.mesh;
-    let summary = serde_json::json!({
+    let mut summary = serde_json::json!({
         "status": "complete",
         "mesh": request.mesh.display().to_string(),
         "objective": objective,
@@ -1010,6 +1041,9 @@ fn write_summary(
         })),
         "task": prepared.identity.fields,
     });
+    if let Some(x) = intersections {
+        summary["self_intersections"] = serde_json::to_value(x)?;
+    }
     rundir::durable::replace_bytes(
         &dir.summary(),
         serde_json::to_string_pretty(&summary)?.as_bytes(),
