@@ -1,14 +1,16 @@
-//! Signals cannot lose work, measured: a model-free batch row is stopped many times at random
-//! moments — one SIGTERM, two SIGTERMs a few milliseconds apart (what `srun` can deliver), a
-//! SIGHUP, SIGTERM then SIGKILL after a short grace time (Slurm's `KillWait`), two SIGINTs (a
-//! person who means "now") — and each time resumed by the same command, until it completes. Every
-//! final output must equal an uninterrupted run's byte for byte, `metrics.jsonl` must hold each
-//! iteration once with the uninterrupted run's values, and every exit must have the documented
-//! status with the run directory's lock released (except after SIGKILL, where it is taken over).
+//! Signals cannot lose work, measured: a model-free run (`stylize run` in odd trials, a one-row
+//! `stylize batch` in even ones) is stopped many times at random moments — one SIGTERM, two
+//! SIGTERMs a few milliseconds apart (what `srun` can deliver), a SIGHUP, SIGTERM then SIGKILL
+//! after a short grace time (Slurm's `KillWait`), two SIGINTs (a person who means "now") — and
+//! each time resumed (the same batch command; `run --resume` once a checkpoint exists), until it
+//! completes. Every final output must equal an uninterrupted run's byte for byte, `metrics.jsonl`
+//! must hold each iteration once with the uninterrupted run's values, and every exit must have the
+//! documented status with no lock of its own left behind (SIGKILL aside: that lock is taken over).
 //!
-//! `signal_kills_at_random_moments_never_lose_work` is the CI-sized version (about 30 trials);
-//! `signal_kill_soak` (ignored) runs many more: `cargo test -p stylize-cli --test signals --
-//! --ignored`. `STYLIZE_SOAK_SEED` repeats a sequence; `STYLIZE_SOAK_TRIALS` sets the soak's size.
+//! `signal_kills_at_random_moments_never_lose_work` is the CI-sized version (12 runs, each stopped
+//! up to 8 times); `signal_kill_soak` (ignored) runs 150: `cargo test -p stylize-cli --test
+//! signals -- --ignored`. `STYLIZE_SOAK_SEED` repeats a sequence; `STYLIZE_SOAK_TRIALS` sets the
+//! soak's size.
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
@@ -116,6 +118,39 @@ fn manifest(dir: &Path, out: &str) -> PathBuf {
     path
 }
 
+/// `stylize run` of the same row into `out` (with `--resume` when it holds a checkpoint, as a user
+/// would type it again).
+fn run(mesh: &Path, out: &Path) -> Child {
+    let iterations = format!("style.iterations={ITERATIONS}");
+    let mut args = vec![
+        "run",
+        s(mesh),
+        "--style",
+        "cube",
+        "-o",
+        s(out),
+        "--quiet",
+        "--set",
+        &iterations,
+        "--set",
+        "run.checkpoint_every=7",
+        "--set",
+        "run.turntable_size=16",
+        "--set",
+        "run.turntable_views=1",
+        "--set",
+        "run.preview_every=0",
+    ];
+    if out.join("checkpoint.json").is_file() {
+        args.push("--resume");
+    }
+    ok(Command::new(env!("CARGO_BIN_EXE_stylize"))
+        .args(&args)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn())
+}
+
 fn batch(manifest: &Path) -> Child {
     ok(Command::new(env!("CARGO_BIN_EXE_stylize"))
         .args(["batch", s(manifest), "--quiet"])
@@ -187,6 +222,16 @@ fn trials(count: usize) {
     let span_ms = (start.elapsed().as_millis() as u64).max(50);
     let reference_metrics = metrics_values(&reference);
     assert_eq!(reference_metrics.len() as u64, ITERATIONS);
+    // The same for `stylize run` (odd trials use it; its files are compared with its own).
+    let mesh = tmp.path().join("m.obj");
+    let run_reference = tmp.path().join("run-reference");
+    let out = ok(run(&mesh, &run_reference).wait_with_output());
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(metrics_values(&run_reference), reference_metrics);
 
     let mut kinds = std::collections::BTreeMap::<&str, (usize, usize)>::new();
     let mut killed_total = 0;
@@ -194,12 +239,18 @@ fn trials(count: usize) {
         let name = format!("t{trial}");
         let dir = tmp.path().join(&name);
         let manifest = manifest(tmp.path(), &name);
+        let by_run = trial % 2 == 1;
+        let reference = if by_run { &run_reference } else { &reference };
         let mut attempts: Vec<Attempt> = Vec::new();
         // Kill each attempt at a random moment until one completes (after 8, let it finish).
         loop {
             // A lock left by an earlier attempt's SIGKILL (taken over by the next process).
             let lock_before = std::fs::read(dir.join("run.lock")).ok();
-            let child = batch(&manifest);
+            let child = if by_run {
+                run(&mesh, &dir)
+            } else {
+                batch(&manifest)
+            };
             if attempts.len() >= 8 {
                 let out = ok(child.wait_with_output());
                 assert!(
