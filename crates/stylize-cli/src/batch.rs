@@ -13,6 +13,7 @@
 //! | `overrides` | list of `"section.key=value"`, optional | applied after the base config |
 //! | `region` | list of region specs, optional | replaces `region.specs` (`vertices:FILE` relative to the manifest's folder) |
 //! | `region_feather` | integer, optional | replaces `region.feather` |
+//! | `remesh` | string or number, optional | replaces `mesh.remesh` (`auto`, `on`, `off`, `0.03`, `"1.5%"`) |
 //!
 //! Rows are numbered from 0 in file order; shard `i` of `n` takes the rows with `index % n == i`.
 //! At load time, an empty `out` and two rows writing the same run directory (after path
@@ -70,6 +71,9 @@ pub struct Row {
     /// Feather rings (replace `region.feather`).
     #[serde(default)]
     pub region_feather: Option<u32>,
+    /// Remeshing (replaces `mesh.remesh`).
+    #[serde(default)]
+    pub remesh: Option<stylize::remeshing::RemeshSetting>,
 }
 
 #[derive(Deserialize)]
@@ -421,6 +425,9 @@ fn run_row(
     }
     if let Some(n) = &row.negative_prompt {
         config.guidance.negative_prompt = n.clone();
+    }
+    if let Some(r) = row.remesh {
+        config.mesh.remesh = r;
     }
     let config = config.with_region_flags(&row.region, row.region_feather, false)?;
     let request = RunRequest {

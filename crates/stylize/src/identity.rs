@@ -67,6 +67,14 @@ pub const PRESENTATION_KEYS: &[&str] = &[
     "region.tint",
 ];
 
+/// Keys every run reads whose whole effect is on the prepared mesh, which the identity records
+/// already (`mesh.sha256`): they are never `config.*` fields. `mesh.remesh` at `auto` keeps an
+/// even mesh exactly, so the identities of runs made before it are unchanged; when a run's input
+/// is remeshed, the runner adds the field `mesh.remeshed` (edge length, iterations, feature
+/// angle: [`crate::remeshing::RemeshReport::identity_value`]) beside the remeshed mesh's hash, so
+/// a resume with settings that remesh differently (or not at all) is refused by name.
+pub const RECORDED_BY_THE_PREPARED_MESH: &[&str] = &["mesh.remesh"];
+
 /// Sections every run reads whatever its kind: the runner builds dARAP from `[darap]` and
 /// `[region]` (the region is recorded by [`TaskIdentity::with_region`]).
 pub const COMMON_SECTIONS: &[&str] = &["darap", "region"];
@@ -122,6 +130,7 @@ pub fn unread_settings(config: &Config, kind: &dyn TaskKind) -> Result<Vec<Strin
         for (key, value) in keys {
             let name = format!("{section}.{key}");
             if PRESENTATION_KEYS.contains(&name.as_str())
+                || RECORDED_BY_THE_PREPARED_MESH.contains(&name.as_str())
                 || run_reads(kind, section, &name)
                 || PICTURE_KEYS.contains(&name.as_str())
             {
@@ -213,7 +222,9 @@ impl TaskIdentityExt for TaskIdentity {
             let default_keys = defaults.get(section).and_then(|d| d.as_table());
             for (key, value) in keys {
                 let name = format!("{section}.{key}");
-                if PRESENTATION_KEYS.contains(&name.as_str()) {
+                if PRESENTATION_KEYS.contains(&name.as_str())
+                    || RECORDED_BY_THE_PREPARED_MESH.contains(&name.as_str())
+                {
                     continue;
                 }
                 if RECORDED_UNLESS_DEFAULT.contains(&name.as_str())
