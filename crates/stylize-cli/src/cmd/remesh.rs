@@ -43,6 +43,11 @@ pub struct Args {
     /// Replace OUT when it exists.
     #[arg(long)]
     pub force: bool,
+    /// Also measure the two-sided Hausdorff distance between the input and this mesh (as
+    /// `compare` in the JSON report; for comparing another remesher's output with its source,
+    /// scripts/bench_remesh.py).
+    #[arg(long, value_name = "FILE", hide = true)]
+    pub compare: Option<PathBuf>,
 }
 
 /// The target edge length in the mesh's own units.
@@ -139,8 +144,22 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     })
     .with_context(|| format!("cannot write {}", a.out.display()))?;
     let diag = before.diagonal;
+    let compare = match &a.compare {
+        None => serde_json::Value::Null,
+        Some(path) => {
+            let other = mesh_core::io::read_mesh(path)
+                .with_context(|| format!("cannot read mesh {}", path.display()))?;
+            let c = mesh_core::remesh::hausdorff(&m.positions, &m.faces, &other.positions, &other.faces)?;
+            serde_json::json!({
+                "mesh": path.display().to_string(),
+                "hausdorff_out_to_in_percent_of_diagonal": 100.0 * c.a_to_b / diag,
+                "hausdorff_in_to_out_percent_of_diagonal": 100.0 * c.b_to_a / diag,
+            })
+        }
+    };
     if a.json {
         let j = serde_json::json!({
+            "compare": compare,
             "input": a.input.display().to_string(),
             "output": a.out.display().to_string(),
             "edge_length": l,
