@@ -1,24 +1,24 @@
 #!/usr/bin/env python3
-"""Side-by-side benchmark: `stylize remesh` against pymeshlab's
-`meshing_isotropic_explicit_remeshing`, same target edge length and iteration count, one mesh at a
-time, both tools back to back.
+"""Side-by-side benchmark: our isotropic remesher (`mesh_core::remesh`, the one `stylize remesh`
+and `stylize run --remesh` call) against pymeshlab's `meshing_isotropic_explicit_remeshing`, same
+target edge length (a percentage of the bounding-box diagonal), iteration count and feature angle,
+one mesh at a time, both tools back to back.
 
 pymeshlab is GPL: it is NEVER a dependency of this project. Install it in a venv outside the
 repository, e.g.
 
     python3 -m venv /work/venvs/remesh-pml && /work/venvs/remesh-pml/bin/pip install pymeshlab numpy
-    cargo build --release -p stylize-cli
+    cargo build --release -p mesh-core --example remesh_file
     bash scripts/fetch-meshes.sh
     taskset -c 0 /work/venvs/remesh-pml/bin/python scripts/bench_remesh.py [--iterations 10] [--percent 1.5]
 
-Both tools run pinned to one core (`taskset -c 0` on the script: pymeshlab in this process, ours
-as a child that inherits the affinity; OMP_NUM_THREADS=1). Quality of both outputs is measured by
-the same code — `stylize remesh`'s report (edge std/mean, minimum angle, share of corners under
-10°, sampled two-sided Hausdorff distance as % of the bounding-box diagonal) — by running our
-binary's measurement on pymeshlab's output (`--iterations 0` remeshes nothing and reports the
-figures of its input against itself; the Hausdorff distance of pymeshlab's output is measured by
-`stylize remesh --compare`). Time is wall time of the remeshing call alone (ours: the report's
-`seconds`; pymeshlab: around the filter call, excluding file reading).
+Both tools run on one core (`taskset -c 0` pins this process — pymeshlab — and our measuring
+binary, a child that inherits the affinity; OMP_NUM_THREADS=1). Quality of both outputs is
+measured by the same code, `crates/mesh-core/examples/remesh_file.rs` (edge std/mean, minimum
+angle, share of faces with a corner under 10°, sampled two-sided Hausdorff distance to the input
+as % of the bounding-box diagonal): ours on its own output, and with ITERATIONS 0 and a REFERENCE
+on pymeshlab's output against the input. Time is wall time of the remeshing call alone (ours:
+around `remesh()`; pymeshlab: around the filter call), excluding file reading and writing.
 
 Prints a Markdown table (docs/benchmarks.md, "Isotropic remeshing").
 """
@@ -53,7 +53,7 @@ MESHES = [
 
 def ours(binary, mesh, out, args):
     r = subprocess.run(
-        [binary, "remesh", str(mesh), "--out", str(out), "--force", "--json", *args],
+        [binary, str(mesh), str(out), *args],
         check=True,
         capture_output=True,
         text=True,
@@ -67,7 +67,7 @@ def main():
     ap.add_argument("--iterations", type=int, default=10)
     ap.add_argument("--percent", type=float, default=1.5)
     ap.add_argument("--feature-angle", type=float, default=30.0)
-    ap.add_argument("--binary", default=str(ROOT / "target/release/stylize"))
+    ap.add_argument("--binary", default=str(ROOT / "target/release/examples/remesh_file"))
     ap.add_argument("meshes", nargs="*")
     a = ap.parse_args()
     import pymeshlab
@@ -84,14 +84,7 @@ def main():
                 a.binary,
                 mesh,
                 tmp / "ours.obj",
-                [
-                    "--edge-length",
-                    f"{a.percent}%",
-                    "--iterations",
-                    str(a.iterations),
-                    "--feature-angle",
-                    str(a.feature_angle),
-                ],
+                [str(a.percent), str(a.iterations), str(a.feature_angle)],
             )
             ms = pymeshlab.MeshSet()
             ms.load_new_mesh(str(mesh))
@@ -108,7 +101,7 @@ def main():
                 a.binary,
                 tmp / "pml.obj",
                 tmp / "pml_measured.obj",
-                ["--iterations", "0", "--compare", str(mesh)],
+                [str(a.percent), "0", str(a.feature_angle), str(mesh)],
             )
             rows.append((mesh.name, o, m, t_pml))
             print(f"done {mesh.name}", file=sys.stderr)
@@ -121,7 +114,7 @@ def main():
         b = o["before"]
         for tool, r, hd, secs in [
             ("ours", o["after"], o, o["seconds"]),
-            ("pymeshlab", m["before"], m["compare"], t_pml),
+            ("pymeshlab", m["before"], m, t_pml),
         ]:
             print(
                 f"| {name} | {b['faces']:,} | {tool} | {r['faces']:,} | "

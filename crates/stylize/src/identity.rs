@@ -413,6 +413,22 @@ mod tests {
         assert_eq!(names(&Prompt::new("a cat")), text);
     }
 
+    /// `mesh.remesh` acts through the prepared mesh only: never a `config.` field, never an
+    /// unread setting, whatever its value and whatever the kind.
+    #[test]
+    fn the_remesh_setting_is_recorded_by_the_prepared_mesh_only() {
+        use crate::remeshing::RemeshSetting;
+        for kind in [&Style::Cube as &dyn TaskKind, &Prompt::new("a cat")] {
+            let default = id(kind, &Config::default());
+            for r in [RemeshSetting::Off, RemeshSetting::On] {
+                let mut c = Config::default();
+                c.mesh.remesh = r;
+                assert_eq!(id(kind, &c), default, "{r}");
+                assert_eq!(unread_settings(&c, kind).ok(), Some(Vec::new()), "{r}");
+            }
+        }
+    }
+
     #[test]
     fn new_settings_join_only_away_from_their_default() {
         let mut fields = BTreeMap::new();

@@ -133,9 +133,10 @@ impl FromStr for RemeshSetting {
             "auto" => Ok(RemeshSetting::Auto),
             "on" => Ok(RemeshSetting::On),
             "off" => Ok(RemeshSetting::Off),
-            other => other.parse().map(RemeshSetting::EdgeLength).map_err(|e| {
-                format!("{e}; mesh.remesh is `auto`, `on`, `off` or an edge length")
-            }),
+            other => other
+                .parse()
+                .map(RemeshSetting::EdgeLength)
+                .map_err(|e| format!("{e}; mesh.remesh is `auto`, `on`, `off` or an edge length")),
         }
     }
 }
@@ -175,7 +176,7 @@ pub fn remeshing_advised(q: &Quality) -> Option<String> {
     let mut why = Vec::new();
     if q.edge_std_over_mean() > ADVISED_ABOVE_EDGE_STD_OVER_MEAN {
         why.push(format!(
-            "edge-length std/mean {:.2} > {ADVISED_ABOVE_EDGE_STD_OVER_MEAN}",
+            "edge-length std/mean {:.3} > {ADVISED_ABOVE_EDGE_STD_OVER_MEAN}",
             q.edge_std_over_mean()
         ));
     }
@@ -393,7 +394,9 @@ mod tests {
             assert_eq!(got, want);
             assert_eq!(got.to_string(), text);
         }
-        for bad in ["", "yes", "0", "-1", "nan", "inf", "1e400", "101%", "%", "0%"] {
+        for bad in [
+            "", "yes", "0", "-1", "nan", "inf", "1e400", "101%", "%", "0%",
+        ] {
             let e = bad.parse::<RemeshSetting>().unwrap_err();
             assert!(e.contains("auto"), "{bad}: {e}");
         }
@@ -435,7 +438,11 @@ mod tests {
     #[test]
     fn the_criterion_has_two_independent_thresholds() {
         assert_eq!(remeshing_advised(&q(0.4, 0.01)), None);
-        assert!(remeshing_advised(&q(0.41, 0.0)).unwrap().contains("std/mean"));
+        assert!(
+            remeshing_advised(&q(0.41, 0.0))
+                .unwrap()
+                .contains("std/mean")
+        );
         assert!(remeshing_advised(&q(0.1, 0.011)).unwrap().contains("10°"));
     }
 
@@ -445,7 +452,9 @@ mod tests {
         let (p, f) = (m.positions, m.faces);
         for s in [RemeshSetting::Auto, RemeshSetting::Off] {
             let (out, report) = remesh_input(&p, &f, s).unwrap();
-            assert!(out.is_none() && report.remeshed.is_none() && report.identity_value().is_none());
+            assert!(
+                out.is_none() && report.remeshed.is_none() && report.identity_value().is_none()
+            );
         }
         let (out, report) = remesh_input(&p, &f, RemeshSetting::On).unwrap();
         let out = out.unwrap();

@@ -248,8 +248,14 @@ mod tests {
             vertex_map: &[],
             face_map: &[],
         };
-        let moved = transfer_parts(&parts, &source, &out.positions, &out.faces, &out.source_faces)
-            .unwrap();
+        let moved = transfer_parts(
+            &parts,
+            &source,
+            &out.positions,
+            &out.faces,
+            &out.source_faces,
+        )
+        .unwrap();
         let centroid_x = |o: usize| {
             out.faces[o]
                 .iter()
@@ -263,20 +269,33 @@ mod tests {
         for o in 0..out.faces.len() {
             let x = centroid_x(o);
             if x < 3.5 {
-                assert!(left.contains(&(o as u32)), "face {o} at x {x} lost its part");
+                assert!(
+                    left.contains(&(o as u32)),
+                    "face {o} at x {x} lost its part"
+                );
             }
             if x > 4.5 {
-                assert!(!left.contains(&(o as u32)), "face {o} at x {x} wrongly in `left`");
+                assert!(
+                    !left.contains(&(o as u32)),
+                    "face {o} at x {x} wrongly in `left`"
+                );
             }
             let side = moved.face_properties[0].values[o];
-            assert!(side == 0.0 || side == 1.0, "face values are copied, not blended");
+            assert!(
+                side == 0.0 || side == 1.0,
+                "face values are copied, not blended"
+            );
             assert_eq!(side == 0.0, left.contains(&(o as u32)));
         }
         // Vertex values are copied from the nearest input vertex: within half a diagonal.
         for (v, q) in out.positions.iter().enumerate() {
             let x = moved.vertex_properties[0].values[v];
             assert_eq!(x, x.round(), "an input value");
-            assert!((x - q[0]).abs() <= 0.5 + 1e-9, "vertex {v} at x {} got {x}", q[0]);
+            assert!(
+                (x - q[0]).abs() <= 0.5 + 1e-9,
+                "vertex {v} at x {} got {x}",
+                q[0]
+            );
         }
         // The same specs select the same side of the surface on both meshes.
         let before = RegionInput::unrepaired(&p, &f, &parts);
@@ -333,7 +352,10 @@ mod tests {
         // A trivial "remesh": the repaired mesh itself.
         let src: Vec<u32> = (0..repaired_faces.len() as u32).collect();
         let moved = transfer_parts(&parts, &source, &p, &repaired_faces, &src).unwrap();
-        assert_eq!(moved.face_properties[0].values, parts.face_properties[0].values[1..]);
+        assert_eq!(
+            moved.face_properties[0].values,
+            parts.face_properties[0].values[1..]
+        );
         let expect: Vec<u32> = parts.named[0].faces[1..].iter().map(|f| f - 1).collect();
         assert_eq!(moved.named[0].faces, expect);
         assert!(matches!(

@@ -442,7 +442,10 @@ mod tests {
             let (got, text) = remesh_advice(&quality);
             assert_eq!(got, advised, "{name}: {text}");
             let table = quality_table(&quality);
-            assert!(table.contains("std/mean") && table.contains(&text), "{table}");
+            assert!(
+                table.contains("std/mean") && table.contains(&text),
+                "{table}"
+            );
         }
     }
 

@@ -43,11 +43,6 @@ pub struct Args {
     /// Replace OUT when it exists.
     #[arg(long)]
     pub force: bool,
-    /// Also measure the two-sided Hausdorff distance between the input and this mesh (as
-    /// `compare` in the JSON report; for comparing another remesher's output with its source,
-    /// scripts/bench_remesh.py).
-    #[arg(long, value_name = "FILE", hide = true)]
-    pub compare: Option<PathBuf>,
 }
 
 /// The target edge length in the mesh's own units.
@@ -110,14 +105,10 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         );
     }
     if a.out.exists() && !a.force {
-        bail!(
-            "{} exists; pass --force to replace it",
-            a.out.display()
-        );
+        bail!("{} exists; pass --force to replace it", a.out.display());
     }
-    mesh_core::io::Format::from_path(&a.out).with_context(|| {
-        format!("cannot write {}: unknown output format", a.out.display())
-    })?;
+    mesh_core::io::Format::from_path(&a.out)
+        .with_context(|| format!("cannot write {}: unknown output format", a.out.display()))?;
     let mesh = mesh_core::io::read_mesh(&a.input)
         .with_context(|| format!("cannot read mesh {}", a.input.display()))?;
     let repaired =
@@ -132,34 +123,30 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         ..RemeshOptions::new(l)
     };
     let start = Instant::now();
-    let out = mesh_core::remesh::remesh(&m.positions, &m.faces, &options)
-        .with_context(|| format!("cannot remesh {}", a.input.display()))?;
+    let out = mesh_core::remesh::remesh(&m.positions, &m.faces, &options).map_err(|e| {
+        let hint = match e {
+            mesh_core::remesh::RemeshError::NonManifoldEdge { .. }
+            | mesh_core::remesh::RemeshError::NonManifoldVertex { .. } => {
+                " (numbers after repair; `stylize mesh check` lists the non-manifold places: \
+                 split the mesh there or fix it in a mesh editor)"
+            }
+            _ => "",
+        };
+        anyhow::Error::new(e).context(format!("cannot remesh {}{hint}", a.input.display()))
+    })?;
     let seconds = start.elapsed().as_secs_f64();
     let after = mesh_core::remesh::quality(&out.positions, &out.faces)?;
     let h = mesh_core::remesh::hausdorff(&out.positions, &out.faces, &m.positions, &m.faces)?;
     let result = mesh_core::TriMesh::new(out.positions, out.faces);
-    let normals = mesh_core::normals::vertex_normals_area_weighted(&result.positions, &result.faces);
+    let normals =
+        mesh_core::normals::vertex_normals_area_weighted(&result.positions, &result.faces);
     rundir::durable::replace_with(&a.out, |tmp| {
         mesh_core::io::write_mesh(tmp, &result, Some(&normals)).map_err(anyhow::Error::from)
     })
     .with_context(|| format!("cannot write {}", a.out.display()))?;
     let diag = before.diagonal;
-    let compare = match &a.compare {
-        None => serde_json::Value::Null,
-        Some(path) => {
-            let other = mesh_core::io::read_mesh(path)
-                .with_context(|| format!("cannot read mesh {}", path.display()))?;
-            let c = mesh_core::remesh::hausdorff(&m.positions, &m.faces, &other.positions, &other.faces)?;
-            serde_json::json!({
-                "mesh": path.display().to_string(),
-                "hausdorff_out_to_in_percent_of_diagonal": 100.0 * c.a_to_b / diag,
-                "hausdorff_in_to_out_percent_of_diagonal": 100.0 * c.b_to_a / diag,
-            })
-        }
-    };
     if a.json {
         let j = serde_json::json!({
-            "compare": compare,
             "input": a.input.display().to_string(),
             "output": a.out.display().to_string(),
             "edge_length": l,

@@ -133,10 +133,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         args.seed,
         args.negative_prompt.as_deref(),
     )?;
-    let config = args
-        .settings
-        .apply_remesh(config)
-        .with_region_flags(&args.region, args.region_feather, args.tint_region)?;
+    let config = args.settings.apply_remesh(config).with_region_flags(
+        &args.region,
+        args.region_feather,
+        args.tint_region,
+    )?;
     let mut options = RunOptions::default();
     if let Some(c) = &config_file {
         options.inputs.push(("config file".into(), c.clone()));
