@@ -16,9 +16,9 @@ fn main() -> anyhow::Result<()> {
     let dirs: Vec<String> = std::env::args().skip(1).collect();
     anyhow::ensure!(!dirs.is_empty(), "usage: remesh_artifacts RUN_DIR...");
     println!(
-        "| run | vertices | faces | edges stretched or shrunk > 2× | worst ratio | self-intersecting pairs: source → result (new) |"
+        "| run | vertices | faces | edges stretched or shrunk > 2× | worst ratio | self-intersecting pairs: source → result (new) | faces in a new pair |"
     );
-    println!("|---|---:|---:|---:|---:|---|");
+    println!("|---|---:|---:|---:|---:|---|---:|");
     for dir in dirs {
         let dir = std::path::PathBuf::from(dir);
         let saved = stylize::saved::SavedDeformation::read(dir.join("deformation.npz"))
@@ -51,8 +51,11 @@ fn main() -> anyhow::Result<()> {
         let si_source = mesh_core::intersect::self_intersections(&source, &saved.faces)?;
         let si_result = mesh_core::intersect::self_intersections(&result.positions, &result.faces)?;
         let new = mesh_core::intersect::new_pairs(&si_source, &si_result)?;
+        let mut involved: Vec<u32> = new.iter().flat_map(|&(a, b)| [a, b]).collect();
+        involved.sort_unstable();
+        involved.dedup();
         println!(
-            "| {} | {} | {} | {:.2} % ({distorted} of {}) | {worst:.1}× | {} → {} ({}) |",
+            "| {} | {} | {} | {:.2} % ({distorted} of {}) | {worst:.1}× | {} → {} ({}) | {:.2} % ({}) |",
             dir.display(),
             source.len(),
             saved.faces.len(),
@@ -60,7 +63,9 @@ fn main() -> anyhow::Result<()> {
             edges.len(),
             si_source.pairs.len(),
             si_result.pairs.len(),
-            new.len()
+            new.len(),
+            100.0 * involved.len() as f64 / saved.faces.len() as f64,
+            involved.len()
         );
     }
     Ok(())

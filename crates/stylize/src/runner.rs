@@ -257,6 +257,14 @@ pub fn prepare_run_mesh(
                 &r.source_faces,
             )
             .map_err(|e| Error::Invalid(e.to_string()))?;
+            // The input's needle faces are gone: its advice to remesh is moot.
+            warnings = repaired
+                .report
+                .issues
+                .iter()
+                .filter(|i| i.kind != mesh_core::validate::IssueKind::NeedleFaces)
+                .map(|i| i.message.clone())
+                .collect();
             m = TriMesh::new(r.positions, r.faces);
             normalize_f32_exact(&mut m.positions);
             let input = RegionInput::unrepaired(&m.positions, &m.faces, &moved);
