@@ -597,6 +597,44 @@ mod tests {
     }
 
     #[test]
+    fn the_remesh_column_takes_settings_and_lengths_and_refuses_others() {
+        use stylize::remeshing::{EdgeLength, RemeshSetting};
+        let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+        let jsonl = dir.path().join("m.jsonl");
+        std::fs::write(
+            &jsonl,
+            "{\"mesh\": \"a.obj\", \"style\": \"cube\", \"out\": \"a\", \"remesh\": \"off\"}\n\
+             {\"mesh\": \"a.obj\", \"style\": \"cube\", \"out\": \"b\", \"remesh\": 0.03}\n\
+             {\"mesh\": \"a.obj\", \"style\": \"cube\", \"out\": \"c\", \"remesh\": \"2%\"}\n\
+             {\"mesh\": \"a.obj\", \"style\": \"cube\", \"out\": \"d\"}\n",
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        let rows = read_manifest(&jsonl).unwrap_or_else(|e| panic!("{e:#}"));
+        let got: Vec<Option<RemeshSetting>> = rows.iter().map(|r| r.remesh).collect();
+        assert_eq!(
+            got,
+            [
+                Some(RemeshSetting::Off),
+                Some(RemeshSetting::EdgeLength(EdgeLength::Absolute(0.03))),
+                Some(RemeshSetting::EdgeLength(EdgeLength::PercentOfDiagonal(
+                    2.0
+                ))),
+                None
+            ]
+        );
+        std::fs::write(
+            &jsonl,
+            "{\"mesh\": \"a.obj\", \"style\": \"cube\", \"out\": \"a\", \"remesh\": \"maybe\"}\n",
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        let e = read_manifest(&jsonl)
+            .err()
+            .map(|e| format!("{e:#}"))
+            .unwrap_or_default();
+        assert!(e.contains("line 1") && e.contains("auto"), "{e}");
+    }
+
+    #[test]
     fn manifests_in_toml_and_jsonl_resolve_relative_paths() {
         let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
         let toml_path = dir.path().join("m.toml");

@@ -266,6 +266,12 @@ impl RemeshReport {
         })
     }
 
+    /// A warning for the run when `auto` advised remeshing but the remesher refused the mesh.
+    pub fn warning(&self) -> Option<String> {
+        (self.remeshed.is_none() && self.reason.contains("but not possible"))
+            .then(|| self.reason.clone())
+    }
+
     /// Lines for the start of a run.
     pub fn lines(&self) -> Vec<String> {
         match &self.remeshed {
@@ -314,6 +320,8 @@ fn remesh_error(e: mesh_core::remesh::RemeshError) -> Error {
 }
 
 /// Applies `setting` to a prepared mesh: the remeshed mesh (`None`: kept) and the report.
+/// `on` and an edge length fail when the remesher refuses the mesh; `auto` keeps it then, with
+/// the refusal in [`RemeshReport::reason`] (see [`RemeshReport::warning`]).
 pub fn remesh_input(
     positions: &[[f64; 3]],
     faces: &[[u32; 3]],
@@ -352,7 +360,25 @@ pub fn remesh_input(
     let start = Instant::now();
     let l = length.resolve(before.diagonal);
     let options = RemeshOptions::new(l);
-    let out = mesh_core::remesh::remesh(positions, faces, &options).map_err(remesh_error)?;
+    let out = match mesh_core::remesh::remesh(positions, faces, &options) {
+        Ok(out) => out,
+        // `auto` only advises: an input the remesher refuses (non-manifold, say) is used as it
+        // is, as before remeshing existed, and the report says why (a warning of the run).
+        Err(e) if setting == RemeshSetting::Auto => {
+            return Ok((
+                None,
+                RemeshReport {
+                    setting,
+                    before,
+                    reason: format!(
+                        "remeshing advised ({reason}) but not possible: {e}; the input is used as it is"
+                    ),
+                    remeshed: None,
+                },
+            ));
+        }
+        Err(e) => return Err(remesh_error(e)),
+    };
     let after = mesh_core::remesh::quality(&out.positions, &out.faces).map_err(remesh_error)?;
     let hausdorff = mesh_core::remesh::hausdorff(&out.positions, &out.faces, positions, faces)
         .map_err(remesh_error)?;
@@ -390,33 +416,38 @@ mod tests {
                 RemeshSetting::EdgeLength(EdgeLength::PercentOfDiagonal(1.5)),
             ),
         ] {
-            let got: RemeshSetting = text.parse().unwrap();
+            let got: RemeshSetting = text.parse().unwrap_or_else(|e| panic!("{e}"));
             assert_eq!(got, want);
             assert_eq!(got.to_string(), text);
         }
         for bad in [
             "", "yes", "0", "-1", "nan", "inf", "1e400", "101%", "%", "0%",
         ] {
-            let e = bad.parse::<RemeshSetting>().unwrap_err();
+            let e = bad
+                .parse::<RemeshSetting>()
+                .err()
+                .unwrap_or_else(|| panic!("expected an error"));
             assert!(e.contains("auto"), "{bad}: {e}");
         }
     }
 
     #[test]
     fn the_section_reads_strings_and_numbers() {
-        let s: MeshSection = toml::from_str("remesh = 0.05").unwrap();
+        let s: MeshSection = toml::from_str("remesh = 0.05").unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(
             s.remesh,
             RemeshSetting::EdgeLength(EdgeLength::Absolute(0.05))
         );
-        let s: MeshSection = toml::from_str("remesh = \"2%\"").unwrap();
+        let s: MeshSection = toml::from_str("remesh = \"2%\"").unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(
             s.remesh,
             RemeshSetting::EdgeLength(EdgeLength::PercentOfDiagonal(2.0))
         );
         assert!(toml::from_str::<MeshSection>("remesh = \"sometimes\"").is_err());
         assert_eq!(
-            toml::to_string(&MeshSection::default()).unwrap().trim(),
+            toml::to_string(&MeshSection::default())
+                .unwrap_or_else(|e| panic!("{e}"))
+                .trim(),
             "remesh = \"auto\""
         );
     }
@@ -440,10 +471,14 @@ mod tests {
         assert_eq!(remeshing_advised(&q(0.4, 0.01)), None);
         assert!(
             remeshing_advised(&q(0.41, 0.0))
-                .unwrap()
+                .unwrap_or_default()
                 .contains("std/mean")
         );
-        assert!(remeshing_advised(&q(0.1, 0.011)).unwrap().contains("10°"));
+        assert!(
+            remeshing_advised(&q(0.1, 0.011))
+                .unwrap_or_default()
+                .contains("10°")
+        );
     }
 
     #[test]
@@ -451,17 +486,26 @@ mod tests {
         let m = mesh_core::shapes::icosphere(2);
         let (p, f) = (m.positions, m.faces);
         for s in [RemeshSetting::Auto, RemeshSetting::Off] {
-            let (out, report) = remesh_input(&p, &f, s).unwrap();
+            let (out, report) = remesh_input(&p, &f, s).unwrap_or_else(|e| panic!("{e}"));
             assert!(
                 out.is_none() && report.remeshed.is_none() && report.identity_value().is_none()
             );
         }
-        let (out, report) = remesh_input(&p, &f, RemeshSetting::On).unwrap();
-        let out = out.unwrap();
-        let r = report.remeshed.as_ref().unwrap();
+        let (out, report) =
+            remesh_input(&p, &f, RemeshSetting::On).unwrap_or_else(|e| panic!("{e}"));
+        let out = out.unwrap_or_else(|| panic!("remeshed"));
+        let r = report
+            .remeshed
+            .as_ref()
+            .unwrap_or_else(|| panic!("remeshed"));
         assert!((r.edge_length - 0.015 * report.before.diagonal).abs() < 1e-15);
         assert_eq!(r.after.faces, out.faces.len());
-        assert!(report.identity_value().unwrap().contains("10 iterations"));
+        assert!(
+            report
+                .identity_value()
+                .unwrap_or_default()
+                .contains("10 iterations")
+        );
     }
 
     #[test]
@@ -478,15 +522,29 @@ mod tests {
                 f.push([a, d, b]);
             }
         }
-        let (out, report) = remesh_input(&p, &f, RemeshSetting::Auto).unwrap();
+        let (out, report) =
+            remesh_input(&p, &f, RemeshSetting::Auto).unwrap_or_else(|e| panic!("{e}"));
         assert!(out.is_some(), "{}", report.reason);
         assert!(report.reason.contains("under 10°"), "{}", report.reason);
+        // A fin (three faces on one edge) the remesher refuses: `auto` keeps the mesh and warns,
+        // `on` fails.
+        let mut fin_p = p.clone();
+        fin_p.push([0.0, 0.5, 1.0]);
+        let mut fin_f = f.clone();
+        fin_f.push([0, 3, 40]);
+        let (kept, report) =
+            remesh_input(&fin_p, &fin_f, RemeshSetting::Auto).unwrap_or_else(|e| panic!("{e}"));
+        assert!(kept.is_none());
+        let w = report.warning().unwrap_or_default();
+        assert!(w.contains("non-manifold"), "{w}");
+        assert!(remesh_input(&fin_p, &fin_f, RemeshSetting::On).is_err());
         let e = remesh_input(
             &p,
             &f,
             RemeshSetting::EdgeLength(EdgeLength::Absolute(1e-6)),
         )
-        .unwrap_err();
+        .err()
+        .unwrap_or_else(|| panic!("expected an error"));
         let m = e.to_string();
         assert!(m.contains("faces") && m.contains("--remesh off"), "{m}");
     }

@@ -220,6 +220,7 @@ pub fn prepare_run_mesh(
     normalize_f32_exact(&mut m.positions);
     let (remeshed, report) = crate::remeshing::remesh_input(&m.positions, &m.faces, remesh)
         .with_context(|| format!("mesh {}", path.display()))?;
+    warnings.extend(report.warning());
     let region = match remeshed {
         None => {
             let input = RegionInput {

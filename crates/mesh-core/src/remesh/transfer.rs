@@ -240,7 +240,7 @@ mod tests {
     #[test]
     fn labels_follow_the_faces_they_came_from() {
         let (p, f, parts) = halves();
-        let out = remesh(&p, &f, &RemeshOptions::new(0.45)).unwrap();
+        let out = remesh(&p, &f, &RemeshOptions::new(0.45)).unwrap_or_else(|e| panic!("{e}"));
         assert!(out.faces.len() > 2 * f.len(), "the grid was refined");
         let source = TransferSource {
             positions: &p,
@@ -255,7 +255,7 @@ mod tests {
             &out.faces,
             &out.source_faces,
         )
-        .unwrap();
+        .unwrap_or_else(|e| panic!("{e}"));
         let centroid_x = |o: usize| {
             out.faces[o]
                 .iter()
@@ -314,7 +314,7 @@ mod tests {
             },
         ] {
             let share = |input: &RegionInput<'_>, pos: &[[f64; 3]]| {
-                let sel = select_vertices(&spec, input).unwrap();
+                let sel = select_vertices(&spec, input).unwrap_or_else(|e| panic!("{e}"));
                 let xs: Vec<f64> = pos
                     .iter()
                     .zip(&sel)
@@ -351,7 +351,8 @@ mod tests {
         };
         // A trivial "remesh": the repaired mesh itself.
         let src: Vec<u32> = (0..repaired_faces.len() as u32).collect();
-        let moved = transfer_parts(&parts, &source, &p, &repaired_faces, &src).unwrap();
+        let moved = transfer_parts(&parts, &source, &p, &repaired_faces, &src)
+            .unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(
             moved.face_properties[0].values,
             parts.face_properties[0].values[1..]
@@ -364,7 +365,9 @@ mod tests {
         ));
         let mut bad = src.clone();
         bad[0] = 10_000;
-        let e = transfer_parts(&parts, &source, &p, &repaired_faces, &bad).unwrap_err();
+        let e = transfer_parts(&parts, &source, &p, &repaired_faces, &bad)
+            .err()
+            .unwrap_or_else(|| panic!("expected an error"));
         assert!(e.to_string().contains("10000"), "{e}");
     }
 }
