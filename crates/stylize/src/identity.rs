@@ -5,6 +5,10 @@
 //! - `mesh`: SHA-256 of the prepared mesh (repaired, normalized: exactly what is optimized) over
 //!   the vertex and face counts (u64 LE), the positions (f64 LE) and the faces (u32 LE); two meshes
 //!   with the same vertex count but different geometry or connectivity differ.
+//! - `mesh.remeshed` (only when `[mesh] remesh` remeshed the input, so identities of kept meshes
+//!   are unchanged): the target edge length, rounds and feature angle
+//!   ([`crate::remeshing::RemeshReport::identity_value`]); the setting itself is never a
+//!   `config.` field ([`RECORDED_BY_THE_PREPARED_MESH`]).
 //! - the task kind's own fields ([`TaskKind::identity_fields`]): `objective` (`style` or
 //!   `prompt`); for a style, `style` (`cube`, `octahedron`, `exemplar`) and for exemplars the
 //!   SHA-256 of the exemplar's target normals (its content, not its path); for a prompt, `prompt`,
