@@ -42,7 +42,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if args.jsonl {
         settings.log_format = LogFormat::Jsonl;
     }
-    let config = resolve_config(settings.config.as_deref(), &settings.set, None, None)?;
+    let config = settings.apply_remesh(resolve_config(
+        settings.config.as_deref(),
+        &settings.set,
+        None,
+        None,
+    )?);
     let shard = Shard::resolve(args.shard.as_deref(), |k| std::env::var(k).ok())?;
     let rows = read_manifest(&args.manifest)?;
     let log = settings.log_mode();
