@@ -201,6 +201,9 @@ fn saved_deformation_reapplies_to_the_saved_mesh() {
         },
     ));
     let applied = ok(layer.forward(&saved.verts_normals_f64())).positions;
+    // mesh.obj is in the input's frame (the default): placed by the recorded map.
+    let frame = ok(saved.input_frame()).unwrap_or_else(|| panic!("no to_input_frame"));
+    let applied = frame.place_result(&applied, &rest, true);
     let written = ok(mesh_core::io::read_mesh(out.join("mesh.obj")));
     assert_eq!(written.faces, saved.faces);
     let worst = applied

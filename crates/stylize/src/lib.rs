@@ -29,6 +29,7 @@ pub mod checkpoint;
 pub mod config;
 pub mod error;
 pub mod eval;
+pub mod frame;
 pub mod identity;
 pub mod malloc;
 pub mod models;

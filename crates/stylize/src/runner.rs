@@ -162,6 +162,32 @@ pub fn prepare_mesh_with_region(
     path: &Path,
     section: &crate::config::RegionSection,
 ) -> Result<(TriMesh, Vec<String>, Option<ResolvedRegion>)> {
+    prepare_oriented_mesh(path, section, crate::frame::UpAxis::PosY)
+        .map(|p| (p.mesh, p.warnings, p.region))
+}
+
+/// A mesh file prepared for a run ([`prepare_oriented_mesh`]).
+#[derive(Clone, Debug)]
+pub struct PreparedMesh {
+    /// The repaired mesh, turned so that its up axis is +y and side-2 cube normalized.
+    pub mesh: TriMesh,
+    /// Repairs made to the input.
+    pub warnings: Vec<String>,
+    /// The region of a localized run.
+    pub region: Option<ResolvedRegion>,
+    /// The map from the normalized frame of `mesh` back to the file's coordinates
+    /// ([`crate::frame`]).
+    pub frame: crate::frame::InputFrame,
+}
+
+/// [`prepare_mesh_with_region`] for a mesh whose up axis is `up`: the repaired positions are
+/// turned by [`crate::frame::UpAxis::turn`] before they are normalized, and the map back to the
+/// file's coordinates is returned with them.
+pub fn prepare_oriented_mesh(
+    path: &Path,
+    section: &crate::config::RegionSection,
+    up: crate::frame::UpAxis,
+) -> Result<PreparedMesh> {
     let (mesh, parts) = mesh_core::io::read_mesh_with_parts(path)
         .with_context(|| format!("cannot read mesh {}", path.display()))?;
     let repaired =
@@ -174,11 +200,17 @@ pub fn prepare_mesh_with_region(
         .map(|i| i.message.clone())
         .collect();
     let mut m = repaired.mesh.clone();
-    mesh_core::normalize::side2_cube(&mut m.positions);
+    up.turn(&mut m.positions);
+    let first = mesh_core::normalize::side2_cube(&mut m.positions);
     for p in &mut m.positions {
         *p = p.map(|c| f64::from(c as f32));
     }
-    mesh_core::normalize::side2_cube(&mut m.positions);
+    let second = mesh_core::normalize::side2_cube(&mut m.positions);
+    // q = ((R·p − c1)·s1 − c2)·s2 = (R·p − (c1 + c2/s1))·(s1·s2), up to the f32 rounding between.
+    let centre: [f64; 3] =
+        std::array::from_fn(|k| first.centre[k] + second.centre[k] / first.scale);
+    let frame =
+        crate::frame::InputFrame::from_normalization(up, centre, first.scale * second.scale);
     let mut warnings = warnings;
     let input = RegionInput {
         positions: &m.positions,
@@ -189,7 +221,12 @@ pub fn prepare_mesh_with_region(
     };
     let region = resolve_region(section, &input, &mut warnings)
         .with_context(|| format!("region of {}", path.display()))?;
-    Ok((m, warnings, region))
+    Ok(PreparedMesh {
+        mesh: m,
+        warnings,
+        region,
+        frame,
+    })
 }
 
 /// dARAP options from the configuration (the `[darap]` section is darap's own options).
@@ -375,16 +412,33 @@ pub struct Prepared {
     pub setup_seconds: f64,
     /// The region of a localized run (`[region]`), already set on `darap`.
     pub region: Option<ResolvedRegion>,
+    /// The map from the normalized frame back to the input file's coordinates.
+    pub frame: crate::frame::InputFrame,
+    /// The configuration the run uses: the request's with `camera.preset` resolved
+    /// ([`Config::with_camera_resolved`]); `config_toml` is its text.
+    pub config: Config,
+    /// What `camera.preset = auto` chose, and why (printed when the loop starts).
+    pub camera_choice: Option<String>,
 }
 
 /// Stage 1: validates the configuration, prepares the mesh, computes the identity of a task of
 /// `kind` and precomputes dARAP — everything that can fail on bad input, before anything is
 /// written.
 pub fn prepare(request: &RunRequest, kind: &dyn TaskKind) -> Result<Prepared> {
-    let config = &request.config;
-    config.validate()?;
+    request.config.validate()?;
+    let PreparedMesh {
+        mesh,
+        warnings,
+        region,
+        frame,
+    } = prepare_oriented_mesh(
+        &request.mesh,
+        &request.config.region,
+        request.config.mesh.up,
+    )?;
+    let (config, camera_choice) = request.config.clone().with_camera_resolved(&mesh.positions);
     let config_toml = config.to_toml_string()?;
-    let (mesh, warnings, region) = prepare_mesh_with_region(&request.mesh, &config.region)?;
+    let config = &config;
     let mut identity = TaskIdentity::new(&mesh.positions, &mesh.faces, kind, config)?;
     if let Some(r) = &region {
         identity = identity.with_region(&config.region.specs, config.region.feather, &r.weights);
@@ -398,7 +452,10 @@ pub fn prepare(request: &RunRequest, kind: &dyn TaskKind) -> Result<Prepared> {
             .context("region weights")?;
     }
     Ok(Prepared {
+        config: config.clone(),
+        camera_choice,
         region,
+        frame,
         mesh,
         warnings,
         identity,
@@ -559,13 +616,27 @@ pub fn write_outputs(
         .forward(&x_saved)
         .context("final dARAP forward")?;
     let deformed = TriMesh::new(result.positions.clone(), mesh.faces.clone());
-    let normals =
-        mesh_core::normals::vertex_normals_area_weighted(&deformed.positions, &deformed.faces);
+    // The files are written in the output frame; the pictures below use the normalized frame.
+    let written_mesh = match config.run.output_frame {
+        crate::frame::OutputFrame::Normalized => deformed.clone(),
+        crate::frame::OutputFrame::Input => TriMesh::new(
+            prepared.frame.place_result(
+                &deformed.positions,
+                &mesh.positions,
+                crate::frame::recentres(config.darap.post_process),
+            ),
+            mesh.faces.clone(),
+        ),
+    };
+    let normals = mesh_core::normals::vertex_normals_area_weighted(
+        &written_mesh.positions,
+        &written_mesh.faces,
+    );
     lock.ensure_held()?;
     for ext in mesh_core::io::Format::WITH_NORMALS.map(mesh_core::io::Format::extension) {
         let path = dir.file(&format!("mesh.{ext}"));
         let written = rundir::durable::replace_with(&path, |tmp| {
-            mesh_core::io::write_mesh(tmp, &deformed, Some(&normals)).map_err(Error::from)
+            mesh_core::io::write_mesh(tmp, &written_mesh, Some(&normals)).map_err(Error::from)
         });
         match written {
             Ok(()) => {}
@@ -583,7 +654,16 @@ pub fn write_outputs(
         }
     }
     let region = prepared.region.as_ref();
-    write_deformation(dir, mesh, x, config, source, record, region)?;
+    write_deformation(
+        dir,
+        mesh,
+        x,
+        config,
+        source,
+        record,
+        region,
+        &prepared.frame,
+    )?;
     let free = region
         .filter(|_| config.region.tint)
         .map(|r| r.free.as_slice());
@@ -662,7 +742,7 @@ fn execute_prepared<'g, T: Task<'g> + 'g>(
     hooks: RunHooks<'_>,
 ) -> Result<RunOutcome> {
     let RunHooks { progress, cancel } = hooks;
-    let config = &request.config;
+    let config = &prepared.config.clone();
     let dir = RunDir::new(&request.out);
     let mut inputs = vec![("input mesh".to_string(), request.mesh.clone())];
     inputs.extend(options.inputs.iter().cloned());
@@ -906,6 +986,9 @@ impl ObservedLoop<'_> {
         if let Some(why) = renderer_choice {
             headline.push(format!("renderer: {why}"));
         }
+        if let Some(why) = &prepared.camera_choice {
+            headline.push(why.clone());
+        }
         progress.start(spec.iterations, state.iteration, &headline);
         let mut observer = RunObserver {
             dir,
@@ -960,7 +1043,7 @@ fn write_summary(
     renderer_choice: Option<&str>,
     loop_seconds: f64,
 ) -> Result<()> {
-    let config = &request.config;
+    let config = &prepared.config;
     let mesh = &prepared.mesh;
     let summary = serde_json::json!({
         "status": "complete",
@@ -972,6 +1055,9 @@ fn write_summary(
         "lambda": config.darap.lambda,
         "rotation_rule": config.darap.rotation_rule.name(),
         "snapshot_every": config.run.snapshot_every,
+        "output_frame": config.run.output_frame.name(),
+        "up": config.mesh.up.name(),
+        "camera_preset": config.camera.preset.name(),
         "vertices": mesh.positions.len(),
         "faces": mesh.faces.len(),
         "alignment_before": alignment.map(|a| a.0),
@@ -993,8 +1079,11 @@ fn write_summary(
     .context("cannot write run.json")
 }
 
-/// Writes `deformation.npz` in the reference format plus our keys (for a localized run:
-/// `region_weights`, one f64 per vertex, `region_specs`, newline separated, and `region_feather`).
+/// Writes `deformation.npz` in the reference format plus our keys: `to_input_frame` (the 4×4 map
+/// from the frame of `verts` to the input file's coordinates, [`crate::frame`]),
+/// `output_frame` (the frame of the run's `mesh.*`), `up` (the input's up axis) and, for a
+/// localized run, `region_weights` (one f64 per vertex), `region_specs` (newline separated) and
+/// `region_feather`.
 #[allow(clippy::too_many_arguments)]
 fn write_deformation(
     dir: &RunDir,
@@ -1004,6 +1093,7 @@ fn write_deformation(
     source: &Path,
     record: &TaskRecord,
     region: Option<&ResolvedRegion>,
+    frame: &crate::frame::InputFrame,
 ) -> Result<()> {
     // The optimizer settings this run used (`[style]`'s on the model-free path).
     let (n_iters, lr) = (record.iterations, record.lr);
@@ -1034,6 +1124,7 @@ fn write_deformation(
         "rotation_rule",
         NpyArray::scalar_str(config.darap.rotation_rule.name()),
     )?;
+    saved.set_input_frame(frame, config.run.output_frame, config.mesh.up)?;
     if let Some(r) = region {
         saved.set_extra(
             "region_weights",

@@ -133,6 +133,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         args.negative_prompt.as_deref(),
     )?;
     let config = config.with_region_flags(&args.region, args.region_feather, args.tint_region)?;
+    let config = crate::cmd::shared::with_view_flags(config, args.settings.view_flags())?;
     let mut options = RunOptions::default();
     if let Some(c) = &config_file {
         options.inputs.push(("config file".into(), c.clone()));

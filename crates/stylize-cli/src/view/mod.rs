@@ -124,6 +124,8 @@ struct LoadedRun {
     /// The rest mesh (side-2 cube frame, the frame of every result), the saved target normals
     /// and the layer, as the run saved them.
     ready: ReadyLayer,
+    /// The saved `to_input_frame` (None: the file does not record it).
+    to_input: Option<stylize::frame::InputFrame>,
 }
 
 /// A run directory named on the command line.
@@ -346,6 +348,33 @@ impl RunItem {
         })
     }
 
+    /// A result `shape` of [`Self::at_lambda`] in the frame `frame` (None: the input's when the
+    /// run recorded it, else the normalized one), placed as the run placed its `mesh.*`
+    /// (`stylize::frame`): what downloads hold. `Some(Input)` on a run that does not record its
+    /// input frame is a bad request.
+    pub fn in_frame(
+        &self,
+        shape: Shape,
+        frame: Option<stylize::frame::OutputFrame>,
+    ) -> Result<Shape, ViewError> {
+        use stylize::frame::OutputFrame;
+        if frame == Some(OutputFrame::Normalized) {
+            return Ok(shape);
+        }
+        self.with_loaded(|l| match (&l.to_input, frame) {
+            (Some(to_input), _) => Ok(Shape {
+                positions: to_input.place_result(&shape.positions, &l.ready.rest.positions, true),
+                ..shape
+            }),
+            (None, Some(OutputFrame::Input)) => Err(ViewError::BadRequest(format!(
+                "run {} does not record its input's frame (deformation.npz has no \
+                 to_input_frame); ask for frame=normalized",
+                self.name
+            ))),
+            (None, _) => Ok(shape),
+        })
+    }
+
     /// The canonical path of a file inside the run, from a request path relative to it.
     ///
     /// Refused: absolute paths, `.` and `..` components, empty paths, and anything that resolves
@@ -514,7 +543,14 @@ fn load_run(npz: &Path, stamp: (SystemTime, u64)) -> anyhow::Result<LoadedRun> {
         .with_context(|| format!("cannot read saved deformation {}", npz.display()))?;
     // A localized run is shown with its saved region, as `apply` re-applies it.
     let ready = saved.ready_layer_as_saved(npz)?;
-    Ok(LoadedRun { stamp, ready })
+    let to_input = saved
+        .input_frame()
+        .with_context(|| format!("{}", npz.display()))?;
+    Ok(LoadedRun {
+        stamp,
+        ready,
+        to_input,
+    })
 }
 
 /// A mesh file named on the command line (shown as is).
@@ -672,6 +708,18 @@ impl Item {
                 "{} is a mesh, not a run: it has no deformation to re-apply",
                 m.name
             ))),
+        }
+    }
+
+    /// [`RunItem::in_frame`] (runs only; a mesh item has no results).
+    pub fn in_frame(
+        &self,
+        shape: Shape,
+        frame: Option<stylize::frame::OutputFrame>,
+    ) -> Result<Shape, ViewError> {
+        match self {
+            Item::Run(r) => r.in_frame(shape, frame),
+            Item::Mesh(_) => Ok(shape),
         }
     }
 

@@ -7,7 +7,9 @@
 //! /TOKEN/api/items                          JSON: one ItemInfo per command-line argument
 //! /TOKEN/api/items/ID/source                framed: header JSON + f32 positions + u32 faces
 //! /TOKEN/api/items/ID/result?lambda=L       framed: header JSON (λ diagnostics) + f32 positions
-//! /TOKEN/api/items/ID/download?lambda=L&format=obj|ply|glb   the mesh at λ as a file
+//! /TOKEN/api/items/ID/download?lambda=L&format=obj|ply|glb[&frame=input|normalized]
+//!                                                          the mesh at λ as a file, in the run's
+//!                                                          input frame by default
 //! /TOKEN/api/items/ID/files/PATH            a file inside a run directory (images, metrics)
 //! /TOKEN/api/items/ID/targets               framed: header JSON + f32 unit target normals, one
 //!                                           per source vertex (the saved deformation's)
@@ -257,6 +259,9 @@ async fn result(
 struct DownloadQuery {
     lambda: f64,
     format: String,
+    /// `input` (the default when the run records its input frame) or `normalized`.
+    #[serde(default)]
+    frame: Option<String>,
 }
 
 async fn download(
@@ -274,10 +279,19 @@ async fn download(
         ))
         .into_response();
     };
+    let frame = match q
+        .frame
+        .as_deref()
+        .map(str::parse::<stylize::frame::OutputFrame>)
+    {
+        None => None,
+        Some(Ok(f)) => Some(f),
+        Some(Err(e)) => return ViewError::BadRequest(e.to_string()).into_response(),
+    };
     let format = format.extension();
     let fmt = format;
     let made = on_item(viewer, id, move |item| {
-        let shape = item.at_lambda(q.lambda)?;
+        let shape = item.in_frame(item.at_lambda(q.lambda)?, frame)?;
         let mesh = mesh_core::TriMesh::new(shape.positions, shape.faces);
         let normals =
             mesh_core::normals::vertex_normals_area_weighted(&mesh.positions, &mesh.faces);
