@@ -245,3 +245,167 @@ fn up_z_on_a_z_up_mesh_renders_the_views_of_the_y_up_mesh() {
         positions(&b.join("mesh.obj"))
     );
 }
+
+#[test]
+fn camera_auto_picks_the_tall_preset_for_tall_slim_meshes_and_records_what_it_chose() {
+    use stylize::config::CameraPreset;
+    let tmp = ok(tempfile::tempdir());
+    // Standing: height 1.3 / widest horizontal 0.8 = 1.6 ≥ 1.5 → tall. Lying (z-up, taken as
+    // y-up): height 0.8 / 1.3 → default; the same file with --up z → tall again.
+    let standing_mesh = write(tmp.path(), "standing.obj", standing().0);
+    let lying_mesh = write(tmp.path(), "lying.obj", z_up(true));
+    let prompt = stylize::task::Prompt::new("a 3d render of a knight in armor");
+    let prepare = |mesh: &Path, preset: CameraPreset, up: UpAxis| {
+        let mut config = config(up, OutputFrame::Input);
+        config.camera.preset = preset;
+        let request = RunRequest {
+            mesh: mesh.to_path_buf(),
+            out: tmp.path().join("unused"),
+            config,
+            force: false,
+            resume: false,
+            halt_after: None,
+        };
+        ok(stylize::runner::prepare(&request, &prompt))
+    };
+    let tall = prepare(&standing_mesh, CameraPreset::Auto, UpAxis::PosY);
+    assert_eq!(tall.config.camera.preset, CameraPreset::Tall);
+    assert_eq!(
+        (
+            tall.config.camera.sampler.elevation_deg,
+            tall.config.camera.sampler.distance
+        ),
+        ([0.0, 30.0], [1.4, 2.6])
+    );
+    let why = tall.camera_choice.clone().unwrap_or_default();
+    assert!(
+        why.contains("auto → tall") && why.contains("height / widest horizontal extent = 1.6"),
+        "{why}"
+    );
+    assert!(
+        tall.config_toml.contains("preset = \"tall\""),
+        "{}",
+        tall.config_toml
+    );
+    // The identity records the resolved preset and ranges: the same task as `--camera tall`.
+    let named = prepare(&standing_mesh, CameraPreset::Tall, UpAxis::PosY);
+    assert_eq!(tall.identity, named.identity);
+    assert_eq!(named.camera_choice, None);
+    assert_eq!(
+        tall.identity
+            .fields
+            .get("config.camera.preset")
+            .map(String::as_str),
+        Some("\"tall\"")
+    );
+    let lying = prepare(&lying_mesh, CameraPreset::Auto, UpAxis::PosY);
+    assert_eq!(lying.config.camera.preset, CameraPreset::Default);
+    assert!(
+        lying
+            .camera_choice
+            .unwrap_or_default()
+            .contains("auto → default")
+    );
+    // An auto that resolves to default is the same task as no preset at all.
+    let plain = prepare(&lying_mesh, CameraPreset::Default, UpAxis::PosY);
+    assert_eq!(lying.identity, plain.identity);
+    assert!(!plain.identity.fields.contains_key("config.camera.preset"));
+    let turned = prepare(&lying_mesh, CameraPreset::Auto, UpAxis::PosZ);
+    assert_eq!(turned.config.camera.preset, CameraPreset::Tall);
+    assert_eq!(
+        turned
+            .identity
+            .fields
+            .get("config.mesh.up")
+            .map(String::as_str),
+        Some("\"+z\"")
+    );
+}
+
+#[test]
+fn flags_and_manifest_columns_set_up_frame_and_camera() {
+    let tmp = ok(tempfile::tempdir());
+    let mesh = write(tmp.path(), "part_mm.obj", z_up(true));
+    let small = [
+        "--set",
+        "style.iterations=2",
+        "--set",
+        "run.turntable_views=1",
+        "--set",
+        "run.turntable_size=16",
+        "--set",
+        "run.turntable_gif_frames=0",
+        "--quiet",
+    ];
+    let summary = |dir: &Path| -> serde_json::Value {
+        ok(serde_json::from_slice(&ok(std::fs::read(
+            dir.join("run.json"),
+        ))))
+    };
+    let run_dir = tmp.path().join("cli");
+    let mut args = vec![
+        "run",
+        s(&mesh),
+        "--style",
+        "cube",
+        "--out",
+        s(&run_dir),
+        "--up",
+        "z",
+        "--output-frame",
+        "normalized",
+        "--camera",
+        "tall",
+    ];
+    args.extend(small);
+    let out = stylize(&args);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let j = summary(&run_dir);
+    assert_eq!(
+        (&j["up"], &j["output_frame"], &j["camera_preset"]),
+        (&"+z".into(), &"normalized".into(), &"tall".into())
+    );
+    let bad = stylize(&[
+        "run",
+        s(&mesh),
+        "--style",
+        "cube",
+        "--out",
+        "x",
+        "--up",
+        "w",
+    ]);
+    assert!(
+        !bad.status.success() && stderr(&bad).contains("unknown up axis"),
+        "{}",
+        stderr(&bad)
+    );
+
+    let manifest = tmp.path().join("rows.jsonl");
+    ok(std::fs::write(
+        &manifest,
+        "{\"mesh\": \"part_mm.obj\", \"style\": \"cube\", \"out\": \"runs/a\", \"up\": \"+z\", \
+         \"output_frame\": \"normalized\", \"camera\": \"auto\"}\n",
+    ));
+    let mut args = vec!["batch", s(&manifest)];
+    args.extend(small);
+    let out = stylize(&args);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let j = summary(&tmp.path().join("runs/a"));
+    assert_eq!(
+        (&j["up"], &j["output_frame"]),
+        (&"+z".into(), &"normalized".into())
+    );
+    // auto resolved on the turned mesh (tall and slim once z is up).
+    assert_eq!(j["camera_preset"], "tall");
+    ok(std::fs::write(
+        &manifest,
+        "{\"mesh\": \"part_mm.obj\", \"style\": \"cube\", \"out\": \"runs/a\", \"up\": \"sideways\"}\n",
+    ));
+    let out = stylize(&["batch", s(&manifest)]);
+    let err = stderr(&out);
+    assert!(
+        !out.status.success() && err.contains("row 0") && err.contains("`up`"),
+        "{err}"
+    );
+}
