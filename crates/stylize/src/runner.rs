@@ -628,31 +628,8 @@ pub fn write_outputs(
             mesh.faces.clone(),
         ),
     };
-    let normals = mesh_core::normals::vertex_normals_area_weighted(
-        &written_mesh.positions,
-        &written_mesh.faces,
-    );
     lock.ensure_held()?;
-    for ext in mesh_core::io::Format::WITH_NORMALS.map(mesh_core::io::Format::extension) {
-        let path = dir.file(&format!("mesh.{ext}"));
-        let written = rundir::durable::replace_with(&path, |tmp| {
-            mesh_core::io::write_mesh(tmp, &written_mesh, Some(&normals)).map_err(Error::from)
-        });
-        match written {
-            Ok(()) => {}
-            Err(e)
-                if matches!(
-                    e.kind(),
-                    Error::Mesh(mesh_core::MeshError::UnsupportedFormat { .. })
-                ) =>
-            {
-                prepared.warnings.push(format!(
-                    "mesh.{ext} not written: this build's mesh writer does not support .{ext}"
-                ));
-            }
-            Err(e) => return Err(e).with_context(|| format!("cannot write {}", path.display())),
-        }
-    }
+    write_mesh_files(dir, &written_mesh, &mut prepared.warnings)?;
     let region = prepared.region.as_ref();
     write_deformation(
         dir,
@@ -703,6 +680,99 @@ pub fn write_outputs(
     Ok(deformed)
 }
 
+/// Writes `mesh.obj/.ply/.glb` with area-weighted vertex normals computed in the frame written;
+/// a format this build's writer does not support becomes a warning.
+fn write_mesh_files(dir: &RunDir, mesh: &TriMesh, warnings: &mut Vec<String>) -> Result<()> {
+    let normals = mesh_core::normals::vertex_normals_area_weighted(&mesh.positions, &mesh.faces);
+    for ext in mesh_core::io::Format::WITH_NORMALS.map(mesh_core::io::Format::extension) {
+        let path = dir.file(&format!("mesh.{ext}"));
+        let written = rundir::durable::replace_with(&path, |tmp| {
+            mesh_core::io::write_mesh(tmp, mesh, Some(&normals)).map_err(Error::from)
+        });
+        match written {
+            Ok(()) => {}
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    Error::Mesh(mesh_core::MeshError::UnsupportedFormat { .. })
+                ) =>
+            {
+                warnings.push(format!(
+                    "mesh.{ext} not written: this build's mesh writer does not support .{ext}"
+                ));
+            }
+            Err(e) => return Err(e).with_context(|| format!("cannot write {}", path.display())),
+        }
+    }
+    Ok(())
+}
+
+/// A complete run of the same task met again (a batch row) with another `run.output_frame`: its
+/// mesh files are rewritten in the asked frame (the frame is presentation, so the task is the
+/// same): dARAP is applied to the saved targets as [`write_outputs`] did — the same numbers — and
+/// placed in the asked frame; then `deformation.npz`'s and `run.json`'s `output_frame` are
+/// updated. Returns what was done, or why it could not be (a run made before output frames
+/// records no `output_frame`: its files stay as they are; `--force` redoes it).
+fn reframe_complete_run(
+    dir: &RunDir,
+    lock: &RunLock,
+    prepared: &mut Prepared,
+) -> Result<Option<String>> {
+    use crate::frame::OutputFrame;
+    let npz = dir.deformation();
+    let mut saved =
+        SavedDeformation::read(&npz).with_context(|| format!("cannot read {}", npz.display()))?;
+    let want = prepared.config.run.output_frame;
+    let was = saved.output_frame()?;
+    if was == want {
+        return Ok(None);
+    }
+    if saved.input_frame()?.is_none() {
+        return Ok(Some(format!(
+            "the complete run's mesh files are in the {was} frame, not the {want} frame asked \
+             for: it was made before output frames existed (redo it with --force)"
+        )));
+    }
+    if saved.verts_normals.len() != prepared.mesh.positions.len() {
+        invalid!(
+            "{} does not match the prepared mesh: cannot rewrite the run's mesh files",
+            npz.display()
+        );
+    }
+    let x_saved: Vec<[f64; 3]> = saved.verts_normals_f64();
+    let result = prepared
+        .darap
+        .forward(&x_saved)
+        .context("dARAP forward of the saved targets")?;
+    let positions = match want {
+        OutputFrame::Normalized => result.positions,
+        OutputFrame::Input => prepared.frame.place_result(
+            &result.positions,
+            &prepared.mesh.positions,
+            crate::frame::recentres(prepared.config.darap.post_process),
+        ),
+    };
+    lock.ensure_held()?;
+    let mesh = TriMesh::new(positions, prepared.mesh.faces.clone());
+    write_mesh_files(dir, &mesh, &mut prepared.warnings)?;
+    saved.set_extra("output_frame", NpyArray::scalar_str(want.name()))?;
+    rundir::durable::replace_with(&npz, |tmp| saved.write(tmp).map_err(Error::from))
+        .with_context(|| format!("cannot write {}", npz.display()))?;
+    let summary_path = dir.summary();
+    let mut summary: serde_json::Value = serde_json::from_slice(
+        &std::fs::read(&summary_path).io_context("cannot read", &summary_path)?,
+    )?;
+    summary["output_frame"] = want.name().into();
+    rundir::durable::replace_bytes(
+        &summary_path,
+        serde_json::to_string_pretty(&summary)?.as_bytes(),
+    )
+    .context("cannot write run.json")?;
+    Ok(Some(format!(
+        "the complete run's mesh files were rewritten from the {was} frame into the {want} frame"
+    )))
+}
+
 /// Runs one request: `kind` gives the task's identity, `make_task` builds the task (e.g. loads
 /// the models) — called only once the run directory is claimed, so refusals come before any
 /// expensive loading.
@@ -749,6 +819,10 @@ fn execute_prepared<'g, T: Task<'g> + 'g>(
     inputs.extend(task_inputs);
     let (lock, start) = claim_run_dir(&dir, request, options, &prepared, &inputs)?;
     if matches!(start, Start::Complete) {
+        if let Some(note) = reframe_complete_run(&dir, &lock, &mut prepared)? {
+            progress.warning(&format!("note: {note}"));
+            prepared.warnings.push(note);
+        }
         return Ok(RunOutcome {
             iteration: 0,
             complete: true,
