@@ -419,6 +419,8 @@ pub struct Prepared {
     pub config: Config,
     /// What `camera.preset = auto` chose, and why (printed when the loop starts).
     pub camera_choice: Option<String>,
+    /// The scale of `mesh_heat.glb` (its largest displacement, [`crate::heat`]) once written.
+    pub heat_max_displacement: Option<f64>,
 }
 
 /// Stage 1: validates the configuration, prepares the mesh, computes the identity of a task of
@@ -462,6 +464,7 @@ pub fn prepare(request: &RunRequest, kind: &dyn TaskKind) -> Result<Prepared> {
         darap,
         config_toml,
         setup_seconds: setup.elapsed().as_secs_f64(),
+        heat_max_displacement: None,
     })
 }
 
@@ -629,7 +632,13 @@ pub fn write_outputs(
         ),
     };
     lock.ensure_held()?;
-    write_mesh_files(dir, &written_mesh, &mut prepared.warnings)?;
+    prepared.heat_max_displacement = Some(write_mesh_outputs(
+        dir,
+        &mesh.positions,
+        &deformed.positions,
+        &written_mesh,
+        &mut prepared.warnings,
+    )?);
     let region = prepared.region.as_ref();
     write_deformation(
         dir,
@@ -680,9 +689,36 @@ pub fn write_outputs(
     Ok(deformed)
 }
 
-/// Writes `mesh.obj/.ply/.glb` with area-weighted vertex normals computed in the frame written;
-/// a format this build's writer does not support becomes a warning.
-fn write_mesh_files(dir: &RunDir, mesh: &TriMesh, warnings: &mut Vec<String>) -> Result<()> {
+/// Writes `mesh.obj/.ply/.glb` and `mesh_heat.glb` of `written` (the result in the output frame)
+/// with area-weighted vertex normals computed in that frame; the heat map's colours measure the
+/// displacement from `rest` to `result` (both in the normalized frame, [`crate::heat`]). A mesh
+/// format this build's writer does not support becomes a warning. Returns the heat map's scale.
+fn write_mesh_outputs(
+    dir: &RunDir,
+    rest: &[[f64; 3]],
+    result: &[[f64; 3]],
+    written: &TriMesh,
+    warnings: &mut Vec<String>,
+) -> Result<f64> {
+    let normals = write_mesh_files(dir, written, warnings)?;
+    // The displacement heat map (crate::heat), beside the plain mesh files.
+    let heat_path = dir.file("mesh_heat.glb");
+    let mut heat_max = 0.0;
+    rundir::durable::replace_with(&heat_path, |tmp| {
+        heat_max = crate::heat::write_heat_glb(tmp, rest, result, written, Some(&normals))?;
+        Ok::<(), Error>(())
+    })
+    .with_context(|| format!("cannot write {}", heat_path.display()))?;
+    Ok(heat_max)
+}
+
+/// Writes `mesh.obj/.ply/.glb` with area-weighted vertex normals computed in the frame written
+/// (returned); a format this build's writer does not support becomes a warning.
+fn write_mesh_files(
+    dir: &RunDir,
+    mesh: &TriMesh,
+    warnings: &mut Vec<String>,
+) -> Result<Vec<[f64; 3]>> {
     let normals = mesh_core::normals::vertex_normals_area_weighted(&mesh.positions, &mesh.faces);
     for ext in mesh_core::io::Format::WITH_NORMALS.map(mesh_core::io::Format::extension) {
         let path = dir.file(&format!("mesh.{ext}"));
@@ -704,7 +740,7 @@ fn write_mesh_files(dir: &RunDir, mesh: &TriMesh, warnings: &mut Vec<String>) ->
             Err(e) => return Err(e).with_context(|| format!("cannot write {}", path.display())),
         }
     }
-    Ok(())
+    Ok(normals)
 }
 
 /// A complete run of the same task met again (a batch row) with another `run.output_frame`: its
@@ -745,7 +781,7 @@ fn reframe_complete_run(
         .forward(&x_saved)
         .context("dARAP forward of the saved targets")?;
     let positions = match want {
-        OutputFrame::Normalized => result.positions,
+        OutputFrame::Normalized => result.positions.clone(),
         OutputFrame::Input => prepared.frame.place_result(
             &result.positions,
             &prepared.mesh.positions,
@@ -754,7 +790,13 @@ fn reframe_complete_run(
     };
     lock.ensure_held()?;
     let mesh = TriMesh::new(positions, prepared.mesh.faces.clone());
-    write_mesh_files(dir, &mesh, &mut prepared.warnings)?;
+    write_mesh_outputs(
+        dir,
+        &prepared.mesh.positions,
+        &result.positions,
+        &mesh,
+        &mut prepared.warnings,
+    )?;
     saved.set_extra("output_frame", NpyArray::scalar_str(want.name()))?;
     rundir::durable::replace_with(&npz, |tmp| saved.write(tmp).map_err(Error::from))
         .with_context(|| format!("cannot write {}", npz.display()))?;
@@ -920,6 +962,7 @@ fn execute_prepared<'g, T: Task<'g> + 'g>(
         (Some(f), Some(before)) => Some((before, f(&deformed.positions))),
         _ => None,
     };
+    let intersections = new_self_intersections(&prepared.mesh, &deformed, &mut prepared.warnings);
     lock.ensure_held()?;
     write_summary(
         &dir,
@@ -930,6 +973,7 @@ fn execute_prepared<'g, T: Task<'g> + 'g>(
         alignment,
         renderer_choice.as_deref(),
         looped.loop_seconds,
+        intersections.as_ref(),
     )?;
     drop(lock);
     Ok(RunOutcome {
@@ -1104,8 +1148,36 @@ impl ObservedLoop<'_> {
     }
 }
 
+/// The end of a run's check for self-intersections the result has and the source does not
+/// ([`crate::intersections`]): when there are any, a warning (pushed to `warnings`) and the figures
+/// (returned, for `run.json`'s `self_intersections`). A check that cannot run becomes a warning —
+/// never a failure of a finished run.
+pub fn new_self_intersections(
+    source: &TriMesh,
+    result: &TriMesh,
+    warnings: &mut Vec<String>,
+) -> Option<crate::intersections::IntersectionFigures> {
+    match crate::intersections::compare(source, result) {
+        Ok(f) => {
+            let w = f.warning()?;
+            warnings.push(format!(
+                "the result has {w}: a self-intersecting mesh breaks printing, booleans and \
+                 simulation; try a smaller λ (`stylize apply deformation.npz --lambda max-safe`)"
+            ));
+            Some(f)
+        }
+        Err(e) => {
+            warnings.push(format!(
+                "the self-intersection check of the result failed: {e}"
+            ));
+            None
+        }
+    }
+}
+
 /// Stage 6 of [`execute_with`]: `run.json`, the run's summary (written last: it marks the run
-/// complete).
+/// complete). `intersections`: the result's new self-intersections, recorded as
+/// `self_intersections` when there are any.
 #[allow(clippy::too_many_arguments)]
 fn write_summary(
     dir: &RunDir,
@@ -1116,10 +1188,11 @@ fn write_summary(
     alignment: Option<(f64, f64)>,
     renderer_choice: Option<&str>,
     loop_seconds: f64,
+    intersections: Option<&crate::intersections::IntersectionFigures>,
 ) -> Result<()> {
     let config = &prepared.config;
     let mesh = &prepared.mesh;
-    let summary = serde_json::json!({
+    let mut summary = serde_json::json!({
         "status": "complete",
         "mesh": request.mesh.display().to_string(),
         "objective": objective,
@@ -1139,6 +1212,12 @@ fn write_summary(
         "renderer": renderer_choice,
         "seconds": { "setup": prepared.setup_seconds, "loop": loop_seconds },
         "warnings": prepared.warnings,
+        "heat": prepared.heat_max_displacement.map(|max| serde_json::json!({
+            "file": "mesh_heat.glb",
+            "quantity": "displacement magnitude |p - (r - centroid(r))|, normalized side-2 frame",
+            "colormap": "viridis, 5 stops, piecewise linear in sRGB; COLOR_0 linear RGB",
+            "max_displacement": max,
+        })),
         "region": prepared.region.as_ref().map(|r| serde_json::json!({
             "specs": config.region.specs,
             "feather": config.region.feather,
@@ -1146,6 +1225,9 @@ fn write_summary(
         })),
         "task": prepared.identity.fields,
     });
+    if let Some(x) = intersections {
+        summary["self_intersections"] = serde_json::to_value(x)?;
+    }
     rundir::durable::replace_bytes(
         &dir.summary(),
         serde_json::to_string_pretty(&summary)?.as_bytes(),

@@ -126,6 +126,10 @@ struct LoadedRun {
     ready: ReadyLayer,
     /// The saved `to_input_frame` (None: the file does not record it).
     to_input: Option<stylize::frame::InputFrame>,
+    /// The rest mesh's self-intersections and a checker refitted at each λ.
+    source: stylize::intersections::SourceIntersections,
+    /// The strongest safe λ up to the slider's end, once asked for (`api/items/ID/max-safe`).
+    max_safe: Option<(f64, crate::max_safe::SafeLambda)>,
 }
 
 /// A run directory named on the command line.
@@ -338,7 +342,7 @@ impl RunItem {
                     anyhow::Error::from(e).context(format!("dARAP forward failed at λ = {lambda}")),
                 )
             })?;
-            let sanity = LambdaSanity::assess(&l.ready.rest, &deformation, lambda)
+            let sanity = LambdaSanity::assess(&l.ready.rest, &mut l.source, &deformation, lambda)
                 .map_err(ViewError::Failed)?;
             Ok(Shape {
                 positions: deformation.positions,
@@ -372,6 +376,31 @@ impl RunItem {
                 self.name
             ))),
             (None, _) => Ok(shape),
+    /// The strongest safe λ in `(0, upper]` ([`crate::max_safe::search`], `upper` validated as a
+    /// λ), computed once per `upper` while `deformation.npz` is unchanged.
+    pub fn max_safe(&self, upper: f64) -> Result<crate::max_safe::SafeLambda, ViewError> {
+        let upper = validate_lambda(upper)?;
+        if upper == 0.0 {
+            return Err(ViewError::BadRequest(
+                "max-safe needs an upper end λ > 0".into(),
+            ));
+        }
+        self.with_loaded(|l| {
+            if let Some((u, found)) = &l.max_safe
+                && *u == upper
+            {
+                return Ok(found.clone());
+            }
+            let LoadedRun { ready, source, .. } = l;
+            let found = crate::max_safe::search(upper, |lambda| {
+                let d = ready
+                    .at_lambda(lambda)
+                    .with_context(|| format!("dARAP forward failed at λ = {lambda}"))?;
+                Ok(LambdaSanity::assess(&ready.rest, source, &d, lambda)?.is_safe())
+            })
+            .map_err(ViewError::Failed)?;
+            l.max_safe = Some((upper, found.clone()));
+            Ok(found)
         })
     }
 
@@ -546,10 +575,14 @@ fn load_run(npz: &Path, stamp: (SystemTime, u64)) -> anyhow::Result<LoadedRun> {
     let to_input = saved
         .input_frame()
         .with_context(|| format!("{}", npz.display()))?;
+    let source = stylize::intersections::SourceIntersections::new(&ready.rest)
+        .context("self-intersection check of the saved rest mesh")?;
     Ok(LoadedRun {
         stamp,
         ready,
         to_input,
+        source,
+        max_safe: None,
     })
 }
 
@@ -695,6 +728,17 @@ impl Item {
             Item::Run(r) => r.target_normals(),
             Item::Mesh(m) => Err(ViewError::NotFound(format!(
                 "{} is a mesh, not a run: it has no target normals",
+                m.name
+            ))),
+        }
+    }
+
+    /// The strongest safe λ up to `upper` (runs only; see [`RunItem::max_safe`]).
+    pub fn max_safe(&self, upper: f64) -> Result<crate::max_safe::SafeLambda, ViewError> {
+        match self {
+            Item::Run(r) => r.max_safe(upper),
+            Item::Mesh(m) => Err(ViewError::NotFound(format!(
+                "{} is a mesh, not a run: it has no λ",
                 m.name
             ))),
         }
