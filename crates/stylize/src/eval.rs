@@ -338,8 +338,10 @@ pub fn evaluate(pairs: &[(String, TriMesh, TriMesh)]) -> Result<EvalReport> {
 
 /// The report as CSV: a header, one line per pair and a `pooled` line. Columns: `name`, `faces`,
 /// `skipped_faces`, `area_ratio_mean`, `area_ratio_std`, `volume_ratio`, `needle_faces`,
-/// `needle_variance_share`, `clip_prompt`, `clip_source`, `clip_result` (empty cells where there
-/// is no value). Fields with a comma, quote or line break are quoted (RFC 4180).
+/// `needle_variance_share`, `source_intersecting_pairs`, `intersecting_pairs`,
+/// `new_intersecting_pairs`, `new_intersecting_faces` ([`crate::intersections`]), `clip_prompt`,
+/// `clip_source`, `clip_result` (empty cells where there is no value; the pooled line sums the
+/// counts). Fields with a comma, quote or line break are quoted (RFC 4180).
 pub fn csv(report: &EvalReport) -> String {
     fn field(s: &str) -> String {
         if s.contains([',', '"', '\n', '\r']) {
@@ -349,9 +351,18 @@ pub fn csv(report: &EvalReport) -> String {
         }
     }
     let num = |v: Option<f64>| v.map(|x| format!("{x}")).unwrap_or_default();
+    let sum = |f: fn(&crate::intersections::IntersectionFigures) -> usize| {
+        report
+            .pairs
+            .iter()
+            .map(|p| f(&p.intersections))
+            .sum::<usize>()
+            .to_string()
+    };
     let mut s = String::from(
         "name,faces,skipped_faces,area_ratio_mean,area_ratio_std,volume_ratio,needle_faces,\
-         needle_variance_share,clip_prompt,clip_source,clip_result\n",
+         needle_variance_share,source_intersecting_pairs,intersecting_pairs,\
+         new_intersecting_pairs,new_intersecting_faces,clip_prompt,clip_source,clip_result\n",
     );
     for p in &report.pairs {
         let clip = p.clip.as_ref();
@@ -364,6 +375,10 @@ pub fn csv(report: &EvalReport) -> String {
             format!("{}", p.volume_ratio),
             p.needle_faces.to_string(),
             format!("{}", p.needle_variance_share),
+            p.intersections.source_pairs.to_string(),
+            p.intersections.pairs.to_string(),
+            p.intersections.new_pairs.to_string(),
+            p.intersections.new_faces.to_string(),
             field(clip.and_then(|c| c.prompt.as_deref()).unwrap_or("")),
             num(clip.and_then(|c| c.source)),
             num(clip.and_then(|c| c.result)),
@@ -402,6 +417,10 @@ pub fn csv(report: &EvalReport) -> String {
                 .map(|p| p.needle_variance_share)
                 .sum::<f64>()
         ),
+        sum(|x| x.source_pairs),
+        sum(|x| x.pairs),
+        sum(|x| x.new_pairs),
+        sum(|x| x.new_faces),
         String::new(),
         num(report.clip_source_mean),
         num(report.clip_result_mean),

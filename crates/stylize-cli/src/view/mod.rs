@@ -376,6 +376,9 @@ impl RunItem {
                 self.name
             ))),
             (None, _) => Ok(shape),
+        })
+    }
+
     /// The strongest safe λ in `(0, upper]` ([`crate::max_safe::search`], `upper` validated as a
     /// λ), computed once per `upper` while `deformation.npz` is unchanged.
     pub fn max_safe(&self, upper: f64) -> Result<crate::max_safe::SafeLambda, ViewError> {
