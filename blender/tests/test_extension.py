@@ -187,6 +187,17 @@ def test_stylize_cube_shape_key_equals_cli_mesh_obj_and_slider_equals_apply(ext,
     assert bpy.ops.gis.write_lambda() == {"FINISHED"}
     written, _ = read_obj(obj["stylize_written"])
     np.testing.assert_allclose(written, cli5, atol=1e-12)
+    # The panel shows what `stylize apply` printed for it (self-intersections included when the
+    # binary reports them).
+    cli_line = next(l.strip() for l in printed.splitlines() if ": volume ratio" in l)
+    assert obj.gis.written_report.split(" | ")[0] == cli_line
+    labels = [r[1] for r in draw_panel(ext, obj) if r[0] == "label"]
+    start = next(i for i, t in enumerate(labels) if t.startswith("stylize apply → mesh_lambda3.obj"))
+    shown, k = [], start + 1
+    while len(" ".join(shown)) < len(cli_line):
+        shown.append(labels[k])
+        k += 1
+    assert " ".join(shown) == cli_line, (shown, cli_line)
 
 
 def test_feathered_vertex_group_region_reapplies_as_stylize_apply(ext, tmp_path) -> None:
