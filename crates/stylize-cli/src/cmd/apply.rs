@@ -258,7 +258,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         None => saved.rotation_rule()?.unwrap_or_default(),
     };
 
-    let outputs = output_paths(&args.output, &lambdas)?;
+    let mut outputs = output_paths(&args.output, &lambdas)?;
+    // Several λ: the labelled comparison sheet too (cmd::apply_grid), checked like the meshes.
+    let grid = if lambdas.len() > 1 {
+        let path = super::apply_grid::grid_path(&args.output)?;
+        outputs.push(path.clone());
+        Some(path)
+    } else {
+        None
+    };
     let mut inputs = vec![("saved deformation".to_string(), args.saved.clone())];
     if let Some(m) = &args.mask {
         inputs.push(("mask file".into(), m.clone()));
@@ -299,6 +307,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         lambdas = vec![max_safe(&mut ready, &mut source, upper)?];
     }
 
+    let mut columns = Vec::new();
     for (&lambda, out) in lambdas.iter().zip(&outputs) {
         let deformed = ready
             .at_lambda(lambda)
@@ -306,6 +315,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let sanity =
             crate::sanity::LambdaSanity::assess(&ready.rest, &mut source, &deformed, lambda)?;
         let mesh = TriMesh::new(deformed.positions, saved.faces.clone());
+        if grid.is_some() {
+            columns.push((
+                lambda,
+                super::apply_grid::tiles(&mesh.positions, &mesh.faces)?,
+            ));
+        }
         let normals =
             mesh_core::normals::vertex_normals_area_weighted(&mesh.positions, &mesh.faces);
         if let Some(parent) = out.parent()
@@ -323,6 +338,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         for w in sanity.warnings() {
             eprintln!("warning: {w}");
         }
+    }
+    if let Some(path) = &grid {
+        super::apply_grid::write_sheet(path, &columns)?;
+        println!("wrote {} (λ = {} by column)", path.display(), {
+            let l: Vec<String> = lambdas.iter().map(f64::to_string).collect();
+            l.join(", ")
+        });
     }
     Ok(())
 }
