@@ -365,3 +365,24 @@ def test_region_from_selected_vertices_and_vertex_group(ext) -> None:
         ext.region_indices(obj, obj.gis)
     obj.gis.region = "ALL"
     assert ext.region_indices(obj, obj.gis) is None
+
+
+def test_remeshed_run_comes_back_as_a_new_object(ext) -> None:
+    exe = str(_stylize())
+    if "--remesh" not in subprocess.run([exe, "run", "--help"], capture_output=True, text=True).stdout:
+        pytest.skip("this stylize binary has no --remesh")
+    obj = quad_sphere("Remeshed")
+    rest = rest_verts(obj)
+    obj.gis.iterations = 10
+    obj.gis.remesh = "ON"
+    assert bpy.ops.gis.stylize() == {"FINISHED"}, obj.gis.status
+    new = bpy.data.objects.get("Remeshed_stylized")
+    assert new is not None, "a new object for the remeshed result"
+    assert obj.data.shape_keys is None, "the original is left alone"
+    run_dir = Path(new[ext.RUN_DIR_KEY])
+    assert obj[ext.RUN_DIR_KEY] == str(run_dir)
+    cli, faces = read_obj(run_dir / "mesh.obj")
+    assert len(new.data.vertices) == len(cli) != len(rest)
+    got = shape_key(new)
+    expected = to_object_frame(cli, run_dir, rest)
+    assert close(got, expected, rest) < 1e-6
