@@ -48,6 +48,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         None,
         None,
     )?);
+    let config = crate::cmd::shared::with_view_flags(config, settings.view_flags())?;
     let shard = Shard::resolve(args.shard.as_deref(), |k| std::env::var(k).ok())?;
     let rows = read_manifest(&args.manifest)?;
     let log = settings.log_mode();
