@@ -40,7 +40,7 @@ pub struct Args {
     /// Output mesh (`.obj`, `.ply` or `.glb`). With several λ: one file per λ, `OUT_lambda<λ>.ext`.
     #[arg(short, long = "out", alias = "output", value_name = "FILE")]
     pub output: PathBuf,
-    /// Strength(s) λ ≥ 0, comma separated (default: the λ saved in the file).
+    /// Strength(s) λ in [0, 1000], comma separated (default: the λ saved in the file).
     #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
     pub lambda: Vec<f64>,
     /// Rotation rule: `gis` (the reference's; what saved files and the paper's λ values assume) or
@@ -142,7 +142,7 @@ fn region(args: &Args, saved: &SavedDeformation, rest: &[[f64; 3]]) -> anyhow::R
         let region = mesh_core::region::select(&specs, &input)
             .context("--region (a saved file has no named parts: use box, sphere, vertices)")?;
         for w in &region.warnings {
-            eprintln!("warning: {w}");
+            errln!("warning: {w}");
         }
         region.free
     } else {
@@ -167,12 +167,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(kind) = saved.arap_energy_type()
         && kind != "spokes_and_rims_mine"
     {
-        eprintln!(
+        errln!(
             "warning: saved arap_energy_type is {kind:?}; applying with \"spokes_and_rims_mine\""
         );
     }
     if !saved.pin_first_vertex() {
-        eprintln!(
+        errln!(
             "warning: saved pin_first_vertex is false; applying with the first vertex (of each component) pinned"
         );
     }
@@ -187,9 +187,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         args.lambda.clone()
     };
     for &l in &lambdas {
+        let max = stylize::config::MAX_LAMBDA;
         ensure!(
-            l.is_finite() && l >= 0.0,
-            "--lambda {l}: the strength λ must be a finite number ≥ 0"
+            l.is_finite() && (0.0..=max).contains(&l),
+            "--lambda {l}: the strength λ must be a finite number within [0, {max}] (the \
+             reference uses 5–10)"
         );
     }
     let rule = match args.rotation_rule {
@@ -233,6 +235,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let region = region(&args, &saved, &ready.rest.positions)?;
     ready.set_region(&saved, &args.saved, region)?;
 
+    // A closed stdout (`… | head -1`) does not stop the writing: every output is written, then the
+    // command fails with the first write error (exit 141 for a broken pipe).
+    let mut closed: Option<crate::output::OutputClosed> = None;
     for (&lambda, out) in lambdas.iter().zip(&outputs) {
         let deformed = ready
             .at_lambda(lambda)
@@ -251,11 +256,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             mesh_core::io::write_mesh(tmp, &mesh, Some(&normals)).map_err(stylize::Error::from)
         })
         .with_context(|| format!("cannot write {}", out.display()))?;
-        println!("λ = {lambda}: wrote {}", out.display());
-        println!("  {}", sanity.summary());
+        if closed.is_none() {
+            closed = outln!(
+                "λ = {lambda}: wrote {}\n  {}",
+                out.display(),
+                sanity.summary()
+            )
+            .err();
+        }
         for w in sanity.warnings() {
-            eprintln!("warning: {w}");
+            errln!("warning: {w}");
         }
     }
-    Ok(())
+    closed.map_or(Ok(()), |e| Err(e.into()))
 }

@@ -91,9 +91,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         add_clip(dir, &settings, &mut report, &pairs, &prompts)?;
     }
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&report)?);
+        outln!("{}", serde_json::to_string_pretty(&report)?)?;
     } else {
-        print!("{}", table(&report));
+        outp!("{}", table(&report))?;
     }
     Ok(())
 }
@@ -113,7 +113,7 @@ fn add_clip(
         .with_context(|| format!("--clip {}", dir.display()))?;
     let opened = start.elapsed().as_secs_f64();
     let t = stylize::eval::add_clip_scores(report, pairs, prompts, &mut clip, settings)?;
-    eprintln!(
+    errln!(
         "CLIP ({}): {} mesh(es) × {} views at {} px; open {opened:.3} s, render {:.3} s, \
          image embedding {:.3} s, text embedding {:.3} s",
         clip.manifest().name,

@@ -69,12 +69,12 @@ fn check(a: CheckArgs) -> anyhow::Result<()> {
     let report = validate(&mesh, &options);
     if a.json {
         let json = report_json(&a.file, &report);
-        println!(
+        outln!(
             "{}",
             serde_json::to_string_pretty(&json).context("cannot format the report as JSON")?
-        );
+        )?;
     } else {
-        print!("{}", report_table(&a.file, &report));
+        outp!("{}", report_table(&a.file, &report))?;
     }
     if report.is_refused() {
         anyhow::bail!(
@@ -174,26 +174,26 @@ fn list_regions(a: &CheckArgs) -> anyhow::Result<()> {
                 serde_json::json!({ "spec": spec, "kind": kind, "vertices": n, "note": note })
             })
             .collect();
-        println!(
+        outln!(
             "{}",
             serde_json::to_string_pretty(&json).context("cannot format the parts as JSON")?
-        );
+        )?;
         return Ok(());
     }
     if rows.is_empty() {
-        println!(
+        outln!(
             "{}: no named parts or properties (use box:, sphere: or vertices: regions)",
             a.file.display()
-        );
+        )?;
         return Ok(());
     }
-    println!(
+    outln!(
         "{}: regions on offer (vertices on the repaired mesh)",
         a.file.display()
-    );
+    )?;
     let width = rows.iter().map(|r| r.0.chars().count()).max().unwrap_or(0);
     for (spec, kind, n, note) in &rows {
-        println!("  {spec:<width$}  {kind:<16} {n:>8} vertices  {note}");
+        outln!("  {spec:<width$}  {kind:<16} {n:>8} vertices  {note}")?;
     }
     Ok(())
 }

@@ -157,7 +157,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             if let Some(m) = &args.settings.model
                 && !args.settings.quiet
             {
-                eprintln!(
+                errln!(
                     "warning: --model {} is not used by a --style run (model-free)",
                     m.display()
                 );
@@ -188,7 +188,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 || {
                     let set = stylize::models::ModelSet::open(model, &config)?;
                     if let Some(w) = set.cpu_time_warning(&config) {
-                        eprintln!("warning: {w}");
+                        errln!("warning: {w}");
                     }
                     let warnings = set.prompt_warnings(prompt, &config)?;
                     Ok(PromptTask {
@@ -208,30 +208,30 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             if let Some(i) = e.downcast_ref::<Interrupted>()
                 && i.checkpoint_iteration.is_some()
             {
-                eprintln!("{i}");
-                eprintln!("resume with:\n  {}", resume_command(&args));
+                errln!("{i}");
+                errln!("resume with:\n  {}", resume_command(&args));
             }
             return Err(e).with_context(|| format!("run on {}", args.mesh.display()));
         }
     };
     if !args.settings.quiet {
         for w in &outcome.warnings {
-            eprintln!("warning: {w}");
+            errln!("warning: {w}");
         }
         if outcome.complete {
-            eprintln!(
+            errln!(
                 "done: {} iterations → {}",
                 outcome.iteration,
                 args.out.display()
             );
             if let Some((before, after)) = outcome.alignment {
-                eprintln!("normal alignment (area-weighted mean n·t): {before:.4} → {after:.4}");
+                errln!("normal alignment (area-weighted mean n·t): {before:.4} → {after:.4}");
             }
             crate::open_hint::lines(&args.out, &crate::open_hint::program())
                 .iter()
-                .for_each(|l| eprintln!("{l}"));
+                .for_each(|l| errln!("{l}"));
         } else {
-            eprintln!(
+            errln!(
                 "stopped after iteration {} (resume with --resume)",
                 outcome.iteration
             );

@@ -80,3 +80,15 @@ mod tests {
         assert_eq!(s(false, LogFormat::Text).log_mode(), LogMode::Bar);
     }
 }
+
+/// `--threads N` of the ONNX commands: a count within `1..=`the session's bound
+/// (`diffusion_onnx::runtime::max_intra_threads`), refused before any model is loaded.
+pub fn thread_count(s: &str) -> Result<usize, String> {
+    let n: usize = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("{s:?} is not a thread count (a positive integer)"))?;
+    #[cfg(feature = "text")]
+    let n = diffusion_onnx::runtime::check_intra_threads(n)?;
+    Ok(n)
+}
