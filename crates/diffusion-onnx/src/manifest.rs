@@ -429,6 +429,15 @@ impl ModelDir {
                 e.tokens, e.dim
             ));
         }
+        if let Some(t) = &m.text_encoder
+            && (t.max_tokens > MAX_TOKENS || t.embedding_dim > MAX_EMBEDDING_DIM)
+        {
+            return err(format!(
+                "[text_encoder] max_tokens = {} and embedding_dim = {} must be at most \
+                 {MAX_TOKENS} and {MAX_EMBEDDING_DIM} (IF: 77 and 4096)",
+                t.max_tokens, t.embedding_dim
+            ));
+        }
         for stage in [Stage::One, Stage::Two] {
             let Some(s) = self.stage(stage) else { continue };
             let key = stage.key();
