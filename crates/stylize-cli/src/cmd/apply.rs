@@ -190,7 +190,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let max = stylize::config::MAX_LAMBDA;
         ensure!(
             l.is_finite() && (0.0..=max).contains(&l),
-            "--lambda {l}: the strength λ must be a finite number within [0, {max}] (the \
+            "--lambda {l}: the strength λ must be a finite number ≥ 0 and at most {max} (the \
              reference uses 5–10)"
         );
     }
