@@ -63,12 +63,14 @@ pub const RUN_FILES: &[&str] = &[
     "mesh.obj",
     "mesh.ply",
     "mesh.glb",
+    "mesh_heat.glb",
     "deformation.npz",
     "turntable.png",
     "turntable.gif",
     "before_after.png",
     "snapshots.npz",
     "run.json",
+    "source_remeshed.obj",
 ];
 
 /// The `format` value of `task.json`.

@@ -6,12 +6,15 @@
 //! - [`task`]: kinds of task behind two traits ([`task::TaskKind`]: identity and settings read;
 //!   [`task::Task`]: schedule, objective, what it reports), with the style and prompt kinds;
 //! - [`config`]: every setting of a run, with the reference's defaults;
+//! - [`remeshing`]: `[mesh] remesh`: whether and how a run's input is remeshed first;
 //! - [`runner`]: one run from mesh file to complete run directory, with a [`runner::Progress`]
 //!   the run, for replay; [`run_pictures`]: the before/after sheet, the turntable (PNG, GIF) and
 //!   the orbit, tint and grid helpers the previews share;
 //! - [`models`]: DeepFloyd IF guidance from a model directory (feature `text`; without it its
 //!   loading functions return [`Error::NotBuilt`]); [`eval`]: metrics
-//!   of finished runs (CLIP similarity with `text`);
+//!   of finished runs (CLIP similarity with `text`); [`intersections`]: a result's
+//!   self-intersections against its source (what `eval`, `apply`, the viewer and the end of a run
+//!   report);
 //! - [`error`]: the typed [`Error`] every public function returns, and [`error::Stopped`];
 //! - [`malloc`]: the C allocator's policy that keeps the loop's large per-iteration buffers from
 //!   being page-faulted in anew every iteration (for programs that run the loop).
@@ -29,10 +32,13 @@ pub mod checkpoint;
 pub mod config;
 pub mod error;
 pub mod eval;
+pub mod heat;
 pub mod identity;
+pub mod intersections;
 pub mod malloc;
 pub mod models;
 pub mod pipeline;
+pub mod remeshing;
 pub mod run_pictures;
 pub mod runner;
 pub mod saved;

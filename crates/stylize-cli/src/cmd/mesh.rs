@@ -1,5 +1,7 @@
 //! `stylize mesh`: mesh utilities. `stylize mesh check FILE [--json]` reads a mesh, runs the
-//! validation of `mesh_core::validate` and prints what repair finds and would do.
+//! validation of `mesh_core::validate` and prints what repair finds and would do, then the
+//! self-intersections of the repaired mesh ([`self_intersection_section`]: exact,
+//! `mesh_core::intersect`; pairs, faces, per component).
 //! `--regions` lists instead the parts the file offers for `stylize run --region` (named parts
 //! and scalar properties, with the vertex counts they select on the repaired mesh).
 
@@ -76,15 +78,39 @@ fn check(a: CheckArgs) -> anyhow::Result<()> {
     } else {
         solver_check(&a.file)
     };
+    let quality = if report.is_refused() {
+        None
+    } else {
+        Some(repaired_quality(&mesh, &options)?)
+    };
+    let intersections = if report.is_refused() {
+        None
+    } else {
+        Some(self_intersection_section(&mesh, &options)?)
+    };
     if a.json {
         let mut json = report_json(&a.file, &report);
         json["solver_error"] = solver_error.clone().into();
+        if let Some(x) = &intersections {
+            json["self_intersections"] = x.json();
+        }
+        if let Some(q) = &quality {
+            json["quality"] = stylize::remeshing::quality_json(q);
+            json["remeshing_advised"] = serde_json::json!(remesh_advice(q).0);
+            json["remeshing_advice"] = serde_json::json!(remesh_advice(q).1);
+        }
         outln!(
             "{}",
             serde_json::to_string_pretty(&json).context("cannot format the report as JSON")?
         )?;
     } else {
         outp!("{}", report_table(&a.file, &report))?;
+        if let Some(x) = &intersections {
+            outp!("{}", x.table())?;
+        }
+        if let Some(q) = &quality {
+            outp!("{}", quality_table(q))?;
+        }
         if let Some(e) = &solver_error {
             outln!("but a run cannot use it: {e}")?;
         }
@@ -102,16 +128,150 @@ fn check(a: CheckArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Why `stylize run` could not start its dARAP layer on `file` (prepared exactly as a run
-/// prepares it: default repairs, side-2 normalization), if it could not.
+/// Why `stylize run` could not start its dARAP layer on `file` (prepared exactly as a run with
+/// the default configuration prepares it: default repairs, `mesh.remesh`'s default, side-2
+/// normalization), if it could not.
 fn solver_check(file: &std::path::Path) -> Option<String> {
-    let rest = match stylize::runner::prepare_mesh(file) {
-        Ok((rest, _)) => rest,
+    let defaults = crate::config::Config::default();
+    let rest = match stylize::runner::prepare_run_mesh(file, defaults.mesh.remesh, &defaults.region)
+    {
+        Ok(prepared) => prepared.mesh,
         Err(e) => return Some(format!("{e:#}")),
     };
     darap::Darap::new(&rest.positions, &rest.faces, darap::DarapOptions::default())
         .err()
         .map(|e| format!("dARAP precomputation: {e}"))
+}
+
+/// Triangle quality of the mesh after the repair `options` make (what a run would optimize,
+/// before `[mesh] remesh`).
+fn repaired_quality(
+    mesh: &mesh_core::TriMesh,
+    options: &RepairOptions,
+) -> anyhow::Result<mesh_core::remesh::Quality> {
+    let repaired = mesh_core::validate::repair(mesh, options).context("cannot repair the mesh")?;
+    mesh_core::remesh::quality(&repaired.mesh.positions, &repaired.mesh.faces)
+        .context("cannot measure the triangles")
+}
+
+/// Whether remeshing is advised (the criterion of `--remesh auto`,
+/// [`stylize::remeshing::remeshing_advised`]) and the sentence that says so.
+fn remesh_advice(q: &mesh_core::remesh::Quality) -> (bool, String) {
+    match stylize::remeshing::remeshing_advised(q) {
+        Some(why) => (
+            true,
+            format!(
+                "remeshing advised ({why}): `stylize run` remeshes it by default (`--remesh \
+                 auto`); `stylize remesh` does it alone"
+            ),
+        ),
+        None => (
+            false,
+            "triangles even enough: `stylize run` keeps them as they are (`--remesh auto`)".into(),
+        ),
+    }
+}
+
+/// The quality figures and the advice, for people.
+fn quality_table(q: &mesh_core::remesh::Quality) -> String {
+    format!(
+        "\ntriangles (after repair): {}\n{}\n",
+        stylize::remeshing::quality_line(q),
+        remesh_advice(q).1
+    )
+}
+
+/// The self-intersections of the repaired mesh (what a run uses), for `mesh check`.
+struct SelfIntersectionSection {
+    result: mesh_core::intersect::SelfIntersections,
+}
+
+/// How many example pairs `mesh check` lists.
+const EXAMPLE_PAIRS: usize = 10;
+
+/// Repairs `mesh` as a run would and checks the result for self-intersections.
+fn self_intersection_section(
+    mesh: &mesh_core::TriMesh,
+    options: &RepairOptions,
+) -> anyhow::Result<SelfIntersectionSection> {
+    let repaired = mesh_core::validate::repair(mesh, options).context("cannot repair the mesh")?;
+    if repaired.mesh.faces.is_empty() {
+        return Ok(SelfIntersectionSection {
+            result: mesh_core::intersect::SelfIntersections::default(),
+        });
+    }
+    let result =
+        mesh_core::intersect::self_intersections(&repaired.mesh.positions, &repaired.mesh.faces)
+            .context("self-intersection check of the repaired mesh")?;
+    Ok(SelfIntersectionSection { result })
+}
+
+impl SelfIntersectionSection {
+    fn json(&self) -> serde_json::Value {
+        let r = &self.result;
+        serde_json::json!({
+            "pairs": r.pairs.len(),
+            "faces": r.faces.len(),
+            "degenerate_faces": r.degenerate.len(),
+            "example_pairs": r.pairs.iter().take(EXAMPLE_PAIRS).collect::<Vec<_>>(),
+            "per_component": r.per_component.iter().map(|c| serde_json::json!({
+                "faces": c.faces,
+                "involved_faces": c.involved_faces,
+                "pairs_within": c.pairs_within,
+                "pairs_across": c.pairs_across,
+            })).collect::<Vec<_>>(),
+            "numbering": "faces of the repaired mesh",
+        })
+    }
+
+    fn table(&self) -> String {
+        use std::fmt::Write;
+        let r = &self.result;
+        let mut s = String::new();
+        if r.pairs.is_empty() {
+            let _ = writeln!(
+                s,
+                "\nself-intersections: none ({} faces checked exactly)",
+                r.num_faces
+            );
+        } else {
+            let _ = writeln!(
+                s,
+                "\nself-intersections: {} pair{} of faces intersect ({} faces of {}; repaired mesh numbering)",
+                r.pairs.len(),
+                if r.pairs.len() == 1 { "" } else { "s" },
+                r.faces.len(),
+                r.num_faces
+            );
+            let examples: Vec<String> = r
+                .pairs
+                .iter()
+                .take(EXAMPLE_PAIRS)
+                .map(|(a, b)| format!("{a}–{b}"))
+                .collect();
+            let _ = writeln!(s, "  e.g. {}", examples.join(", "));
+            if r.per_component.len() > 1 {
+                for (i, c) in r.per_component.iter().enumerate() {
+                    if c.pairs_within + c.pairs_across > 0 {
+                        let _ = writeln!(
+                            s,
+                            "  part {i}: {} of {} faces, {} pairs within, {} with other parts",
+                            c.involved_faces, c.faces, c.pairs_within, c.pairs_across
+                        );
+                    }
+                }
+            }
+        }
+        if !r.degenerate.is_empty() {
+            let _ = writeln!(
+                s,
+                "  {} zero-area face{} (never counted as intersecting)",
+                r.degenerate.len(),
+                if r.degenerate.len() == 1 { "" } else { "s" }
+            );
+        }
+        s
+    }
 }
 
 /// One row of `--regions`: spec, kind, vertices it selects on the repaired mesh, a note.
@@ -455,8 +615,32 @@ mod tests {
     }
 
     #[test]
+    fn quality_advice_follows_the_auto_criterion() {
+        let q = |name: &str| {
+            let mesh = mesh_core::io::read_mesh(fixture(name)).unwrap_or_else(|e| panic!("{e}"));
+            repaired_quality(&mesh, &RepairOptions::default()).unwrap_or_else(|e| panic!("{e:#}"))
+        };
+        for (name, advised) in [
+            ("bunny.obj", false),
+            ("fandisk.off", false),
+            ("cow.off", true),
+            ("triceratops.off", true),
+        ] {
+            let quality = q(name);
+            let (got, text) = remesh_advice(&quality);
+            assert_eq!(got, advised, "{name}: {text}");
+            let table = quality_table(&quality);
+            assert!(
+                table.contains("std/mean") && table.contains(&text),
+                "{table}"
+            );
+        }
+    }
+
+    #[test]
     fn check_succeeds_on_repairable_meshes_and_fails_on_refused_or_unreadable_ones() {
         assert!(check(args("bone.ply", false)).is_ok());
+        assert!(check(args("cow.off", false)).is_ok());
         assert!(check(args("triceratops.off", true)).is_ok());
         let e = check(args("bad/nan_coordinates.obj", false)).expect_err("refused");
         assert!(format!("{e:#}").contains("vertex 3"), "{e:#}");
