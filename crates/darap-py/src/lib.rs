@@ -511,19 +511,23 @@ impl PyDarap {
     /// `stylize apply` use (`feather_weights` builds them). None lets every vertex rotate. Replaces
     /// any mask.
     #[pyo3(signature = (weights))]
-    fn set_region_weights(&mut self, weights: Option<&Bound<'_, PyAny>>) -> PyResult<()> {
+    fn set_region_weights(
+        &self,
+        py: Python<'_>,
+        weights: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<()> {
         let w = match weights {
-            Some(w) if !w.is_none() => Some(read_weights(w, self.inner.num_vertices())?),
+            Some(w) if !w.is_none() => Some(read_weights(w, self.read(py, Darap::num_vertices))?),
             _ => None,
         };
-        self.inner.set_region_weights(w).map_err(layer_error)
+        self.write(py, |l| l.set_region_weights(w))
+            .map_err(layer_error)
     }
 
     /// The region's per-vertex weights (V,) float64 (1 free, 0 masked, the feather weight in
     /// between), or None when every vertex may rotate.
     fn region_weights<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyArray1<f64>>> {
-        self.inner
-            .region_weights()
+        self.read(py, Darap::region_weights)
             .map(|w| PyArray1::from_vec(py, w))
     }
 
