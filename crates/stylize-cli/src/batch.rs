@@ -14,6 +14,9 @@
 //! | `region` | list of region specs, optional | replaces `region.specs` (`vertices:FILE` relative to the manifest's folder) |
 //! | `region_feather` | integer, optional | replaces `region.feather` |
 //! | `remesh` | string or number, optional | replaces `mesh.remesh` (`auto`, `on`, `off`, `0.03`, `"1.5%"`) |
+//! | `up` | string, optional | the mesh's up axis, replaces `mesh.up` (`+z`, `-x`, …) |
+//! | `output_frame` | string, optional | `input` or `normalized`, replaces `run.output_frame` |
+//! | `camera` | string, optional | `default`, `tall` or `auto`, replaces `camera.preset` |
 //!
 //! Rows are numbered from 0 in file order; shard `i` of `n` takes the rows with `index % n == i`.
 //! At load time, an empty `out` and two rows writing the same run directory (after path
@@ -74,6 +77,36 @@ pub struct Row {
     /// Remeshing (replaces `mesh.remesh`).
     #[serde(default)]
     pub remesh: Option<stylize::remeshing::RemeshSetting>,
+    /// The mesh's up axis (replaces `mesh.up`).
+    #[serde(default)]
+    pub up: Option<String>,
+    /// The frame of the mesh outputs (replaces `run.output_frame`).
+    #[serde(default)]
+    pub output_frame: Option<String>,
+    /// The camera preset (replaces `camera.preset`).
+    #[serde(default)]
+    pub camera: Option<String>,
+}
+
+impl Row {
+    /// The row's `up`, `output_frame` and `camera` columns, parsed.
+    pub fn view_flags(&self) -> anyhow::Result<crate::cmd::shared::ViewFlags> {
+        fn parse<T: std::str::FromStr<Err = stylize::Error>>(
+            column: &str,
+            value: &Option<String>,
+        ) -> anyhow::Result<Option<T>> {
+            value
+                .as_deref()
+                .map(str::parse::<T>)
+                .transpose()
+                .with_context(|| format!("`{column}`"))
+        }
+        Ok(crate::cmd::shared::ViewFlags {
+            up: parse("up", &self.up)?,
+            output_frame: parse("output_frame", &self.output_frame)?,
+            camera: parse("camera", &self.camera)?,
+        })
+    }
 }
 
 #[derive(Deserialize)]
@@ -197,6 +230,8 @@ pub fn read_manifest(path: &Path) -> anyhow::Result<Vec<Row>> {
         if r.mesh.to_str().is_some_and(|t| t.trim().is_empty()) {
             bail!("manifest {} row {i}: `mesh` is empty", path.display());
         }
+        r.view_flags()
+            .with_context(|| format!("manifest {} row {i}", path.display()))?;
         let written = r.out.clone();
         if r.mesh.is_relative() {
             r.mesh = base.join(&r.mesh);
@@ -493,6 +528,7 @@ fn run_row(
         config.mesh.remesh = r;
     }
     let config = config.with_region_flags(&row.region, row.region_feather, false)?;
+    let config = crate::cmd::shared::with_view_flags(config, row.view_flags()?)?;
     let request = RunRequest {
         mesh: row.mesh.clone(),
         out: row.out.clone(),

@@ -43,6 +43,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         None,
         None,
     )?);
+    let config = crate::cmd::shared::with_view_flags(config, settings.view_flags())?;
     let shard = match &args.shard {
         Some(s) => Shard::parse(s)?,
         None => Shard::from_env(|k| std::env::var(k).ok())?.unwrap_or(Shard::ALL),

@@ -138,6 +138,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         args.region_feather,
         args.tint_region,
     )?;
+    let config = crate::cmd::shared::with_view_flags(config, args.settings.view_flags())?;
     let mut options = RunOptions::default();
     if let Some(c) = &config_file {
         options.inputs.push(("config file".into(), c.clone()));
