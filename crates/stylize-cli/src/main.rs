@@ -1,5 +1,8 @@
 //! `stylize`: text-guided, identity-preserving mesh stylization (Geometry in Style).
 
+// Printing goes through `stylize_cli::output` (never panics on a closed pipe).
+#![deny(clippy::print_stdout, clippy::print_stderr)]
+
 use clap::{Parser, Subcommand};
 use stylize_cli::cmd;
 #[cfg(not(all(feature = "text", feature = "view")))]
@@ -104,11 +107,10 @@ fn main() -> std::process::ExitCode {
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
-            // A closed terminal (SIGHUP) must not turn the exit status into a panic's.
-            use std::io::Write;
-            let _ = writeln!(std::io::stderr(), "error: {e:#}");
+            stylize_cli::errln!("error: {e:#}");
             // 128 + signal after SIGHUP/SIGINT/SIGTERM, 75 when a run directory is locked by
-            // another process (for a batch: rows left to other processes), else 1.
+            // another process (for a batch: rows left to other processes), 141 when stdout's
+            // reader hung up, else 1.
             std::process::ExitCode::from(stylize_cli::signals::exit_code(&e))
         }
     }

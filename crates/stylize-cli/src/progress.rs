@@ -42,20 +42,23 @@ struct Quiet;
 
 impl Progress for Quiet {
     fn warning(&mut self, message: &str) {
-        eprintln!("{message}");
+        errln!("{message}");
     }
 }
 
-/// `metrics.jsonl` lines on stdout.
+/// `metrics.jsonl` lines on stdout. When stdout cannot be written (the reader hung up), the run
+/// stops as if signalled ([`crate::signals::output_closed`]): checkpoint, exit 141.
 struct JsonLines;
 
 impl Progress for JsonLines {
     fn iteration(&mut self, _record: &IterationRecord, json: &str) {
-        println!("{json}");
+        if outln!("{json}").is_err() {
+            crate::signals::output_closed();
+        }
     }
 
     fn warning(&mut self, message: &str) {
-        eprintln!("{message}");
+        errln!("{message}");
     }
 }
 
@@ -101,12 +104,15 @@ impl Progress for RowJsonLines {
             .is_none_or(|last| now.duration_since(last) >= self.interval);
         if due || record.iteration >= self.total {
             self.last_line = Some(now);
-            println!("{}", with_row(self.row, json));
+            // As for `JsonLines`: a stdout that cannot be written stops the run like a signal.
+            if crate::outln!("{}", with_row(self.row, json)).is_err() {
+                crate::signals::output_closed();
+            }
         }
     }
 
     fn warning(&mut self, message: &str) {
-        eprintln!("{message}");
+        crate::errln!("{message}");
     }
 }
 
@@ -137,8 +143,8 @@ impl Progress for Bar {
 
     fn warning(&mut self, message: &str) {
         match &self.0 {
-            Some(bar) => bar.suspend(|| eprintln!("{message}")),
-            None => eprintln!("{message}"),
+            Some(bar) => bar.suspend(|| errln!("{message}")),
+            None => errln!("{message}"),
         }
     }
 

@@ -27,7 +27,7 @@ use std::path::PathBuf;
 use std::sync::Once;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
-use signal_hook::consts::signal::{SIGHUP, SIGINT, SIGTERM};
+use signal_hook::consts::signal::{SIGHUP, SIGINT, SIGPIPE, SIGTERM};
 
 static RECEIVED: AtomicBool = AtomicBool::new(false);
 static WHICH: AtomicUsize = AtomicUsize::new(0);
@@ -111,6 +111,15 @@ pub fn flag() -> &'static AtomicBool {
     &RECEIVED
 }
 
+/// Stops the run the way a signal does, as if `SIGPIPE` had been received: called when standard
+/// output cannot be written (`--log-format jsonl` into a pipe whose reader hung up; see
+/// [`crate::output`]). The loop ends its iteration, writes a checkpoint, and the command exits
+/// with 141 (128 + `SIGPIPE`).
+pub fn output_closed() {
+    WHICH.store(SIGPIPE as usize, Ordering::SeqCst);
+    RECEIVED.store(true, Ordering::SeqCst);
+}
+
 /// The signal received (the last one when several came), if any.
 pub fn pending() -> Option<i32> {
     if !RECEIVED.load(Ordering::SeqCst) {
@@ -128,6 +137,7 @@ pub fn name(signal: i32) -> &'static str {
         SIGINT => "SIGINT",
         SIGTERM => "SIGTERM",
         SIGHUP => "SIGHUP",
+        SIGPIPE => "a closed standard output (SIGPIPE)",
         _ => "a signal",
     }
 }
@@ -186,13 +196,20 @@ pub struct Exit {
 
 /// The exit status for an error: 128 + signal for [`Interrupted`] (129 SIGHUP, 130 SIGINT, 143
 /// SIGTERM: stopped with a checkpoint, the same command resumes), [`EXIT_IN_USE`] when a run
-/// directory is locked by another process, [`EXIT_FAILED`] otherwise.
+/// directory is locked by another process, 141 or 74 when standard output cannot be written
+/// ([`crate::output::OutputClosed`]), [`EXIT_FAILED`] otherwise.
 pub fn exit_code(e: &anyhow::Error) -> u8 {
     if let Some(i) = e.downcast_ref::<Interrupted>() {
         return i.exit_code();
     }
     if let Some(x) = e.downcast_ref::<Exit>() {
         return x.code;
+    }
+    if let Some(o) = e
+        .chain()
+        .find_map(|c| c.downcast_ref::<crate::output::OutputClosed>())
+    {
+        return o.exit_code();
     }
     use rundir::LockError;
     let locked = |l: &LockError| matches!(l, LockError::Held { .. } | LockError::Busy { .. });

@@ -338,6 +338,20 @@ impl Default for StyleSection {
     }
 }
 
+/// The largest `darap.lambda` (the reference uses 5–10; `stylize view`'s slider stops at 100).
+pub const MAX_LAMBDA: f64 = 1000.0;
+/// The largest `optim.lr` and `style.lr` (the defaults are 0.002 and 0.02).
+pub const MAX_LEARNING_RATE: f64 = 10.0;
+/// The largest `guidance.scale`, `guidance.loss_scale` and `guidance.stage1_weight` (defaults
+/// 100, 100 and 1).
+pub const MAX_WEIGHT: f64 = 1e6;
+/// The most `camera.views` (the reference uses 8).
+pub const MAX_VIEWS: usize = 256;
+/// The largest `render.width` / `render.height`, in pixels (the reference uses 512).
+pub const MAX_RENDER_SIZE: usize = 4096;
+/// The most `optim.steps_per_batch` (the reference uses 2).
+pub const MAX_STEPS_PER_BATCH: u32 = 1000;
+
 /// The largest `run.turntable_size`, in pixels (the zoomed renders behind a tile reach 4×).
 pub const MAX_TURNTABLE_SIZE: usize = 1024;
 /// The most `run.turntable_views` (tiles of the contact sheet and of `before_after.png`).
@@ -493,16 +507,58 @@ impl Config {
             }
             Ok(())
         };
-        if !(self.darap.lambda.is_finite() && self.darap.lambda >= 0.0) {
+        if !(self.darap.lambda.is_finite() && (0.0..=MAX_LAMBDA).contains(&self.darap.lambda)) {
             bad_field!(
                 "darap.lambda",
-                "darap.lambda must be finite and >= 0, got {}",
+                "darap.lambda must be within [0, {MAX_LAMBDA}] (the reference uses 5–10), got {}",
                 self.darap.lambda
             );
         }
+        // Numbers that are finite but far outside any sensible use overflow the arithmetic and
+        // end in a silently destroyed mesh (or an allocation abort): each has an upper bound.
+        let within = |name: &str, v: f64, low_exclusive: bool, max: f64| -> Result<()> {
+            let low_ok = if low_exclusive { v > 0.0 } else { v >= 0.0 };
+            if !(v.is_finite() && low_ok && v <= max) {
+                let low = if low_exclusive { "(0" } else { "[0" };
+                return Err(Error::config(
+                    name,
+                    format!("{name} must be within {low}, {max}], got {v}"),
+                ));
+            }
+            Ok(())
+        };
         finite_pos("optim.lr", self.optim.lr)?;
         finite_pos("style.lr", self.style.lr)?;
         finite_pos("optim.eps", self.optim.eps)?;
+        within("optim.lr", self.optim.lr, true, MAX_LEARNING_RATE)?;
+        within("style.lr", self.style.lr, true, MAX_LEARNING_RATE)?;
+        within("optim.eps", self.optim.eps, true, 1.0)?;
+        let g = &self.guidance;
+        within("guidance.scale", g.scale, false, MAX_WEIGHT)?;
+        within("guidance.loss_scale", g.loss_scale, false, MAX_WEIGHT)?;
+        within("guidance.stage1_weight", g.stage1_weight, false, MAX_WEIGHT)?;
+        if self.camera.views > MAX_VIEWS {
+            bad_field!(
+                "camera.views",
+                "camera.views must be at most {MAX_VIEWS} (the reference uses 8), got {}",
+                self.camera.views
+            );
+        }
+        if self.render.width > MAX_RENDER_SIZE || self.render.height > MAX_RENDER_SIZE {
+            bad_field!(
+                "render.width",
+                "render.width and render.height must be at most {MAX_RENDER_SIZE} pixels, got {}×{}",
+                self.render.width,
+                self.render.height
+            );
+        }
+        if self.optim.steps_per_batch > MAX_STEPS_PER_BATCH {
+            bad_field!(
+                "optim.steps_per_batch",
+                "optim.steps_per_batch must be at most {MAX_STEPS_PER_BATCH}, got {}",
+                self.optim.steps_per_batch
+            );
+        }
         for (name, b) in [
             ("optim.beta1", self.optim.beta1),
             ("optim.beta2", self.optim.beta2),
@@ -772,6 +828,45 @@ mod tests {
             "run.turntable_gif_frames=360",
         ]));
         ok(c.validate());
+    }
+
+    /// Finite numbers far outside any use (λ = 1e308 completed with a destroyed mesh) are refused
+    /// naming the key and its range; the bounds themselves are accepted.
+    #[test]
+    fn numeric_settings_have_ranges_not_only_signs() {
+        for (set, key) in [
+            ("darap.lambda=1e308", "darap.lambda"),
+            ("darap.lambda=1000.5", "darap.lambda"),
+            ("optim.lr=1e300", "optim.lr"),
+            ("style.lr=11", "style.lr"),
+            ("optim.eps=2", "optim.eps"),
+            ("guidance.scale=1e300", "guidance.scale"),
+            ("guidance.scale=-1", "guidance.scale"),
+            ("guidance.scale=nan", "guidance.scale"),
+            ("guidance.loss_scale=inf", "guidance.loss_scale"),
+            ("guidance.stage1_weight=-0.5", "guidance.stage1_weight"),
+            ("camera.views=1000000000", "camera.views"),
+            ("render.width=100000", "render.width"),
+            ("optim.steps_per_batch=1000000", "optim.steps_per_batch"),
+        ] {
+            let e = Config::default()
+                .with_overrides(&[set])
+                .err()
+                .map(|e| e.full_message())
+                .unwrap_or_default();
+            assert!(
+                e.contains(key) && (e.contains("within") || e.contains("at most")),
+                "{set}: {e}"
+            );
+        }
+        ok(Config::default().with_overrides(&[
+            "darap.lambda=1000",
+            "optim.lr=10",
+            "guidance.scale=0",
+            "camera.views=256",
+            "render.width=4096",
+            "optim.steps_per_batch=1000",
+        ]));
     }
 
     #[test]

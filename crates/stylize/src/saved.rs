@@ -167,7 +167,7 @@ pub const FORMAT_VERSION: i64 = 1;
 /// | `dataset_cfg` | `<U…` 0-d | JSON describing the input |
 ///
 /// Any other keys (ours: `format_version`, `seed`, `rotation_rule`, …) up to [`MAX_EXTRA_BYTES`]
-/// each are kept in [`extra`] in file order (larger ones are skipped unread) and written back after the five standard keys; readers that ignore unknown keys
+/// in total are kept in [`extra`] in file order (the ones beyond are skipped unread) and written back after the five standard keys; readers that ignore unknown keys
 /// (the reference) are unaffected.
 ///
 /// [`extra`]: SavedDeformation::extra
@@ -187,7 +187,8 @@ pub struct SavedDeformation {
     pub extra: Vec<(String, NpyArray)>,
 }
 
-/// Extra (non-standard) entries larger than this (declared, uncompressed) are skipped on read.
+/// Extra (non-standard) entries are read, in file order, while their declared (uncompressed)
+/// sizes add up to at most this; the others are skipped unread.
 pub const MAX_EXTRA_BYTES: u64 = 1 << 24;
 
 const STANDARD_KEYS: [&str; 5] = [
@@ -239,13 +240,20 @@ impl SavedDeformation {
         }
         // Extra keys are metadata (ours are a few bytes); large ones are not loaded at all, so an
         // unrelated big entry cannot make reading cost memory.
+        // The bound is on their total: many entries each under it would add up without one.
         let mut extra = Vec::new();
+        let mut extra_bytes = 0u64;
         for key in r.keys() {
-            if STANDARD_KEYS.contains(&key)
-                || r.declared_size(key).is_none_or(|s| s > MAX_EXTRA_BYTES)
-            {
+            if STANDARD_KEYS.contains(&key) {
                 continue;
             }
+            let Some(size) = r
+                .declared_size(key)
+                .filter(|&s| s <= MAX_EXTRA_BYTES - extra_bytes)
+            else {
+                continue;
+            };
+            extra_bytes += size;
             extra.push((key.to_string(), r.require(key)?.clone()));
         }
         Ok(Self {

@@ -52,7 +52,7 @@ pub struct Args {
     /// Output mesh (`.obj`, `.ply` or `.glb`). With several λ: one file per λ, `OUT_lambda<λ>.ext`.
     #[arg(short, long = "out", alias = "output", value_name = "FILE")]
     pub output: PathBuf,
-    /// Strength(s) λ ≥ 0, comma separated (default: the λ saved in the file); or
+    /// Strength(s) λ in [0, 1000], comma separated (default: the λ saved in the file); or
     /// `max-safe[:UPPER]`: the strongest λ in (0, UPPER] whose result is safe (no new
     /// self-intersections, flips, collapse), UPPER defaulting to the saved λ.
     #[arg(long, value_delimiter = ',', allow_negative_numbers = true, value_parser = parse_lambda)]
@@ -99,7 +99,7 @@ fn output_map(args: &Args, saved: &SavedDeformation) -> anyhow::Result<Option<In
             args.saved.display()
         ),
         (None, None) => {
-            eprintln!(
+            errln!(
                 "note: {} does not record its input's frame (`to_input_frame`); writing the \
                  normalized side-2 frame",
                 args.saved.display()
@@ -218,7 +218,7 @@ fn region(args: &Args, saved: &SavedDeformation, rest: &[[f64; 3]]) -> anyhow::R
         let region = mesh_core::region::select(&specs, &input)
             .context("--region (a saved file has no named parts: use box, sphere, vertices)")?;
         for w in &region.warnings {
-            eprintln!("warning: {w}");
+            errln!("warning: {w}");
         }
         region.free
     } else {
@@ -243,12 +243,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(kind) = saved.arap_energy_type()
         && kind != "spokes_and_rims_mine"
     {
-        eprintln!(
+        errln!(
             "warning: saved arap_energy_type is {kind:?}; applying with \"spokes_and_rims_mine\""
         );
     }
     if !saved.pin_first_vertex() {
-        eprintln!(
+        errln!(
             "warning: saved pin_first_vertex is false; applying with the first vertex (of each component) pinned"
         );
     }
@@ -285,9 +285,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         lambdas.push(recorded()?);
     }
     for &l in &lambdas {
+        let max = stylize::config::MAX_LAMBDA;
         ensure!(
-            l.is_finite() && l >= 0.0,
-            "--lambda {l}: the strength λ must be a finite number ≥ 0"
+            l.is_finite() && (0.0..=max).contains(&l),
+            "--lambda {l}: the strength λ must be a finite number ≥ 0 and at most {max} (the \
+             reference uses 5–10)"
         );
     }
     let rule = match args.rotation_rule {
@@ -341,8 +343,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     ready.set_region(&saved, &args.saved, region)?;
     let mut source = stylize::intersections::SourceIntersections::new(&ready.rest)
         .context("self-intersection check of the saved rest mesh")?;
+    // A closed stdout (`… | head -1`) does not stop the writing: every output is written, then the
+    // command fails with the first write error (exit 141 for a broken pipe).
+    let mut closed: Option<crate::output::OutputClosed> = None;
     if let Some(upper) = max_safe_upper {
-        lambdas = vec![max_safe(&mut ready, &mut source, upper)?];
+        let (lambda, lines) = max_safe(&mut ready, &mut source, upper)?;
+        for line in lines {
+            if closed.is_none() {
+                closed = outln!("{line}").err();
+            }
+        }
+        lambdas = vec![lambda];
     }
 
     let mut columns = Vec::new();
@@ -377,29 +388,39 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             mesh_core::io::write_mesh(tmp, &mesh, Some(&normals)).map_err(stylize::Error::from)
         })
         .with_context(|| format!("cannot write {}", out.display()))?;
-        println!("λ = {lambda}: wrote {}", out.display());
-        println!("  {}", sanity.summary());
+        if closed.is_none() {
+            closed = outln!(
+                "λ = {lambda}: wrote {}\n  {}",
+                out.display(),
+                sanity.summary()
+            )
+            .err();
+        }
         for w in sanity.warnings() {
-            eprintln!("warning: {w}");
+            errln!("warning: {w}");
         }
     }
     if let Some(path) = &grid {
         super::apply_grid::write_sheet(path, &columns)?;
-        println!("wrote {} (λ = {} by column)", path.display(), {
-            let l: Vec<String> = lambdas.iter().map(f64::to_string).collect();
-            l.join(", ")
-        });
+        if closed.is_none() {
+            closed = outln!("wrote {} (λ = {} by column)", path.display(), {
+                let l: Vec<String> = lambdas.iter().map(f64::to_string).collect();
+                l.join(", ")
+            })
+            .err();
+        }
     }
-    Ok(())
+    closed.map_or(Ok(()), |e| Err(e.into()))
 }
 
-/// `--lambda max-safe:UPPER`: searches ([`crate::max_safe::search`]) and prints what it found;
-/// returns the λ to write.
+/// `--lambda max-safe:UPPER`: searches ([`crate::max_safe::search`]); returns the λ to write and
+/// the lines that report what it found, for stdout (warnings go to stderr here).
 fn max_safe(
     ready: &mut stylize::saved::ReadyLayer,
     source: &mut stylize::intersections::SourceIntersections,
     upper: f64,
-) -> anyhow::Result<f64> {
+) -> anyhow::Result<(f64, Vec<String>)> {
+    let mut lines = Vec::new();
     let mut unsafe_warnings: Vec<(f64, Vec<String>)> = Vec::new();
     let searched = crate::max_safe::search(upper, |lambda| {
         let deformed = ready
@@ -428,25 +449,25 @@ fn max_safe(
         }
     };
     match found.first_unsafe {
-        None => println!(
+        None => lines.push(format!(
             "max-safe: every λ scanned up to {upper} is safe ({} evaluations): λ = {upper}",
             found.evaluations
-        ),
+        )),
         Some(hi) => {
             let why = unsafe_warnings
                 .iter()
                 .find(|(l, _)| *l == hi)
                 .map(|(_, w)| w.join("; "))
                 .unwrap_or_default();
-            println!(
+            lines.push(format!(
                 "max-safe: λ = {} (within {}% of the first unsafe λ = {hi}; {} evaluations up to {upper})",
                 found.lambda,
                 100.0 * crate::max_safe::RELATIVE_TOLERANCE,
                 found.evaluations
-            );
-            println!("  unsafe at λ = {hi}: {why}");
+            ));
+            lines.push(format!("  unsafe at λ = {hi}: {why}"));
             if found.lambda == 0.0 {
-                eprintln!(
+                errln!(
                     "warning: max-safe: no λ > 0 was found safe (unsafe down to λ = {hi}); writing the result at λ = 0"
                 );
             }
@@ -463,10 +484,10 @@ fn max_safe(
         if found.safe_again.len() > SHOWN {
             list.push(format!("… ({} grid points in all)", found.safe_again.len()));
         }
-        eprintln!(
+        errln!(
             "warning: max-safe: safety is not monotone over the scan: after the first crossing the result is safe again at λ = {} (the answer is the first crossing)",
             list.join(", ")
         );
     }
-    Ok(found.lambda)
+    Ok((found.lambda, lines))
 }

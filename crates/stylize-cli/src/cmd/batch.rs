@@ -151,9 +151,9 @@ fn report_row(result: &RowResult, took: std::time::Duration, jsonl: bool) {
         if let RowStatus::Failed(e) | RowStatus::InUse(e) | RowStatus::Interrupted(e) = status {
             line["error"] = e.clone().into();
         }
-        use std::io::Write;
-        let mut out = std::io::stdout().lock();
-        let _ = writeln!(out, "{line}");
-        let _ = out.flush();
+        // A stdout that cannot be written stops the batch like a signal (after this row).
+        if crate::outln!("{line}").is_err() {
+            crate::signals::output_closed();
+        }
     }
 }

@@ -74,7 +74,7 @@ pub fn manifest_runs(manifest: &Path) -> anyhow::Result<Vec<PathBuf>> {
         }
     }
     if !unfinished.is_empty() {
-        eprintln!(
+        errln!(
             "{}: {} not finished, left out: {}",
             manifest.display(),
             crate::cmd::shared::count_noun(unfinished.len(), "row", "rows"),
@@ -140,12 +140,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .with_context(|| format!("cannot write {}", path.display()))?;
     }
     if args.json {
-        println!("{json}");
+        outln!("{json}")?;
         for w in &report.warnings {
-            eprintln!("warning: {w}");
+            errln!("warning: {w}");
         }
     } else {
-        print!("{}", table(&report));
+        outp!("{}", table(&report))?;
     }
     Ok(())
 }
@@ -165,7 +165,7 @@ fn add_clip(
         .with_context(|| format!("--clip {}", dir.display()))?;
     let opened = start.elapsed().as_secs_f64();
     let t = stylize::eval::add_clip_scores(report, pairs, prompts, &mut clip, settings)?;
-    eprintln!(
+    errln!(
         "CLIP ({}): {} mesh(es) × {} views at {} px; open {opened:.3} s, render {:.3} s, \
          image embedding {:.3} s, text embedding {:.3} s",
         clip.manifest().name,

@@ -69,6 +69,15 @@ fn check(a: CheckArgs) -> anyhow::Result<()> {
         ..RepairOptions::default()
     };
     let report = validate(&mesh, &options);
+    // A mesh the repairs accept must also be one a run can solve on: the same preparation and
+    // dARAP precomputation as `stylize run`, so the verdicts agree (tiny debris components made
+    // the factorization fail while the report said "usable").
+    // (Only with the default repairs: `--drop-…` preview repairs a run does not make.)
+    let solver_error = if report.is_refused() || a.drop_nonfinite || a.drop_out_of_range {
+        None
+    } else {
+        solver_check(&a.file)
+    };
     let quality = if report.is_refused() {
         None
     } else {
@@ -82,6 +91,7 @@ fn check(a: CheckArgs) -> anyhow::Result<()> {
     };
     if a.json {
         let mut json = report_json(&a.file, &report);
+        json["solver_error"] = solver_error.clone().into();
         if let Some(x) = &intersections {
             json["self_intersections"] = x.json();
         }
@@ -92,18 +102,21 @@ fn check(a: CheckArgs) -> anyhow::Result<()> {
         }
         json["extents"] = serde_json::json!(extents.size);
         json["up_hint"] = serde_json::json!(extents.up_hint());
-        println!(
+        outln!(
             "{}",
             serde_json::to_string_pretty(&json).context("cannot format the report as JSON")?
-        );
+        )?;
     } else {
-        print!("{}", report_table(&a.file, &report));
-        print!("{}", extents.table());
+        outp!("{}", report_table(&a.file, &report))?;
+        outp!("{}", extents.table())?;
         if let Some(x) = &intersections {
-            print!("{}", x.table());
+            outp!("{}", x.table())?;
         }
         if let Some(q) = &quality {
-            print!("{}", quality_table(q));
+            outp!("{}", quality_table(q))?;
+        }
+        if let Some(e) = &solver_error {
+            outln!("but a run cannot use it: {e}")?;
         }
     }
     if report.is_refused() {
@@ -113,7 +126,29 @@ fn check(a: CheckArgs) -> anyhow::Result<()> {
             report.refusal_message()
         );
     }
+    if let Some(e) = solver_error {
+        anyhow::bail!("{} cannot be used for a run: {e}", a.file.display());
+    }
     Ok(())
+}
+
+/// Why `stylize run` could not start its dARAP layer on `file` (prepared exactly as a run with
+/// the default configuration prepares it: default repairs, `mesh.remesh`'s default, side-2
+/// normalization), if it could not.
+fn solver_check(file: &std::path::Path) -> Option<String> {
+    let defaults = crate::config::Config::default();
+    let rest = match stylize::runner::prepare_run_mesh(
+        file,
+        defaults.mesh.remesh,
+        defaults.mesh.up,
+        &defaults.region,
+    ) {
+        Ok(prepared) => prepared.mesh,
+        Err(e) => return Some(format!("{e:#}")),
+    };
+    darap::Darap::new(&rest.positions, &rest.faces, darap::DarapOptions::default())
+        .err()
+        .map(|e| format!("dARAP precomputation: {e}"))
 }
 
 /// Triangle quality of the mesh after the repair `options` make (what a run would optimize,
@@ -387,26 +422,26 @@ fn list_regions(a: &CheckArgs) -> anyhow::Result<()> {
                 serde_json::json!({ "spec": spec, "kind": kind, "vertices": n, "note": note })
             })
             .collect();
-        println!(
+        outln!(
             "{}",
             serde_json::to_string_pretty(&json).context("cannot format the parts as JSON")?
-        );
+        )?;
         return Ok(());
     }
     if rows.is_empty() {
-        println!(
+        outln!(
             "{}: no named parts or properties (use box:, sphere: or vertices: regions)",
             a.file.display()
-        );
+        )?;
         return Ok(());
     }
-    println!(
+    outln!(
         "{}: regions on offer (vertices on the repaired mesh)",
         a.file.display()
-    );
+    )?;
     let width = rows.iter().map(|r| r.0.chars().count()).max().unwrap_or(0);
     for (spec, kind, n, note) in &rows {
-        println!("  {spec:<width$}  {kind:<16} {n:>8} vertices  {note}");
+        outln!("  {spec:<width$}  {kind:<16} {n:>8} vertices  {note}")?;
     }
     Ok(())
 }
@@ -499,6 +534,57 @@ fn report_table(file: &std::path::Path, r: &ValidationReport) -> String {
 mod tests {
     use super::*;
     use mesh_core::TriMesh;
+
+    /// The bunny and a well-shaped icosahedron 1e-9 of its size: the repairs keep both parts, but
+    /// the dARAP factorization fails on the debris; `mesh check` says so, as `run` would.
+    #[test]
+    fn tiny_debris_that_a_run_cannot_factor_is_reported_by_mesh_check() {
+        let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+        let bunny = mesh_core::io::read_mesh(
+            PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/meshes/bunny.obj"),
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        let extent = mesh_core::geometry::bbox_diagonal(&bunny.positions);
+        let (mut p, mut f) = (bunny.positions.clone(), bunny.faces.clone());
+        let (dp, df) = mesh_core::shapes::icosphere(0).into_parts();
+        let base = p.len() as u32;
+        let at = [p[0][0] + 0.3 * extent, p[0][1], p[0][2]];
+        let s = 1e-9 * extent;
+        p.extend(
+            dp.iter()
+                .map(|v| [at[0] + s * v[0], at[1] + s * v[1], at[2] + s * v[2]]),
+        );
+        f.extend(df.iter().map(|t| t.map(|i| i + base)));
+        let args = |file: PathBuf| CheckArgs {
+            file,
+            json: false,
+            drop_nonfinite: false,
+            drop_out_of_range: false,
+            needle_angle: 1.0,
+            regions: false,
+        };
+        // Written with every digit (the debris lives in the 10th significant one).
+        let mut obj = String::new();
+        for v in &p {
+            obj.push_str(&format!("v {:?} {:?} {:?}\n", v[0], v[1], v[2]));
+        }
+        for t in &f {
+            obj.push_str(&format!("f {} {} {}\n", t[0] + 1, t[1] + 1, t[2] + 1));
+        }
+        let debris = dir.path().join("debris.obj");
+        std::fs::write(&debris, obj).unwrap_or_else(|e| panic!("{e}"));
+        let e = check(args(debris)).expect_err("a run could not use it");
+        assert!(
+            format!("{e:#}").contains("cannot be used for a run")
+                && format!("{e:#}").contains("component far smaller than the mesh"),
+            "{e:#}"
+        );
+        let (p, f) = mesh_core::shapes::icosphere(2).into_parts();
+        let sphere = dir.path().join("sphere.obj");
+        mesh_core::io::write_mesh(&sphere, &TriMesh::new(p, f), None)
+            .unwrap_or_else(|e| panic!("{e}"));
+        check(args(sphere)).unwrap_or_else(|e| panic!("{e:#}"));
+    }
 
     fn two_parts_with_nan() -> TriMesh {
         TriMesh::new(

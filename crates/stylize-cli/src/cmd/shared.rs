@@ -127,9 +127,34 @@ pub fn count_noun(count: usize, singular: &str, plural: &str) -> String {
     }
 }
 
+/// `--threads N` of the ONNX commands: a count within `1..=`the session's bound
+/// (`diffusion_onnx::runtime::max_intra_threads`), refused before any model is loaded.
+pub fn thread_count(s: &str) -> Result<usize, String> {
+    let n: usize = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("{s:?} is not a thread count (a positive integer)"))?;
+    #[cfg(feature = "text")]
+    let n = diffusion_onnx::runtime::check_intra_threads(n)?;
+    Ok(n)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `embed --threads 100000` crashed inside ONNX Runtime: counts are bounded before any
+    /// model loads.
+    #[cfg(feature = "text")]
+    #[test]
+    fn thread_counts_are_bounded_before_any_session() {
+        assert_eq!(thread_count("1"), Ok(1));
+        for bad in ["0", "100000", "2000", "-1", "many"] {
+            assert!(thread_count(bad).is_err(), "{bad}");
+        }
+        let max = diffusion_onnx::runtime::max_intra_threads();
+        assert_eq!(thread_count(&max.to_string()), Ok(max));
+    }
 
     #[test]
     fn count_noun_is_singular_only_for_one() {
