@@ -244,6 +244,12 @@ fn trials(count: usize) {
         let mut attempts: Vec<Attempt> = Vec::new();
         // Kill each attempt at a random moment until one completes (after 8, let it finish).
         loop {
+            // An attempt SIGKILLed after its run completed (`run.json` written last) leaves a
+            // complete run: `run --resume` would refuse it ("a complete run is never resumed");
+            // a user is done there.
+            if by_run && dir.join("run.json").is_file() {
+                break;
+            }
             // A lock left by an earlier attempt's SIGKILL (taken over by the next process).
             let lock_before = std::fs::read(dir.join("run.lock")).ok();
             let child = if by_run {
