@@ -10,7 +10,9 @@
 //! API is used (ort would otherwise panic on a bad library); anything older than
 //! [`MINIMUM_ORT_VERSION`] is refused with a message that says how to get a good one.
 
+use std::fmt;
 use std::path::{Path, PathBuf};
+use std::str::FromStr;
 use std::sync::{Mutex, OnceLock};
 
 use ort::environment::Environment;
@@ -273,7 +275,7 @@ pub fn environment() -> Result<Environment, OnnxError> {
     environment_from(&path)
 }
 
-/// Where sessions run.
+/// Where sessions run. Written `cpu` or `cuda:N` ([`Device::from_str`], [`fmt::Display`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Device {
     /// ONNX Runtime's CPU execution provider.
@@ -285,6 +287,135 @@ pub enum Device {
         /// CUDA device ordinal.
         device_id: i32,
     },
+}
+
+impl Device {
+    /// `"cpu"` or `"cuda"`: the kind of device, without the ordinal.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Self::Cpu => "cpu",
+            Self::Cuda { .. } => "cuda",
+        }
+    }
+}
+
+impl fmt::Display for Device {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Cpu => f.write_str("cpu"),
+            Self::Cuda { device_id } => write!(f, "cuda:{device_id}"),
+        }
+    }
+}
+
+impl FromStr for Device {
+    type Err = String;
+
+    /// `cpu`, `cuda` (device 0) or `cuda:N` with N a device ordinal 0..=1023.
+    fn from_str(s: &str) -> Result<Self, String> {
+        let t = s.trim();
+        if t == "cpu" {
+            return Ok(Self::Cpu);
+        }
+        if t == "cuda" {
+            return Ok(Self::Cuda { device_id: 0 });
+        }
+        if let Some(n) = t.strip_prefix("cuda:") {
+            return match n.parse::<i32>() {
+                Ok(id) if (0..=1023).contains(&id) => Ok(Self::Cuda { device_id: id }),
+                _ => Err(format!(
+                    "device `{s}`: the CUDA device ordinal must be a number 0, 1, … (as `cuda:0`)"
+                )),
+            };
+        }
+        Err(format!("device `{s}`: write `cpu` or `cuda:N` (N the GPU's ordinal, e.g. `cuda:0`)"))
+    }
+}
+
+/// cuDNN's convolution algorithm choice in the CUDA execution provider (`cudnn_conv_algo_search`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum ConvAlgorithmSearch {
+    /// Benchmark every algorithm on the first call of each shape (ONNX Runtime's default): the first
+    /// call is slow, later ones use the fastest kernel. The setting users of large UNets need.
+    #[default]
+    Exhaustive,
+    /// cuDNN's heuristics, no benchmarking: a fast first call, possibly slower kernels.
+    Heuristic,
+    /// The implicit-precomputed-GEMM algorithm always: the least workspace memory, often slowest.
+    Default,
+}
+
+impl ConvAlgorithmSearch {
+    /// The config spelling: `exhaustive`, `heuristic`, `default`.
+    pub const NAMES: [&'static str; 3] = ["exhaustive", "heuristic", "default"];
+}
+
+impl FromStr for ConvAlgorithmSearch {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "exhaustive" => Ok(Self::Exhaustive),
+            "heuristic" => Ok(Self::Heuristic),
+            "default" => Ok(Self::Default),
+            _ => Err(format!(
+                "cuDNN convolution search `{s}`: one of {}",
+                Self::NAMES.join(", ")
+            )),
+        }
+    }
+}
+
+/// How the CUDA execution provider's memory arena grows (`arena_extend_strategy`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum ArenaGrowth {
+    /// Each extension doubles the previous one (ONNX Runtime's default): fewer allocations, but the
+    /// arena can overshoot what the model needs by up to 2×.
+    #[default]
+    NextPowerOfTwo,
+    /// Extend by exactly what is requested: the tightest fit, for cards near their memory.
+    SameAsRequested,
+}
+
+impl ArenaGrowth {
+    /// The config spelling: `next_power_of_two`, `same_as_requested`.
+    pub const NAMES: [&'static str; 2] = ["next_power_of_two", "same_as_requested"];
+}
+
+impl FromStr for ArenaGrowth {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "next_power_of_two" => Ok(Self::NextPowerOfTwo),
+            "same_as_requested" => Ok(Self::SameAsRequested),
+            _ => Err(format!("arena growth `{s}`: one of {}", Self::NAMES.join(", "))),
+        }
+    }
+}
+
+/// The CUDA execution provider's options that matter for IF's UNets (defaults: ONNX Runtime 1.31's
+/// own). Ignored on the CPU.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct CudaOptions {
+    /// cuDNN convolution algorithm search: exhaustive.
+    pub conv_algorithm_search: ConvAlgorithmSearch,
+    /// Arena growth: next power of two.
+    pub arena_growth: ArenaGrowth,
+    /// Cap on the provider's arena in bytes (`gpu_mem_limit`; None: no cap).
+    pub memory_limit: Option<u64>,
+    /// TF32 tensor-core math for fp32 MatMul/Conv on Ampere and later (`use_tf32`; on): ≈ 10-bit
+    /// mantissa products. Only fp32 models are affected; fp16 models compute in fp16 anyway.
+    pub tf32: bool,
+}
+
+impl Default for CudaOptions {
+    fn default() -> Self {
+        Self {
+            conv_algorithm_search: ConvAlgorithmSearch::Exhaustive,
+            arena_growth: ArenaGrowth::NextPowerOfTwo,
+            memory_limit: None,
+            tf32: true,
+        }
+    }
 }
 
 /// Options for every session this crate creates.
@@ -328,6 +459,13 @@ pub struct SessionOptions {
     /// caller's own threads (resizes, the renderer, dARAP) run right after each UNet call on the same
     /// cores, and spinning workers take CPU from them (docs/benchmarks.md, "The loop").
     pub intra_op_spinning: bool,
+    /// UNet calls through a persistent ONNX Runtime IO binding (default on): inputs written in
+    /// place, the text embeddings re-bound only when they change, the output preallocated and
+    /// reused (`OnnxDenoiser`). Off, each call builds fresh input and output tensors. Bit-identical
+    /// results on the CPU provider (tested); fewer copies (docs/benchmarks.md, "IO binding").
+    pub io_binding: bool,
+    /// CUDA execution provider options (used only when `device` is CUDA).
+    pub cuda: CudaOptions,
 }
 
 impl Default for SessionOptions {
@@ -341,6 +479,8 @@ impl Default for SessionOptions {
             graph_optimizations: true,
             max_batch: None,
             intra_op_spinning: false,
+            io_binding: true,
+            cuda: CudaOptions::default(),
         }
     }
 }
@@ -403,10 +543,23 @@ pub(crate) fn open_session(
         }
         #[cfg(feature = "cuda")]
         Device::Cuda { device_id } => {
-            let ep = ort::ep::CUDA::default()
+            let c = &options.cuda;
+            let mut cuda = ort::ep::CUDA::default()
                 .with_device_id(device_id)
-                .build()
-                .error_on_failure();
+                .with_conv_algorithm_search(match c.conv_algorithm_search {
+                    ConvAlgorithmSearch::Exhaustive => ort::ep::cuda::ConvAlgorithmSearch::Exhaustive,
+                    ConvAlgorithmSearch::Heuristic => ort::ep::cuda::ConvAlgorithmSearch::Heuristic,
+                    ConvAlgorithmSearch::Default => ort::ep::cuda::ConvAlgorithmSearch::Default,
+                })
+                .with_arena_extend_strategy(match c.arena_growth {
+                    ArenaGrowth::NextPowerOfTwo => ort::ep::ArenaExtendStrategy::NextPowerOfTwo,
+                    ArenaGrowth::SameAsRequested => ort::ep::ArenaExtendStrategy::SameAsRequested,
+                })
+                .with_tf32(c.tf32);
+            if let Some(limit) = c.memory_limit {
+                cuda = cuda.with_memory_limit(usize::try_from(limit).unwrap_or(usize::MAX));
+            }
+            let ep = cuda.build().error_on_failure();
             builder = builder
                 .with_execution_providers([ep])
                 .map_err(|e| OnnxError::ort(ctx("registering the CUDA execution provider"), e))?;
