@@ -12,7 +12,6 @@
 
 use std::fmt;
 use std::path::{Path, PathBuf};
-use std::str::FromStr;
 use std::sync::{Mutex, OnceLock};
 
 use ort::environment::Environment;
@@ -275,7 +274,7 @@ pub fn environment() -> Result<Environment, OnnxError> {
     environment_from(&path)
 }
 
-/// Where sessions run. Written `cpu` or `cuda:N` ([`Device::from_str`], [`fmt::Display`]).
+/// Where sessions run. Displayed `cpu` or `cuda:N` (the spelling of the run configuration's device keys).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Device {
     /// ONNX Runtime's CPU execution provider.
@@ -308,30 +307,6 @@ impl fmt::Display for Device {
     }
 }
 
-impl FromStr for Device {
-    type Err = String;
-
-    /// `cpu`, `cuda` (device 0) or `cuda:N` with N a device ordinal 0..=1023.
-    fn from_str(s: &str) -> Result<Self, String> {
-        let t = s.trim();
-        if t == "cpu" {
-            return Ok(Self::Cpu);
-        }
-        if t == "cuda" {
-            return Ok(Self::Cuda { device_id: 0 });
-        }
-        if let Some(n) = t.strip_prefix("cuda:") {
-            return match n.parse::<i32>() {
-                Ok(id) if (0..=1023).contains(&id) => Ok(Self::Cuda { device_id: id }),
-                _ => Err(format!(
-                    "device `{s}`: the CUDA device ordinal must be a number 0, 1, … (as `cuda:0`)"
-                )),
-            };
-        }
-        Err(format!("device `{s}`: write `cpu` or `cuda:N` (N the GPU's ordinal, e.g. `cuda:0`)"))
-    }
-}
-
 /// cuDNN's convolution algorithm choice in the CUDA execution provider (`cudnn_conv_algo_search`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum ConvAlgorithmSearch {
@@ -345,26 +320,6 @@ pub enum ConvAlgorithmSearch {
     Default,
 }
 
-impl ConvAlgorithmSearch {
-    /// The config spelling: `exhaustive`, `heuristic`, `default`.
-    pub const NAMES: [&'static str; 3] = ["exhaustive", "heuristic", "default"];
-}
-
-impl FromStr for ConvAlgorithmSearch {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        match s {
-            "exhaustive" => Ok(Self::Exhaustive),
-            "heuristic" => Ok(Self::Heuristic),
-            "default" => Ok(Self::Default),
-            _ => Err(format!(
-                "cuDNN convolution search `{s}`: one of {}",
-                Self::NAMES.join(", ")
-            )),
-        }
-    }
-}
-
 /// How the CUDA execution provider's memory arena grows (`arena_extend_strategy`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum ArenaGrowth {
@@ -374,22 +329,6 @@ pub enum ArenaGrowth {
     NextPowerOfTwo,
     /// Extend by exactly what is requested: the tightest fit, for cards near their memory.
     SameAsRequested,
-}
-
-impl ArenaGrowth {
-    /// The config spelling: `next_power_of_two`, `same_as_requested`.
-    pub const NAMES: [&'static str; 2] = ["next_power_of_two", "same_as_requested"];
-}
-
-impl FromStr for ArenaGrowth {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        match s {
-            "next_power_of_two" => Ok(Self::NextPowerOfTwo),
-            "same_as_requested" => Ok(Self::SameAsRequested),
-            _ => Err(format!("arena growth `{s}`: one of {}", Self::NAMES.join(", "))),
-        }
-    }
 }
 
 /// The CUDA execution provider's options that matter for IF's UNets (defaults: ONNX Runtime 1.31's

@@ -190,6 +190,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     if let Some(w) = set.cpu_time_warning(&config) {
                         eprintln!("warning: {w}");
                     }
+                    for w in set.memory_warnings() {
+                        eprintln!("warning: {w}");
+                    }
                     let warnings = set.prompt_warnings(prompt, &config)?;
                     Ok(PromptTask {
                         prompt: kind.clone(),
