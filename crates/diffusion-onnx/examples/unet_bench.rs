@@ -87,7 +87,10 @@ fn args() -> Result<Args, String> {
             }
             "--flop-per-sample" => {
                 let v = value()?;
-                a.flop = Some(v.parse().map_err(|e| format!("--flop-per-sample {v}: {e}"))?);
+                a.flop = Some(
+                    v.parse()
+                        .map_err(|e| format!("--flop-per-sample {v}: {e}"))?,
+                );
             }
             "--compare-cpu" => a.compare = true,
             "--tol" => {
@@ -99,7 +102,9 @@ fn args() -> Result<Args, String> {
                 ));
             }
             "-h" | "--help" => {
-                return Err("see the doc comment of crates/diffusion-onnx/examples/unet_bench.rs".into());
+                return Err(
+                    "see the doc comment of crates/diffusion-onnx/examples/unet_bench.rs".into(),
+                );
             }
             f => return Err(format!("unknown option {f}")),
         }
@@ -148,7 +153,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         a.model.display(),
         a.stage.key(),
         spec.dtype.as_str(),
-        if a.compare { "CUDA-vs-CPU check" } else { "timing" },
+        if a.compare {
+            "CUDA-vs-CPU check"
+        } else {
+            "timing"
+        },
         a.device,
         spec.in_channels,
         (x.data.len() * 4) as f64 / 1e6

@@ -240,64 +240,68 @@ impl OnnxDenoiser {
         labels: Option<&[i64]>,
     ) -> Result<Vec<f32>, OnnxError> {
         let label = self.label.clone();
-        let ort_err = |step: &str, e: ort::Error| OnnxError::ort(format!("{step} for the {label}"), e);
-        if self.bound.as_ref().is_none_or(|b| b.shape != shape) {
-            // A new shape (first call, a ragged last chunk, another view count): new tensors.
-            self.bound = None;
-            self.bound = Some(Bound::new(
-                &self.session,
-                shape,
-                self.spec.out_channels,
-                self.embedding_shape,
-                self.spec.dtype,
-                labels.is_some(),
-            )
-            .map_err(|e| ort_err("preparing the IO binding", e))?);
-        }
-        let Some(b) = self.bound.as_mut() else {
-            unreachable!("bound just above")
+        let ort_err =
+            |step: &str, e: ort::Error| OnnxError::ort(format!("{step} for the {label}"), e);
+        // Reuse the bound tensors while the shape stays; a new shape (first call, a ragged last
+        // chunk, another view count) frees the old ones first, then allocates. On an error the
+        // binding is dropped and rebuilt by the next call.
+        let mut b = match self.bound.take() {
+            Some(b) if b.shape == shape => b,
+            old => {
+                drop(old);
+                Bound::new(
+                    &self.session,
+                    shape,
+                    self.spec.out_channels,
+                    self.embedding_shape,
+                    self.spec.dtype,
+                    labels.is_some(),
+                )
+                .map_err(|e| ort_err("preparing the IO binding", e))?
+            }
         };
         let dtype = self.spec.dtype;
         write_floats(&mut b.sample, dtype, sample).map_err(|e| ort_err("writing the sample", e))?;
-        b.io
-            .bind_input(self.spec.sample.as_str(), &b.sample)
+        b.io.bind_input(self.spec.sample.as_str(), &b.sample)
             .map_err(|e| ort_err("binding the sample", e))?;
-        b.timesteps.extract_tensor_mut().1.copy_from_slice(timesteps);
-        b.io
-            .bind_input(self.spec.timestep.as_str(), &b.timesteps)
+        b.timesteps
+            .extract_tensor_mut()
+            .1
+            .copy_from_slice(timesteps);
+        b.io.bind_input(self.spec.timestep.as_str(), &b.timesteps)
             .map_err(|e| ort_err("binding the timesteps", e))?;
         let changed = write_embeddings(&mut b.text, dtype, embeddings, !b.text_bound)
             .map_err(|e| ort_err("writing the text embeddings", e))?;
         if changed || !b.text_bound {
-            b.io
-                .bind_input(self.spec.encoder_hidden_states.as_str(), &b.text)
+            b.io.bind_input(self.spec.encoder_hidden_states.as_str(), &b.text)
                 .map_err(|e| ort_err("binding the text embeddings", e))?;
             b.text_bound = true;
         }
         if let (Some(name), Some(t), Some(l)) = (&self.spec.class_labels, b.labels.as_mut(), labels)
         {
             t.extract_tensor_mut().1.copy_from_slice(l);
-            b.io
-                .bind_input(name.as_str(), &*t)
+            b.io.bind_input(name.as_str(), &*t)
                 .map_err(|e| ort_err("binding the class labels", e))?;
         }
         if !b.output_bound {
-            b.io
-                .bind_output(self.spec.output.as_str(), &mut b.output)
+            b.io.bind_output(self.spec.output.as_str(), &mut b.output)
                 .map_err(|e| ort_err("binding the output", e))?;
             b.output_bound = true;
         }
-        let outputs = self
-            .session
-            .run_binding(&b.io)
-            .map_err(|e| OnnxError::ort(format!("running the {label}"), e))?;
-        let value = outputs
-            .get(&self.spec.output)
-            .ok_or_else(|| OnnxError::Signature {
-                model: label.clone(),
-                message: format!("output `{}` missing from the results", self.spec.output),
-            })?;
-        let (out_shape, data) = float_output(value, dtype, &format!("the {label} output"))?;
+        let (out_shape, data) = {
+            let outputs = self
+                .session
+                .run_binding(&b.io)
+                .map_err(|e| OnnxError::ort(format!("running the {label}"), e))?;
+            let value = outputs
+                .get(&self.spec.output)
+                .ok_or_else(|| OnnxError::Signature {
+                    model: label.clone(),
+                    message: format!("output `{}` missing from the results", self.spec.output),
+                })?;
+            float_output(value, dtype, &format!("the {label} output"))?
+        };
+        self.bound = Some(b);
         let [m, _, h, w] = shape;
         if out_shape != [m, self.spec.out_channels, h, w] {
             return Err(OnnxError::Shape {

@@ -69,12 +69,7 @@ pub fn estimate_stage(
     let file = model.weight_bytes(stage)?;
     let parameters = model.approx_parameters(stage)? as f64;
     Some(estimate(
-        file,
-        parameters,
-        spec.dtype,
-        options,
-        batch,
-        pixels,
+        file, parameters, spec.dtype, options, batch, pixels,
     ))
 }
 

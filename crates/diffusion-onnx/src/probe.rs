@@ -104,9 +104,18 @@ pub fn classify_load_error(message: &str) -> LoadFailure {
             LoadFailure::SharedProviderMissing
         } else if name.starts_with("libnvinfer") || name.starts_with("libnvonnxparser") {
             LoadFailure::TensorRtMissing(name)
-        } else if ["libcudart", "libcublas", "libcufft", "libcurand", "libnvrtc", "libnvJitLink", "libcusparse", "libcusolver"]
-            .iter()
-            .any(|p| name.starts_with(p))
+        } else if [
+            "libcudart",
+            "libcublas",
+            "libcufft",
+            "libcurand",
+            "libnvrtc",
+            "libnvJitLink",
+            "libcusparse",
+            "libcusolver",
+        ]
+        .iter()
+        .any(|p| name.starts_with(p))
         {
             LoadFailure::CudaRuntimeMissing(name)
         } else {
@@ -223,17 +232,18 @@ pub fn probe_driver() -> DriverReport {
     dl::cuda_driver(lib)
 }
 
-/// The ONNX Runtime build string (`ORT Build Info: git-branch=rel-1.31.1, …`) of the loaded library,
-/// and its version parsed from it when it names a release branch. Loads the library found by
-/// [`runtime::environment`] if none is loaded yet.
-pub fn runtime_build_info() -> Result<(String, Option<String>), crate::OnnxError> {
-    runtime::environment()?;
-    let info = ort::info().to_string();
-    let version = info
-        .split("git-branch=rel-")
-        .nth(1)
-        .map(|s| s.split([',', ' ']).next().unwrap_or(s).to_string());
-    Ok((info, version))
+/// The ONNX Runtime library at `path`: its version (`OrtGetApiBase()->GetVersionString()`, e.g.
+/// `1.31.1`) and build string (`ORT Build Info: git-branch=…, git-commit-id=…`). Loads the library
+/// as the process's ONNX Runtime ([`runtime::environment_from`]) if none is loaded yet.
+pub fn runtime_version(path: &Path) -> Result<(String, String), crate::OnnxError> {
+    runtime::environment_from(path)?;
+    let unusable = |reason: String| crate::OnnxError::RuntimeUnusable {
+        path: path.to_path_buf(),
+        reason,
+    };
+    let lib = dl::open(&path.to_string_lossy()).map_err(&unusable)?;
+    let version = dl::ort_version(&lib).ok_or_else(|| unusable("no OrtGetApiBase".into()))?;
+    Ok((version, ort::info().to_string()))
 }
 
 /// The devices ONNX Runtime lists (`execution provider: hardware type, vendor`), e.g.
@@ -303,6 +313,29 @@ mod dl {
         (!p.is_null()).then_some(p)
     }
 
+    /// The head of ONNX Runtime's `OrtApiBase` (onnxruntime_c_api.h).
+    #[repr(C)]
+    struct OrtApiBase {
+        _get_api: unsafe extern "C" fn(u32) -> *const c_void,
+        get_version_string: unsafe extern "C" fn() -> *const c_char,
+    }
+
+    /// `OrtGetApiBase()->GetVersionString()` of a loaded ONNX Runtime.
+    pub(super) fn ort_version(lib: &Lib) -> Option<String> {
+        let f = sym(lib, "OrtGetApiBase")?;
+        // SAFETY: `OrtGetApiBase` is `const OrtApiBase* ORT_API_CALL OrtGetApiBase(void)`; the base
+        // is a static table whose second entry returns a static NUL-terminated string.
+        unsafe {
+            let f: unsafe extern "C" fn() -> *const OrtApiBase = std::mem::transmute(f);
+            let base = f();
+            if base.is_null() {
+                return None;
+            }
+            let s = ((*base).get_version_string)();
+            (!s.is_null()).then(|| CStr::from_ptr(s).to_string_lossy().into_owned())
+        }
+    }
+
     type CuInit = unsafe extern "C" fn(c_uint) -> c_int;
     type CuIntOut = unsafe extern "C" fn(*mut c_int) -> c_int;
     type CuDeviceGet = unsafe extern "C" fn(*mut c_int, c_int) -> c_int;
@@ -359,7 +392,11 @@ mod dl {
                     "?".into()
                 };
                 let mut bytes: usize = 0;
-                let total = if mem(&mut bytes, dev) == 0 { bytes as u64 } else { 0 };
+                let total = if mem(&mut bytes, dev) == 0 {
+                    bytes as u64
+                } else {
+                    0
+                };
                 report.gpus.push(GpuInfo {
                     ordinal,
                     name: label,
@@ -397,7 +434,9 @@ mod tests {
             LoadFailure::DriverMissing
         );
         assert_eq!(
-            c("libonnxruntime_providers_shared.so: cannot open shared object file: No such file or directory"),
+            c(
+                "libonnxruntime_providers_shared.so: cannot open shared object file: No such file or directory"
+            ),
             LoadFailure::SharedProviderMissing
         );
         assert_eq!(c("/x/p.so: invalid ELF header"), LoadFailure::Damaged);
@@ -447,6 +486,9 @@ mod tests {
         let r = probe_driver();
         // On machines with a driver this lists GPUs; on this project's CPU machines it must say why
         // there are none rather than return an empty list silently.
-        assert!(r.error.is_some() || !r.gpus.is_empty() || r.cuda_version.is_some(), "{r:?}");
+        assert!(
+            r.error.is_some() || !r.gpus.is_empty() || r.cuda_version.is_some(),
+            "{r:?}"
+        );
     }
 }

@@ -486,7 +486,9 @@ pub(crate) fn open_session(
             let mut cuda = ort::ep::CUDA::default()
                 .with_device_id(device_id)
                 .with_conv_algorithm_search(match c.conv_algorithm_search {
-                    ConvAlgorithmSearch::Exhaustive => ort::ep::cuda::ConvAlgorithmSearch::Exhaustive,
+                    ConvAlgorithmSearch::Exhaustive => {
+                        ort::ep::cuda::ConvAlgorithmSearch::Exhaustive
+                    }
                     ConvAlgorithmSearch::Heuristic => ort::ep::cuda::ConvAlgorithmSearch::Heuristic,
                     ConvAlgorithmSearch::Default => ort::ep::cuda::ConvAlgorithmSearch::Default,
                 })

@@ -761,7 +761,9 @@ fn io_binding_picks_up_changed_text() {
     let mut unet = OnnxDenoiser::open(&model, Stage::One, &options()).expect("open");
     let x = csd::Tensor {
         shape: vec![1, 3, 32, 32],
-        data: (0..3 * 32 * 32).map(|i| (i % 17) as f32 / 8.0 - 1.0).collect(),
+        data: (0..3 * 32 * 32)
+            .map(|i| (i % 17) as f32 / 8.0 - 1.0)
+            .collect(),
     };
     let a = unet.predict(&x, &[500], &[&uncond], None).expect("a");
     let a2 = unet.predict(&x, &[500], &[&uncond], None).expect("a2");

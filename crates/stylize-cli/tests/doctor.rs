@@ -13,22 +13,27 @@ fn repo() -> PathBuf {
 }
 
 fn doctor(args: &[&str], ort: Option<&Path>) -> (serde_json::Value, String) {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_stylize"));
-    c.arg("doctor").args(args);
-    match ort {
-        Some(p) => c.env(diffusion_onnx::runtime::ORT_DYLIB_ENV, p),
-        None => c.env_remove(diffusion_onnx::runtime::ORT_DYLIB_ENV),
+    let run = |args: &[&str]| {
+        let mut c = Command::new(env!("CARGO_BIN_EXE_stylize"));
+        c.arg("doctor").args(args);
+        match ort {
+            Some(p) => c.env(diffusion_onnx::runtime::ORT_DYLIB_ENV, p),
+            None => c.env_remove(diffusion_onnx::runtime::ORT_DYLIB_ENV),
+        };
+        let out = ok(c.output());
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        out.stdout
     };
-    let json = ok(c.output());
-    assert!(json.status.success(), "{}", String::from_utf8_lossy(&json.stderr));
-    let text = ok(Command::new(env!("CARGO_BIN_EXE_stylize"))
-        .arg("doctor")
-        .args(args.iter().filter(|a| **a != "--json"))
-        .envs(ort.map(|p| (diffusion_onnx::runtime::ORT_DYLIB_ENV, p)))
-        .output());
+    let json = run(args);
+    let plain: Vec<&str> = args.iter().copied().filter(|a| *a != "--json").collect();
+    let text = run(&plain);
     (
-        ok(serde_json::from_slice(&json.stdout)),
-        String::from_utf8_lossy(&text.stdout).into_owned(),
+        ok(serde_json::from_slice(&json)),
+        String::from_utf8_lossy(&text).into_owned(),
     )
 }
 
@@ -52,23 +57,30 @@ fn cpu_library_no_gpu_and_the_tiny_models() {
     assert!(rt["error"].is_null(), "{v:#}");
     assert_eq!(rt["cuda_provider"]["state"], "absent", "{v:#}");
     assert!(
-        rt["devices"].as_array().is_some_and(|d| d
-            .iter()
-            .any(|d| d.as_str().is_some_and(|s| s.starts_with("CPUExecutionProvider")))),
+        rt["devices"].as_array().is_some_and(|d| d.iter().any(|d| d
+            .as_str()
+            .is_some_and(|s| s.starts_with("CPUExecutionProvider")))),
         "{v:#}"
     );
     // No NVIDIA driver on this machine: the report says why there are no GPUs.
     if v["driver"]["gpus"].as_array().is_some_and(|g| g.is_empty()) {
         assert!(v["driver"]["error"].is_string(), "{v:#}");
     }
-    assert!(v["model"].as_str().is_some_and(|m| m.starts_with("ok: tiny-if")), "{v:#}");
+    assert!(
+        v["model"]
+            .as_str()
+            .is_some_and(|m| m.starts_with("ok: tiny-if")),
+        "{v:#}"
+    );
     assert_eq!(v["memory"][0]["device"], "cpu", "{v:#}");
     assert!(v["time"][0]["seconds_per_iteration"].is_number(), "{v:#}");
     if !cfg!(feature = "cuda") {
         assert_eq!(problems(&v), Vec::<String>::new());
     }
     assert!(
-        text.contains("ONNX Runtime: ") && text.contains("CUDA provider: absent") && text.contains("problems: none"),
+        text.contains("ONNX Runtime: ")
+            && text.contains("CUDA provider: absent")
+            && text.contains("problems: none"),
         "{text}"
     );
 }
@@ -108,7 +120,9 @@ fn a_damaged_cuda_provider_beside_the_library_is_named() {
     let cuda = &v["onnx_runtime"]["cuda_provider"];
     assert_eq!(cuda["state"], "fails", "{v:#}");
     assert!(
-        cuda["advice"].as_str().is_some_and(|a| a.contains("damaged")),
+        cuda["advice"]
+            .as_str()
+            .is_some_and(|a| a.contains("damaged")),
         "{v:#}"
     );
     assert!(
@@ -133,7 +147,8 @@ fn a_stage_on_a_gpu_that_is_not_there_is_a_problem() {
     );
     let p = problems(&v);
     assert!(
-        p.iter().any(|p| p.contains("cuda:3 is configured but the driver lists no such GPU")),
+        p.iter()
+            .any(|p| p.contains("cuda:3 is configured but the driver lists no such GPU")),
         "{p:?}"
     );
     if !cfg!(feature = "cuda") {
@@ -141,7 +156,9 @@ fn a_stage_on_a_gpu_that_is_not_there_is_a_problem() {
     }
     assert!(v["time"][0]["seconds_per_iteration"].is_null(), "{v:#}");
     assert!(
-        v["time"][0]["basis"].as_str().is_some_and(|b| b.contains("gpu_check.sh")),
+        v["time"][0]["basis"]
+            .as_str()
+            .is_some_and(|b| b.contains("gpu_check.sh")),
         "{v:#}"
     );
 }

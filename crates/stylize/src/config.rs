@@ -731,10 +731,22 @@ mod tests {
         for (bad, key) in [
             ("guidance.stage1_device=gpu", "guidance.stage1_device"),
             ("guidance.stage2_device=cuda:x", "guidance.stage2_device"),
-            ("guidance.text_encoder_device=cuda:-1", "guidance.text_encoder_device"),
-            ("guidance.cuda_conv_search=fast", "guidance.cuda_conv_search"),
-            ("guidance.cuda_arena_growth=double", "guidance.cuda_arena_growth"),
-            ("guidance.cuda_memory_limit_gib=-1", "guidance.cuda_memory_limit_gib"),
+            (
+                "guidance.text_encoder_device=cuda:-1",
+                "guidance.text_encoder_device",
+            ),
+            (
+                "guidance.cuda_conv_search=fast",
+                "guidance.cuda_conv_search",
+            ),
+            (
+                "guidance.cuda_arena_growth=double",
+                "guidance.cuda_arena_growth",
+            ),
+            (
+                "guidance.cuda_memory_limit_gib=-1",
+                "guidance.cuda_memory_limit_gib",
+            ),
         ] {
             let e = Config::default()
                 .with_overrides(&[bad])
@@ -763,9 +775,7 @@ mod tests {
         // Another GPU of the same kind is not a change of numerics worth a note.
         let other = ok(Config::default().with_overrides(&["guidance.stage2_device=cuda:1"]));
         assert_eq!(
-            other
-                .guidance
-                .device_change_note(&ok(gpu.to_toml_string())),
+            other.guidance.device_change_note(&ok(gpu.to_toml_string())),
             None
         );
     }

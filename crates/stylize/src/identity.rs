@@ -289,7 +289,10 @@ mod tests {
             ])
             .unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(id(&Prompt::new("a cat"), &moved), base);
-        assert_eq!(unread_settings(&moved, &Style::Cube).unwrap_or_default(), Vec::<String>::new());
+        assert_eq!(
+            unread_settings(&moved, &Style::Cube).unwrap_or_default(),
+            Vec::<String>::new()
+        );
     }
 
     #[test]

@@ -186,7 +186,9 @@ pub struct DeviceMemory {
 impl DeviceMemory {
     /// Whether the estimate exceeds the known capacity.
     pub fn over(&self) -> bool {
-        self.capacity.as_ref().is_some_and(|(c, _)| self.estimate > *c)
+        self.capacity
+            .as_ref()
+            .is_some_and(|(c, _)| self.estimate > *c)
     }
 
     /// One line: `cuda:0: estimate 21.30 GiB (stage1 …) of 79.19 GiB (NVIDIA H100 …)`.
@@ -212,7 +214,10 @@ impl DeviceMemory {
             parts.join("; "),
             self.capacity
                 .as_ref()
-                .map_or("unknown capacity".to_string(), |(c, src)| format!("{} ({src})", gib(*c)))
+                .map_or("unknown capacity".to_string(), |(c, src)| format!(
+                    "{} ({src})",
+                    gib(*c)
+                ))
         )
     }
 }
@@ -228,7 +233,9 @@ pub fn memory_plan(
     config: &Config,
     gpus: &[diffusion_onnx::probe::GpuInfo],
 ) -> Vec<DeviceMemory> {
-    use diffusion_onnx::memory::{CPU_BASE_BYTES, CUDA_BASE_BYTES, estimate_stage, host_memory_bytes};
+    use diffusion_onnx::memory::{
+        CPU_BASE_BYTES, CUDA_BASE_BYTES, estimate_stage, host_memory_bytes,
+    };
     let batch = 2 * config.camera.views;
     let g = csd::GuidanceConfig::default();
     let mut plan: Vec<DeviceMemory> = Vec::new();
@@ -355,7 +362,9 @@ impl ModelSet {
         let cache = EmbeddingCache::at_default().ok();
         let stage1 = OnnxDenoiser::open(&dir, Stage::One, &options).context("IF stage I")?;
         let stage2 = match dir.stage(Stage::Two) {
-            Some(_) => Some(OnnxDenoiser::open(&dir, Stage::Two, &options2).context("IF stage II")?),
+            Some(_) => {
+                Some(OnnxDenoiser::open(&dir, Stage::Two, &options2).context("IF stage II")?)
+            }
             None => None,
         };
         Ok(Self {
@@ -537,6 +546,68 @@ mod tests {
             "{w:?}"
         );
         assert!(w[1].starts_with("the negative prompt"), "{w:?}");
+    }
+
+    #[test]
+    fn a_gpu_too_small_for_both_real_size_stages_is_refused_before_loading() {
+        // IF's fp16 sizes: stage I 8.6 GB, stage II 2.5 GB (sparse files).
+        let tmp = fake_model(8_600_000_000, Some(2_500_000_000));
+        let dir = ModelDir::open(tmp.path()).expect("model");
+        let gpu = |ordinal, gib: u64| diffusion_onnx::probe::GpuInfo {
+            ordinal,
+            name: format!("GPU {ordinal} with {gib} GiB"),
+            memory_bytes: gib << 30,
+        };
+        let plan_for = |overrides: &[&str], gpus: &[diffusion_onnx::probe::GpuInfo]| {
+            let config = Config::default()
+                .with_overrides(overrides)
+                .expect("overrides");
+            let [o1, o2, _] = device_options(&config).expect("devices");
+            memory_plan(&dir, &[o1, o2], &config, gpus)
+        };
+        let both = [
+            "guidance.stage1_device=cuda:0",
+            "guidance.stage2_device=cuda:0",
+        ];
+        let small = [gpu(0, 24), gpu(1, 24)];
+        let plan = plan_for(&both, &small);
+        assert_eq!(plan.len(), 1, "{plan:?}");
+        let e = check_memory(&plan).expect_err("24 GiB cannot hold both stages at 8 views");
+        let msg = e.to_string();
+        assert!(
+            msg.contains("cuda:0")
+                && msg.contains("GPU 0 with 24 GiB")
+                && msg.contains("stage1")
+                && msg.contains("stage2")
+                && msg.contains("onnx_low_memory"),
+            "{msg}"
+        );
+        // The ways out the message names: an 80 GiB card, two cards, one sample per call.
+        assert!(check_memory(&plan_for(&both, &[gpu(0, 80)])).is_ok_and(|w| w.is_empty()));
+        let split = plan_for(
+            &[
+                "guidance.stage1_device=cuda:0",
+                "guidance.stage2_device=cuda:1",
+            ],
+            &small,
+        );
+        assert_eq!(split.len(), 2);
+        assert!(check_memory(&split).is_ok());
+        let low: Vec<&str> = both
+            .iter()
+            .copied()
+            .chain(["guidance.onnx_low_memory=true"])
+            .collect();
+        assert!(check_memory(&plan_for(&low, &small)).is_ok());
+        // A cap set in the configuration is what the check uses.
+        let capped: Vec<&str> = both
+            .iter()
+            .copied()
+            .chain(["guidance.cuda_memory_limit_gib=10"])
+            .collect();
+        let capped = plan_for(&capped, &[gpu(0, 80)]);
+        let msg = check_memory(&capped).expect_err("over the cap").to_string();
+        assert!(msg.contains("guidance.cuda_memory_limit_gib"), "{msg}");
     }
 
     /// A model directory whose stage files have the given sizes (sparse files: nothing is written).

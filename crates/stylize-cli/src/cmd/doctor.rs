@@ -161,6 +161,10 @@ pub const MEASURED_THROUGHPUT: &[(&str, f64, &str)] = &[(
      (docs/models.md, \"What a CPU can do\")",
 )];
 
+/// The paper's measured time per iteration with the real models on one NVIDIA A40 (2 h 15 min for
+/// 2,500 iterations; docs/models.md, "What a CPU can do").
+pub const PAPER_A40_SECONDS_PER_ITERATION: f64 = 3.24;
+
 /// Gathers the report.
 pub fn build(model: Option<&std::path::Path>, config: &stylize::config::Config) -> Report {
     let mut r = Report {
@@ -180,8 +184,12 @@ pub fn build(model: Option<&std::path::Path>, config: &stylize::config::Config) 
     {
         let _ = (model, config);
         r.problems.push(Problem {
-            problem: "this stylize was built without the `text` feature: no ONNX Runtime, no prompts".into(),
-            next_step: "build the full command line: cargo install --locked --path crates/stylize-cli".into(),
+            problem:
+                "this stylize was built without the `text` feature: no ONNX Runtime, no prompts"
+                    .into(),
+            next_step:
+                "build the full command line: cargo install --locked --path crates/stylize-cli"
+                    .into(),
         });
     }
     r
@@ -355,15 +363,16 @@ mod text {
         .and_then(|p| diffusion_onnx::runtime::check_library_file(&p).map(|()| p))
         {
             Ok(path) => {
-                match probe::runtime_build_info() {
-                    Ok((info, version)) => {
+                match probe::runtime_version(&path) {
+                    Ok((version, info)) => {
                         rt.build_info = Some(info);
-                        rt.version = version;
+                        rt.version = Some(version);
                         rt.devices = probe::runtime_devices().unwrap_or_default();
                     }
                     Err(e) => rt.error = Some(e.to_string()),
                 }
-                rt.cuda_provider = provider(probe::probe_provider(&path, probe::CUDA_PROVIDER_FILE));
+                rt.cuda_provider =
+                    provider(probe::probe_provider(&path, probe::CUDA_PROVIDER_FILE));
                 rt.tensorrt_provider =
                     provider(probe::probe_provider(&path, probe::TENSORRT_PROVIDER_FILE));
                 rt.path = Some(path);
@@ -503,9 +512,12 @@ mod text {
             tflop_per_iteration: flop / 1e12,
             seconds_per_iteration: measured.map(|(_, f, _)| flop / f),
             basis: measured.map_or(
-                "no throughput measured on a GPU yet: run scripts/gpu_check.sh there (its `throughput` step \
-                 prints TFLOP/s) and see docs/benchmarks.md"
-                    .to_string(),
+                format!(
+                    "no throughput measured on a GPU here yet: run scripts/gpu_check.sh (its `throughput` step \
+                     prints TFLOP/s) and see docs/benchmarks.md; the one GPU figure known is the paper's, \
+                     {PAPER_A40_SECONDS_PER_ITERATION} s per iteration on an A40 with the real IF models \
+                     (2 h 15 min for 2,500 iterations)"
+                ),
                 |(_, f, src)| format!("{:.2} TFLOP/s measured: {src}", f / 1e12),
             ),
         });
@@ -520,7 +532,12 @@ pub fn render(r: &Report) -> String {
     use std::fmt::Write;
     let mut s = String::new();
     let gib = |b: u64| format!("{:.2} GiB", b as f64 / 1_073_741_824.0);
-    let _ = writeln!(s, "stylize {} (features: {})", r.version, r.features.join(", "));
+    let _ = writeln!(
+        s,
+        "stylize {} (features: {})",
+        r.version,
+        r.features.join(", ")
+    );
     match &r.onnx_runtime {
         None => {
             let _ = writeln!(s, "ONNX Runtime: not built in (no `text` feature)");
@@ -539,7 +556,10 @@ pub fn render(r: &Report) -> String {
                     (None, None) => "?".into(),
                 }
             );
-            for (name, p) in [("CUDA", &rt.cuda_provider), ("TensorRT", &rt.tensorrt_provider)] {
+            for (name, p) in [
+                ("CUDA", &rt.cuda_provider),
+                ("TensorRT", &rt.tensorrt_provider),
+            ] {
                 let line = match p.state.as_str() {
                     "absent" => "absent (a CPU-only ONNX Runtime)".to_string(),
                     "loads" => format!(
@@ -571,7 +591,13 @@ pub fn render(r: &Report) -> String {
         }
     );
     for g in &r.driver.gpus {
-        let _ = writeln!(s, "  cuda:{}: {}, {}", g.ordinal, g.name, gib(g.memory_bytes));
+        let _ = writeln!(
+            s,
+            "  cuda:{}: {}, {}",
+            g.ordinal,
+            g.name,
+            gib(g.memory_bytes)
+        );
     }
     let _ = writeln!(s, "wgpu: {}", r.wgpu);
     if let Some(m) = &r.model {
