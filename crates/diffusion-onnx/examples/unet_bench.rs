@@ -146,7 +146,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         if a.compare {
             o.cuda.tf32 = false;
         }
-        OnnxDenoiser::open(&model, a.stage, &o)
+        OnnxDenoiser::open(&model, a.stage, &o).map_err(Box::<dyn std::error::Error>::from)
     };
     println!(
         "{} {} ({}), {} on {}: batch {n} × {} × {px}², {:.1} MB in",

@@ -419,12 +419,14 @@ mod tests {
             c("libcudnn.so.9: cannot open shared object file: No such file or directory"),
             LoadFailure::CudnnMissing("libcudnn.so.9".into())
         );
-        assert_eq!(
-            c("/x/libonnxruntime_providers_cuda.so: libcublasLt.so.13: cannot open shared object file: No such file or directory")
-                .advice()
-                .contains("libcublasLt.so.13"),
-            true
+        let cublas = c(
+            "/x/libonnxruntime_providers_cuda.so: libcublasLt.so.13: cannot open shared object file: No such file or directory",
         );
+        assert_eq!(
+            cublas,
+            LoadFailure::CudaRuntimeMissing("libcublasLt.so.13".into())
+        );
+        assert!(cublas.advice().contains("libcublasLt.so.13"));
         assert_eq!(
             c("libcudart.so.13: cannot open shared object file: No such file or directory"),
             LoadFailure::CudaRuntimeMissing("libcudart.so.13".into())

@@ -141,7 +141,7 @@ pub fn session_options(config: &Config) -> SessionOptions {
                 _ => diffusion_onnx::ArenaGrowth::NextPowerOfTwo,
             },
             memory_limit: (g.cuda_memory_limit_gib > 0.0)
-                .then(|| (g.cuda_memory_limit_gib * GIB) as u64),
+                .then_some((g.cuda_memory_limit_gib * GIB) as u64),
             tf32: g.cuda_tf32,
         },
         ..base

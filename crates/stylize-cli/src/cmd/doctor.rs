@@ -356,12 +356,16 @@ mod text {
     pub fn fill(r: &mut Report, model: Option<&std::path::Path>, config: &stylize::config::Config) {
         let mut rt = RuntimeState::default();
         let env_value = std::env::var_os(diffusion_onnx::runtime::ORT_DYLIB_ENV);
-        match diffusion_onnx::runtime::resolve_dylib_path(
+        let found = match diffusion_onnx::runtime::resolve_dylib_path(
             env_value.as_deref(),
             &diffusion_onnx::runtime::default_dylib_path(),
-        )
-        .and_then(|p| diffusion_onnx::runtime::check_library_file(&p).map(|()| p))
-        {
+        ) {
+            Ok(p) => diffusion_onnx::runtime::check_library_file(&p)
+                .map(|()| p)
+                .map_err(|e| e.to_string()),
+            Err(e) => Err(e.to_string()),
+        };
+        match found {
             Ok(path) => {
                 match probe::runtime_version(&path) {
                     Ok((version, info)) => {
@@ -378,7 +382,7 @@ mod text {
                 rt.path = Some(path);
             }
             Err(e) => {
-                rt.error = Some(e.to_string());
+                rt.error = Some(e);
                 rt.cuda_provider.state = "unknown".into();
                 rt.tensorrt_provider.state = "unknown".into();
             }
