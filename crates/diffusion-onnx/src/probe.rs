@@ -193,10 +193,14 @@ pub fn probe_provider(ort_library: &Path, file: &str) -> ProviderProbe {
         return ProviderProbe::Absent { expected: path };
     }
     if let Err(e) = runtime::check_library_file(&path) {
+        let message = match e {
+            crate::OnnxError::RuntimeUnusable { reason, .. } => reason,
+            other => other.to_string(),
+        };
         return ProviderProbe::Fails {
+            message: format!("{}: {message}", path.display()),
             path,
             failure: LoadFailure::Damaged,
-            message: e.to_string(),
         };
     }
     match dl::open(&path.to_string_lossy()) {
