@@ -3,6 +3,7 @@
 #   - Debian: mesa-vulkan-drivers + libvulkan1 (lavapipe: wgpu on the CPU, for the GPU backend's tests)
 #             chromium (headless; the `stylize view` page's browser test, WebGL through SwiftShader)
 #   - PyPI:   ONNX Runtime's shared library (scripts/setup-onnxruntime.sh → .deps/onnxruntime/)
+#             maturin, pytest, NumPy (.venv/); bpy 4.5 + pytest (.venv-blender/, the Blender extension)
 # Idempotent: re-running skips what is already there. Needs root (or sudo) for apt-get.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -35,4 +36,20 @@ if ! .venv/bin/python -c "import numpy, pytest" 2>/dev/null || [ ! -x .venv/bin/
   .venv/bin/python -m pip install -q --disable-pip-version-check "maturin>=1.9.4,<2" "pytest>=7" "numpy>=1.21"
 fi
 # --- end Python bindings -----------------------------------------------------------------------
+# --- Blender extension (blender/, docs/blender.md) ---------------------------------------------
+# Blender 4.5 LTS as a Python module (PyPI `bpy`, CPython 3.11 only, ~480 MB installed) and pytest
+# in their own venv .venv-blender/ (git-ignored), for the headless extension tests and Blender's
+# extension build tool; skipped when present, and where python3 is not 3.11 (no bpy wheel: the
+# extension tests are then skipped by scripts/test.sh, which says so).
+if ! .venv-blender/bin/python -c "import bpy, pytest" 2>/dev/null; then
+  if python3 -c 'import sys; sys.exit(sys.version_info[:2] != (3, 11))'; then
+    echo "setup: creating .venv-blender with bpy 4.5 (PyPI, ~480 MB) and pytest"
+    rm -rf .venv-blender
+    python3 -m venv .venv-blender
+    .venv-blender/bin/python -m pip install -q --disable-pip-version-check "bpy==4.5.*" "pytest>=7"
+  else
+    echo "setup: python3 is not 3.11: no bpy 4.5 wheel, the Blender extension tests will be skipped"
+  fi
+fi
+# --- end Blender extension ---------------------------------------------------------------------
 echo "setup: done"

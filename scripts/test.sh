@@ -43,5 +43,14 @@ step "darap-py: maturin develop";  VIRTUAL_ENV="$PWD/.venv" PATH="$PWD/.venv/bin
                                    --features workspace-hack
 step "pytest (darap-py, scripts)"; .venv/bin/python -m pytest crates/darap-py/tests scripts/tests
 # --- end Python bindings ---
+# --- Blender extension (blender/): build the zip (dev wheel from the artifacts above), install it
+# into the bpy module headless and drive it against target/debug/stylize (docs/blender.md) ---
+if [ -x .venv-blender/bin/python ]; then
+  step "blender extension: build";  bash scripts/build_blender_extension.sh
+  step "pytest (blender extension)"; .venv-blender/bin/python -m pytest blender/tests
+else
+  step "blender extension: SKIPPED (no .venv-blender: python3 is not 3.11, see scripts/setup.sh)"
+fi
+# --- end Blender extension ---
 step "cargo xtask fuzz";           cargo xtask fuzz --seconds 60
 echo; echo "test.sh: all checks passed in $((SECONDS - started)) s"

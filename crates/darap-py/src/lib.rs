@@ -107,6 +107,43 @@ fn bad_array(
     }
 }
 
+/// Reads a float64/float32 `(V,)` array of per-vertex region weights (range checked by the layer).
+fn read_weights(obj: &Bound<'_, PyAny>, num_vertices: usize) -> PyResult<Vec<f64>> {
+    let weights: Option<Vec<f64>> = if let Ok(a) = obj.cast::<PyArray1<f64>>() {
+        Some(a.try_readonly()?.as_array().iter().copied().collect())
+    } else if let Ok(a) = obj.cast::<PyArray1<f32>>() {
+        Some(
+            a.try_readonly()?
+                .as_array()
+                .iter()
+                .map(|&w| f64::from(w))
+                .collect(),
+        )
+    } else {
+        None
+    };
+    match weights {
+        Some(w) if w.len() == num_vertices => Ok(w),
+        Some(w) => Err(PyValueError::new_err(format!(
+            "region weights must have shape ({num_vertices},) (one entry per vertex), got an \
+             array of shape ({},)",
+            w.len()
+        ))),
+        None => Err(bad_array(
+            obj,
+            "region weights",
+            "float64 or float32 (in [0, 1])",
+            &format!("({num_vertices},)"),
+            |a| {
+                let py = a.py();
+                a.ndim() != 1
+                    && (a.dtype().is_equiv_to(&numpy::dtype::<f64>(py))
+                        || a.dtype().is_equiv_to(&numpy::dtype::<f32>(py)))
+            },
+        )),
+    }
+}
+
 fn is_float(a: &Bound<'_, PyUntypedArray>) -> bool {
     let py = a.py();
     let d = a.dtype();
@@ -442,6 +479,27 @@ impl PyDarap {
         self.inner.set_mask(free).map_err(layer_error)
     }
 
+    /// A feathered region: (V,) float64/float32 weights w in [0, 1] scaling the strength per
+    /// vertex (λ·w_v·a_v; 0 = masked, R = I; 1 = free), as `stylize run --region-feather` and
+    /// `stylize apply` use (`feather_weights` builds them). None lets every vertex rotate. Replaces
+    /// any mask.
+    #[pyo3(signature = (weights))]
+    fn set_region_weights(&mut self, weights: Option<&Bound<'_, PyAny>>) -> PyResult<()> {
+        let w = match weights {
+            Some(w) if !w.is_none() => Some(read_weights(w, self.inner.num_vertices())?),
+            _ => None,
+        };
+        self.inner.set_region_weights(w).map_err(layer_error)
+    }
+
+    /// The region's per-vertex weights (V,) float64 (1 free, 0 masked, the feather weight in
+    /// between), or None when every vertex may rotate.
+    fn region_weights<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyArray1<f64>>> {
+        self.inner
+            .region_weights()
+            .map(|w| PyArray1::from_vec(py, w))
+    }
+
     /// Strength λ.
     #[getter]
     fn lam(&self) -> f64 {
@@ -537,6 +595,37 @@ fn normalize_side2_cube<'py>(
     )
 }
 
+/// Feathered region weights (mesh_core::region::feather_weights, the same function `stylize run
+/// --region-feather` and `stylize apply --region-feather` use): free (V,) bool, True inside the
+/// region; faces (F, 3); rings K ≥ 0. A vertex at edge-hop distance d from the nearest vertex
+/// outside the region gets min(d / (K + 1), 1); vertices outside get 0 (K = 0: the hard mask as
+/// 0/1). Returns (V,) float64.
+#[pyfunction]
+fn feather_weights<'py>(
+    py: Python<'py>,
+    free: &Bound<'py, PyAny>,
+    faces: &Bound<'py, PyAny>,
+    rings: usize,
+) -> PyResult<Bound<'py, PyArray1<f64>>> {
+    let n = match free.cast::<PyUntypedArray>() {
+        Ok(a) if a.ndim() == 1 => a.shape()[0],
+        _ => 0,
+    };
+    let free = read_mask(free, n)?;
+    let faces = read_faces(faces)?;
+    if let Some((f, v)) = faces
+        .iter()
+        .enumerate()
+        .find_map(|(f, t)| t.iter().find(|&&v| v as usize >= n).map(|&v| (f, v)))
+    {
+        return Err(DarapError::new_err(format!(
+            "face {f} refers to vertex {v}, but the mesh has only {n} vertices"
+        )));
+    }
+    let w = py.detach(|| mesh_core::region::feather_weights(&free, &faces, rings));
+    Ok(PyArray1::from_vec(py, w))
+}
+
 /// A unit icosphere subdivided `level` times (0..=7): (verts (V, 3) float64, faces (F, 3) int64).
 #[pyfunction]
 fn icosphere<'py>(py: Python<'py>, level: u32) -> PyResult<Bound<'py, PyTuple>> {
@@ -569,6 +658,7 @@ fn _darap(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("DarapError", m.py().get_type::<DarapError>())?;
     m.add_function(wrap_pyfunction!(normalize_side2_cube, m)?)?;
     m.add_function(wrap_pyfunction!(icosphere, m)?)?;
+    m.add_function(wrap_pyfunction!(feather_weights, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

@@ -494,3 +494,97 @@ def test_darap_torch_without_torch_raises_a_clear_import_error() -> None:
         pytest.skip("torch is installed here (tests/test_torch.py covers darap.torch)")
     with pytest.raises(ImportError, match="darap.torch needs PyTorch"):
         import darap.torch  # noqa: F401
+
+
+# ---------------------------------------------------------------------------------------------
+# Feathered regions: the weights of `stylize run --region-feather` / `stylize apply`
+
+
+def test_feather_weights_ramp_over_the_rings_inside_the_region() -> None:
+    # A strip of triangles 0-1-2-…: vertex k is k hops from vertex 0, the only one outside.
+    n = 8
+    faces = np.array([[k, k + 1, k + 2] for k in range(n - 2)], dtype=np.int64)
+    free = np.ones(n, dtype=bool)
+    free[0] = False
+    # Hops from vertex 0 in this strip: 1 for vertices 1 and 2, then ⌈k/2⌉.
+    hops = np.array([0, 1, 1, 2, 2, 3, 3, 4], dtype=np.float64)
+    for rings in (0, 1, 2):
+        w = darap.feather_weights(free, faces, rings)
+        np.testing.assert_array_equal(w, np.minimum(hops / (rings + 1), 1.0))
+    with pytest.raises(darap.DarapError, match="face 0 refers to vertex 2, but the mesh has only 2"):
+        darap.feather_weights(np.ones(2, dtype=bool), faces, 1)
+
+
+def test_region_weights_round_trip_and_feathered_layer_differs_from_the_hard_mask(rng: np.random.Generator) -> None:
+    verts, faces = darap.icosphere(2)
+    free = verts[:, 0] > -0.2
+    w = darap.feather_weights(free, faces, 2)
+    assert ((w > 0) & (w < 1)).any()
+    layer = darap.Darap(verts, faces)
+    assert layer.region_weights() is None
+    layer.set_region_weights(w)
+    np.testing.assert_array_equal(layer.region_weights(), w)
+    x = tilted_targets(layer, rng)
+    feathered = layer.forward(x).positions
+    layer.set_mask(free)
+    hard = layer.forward(x).positions
+    assert np.abs(feathered - hard).max() > 1e-6
+    layer.set_region_weights(None)
+    assert layer.region_weights() is None
+    with pytest.raises(darap.DarapError, match=r"region weight \(must lie in \[0, 1\]\)"):
+        layer.set_region_weights(np.full(len(verts), 1.5))
+    with pytest.raises(ValueError, match=r"region weights must have shape \(162,\)"):
+        layer.set_region_weights(np.ones(3))
+    with pytest.raises(TypeError, match="region weights must be a NumPy array of dtype float64"):
+        layer.set_region_weights(np.ones(len(verts), dtype=np.int64))
+
+
+def test_feathered_localized_run_reapplies_as_stylize_apply(tmp_path: Path) -> None:
+    """A localized, feathered `stylize run` re-applied by `SavedDeformation.apply` (saved region,
+    a new region with its own feather, and the whole mesh) equals `stylize apply` at the same λ."""
+    exe = find_stylize()
+    if exe is None:
+        pytest.skip("no stylize binary in target/ (cargo build --bin stylize) and DARAP_STYLIZE_BIN unset")
+    verts, faces = darap.icosphere(2)
+    mesh = tmp_path / "sphere.obj"
+    with mesh.open("w") as f:
+        for v in verts:
+            f.write("v %.17g %.17g %.17g\n" % tuple(v))
+        for t in faces:
+            f.write(f"f {t[0] + 1} {t[1] + 1} {t[2] + 1}\n")
+    run = tmp_path / "run"
+    subprocess.run(
+        [str(exe), "run", str(mesh), "--style", "cube", "--out", str(run), "-q",
+         "--region", "box:-1,-1,-1,0.2,1,1", "--region-feather", "2",
+         "--set", "style.iterations=15", "--set", "run.turntable_gif_frames=0"],
+        check=True, capture_output=True, timeout=300,
+    )
+    saved = darap.load_saved(run / "deformation.npz")
+    weights = saved.region_weights()
+    assert weights is not None and ((weights > 0) & (weights < 1)).any(), "the run should be feathered"
+    assert saved.region_feather == 2
+    # The saved weights are the feather of the saved free set (the run's own resolution).
+    np.testing.assert_array_equal(darap.feather_weights(weights > 0, saved.faces, 2), weights)
+    vfile = tmp_path / "verts.txt"
+    chosen = np.flatnonzero(saved.rest_positions()[:, 1] > 0)
+    vfile.write_text("\n".join(map(str, chosen)) + "\n")
+    chosen_free = np.zeros(len(saved.verts), dtype=bool)
+    chosen_free[chosen] = True
+    cases = [
+        ([], dict()),
+        (["--region", f"vertices:{vfile}", "--region-feather", "1"], dict(region=chosen_free, feather=1)),
+        (["--region", f"vertices:{vfile}"], dict(region=chosen_free)),  # the saved feather, 2
+        (["--no-region"], dict(region="whole")),
+    ]
+    for k, (args, kwargs) in enumerate(cases):
+        out = tmp_path / f"applied{k}.obj"
+        subprocess.run([str(exe), "apply", str(run / "deformation.npz"), "-o", str(out), "--lambda", "5", *args],
+                       check=True, capture_output=True, timeout=300)
+        cli, _ = read_obj(out)
+        ours = saved.apply(lam=5.0, **kwargs)
+        err = np.abs(ours - cli).max()
+        assert err <= 1e-12, f"case {args}: max |Δposition| vs stylize apply = {err:.3e}"
+    # The saved region matters: the whole-mesh result differs from the localized one.
+    assert np.abs(saved.apply(lam=5.0) - saved.apply(lam=5.0, region="whole")).max() > 1e-4
+    with pytest.raises(ValueError, match="selects no vertex"):
+        saved.apply(region=np.zeros(len(saved.verts), dtype=bool))

@@ -63,6 +63,7 @@ pub const RUN_FILES: &[&str] = &[
     "mesh.obj",
     "mesh.ply",
     "mesh.glb",
+    "mesh_heat.glb",
     "deformation.npz",
     "turntable.png",
     "turntable.gif",

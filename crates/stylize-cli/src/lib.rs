@@ -7,6 +7,7 @@ pub mod cmd;
 pub mod config;
 pub mod features;
 pub mod input;
+pub mod max_safe;
 pub mod open_hint;
 pub mod progress;
 pub mod reference_config;

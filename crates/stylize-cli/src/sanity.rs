@@ -12,13 +12,19 @@
 //!   ([`stylize::eval::pair_ratios`]: the result recentred and rescaled to the source's bounding-box
 //!   diagonal).
 //!
+//! - **self-intersections** ([`stylize::intersections`], exact): the result's intersecting face
+//!   pairs and faces, and the **new** pairs — those the source does not have.
+//!
 //! [`LambdaSanity::warnings`] names each symptom of a collapsing result: a volume ratio below
 //! [`COLLAPSE_VOLUME_RATIO`] (or above its inverse), more than [`FLIPPED_WARN_FRACTION`] of the
-//! vertices flipped, or a mean face-area ratio below [`COLLAPSE_AREA_RATIO`].
+//! vertices flipped, a mean face-area ratio below [`COLLAPSE_AREA_RATIO`], or new
+//! self-intersections. A result is **safe** ([`LambdaSanity::is_safe`]) when it has none of them;
+//! `apply --lambda max-safe` searches the largest such λ.
 
 use darap::Deformation;
 use mesh_core::TriMesh;
 use serde::Serialize;
+use stylize::intersections::{IntersectionFigures, SourceIntersections};
 
 /// A volume ratio below this (or above its inverse) is reported as collapsing (or inflating).
 pub const COLLAPSE_VOLUME_RATIO: f64 = 0.5;
@@ -42,6 +48,14 @@ pub struct LambdaSanity {
     pub area_ratio_mean: f64,
     /// Population standard deviation of the per-face area ratios.
     pub area_ratio_std: f64,
+    /// Self-intersections of the result, and those new against the source.
+    pub intersections: IntersectionFigures,
+    /// The result's intersecting faces, sorted (for highlighting; not serialized).
+    #[serde(skip)]
+    pub intersecting_faces: Vec<u32>,
+    /// The faces of the new pairs, sorted (not serialized).
+    #[serde(skip)]
+    pub new_intersecting_faces: Vec<u32>,
 }
 
 /// Whether a rotation (a proper 3×3 rotation, applied as `R·x`) turns by more than 90°.
@@ -50,8 +64,14 @@ pub fn is_flipped(r: &[[f64; 3]; 3]) -> bool {
 }
 
 impl LambdaSanity {
-    /// Diagnostics of `deformation` (the dARAP result at `lambda`) of the rest mesh `rest`.
-    pub fn assess(rest: &TriMesh, deformation: &Deformation, lambda: f64) -> anyhow::Result<Self> {
+    /// Diagnostics of `deformation` (the dARAP result at `lambda`) of the rest mesh `rest`;
+    /// `source` is `rest` checked for self-intersections (built once, refitted per call).
+    pub fn assess(
+        rest: &TriMesh,
+        source: &mut SourceIntersections,
+        deformation: &Deformation,
+        lambda: f64,
+    ) -> anyhow::Result<Self> {
         let result = TriMesh::new(deformation.positions.clone(), rest.faces.clone());
         let (ratios, _skipped, volume_ratio) = stylize::eval::pair_ratios(rest, &result)?;
         let n = ratios.len().max(1) as f64;
@@ -62,6 +82,7 @@ impl LambdaSanity {
             .iter()
             .filter(|r| is_flipped(r))
             .count();
+        let checked = source.check(&deformation.positions)?;
         Ok(Self {
             lambda,
             flipped,
@@ -69,18 +90,29 @@ impl LambdaSanity {
             volume_ratio,
             area_ratio_mean: mean,
             area_ratio_std: var.sqrt(),
+            intersections: checked.figures,
+            intersecting_faces: checked.faces,
+            new_intersecting_faces: checked.new_faces,
         })
     }
 
-    /// One line: `λ = 8: volume ratio 0.93, face-area ratio 0.98 ± 0.21, 0.0% of vertices flipped`.
+    /// Safe: no warning (no collapse, inflation, shrinking, flips over the limit, or new
+    /// self-intersections).
+    pub fn is_safe(&self) -> bool {
+        self.warnings().is_empty()
+    }
+
+    /// One line: `λ = 8: volume ratio 0.93, face-area ratio 0.98 ± 0.21, 0.0% of vertices
+    /// flipped (rotation > 90°), self-intersections: 0 pairs (0 faces), 0 new`.
     pub fn summary(&self) -> String {
         format!(
-            "λ = {}: volume ratio {:.3}, face-area ratio {:.3} ± {:.3}, {:.1}% of vertices flipped (rotation > 90°)",
+            "λ = {}: volume ratio {:.3}, face-area ratio {:.3} ± {:.3}, {:.1}% of vertices flipped (rotation > 90°), {}",
             self.lambda,
             self.volume_ratio,
             self.area_ratio_mean,
             self.area_ratio_std,
-            100.0 * self.flipped_fraction
+            100.0 * self.flipped_fraction,
+            self.intersections.summary()
         )
     }
 
@@ -113,6 +145,9 @@ impl LambdaSanity {
                 100.0 * self.flipped_fraction
             ));
         }
+        if let Some(w) = self.intersections.warning() {
+            out.push(format!("λ = {}: {w}; try a smaller λ", self.lambda));
+        }
         out
     }
 }
@@ -129,6 +164,9 @@ mod tests {
             volume_ratio,
             area_ratio_mean: area,
             area_ratio_std: 0.1,
+            intersections: IntersectionFigures::default(),
+            intersecting_faces: Vec::new(),
+            new_intersecting_faces: Vec::new(),
         }
     }
 
@@ -159,5 +197,16 @@ mod tests {
         assert!(sanity(1.0, 1.0, 0.2).warnings()[0].contains("20.0%"));
         // An open sheet has no volume: no volume verdict, no panic.
         assert!(sanity(f64::NAN, 1.0, 0.0).warnings().is_empty());
+        assert!(sanity(0.95, 0.97, 0.0).is_safe());
+        let mut crossing = sanity(0.95, 0.97, 0.0);
+        crossing.intersections.new_pairs = 3;
+        crossing.intersections.new_faces = 5;
+        let w = crossing.warnings();
+        assert_eq!(w.len(), 1, "{w:?}");
+        assert!(
+            w[0].contains("3 new self-intersecting face pairs (5 faces)"),
+            "{w:?}"
+        );
+        assert!(!crossing.is_safe());
     }
 }

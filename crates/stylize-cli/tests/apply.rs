@@ -5,7 +5,7 @@
 use std::path::PathBuf;
 
 use darap::RotationRule;
-use stylize_cli::cmd::apply::{Args, run};
+use stylize_cli::cmd::apply::{Args, LambdaArg, run};
 
 fn golden(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -51,7 +51,7 @@ fn several_lambdas_write_one_file_each_and_match_golden() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("bunny.obj");
     run(Args {
-        lambda: vec![5.0, 8.0],
+        lambda: vec![LambdaArg::Value(5.0), LambdaArg::Value(8.0)],
         ..args(out)
     })
     .unwrap();
@@ -66,7 +66,7 @@ fn procrustes_rule_matches_golden() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("bunny.obj");
     run(Args {
-        lambda: vec![40.0],
+        lambda: vec![LambdaArg::Value(40.0)],
         rotation_rule: Some(RotationRule::Procrustes),
         ..args(out.clone())
     })
@@ -85,7 +85,7 @@ fn existing_outputs_are_refused_without_force_and_nothing_is_written() {
     let out = dir.path().join("bunny.obj");
     std::fs::write(dir.path().join("bunny_lambda8.obj"), "keep me").unwrap();
     let err = run(Args {
-        lambda: vec![5.0, 8.0],
+        lambda: vec![LambdaArg::Value(5.0), LambdaArg::Value(8.0)],
         ..args(out.clone())
     })
     .unwrap_err();
@@ -99,7 +99,7 @@ fn existing_outputs_are_refused_without_force_and_nothing_is_written() {
         "keep me"
     );
     run(Args {
-        lambda: vec![5.0, 8.0],
+        lambda: vec![LambdaArg::Value(5.0), LambdaArg::Value(8.0)],
         force: true,
         ..args(out)
     })
@@ -150,7 +150,7 @@ fn bad_inputs_give_clear_errors() {
     .unwrap_err();
     assert!(format!("{bad_mask:#}").contains("line 2"));
     let neg = run(Args {
-        lambda: vec![-1.0],
+        lambda: vec![LambdaArg::Value(-1.0)],
         ..args(dir.path().join("c.obj"))
     })
     .unwrap_err();
@@ -206,7 +206,7 @@ fn a_missing_or_malformed_recorded_lambda_is_named_as_the_files() {
     // --lambda overrides what the file records.
     run(Args {
         saved: path,
-        lambda: vec![5.0],
+        lambda: vec![LambdaArg::Value(5.0)],
         ..args(dir.path().join("out.obj"))
     })
     .unwrap();

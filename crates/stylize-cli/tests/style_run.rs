@@ -101,12 +101,14 @@ fn run_directory_is_complete_and_refuses_overwrite() {
         "mesh.obj",
         "mesh.ply",
         "mesh.glb",
+        "mesh_heat.glb",
         "deformation.npz",
         "turntable.png",
         "run.json",
     ] {
         assert!(out.join(f).is_file(), "{f} missing");
     }
+    check_heat_map(&mesh, &out);
     assert_eq!(ok(stylize_cli::config::load(&out.join("config.toml"))), cfg);
     let metrics = ok(std::fs::read_to_string(out.join("metrics.jsonl")));
     let iterations: Vec<u64> = metrics
@@ -250,4 +252,91 @@ fn lambda_zero_is_warned_about_up_front() {
         "{:?}",
         outcome.warnings
     );
+}
+
+/// The `(count, 3)` f32 rows of a GLB attribute (our writer's layout: one buffer, tight VEC3).
+fn glb_vec3(path: &Path, attribute: &str) -> Vec<[f32; 3]> {
+    let bytes = ok(std::fs::read(path));
+    let u32_at = |i: usize| {
+        u32::from_le_bytes([bytes[i], bytes[i + 1], bytes[i + 2], bytes[i + 3]]) as usize
+    };
+    assert_eq!(&bytes[0..4], b"glTF");
+    let json_len = u32_at(12);
+    let json: serde_json::Value = ok(serde_json::from_slice(&bytes[20..20 + json_len]));
+    let bin = &bytes[20 + json_len + 8..];
+    let accessor = &json["accessors"][json["meshes"][0]["primitives"][0]["attributes"][attribute]
+        .as_u64()
+        .unwrap_or(u64::MAX) as usize];
+    assert_eq!(accessor["componentType"], 5126, "{attribute}: f32");
+    assert_eq!(accessor["type"], "VEC3");
+    let view = &json["bufferViews"][accessor["bufferView"].as_u64().unwrap_or(u64::MAX) as usize];
+    let offset = view["byteOffset"].as_u64().unwrap_or(0) as usize;
+    let count = accessor["count"].as_u64().unwrap_or(0) as usize;
+    (0..count)
+        .map(|v| {
+            [0, 1, 2].map(|k| {
+                let i = offset + 12 * v + 4 * k;
+                f32::from_le_bytes([bin[i], bin[i + 1], bin[i + 2], bin[i + 3]])
+            })
+        })
+        .collect()
+}
+
+/// `mesh_heat.glb`: the result's positions, and colours that encode the displacement from the
+/// rest mesh (at its vertex centroid) through the documented colormap, with the scale in run.json.
+fn check_heat_map(mesh: &Path, out: &Path) {
+    let rest = ok(stylize::runner::prepare_mesh(mesh)).0.positions;
+    let result = ok(mesh_core::io::read_mesh(out.join("mesh.obj"))).positions;
+    let heat = out.join("mesh_heat.glb");
+    // A valid glTF for the reader too, with the result's geometry.
+    let read = ok(mesh_core::io::read_mesh(&heat));
+    assert_eq!(read.positions.len(), result.len());
+    for (g, r) in glb_vec3(&heat, "POSITION").iter().zip(&result) {
+        for k in 0..3 {
+            assert_eq!(g[k], r[k] as f32);
+        }
+    }
+    let n = rest.len() as f64;
+    let centroid = [0, 1, 2].map(|k| rest.iter().map(|r| r[k]).sum::<f64>() / n);
+    let d: Vec<f64> = rest
+        .iter()
+        .zip(&result)
+        .map(|(r, p)| {
+            [0, 1, 2]
+                .map(|k| (p[k] - (r[k] - centroid[k])).powi(2))
+                .iter()
+                .sum::<f64>()
+                .sqrt()
+        })
+        .collect();
+    let max = d.iter().copied().fold(0.0, f64::max);
+    assert!(max > 1e-4, "the run should move the surface ({max})");
+    let summary: serde_json::Value = ok(serde_json::from_str(&ok(std::fs::read_to_string(
+        out.join("run.json"),
+    ))));
+    let recorded = summary["heat"]["max_displacement"]
+        .as_f64()
+        .unwrap_or(f64::NAN);
+    assert!((recorded - max).abs() <= 1e-12 * max, "{recorded} vs {max}");
+    assert_eq!(summary["heat"]["file"], "mesh_heat.glb");
+    let colors = glb_vec3(&heat, "COLOR_0");
+    assert_eq!(colors.len(), d.len());
+    let mut most = 0;
+    for (v, (c, &dv)) in colors.iter().zip(&d).enumerate() {
+        let want = stylize::heat::colormap(dv / max).map(stylize::heat::srgb_to_linear);
+        for k in 0..3 {
+            assert!(
+                (f64::from(c[k]) - want[k]).abs() < 1e-6,
+                "vertex {v}: {c:?} vs {want:?}"
+            );
+        }
+        if dv > d[most] {
+            most = v;
+        }
+    }
+    // The vertex that moved most is the colormap's last stop (yellow).
+    let top = stylize::heat::VIRIDIS_STOPS[4].map(stylize::heat::srgb_to_linear);
+    for k in 0..3 {
+        assert!((f64::from(colors[most][k]) - top[k]).abs() < 1e-6);
+    }
 }

@@ -248,9 +248,80 @@ fn collapsing_lambda_is_reported_in_the_result_header() {
         let (head, _) = unframe(&r.body);
         let warnings = head["warnings"].as_array().unwrap();
         assert!(!warnings.is_empty(), "{head}");
+        // λ = 20 on the golden bunny also crosses itself: the figures and the faces to highlight.
+        let x = &head["intersections"];
+        let new_pairs = x["new_pairs"].as_u64().unwrap();
+        assert!(new_pairs > 0, "{head}");
+        assert_eq!(x["source_pairs"], 0, "{head}");
+        let faces = head["intersecting_faces"].as_array().unwrap();
+        assert_eq!(faces.len() as u64, x["faces"].as_u64().unwrap(), "{head}");
+        assert_eq!(
+            head["new_intersecting_faces"].as_array().unwrap().len() as u64,
+            x["new_faces"].as_u64().unwrap()
+        );
+        assert!(
+            faces
+                .iter()
+                .all(|f| f.as_u64().unwrap() < head["faces"].as_u64().unwrap())
+        );
+        assert!(
+            warnings
+                .iter()
+                .any(|w| w.as_str().unwrap().contains("new self-intersecting")),
+            "{head}"
+        );
         let r = get(&app, &format!("/{TOKEN}/api/items/0/result?lambda=5")).await;
         let (head, _) = unframe(&r.body);
         assert!(head["warnings"].as_array().unwrap().is_empty(), "{head}");
+        assert_eq!(head["intersections"]["new_pairs"], 0, "{head}");
+        assert!(head["intersecting_faces"].as_array().unwrap().is_empty());
+    });
+}
+
+#[test]
+fn max_safe_is_the_strongest_safe_lambda_up_to_upper() {
+    let dir = tempfile::tempdir().unwrap();
+    let app = app(&[complete_run(dir.path(), "run"), golden("bunny.obj")]);
+    rt().block_on(async {
+        let j = json(&app, &format!("/{TOKEN}/api/items/0/max-safe?upper=20")).await;
+        let lambda = j["lambda"].as_f64().unwrap();
+        let hi = j["first_unsafe"].as_f64().unwrap();
+        // λ = 8 is safe and λ = 10 is not on the golden bunny (docs/cli.md, "λ sanity").
+        assert!(
+            (8.0..10.0).contains(&lambda) && hi > lambda && hi <= 1.01 * lambda,
+            "{j}"
+        );
+        let r = get(
+            &app,
+            &format!("/{TOKEN}/api/items/0/result?lambda={lambda}"),
+        )
+        .await;
+        assert!(
+            unframe(&r.body).0["warnings"]
+                .as_array()
+                .unwrap()
+                .is_empty()
+        );
+        let r = get(&app, &format!("/{TOKEN}/api/items/0/result?lambda={hi}")).await;
+        assert!(
+            !unframe(&r.body).0["warnings"]
+                .as_array()
+                .unwrap()
+                .is_empty()
+        );
+        // Everything safe up to a small upper end: the upper end itself.
+        let j = json(&app, &format!("/{TOKEN}/api/items/0/max-safe?upper=3")).await;
+        assert_eq!(
+            (j["lambda"].as_f64(), j["first_unsafe"].as_f64()),
+            (Some(3.0), None),
+            "{j}"
+        );
+        for bad in ["0", "-1", "NaN", "1000", "x"] {
+            let r = get(&app, &format!("/{TOKEN}/api/items/0/max-safe?upper={bad}")).await;
+            assert_eq!(r.status, 400, "upper={bad}: {}", r.text());
+        }
+        let r = get(&app, &format!("/{TOKEN}/api/items/1/max-safe?upper=5")).await;
+        assert_eq!(r.status, 404, "a mesh has no λ: {}", r.text());
     });
 }
 

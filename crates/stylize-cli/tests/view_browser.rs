@@ -546,6 +546,36 @@ fn page_shows_the_mesh_and_follows_the_lambda_slider() {
         after > 0.01,
         "the 'after' view did not change between λ = 2 and 16 ({after:.4} of its pixels)"
     );
+    // Self-intersections: none at λ = 2; at λ = 16 the golden bunny crosses itself, the counts
+    // are on the page and the new faces are drawn red over the result (only in 'after').
+    let count = |shot: &Shot| -> u64 {
+        html_attr(&shot.dom, "data-new-intersecting-faces")
+            .and_then(|v| v.parse().ok())
+            .unwrap_or_else(|| panic!("no count: {}", html_tag(&shot.dom)))
+    };
+    assert_eq!(count(&shots[0]), 0);
+    assert!(count(&shots[1]) > 0);
+    let red = |shot: &Shot, x0: usize, x1: usize| {
+        shot.band(x0, x1)
+            .filter(|&(x, y)| {
+                let [r, g, b] = shot.pixel(x, y);
+                r > 150 && g < 90 && b < 90
+            })
+            .count()
+    };
+    assert_eq!(red(&shots[0], 0, 2 * half), 0, "red pixels at λ = 2");
+    assert_eq!(red(&shots[1], 0, half), 0, "red pixels in 'before'");
+    assert!(
+        red(&shots[1], half, 2 * half) > 20,
+        "no red faces at λ = 16"
+    );
+    // The strongest safe λ up to the slider's end (20): λ = 8 is safe, 10 is not.
+    for shot in &shots {
+        let safe: f64 = html_attr(&shot.dom, "data-max-safe")
+            .and_then(|v| v.parse().ok())
+            .unwrap_or_else(|| panic!("no max-safe λ: {}", html_tag(&shot.dom)));
+        assert!((8.0..10.0).contains(&safe), "{safe}");
+    }
 }
 
 /// A run still being written (a lock, no `deformation.npz` yet) with two snapshots: the page

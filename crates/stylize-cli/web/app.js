@@ -4,7 +4,9 @@
 //
 // URL parameters: ?item=ID (which item first), ?lambda=L (after loading, set λ to L through the
 // slider's own input handler — the browser test uses it). <html data-state> is "loading" while a
-// request is pending and "ready" when the shown shape matches the slider; data-lambda is the λ shown.
+// request is pending and "ready" when the shown shape matches the slider; data-lambda is the λ shown,
+// data-intersecting-faces / data-new-intersecting-faces its self-intersection counts, data-max-safe
+// the strongest safe λ up to the slider's end once the server has found it.
 import * as THREE from 'three';
 import { OrbitControls } from './vendor/three/OrbitControls.js';
 import { renderPlots, renderInfo } from './plots.js';
@@ -13,7 +15,7 @@ const $ = (id) => document.getElementById(id);
 const params = new URLSearchParams(location.search);
 const ui = {
   item: $('item'), status: $('status'), lambda: $('lambda'), lambdaValue: $('lambda-value'),
-  reset: $('reset-lambda'), flat: $('flat'), wire: $('wire'), layout: $('layout'), toggle: $('toggle'),
+  reset: $('reset-lambda'), maxSafe: $('max-safe'), safeNote: $('safe-note'), flat: $('flat'), wire: $('wire'), layout: $('layout'), toggle: $('toggle'),
   dlObj: $('dl-obj'), dlPly: $('dl-ply'), dlGlb: $('dl-glb'), images: $('images'),
   metrics: $('metrics'), warnings: $('warnings'), left: $('label-left'), right: $('label-right'),
   canvas: $('canvas'), viewport: $('viewport'),
@@ -79,6 +81,67 @@ const referenceMaterial = new THREE.MeshLambertMaterial({
 referenceMaterial.color.setRGB(0.5, 0.5, 0.5, THREE.LinearSRGBColorSpace);
 function referenceLook() { return ui.look.value === 'reference'; }
 const wireMaterial = new THREE.MeshBasicMaterial({ color: 0x202020, wireframe: true, transparent: true, opacity: 0.35 });
+
+// Self-intersecting faces of the result (drawn over it, sharing its positions): new ones (not in
+// the source) red, the source's own orange. Group 0 = new, group 1 = the source's own.
+const newIntersectionMaterial = new THREE.MeshBasicMaterial({
+  color: 0xd62828, side: THREE.DoubleSide, polygonOffset: true, polygonOffsetFactor: -1, polygonOffsetUnits: -1,
+});
+const oldIntersectionMaterial = newIntersectionMaterial.clone();
+oldIntersectionMaterial.color.set(0xf08c00);
+let highlight = null;
+
+// Highlights head.intersecting_faces of the result (faces in head.new_intersecting_faces red).
+function showIntersections(head) {
+  if (highlight) { after.scene.remove(highlight); highlight.geometry.dispose(); highlight = null; }
+  const all = head.intersecting_faces || [];
+  if (!resultGeometry || !resultGeometry.index || all.length === 0) return;
+  const src = resultGeometry.index.array;
+  const fresh = new Set(head.new_intersecting_faces || []);
+  const ordered = [...all.filter((f) => fresh.has(f)), ...all.filter((f) => !fresh.has(f))];
+  const index = new Uint32Array(3 * ordered.length);
+  ordered.forEach((f, k) => { index[3 * k] = src[3 * f]; index[3 * k + 1] = src[3 * f + 1]; index[3 * k + 2] = src[3 * f + 2]; });
+  const g = new THREE.BufferGeometry();
+  g.setAttribute('position', resultGeometry.getAttribute('position'));
+  g.setIndex(new THREE.BufferAttribute(index, 1));
+  const nNew = ordered.filter((f) => fresh.has(f)).length;
+  g.addGroup(0, 3 * nNew, 0);
+  g.addGroup(3 * nNew, 3 * (ordered.length - nNew), 1);
+  highlight = new THREE.Mesh(g, [newIntersectionMaterial, oldIntersectionMaterial]);
+  highlight.name = 'intersections';
+  after.scene.add(highlight);
+}
+
+// The strongest safe λ up to the slider's end (server: api/items/ID/max-safe), shown on the
+// slider's track (green up to it, red beyond) and behind the "max safe λ" button.
+let safe = null;   // { upper, lambda, first_unsafe, safe_again, ... } of the current item
+const AUTO_MAX_SAFE_FACES = 20000;
+async function loadMaxSafe() {
+  const item = current;
+  const upper = Number(ui.lambda.max);
+  ui.safeNote.textContent = 'searching the safe λ…';
+  const r = await check(await fetch(`api/items/${item.id}/max-safe?upper=${upper}`), 'max-safe');
+  const j = await r.json();
+  if (current !== item) return;
+  safe = j;
+  const pct = (100 * j.lambda / upper).toFixed(2);
+  ui.lambda.style.background = j.first_unsafe === null
+    ? '#cfe8cf'
+    : `linear-gradient(to right, #cfe8cf 0%, #cfe8cf ${pct}%, #f4c4c4 ${pct}%, #f4c4c4 100%)`;
+  ui.maxSafe.hidden = false;
+  ui.maxSafe.dataset.lambda = String(j.lambda);
+  ui.safeNote.textContent = j.first_unsafe === null
+    ? `safe up to λ = ${upper}`
+    : `safe up to λ = ${fmt(j.lambda, 2)}` + (j.safe_again.length ? ' (safe again further up: not monotone)' : '');
+  document.documentElement.dataset.maxSafe = String(j.lambda);
+}
+function clearMaxSafe() {
+  safe = null;
+  ui.lambda.style.background = '';
+  ui.maxSafe.hidden = true;  // shown again for runs
+  ui.safeNote.textContent = '';
+  delete document.documentElement.dataset.maxSafe;
+}
 
 const pointsMaterial = new THREE.PointsMaterial({ color: 0x3d5a80, size: 2, sizeAttenuation: false });
 
@@ -240,8 +303,13 @@ async function loadItem(id) {
   ui.normals.parentElement.hidden = !run;
   await showNormals();
   if (current.kind === 'run') await refreshReplay();
+  clearMaxSafe();
   if (run) {
+    ui.maxSafe.hidden = false;
     await request({ kind: 'lambda', value: Number(ui.lambda.value) });
+    // The search re-solves ~40 λ on the server and holds the run meanwhile (slider moves wait):
+    // automatic on small meshes only, else on the button's first click.
+    if (head.faces <= AUTO_MAX_SAFE_FACES) loadMaxSafe().catch((e) => { ui.safeNote.textContent = e.message; });
   } else {
     render();
     setState('ready');
@@ -356,6 +424,8 @@ async function refreshReplay() {
 }
 
 async function applySnapshot(iteration) {
+  // The highlighted faces belong to the λ result, not to a snapshot.
+  if (highlight) highlight.visible = false;
   let s;
   try {
     s = await fetchSnapshot(iteration, false);
@@ -455,7 +525,14 @@ async function applyResult(lambda) {
   document.documentElement.dataset.lambda = String(lambda);
   ui.metrics.textContent =
     `λ = ${lambda} · volume ratio ${fmt(head.volume_ratio)} · face-area ratio ${fmt(head.area_ratio_mean)} ± ${fmt(head.area_ratio_std)}` +
-    ` · flipped ${fmt(100 * head.flipped_fraction, 1)}% · ${head.vertices} vertices · updated in ${ms.toFixed(0)} ms`;
+    ` · flipped ${fmt(100 * head.flipped_fraction, 1)}%` +
+    ` · self-intersecting faces ${head.intersections ? head.intersections.faces : '—'} (${head.intersections ? head.intersections.new_faces : '—'} new)` +
+    ` · ${head.vertices} vertices · updated in ${ms.toFixed(0)} ms`;
+  // For scripts and the browser test: the counts of the shown result.
+  document.documentElement.dataset.intersectingFaces = String(head.intersections ? head.intersections.faces : '');
+  document.documentElement.dataset.newIntersectingFaces = String(head.intersections ? head.intersections.new_faces : '');
+  showIntersections(head);
+  render();
   ui.metrics.dataset.ms = ms.toFixed(1);
   ui.warnings.textContent = (head.warnings || []).join(' · ');
   setDownloads(lambda);
@@ -489,6 +566,15 @@ ui.lambda.addEventListener('input', () => {
   movedAt = performance.now();
   stopPlaying();
   request({ kind: 'lambda', value: l });
+});
+ui.maxSafe.addEventListener('click', async () => {
+  if (!safe) {
+    try { await loadMaxSafe(); } catch (e) { ui.safeNote.textContent = e.message; return; }
+  }
+  if (safe) {
+    ui.lambda.value = String(safe.lambda);
+    ui.lambda.dispatchEvent(new Event('input'));
+  }
 });
 ui.reset.addEventListener('click', () => {
   if (current && current.lambda !== null) {

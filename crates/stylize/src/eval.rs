@@ -10,6 +10,10 @@
 //! - per mesh, the signed volume ratio `V_result / V_source` (divergence theorem,
 //!   `Σ_f p1·(p2 × p3)/6`).
 //!
+//! - per pair, the **self-intersections** ([`crate::intersections`], exact): the source's and the
+//!   result's intersecting face pairs and faces, and the pairs of the result that the source does
+//!   not have (computed on the meshes as given: intersection does not depend on placement).
+//!
 //! The area ratios of **all faces of all pairs are pooled**: the reported mean and standard
 //! deviation (population, ddof = 0) are over that pool, as in the paper's table.
 //!
@@ -49,6 +53,8 @@ pub struct PairMetrics {
     pub area_ratio_std: f64,
     /// `V_result / V_source` (NaN when the source volume is 0, e.g. an open sheet).
     pub volume_ratio: f64,
+    /// Self-intersections of the source and the result, and the result's new pairs.
+    pub intersections: crate::intersections::IntersectionFigures,
     /// CLIP similarity of source and result (only when a CLIP model was given).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub clip: Option<ClipScore>,
@@ -194,6 +200,8 @@ pub fn evaluate(pairs: &[(String, TriMesh, TriMesh)]) -> Result<EvalReport> {
         let (ratios, skipped, volume) =
             pair_ratios(source, result).with_context(|| name.clone())?;
         let (m, s) = mean_std(&ratios);
+        let intersections =
+            crate::intersections::compare(source, result).with_context(|| name.clone())?;
         out.push(PairMetrics {
             name: name.clone(),
             faces: ratios.len(),
@@ -201,6 +209,7 @@ pub fn evaluate(pairs: &[(String, TriMesh, TriMesh)]) -> Result<EvalReport> {
             area_ratio_mean: m,
             area_ratio_std: s,
             volume_ratio: volume,
+            intersections,
             clip: None,
         });
         pooled.extend(ratios);
@@ -419,17 +428,23 @@ pub fn table(report: &EvalReport) -> String {
         None => format!(" {:>9}", "—"),
     };
     let mut s = format!(
-        "{:<40} {:>8} {:>18} {:>10}",
-        "pair", "faces", "area ratio", "volume"
+        "{:<40} {:>8} {:>18} {:>10} {:>17}",
+        "pair", "faces", "area ratio", "volume", "self-∩ faces (new)"
     );
     if with_clip {
         s += &format!(" {:>9} {:>9}", "CLIP src", "CLIP res");
     }
     s += "\n";
     for p in &report.pairs {
+        let x = &p.intersections;
         s += &format!(
-            "{:<40} {:>8} {:>8.3} ± {:<7.3} {:>10.3}",
-            p.name, p.faces, p.area_ratio_mean, p.area_ratio_std, p.volume_ratio
+            "{:<40} {:>8} {:>8.3} ± {:<7.3} {:>10.3} {:>17}",
+            p.name,
+            p.faces,
+            p.area_ratio_mean,
+            p.area_ratio_std,
+            p.volume_ratio,
+            format!("{} ({})", x.faces, x.new_faces)
         );
         if with_clip {
             let c = p.clip.as_ref();
@@ -439,12 +454,25 @@ pub fn table(report: &EvalReport) -> String {
         s += "\n";
     }
     s += &format!(
-        "{:<40} {:>8} {:>8.3} ± {:<7.3} {:>10.3}",
+        "{:<40} {:>8} {:>8.3} ± {:<7.3} {:>10.3} {:>17}",
         "pooled",
         report.pairs.iter().map(|p| p.faces).sum::<usize>(),
         report.area_ratio_mean,
         report.area_ratio_std,
-        report.volume_ratio_mean
+        report.volume_ratio_mean,
+        format!(
+            "{} ({})",
+            report
+                .pairs
+                .iter()
+                .map(|p| p.intersections.faces)
+                .sum::<usize>(),
+            report
+                .pairs
+                .iter()
+                .map(|p| p.intersections.new_faces)
+                .sum::<usize>()
+        )
     );
     if with_clip {
         s += &clip_cell(report.clip_source_mean);

@@ -11,7 +11,9 @@
 //!   the orbit, tint and grid helpers the previews share;
 //! - [`models`]: DeepFloyd IF guidance from a model directory (feature `text`; without it its
 //!   loading functions return [`Error::NotBuilt`]); [`eval`]: metrics
-//!   of finished runs (CLIP similarity with `text`);
+//!   of finished runs (CLIP similarity with `text`); [`intersections`]: a result's
+//!   self-intersections against its source (what `eval`, `apply`, the viewer and the end of a run
+//!   report);
 //! - [`error`]: the typed [`Error`] every public function returns, and [`error::Stopped`];
 //! - [`malloc`]: the C allocator's policy that keeps the loop's large per-iteration buffers from
 //!   being page-faulted in anew every iteration (for programs that run the loop).
@@ -29,7 +31,9 @@ pub mod checkpoint;
 pub mod config;
 pub mod error;
 pub mod eval;
+pub mod heat;
 pub mod identity;
+pub mod intersections;
 pub mod malloc;
 pub mod models;
 pub mod pipeline;

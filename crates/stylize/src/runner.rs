@@ -375,6 +375,8 @@ pub struct Prepared {
     pub setup_seconds: f64,
     /// The region of a localized run (`[region]`), already set on `darap`.
     pub region: Option<ResolvedRegion>,
+    /// The scale of `mesh_heat.glb` (its largest displacement, [`crate::heat`]) once written.
+    pub heat_max_displacement: Option<f64>,
 }
 
 /// Stage 1: validates the configuration, prepares the mesh, computes the identity of a task of
@@ -405,6 +407,7 @@ pub fn prepare(request: &RunRequest, kind: &dyn TaskKind) -> Result<Prepared> {
         darap,
         config_toml,
         setup_seconds: setup.elapsed().as_secs_f64(),
+        heat_max_displacement: None,
     })
 }
 
@@ -582,6 +585,21 @@ pub fn write_outputs(
             Err(e) => return Err(e).with_context(|| format!("cannot write {}", path.display())),
         }
     }
+    // The displacement heat map (crate::heat), beside the plain mesh files.
+    let heat_path = dir.file("mesh_heat.glb");
+    let mut heat_max = 0.0;
+    rundir::durable::replace_with(&heat_path, |tmp| {
+        heat_max = crate::heat::write_heat_glb(
+            tmp,
+            &mesh.positions,
+            &deformed.positions,
+            &deformed,
+            Some(&normals),
+        )?;
+        Ok::<(), Error>(())
+    })
+    .with_context(|| format!("cannot write {}", heat_path.display()))?;
+    prepared.heat_max_displacement = Some(heat_max);
     let region = prepared.region.as_ref();
     write_deformation(dir, mesh, x, config, source, record, region)?;
     let free = region
@@ -773,6 +791,7 @@ fn execute_prepared<'g, T: Task<'g> + 'g>(
         (Some(f), Some(before)) => Some((before, f(&deformed.positions))),
         _ => None,
     };
+    let intersections = new_self_intersections(&prepared.mesh, &deformed, &mut prepared.warnings);
     lock.ensure_held()?;
     write_summary(
         &dir,
@@ -783,6 +802,7 @@ fn execute_prepared<'g, T: Task<'g> + 'g>(
         alignment,
         renderer_choice.as_deref(),
         looped.loop_seconds,
+        intersections.as_ref(),
     )?;
     drop(lock);
     Ok(RunOutcome {
@@ -954,8 +974,36 @@ impl ObservedLoop<'_> {
     }
 }
 
+/// The end of a run's check for self-intersections the result has and the source does not
+/// ([`crate::intersections`]): when there are any, a warning (pushed to `warnings`) and the figures
+/// (returned, for `run.json`'s `self_intersections`). A check that cannot run becomes a warning —
+/// never a failure of a finished run.
+pub fn new_self_intersections(
+    source: &TriMesh,
+    result: &TriMesh,
+    warnings: &mut Vec<String>,
+) -> Option<crate::intersections::IntersectionFigures> {
+    match crate::intersections::compare(source, result) {
+        Ok(f) => {
+            let w = f.warning()?;
+            warnings.push(format!(
+                "the result has {w}: a self-intersecting mesh breaks printing, booleans and \
+                 simulation; try a smaller λ (`stylize apply deformation.npz --lambda max-safe`)"
+            ));
+            Some(f)
+        }
+        Err(e) => {
+            warnings.push(format!(
+                "the self-intersection check of the result failed: {e}"
+            ));
+            None
+        }
+    }
+}
+
 /// Stage 6 of [`execute_with`]: `run.json`, the run's summary (written last: it marks the run
-/// complete).
+/// complete). `intersections`: the result's new self-intersections, recorded as
+/// `self_intersections` when there are any.
 #[allow(clippy::too_many_arguments)]
 fn write_summary(
     dir: &RunDir,
@@ -966,10 +1014,11 @@ fn write_summary(
     alignment: Option<(f64, f64)>,
     renderer_choice: Option<&str>,
     loop_seconds: f64,
+    intersections: Option<&crate::intersections::IntersectionFigures>,
 ) -> Result<()> {
     let config = &request.config;
     let mesh = &prepared.mesh;
-    let summary = serde_json::json!({
+    let mut summary = serde_json::json!({
         "status": "complete",
         "mesh": request.mesh.display().to_string(),
         "objective": objective,
@@ -986,6 +1035,12 @@ fn write_summary(
         "renderer": renderer_choice,
         "seconds": { "setup": prepared.setup_seconds, "loop": loop_seconds },
         "warnings": prepared.warnings,
+        "heat": prepared.heat_max_displacement.map(|max| serde_json::json!({
+            "file": "mesh_heat.glb",
+            "quantity": "displacement magnitude |p - (r - centroid(r))|, normalized side-2 frame",
+            "colormap": "viridis, 5 stops, piecewise linear in sRGB; COLOR_0 linear RGB",
+            "max_displacement": max,
+        })),
         "region": prepared.region.as_ref().map(|r| serde_json::json!({
             "specs": config.region.specs,
             "feather": config.region.feather,
@@ -993,6 +1048,9 @@ fn write_summary(
         })),
         "task": prepared.identity.fields,
     });
+    if let Some(x) = intersections {
+        summary["self_intersections"] = serde_json::to_value(x)?;
+    }
     rundir::durable::replace_bytes(
         &dir.summary(),
         serde_json::to_string_pretty(&summary)?.as_bytes(),

@@ -24,6 +24,7 @@ from ._darap import (
     DarapError,
     Deformation,
     __version__,
+    feather_weights,
     icosphere,
     normalize_side2_cube,
 )
@@ -38,6 +39,7 @@ __all__ = [
     "Deformation",
     "SavedDeformation",
     "__version__",
+    "feather_weights",
     "icosphere",
     "load_saved",
     "normalize_side2_cube",

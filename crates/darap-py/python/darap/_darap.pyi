@@ -10,6 +10,7 @@ __version__: str
 Float3 = npt.NDArray[np.floating]  # (N, 3) float64 or float32, any memory layout
 Index3 = npt.NDArray[np.integer]  # (F, 3) int32/int64/uint32/uint64, 0-based, CCW
 Mask = npt.NDArray[np.bool_]  # (V,) True where the vertex may rotate
+Weights = npt.NDArray[np.floating]  # (V,) float64/float32 region weights in [0, 1]
 
 class DarapError(ValueError):
     """An error reported by the Rust dARAP layer (the message is the Rust one): non-finite input,
@@ -87,6 +88,12 @@ class Darap:
         """``"recenter_rescale"``, ``"recenter_only"`` or ``"none"``."""
     def set_mask(self, mask: Optional[Mask]) -> None:
         """(V,) bool, True where the vertex may rotate; ``None`` lets every vertex rotate."""
+    def set_region_weights(self, weights: Optional[Weights]) -> None:
+        """A feathered region: (V,) weights in [0, 1] scaling λ per vertex (0 = masked, R = I;
+        1 = free), as ``stylize apply`` uses; ``None`` lets every vertex rotate. Replaces any
+        mask."""
+    def region_weights(self) -> Optional[npt.NDArray[np.float64]]:
+        """(V,) weights (1 free, 0 masked, feather in between), ``None`` when all may rotate."""
     @property
     def lam(self) -> float: ...
     @property
@@ -108,3 +115,9 @@ def normalize_side2_cube(
 def icosphere(level: int) -> Tuple[npt.NDArray[np.float64], npt.NDArray[np.int64]]:
     """A unit icosphere subdivided ``level`` times (0 ≤ level ≤ 7; level 3 has 642 vertices):
     ``(verts (V, 3) float64, faces (F, 3) int64)``."""
+
+def feather_weights(free: Mask, faces: Index3, rings: int) -> npt.NDArray[np.float64]:
+    """Feathered region weights (``mesh_core::region::feather_weights``, what ``stylize run
+    --region-feather`` and ``stylize apply`` use): a vertex at edge-hop distance ``d`` from the
+    nearest vertex outside the region (``free`` False) gets ``min(d / (rings + 1), 1)``; outside
+    vertices get 0. Returns (V,) float64."""

@@ -21,11 +21,17 @@ from typing import Any, Dict, Optional, Union
 
 import numpy as np
 
-from ._darap import Darap, normalize_side2_cube
+from ._darap import Darap, feather_weights, normalize_side2_cube
 
 STANDARD_KEYS = ("verts", "faces", "verts_normals", "deform_by_csd_cfg", "dataset_cfg")
 
 PathLike = Union[str, "os.PathLike[str]"]
+
+#: Which vertices may rotate when re-applying (``stylize::saved::Region``): ``"saved"`` (the run's
+#: ``region_weights``, else every vertex: what ``stylize apply`` does by default), ``"whole"``
+#: (every vertex, ``--no-region``) or a (V,) bool array of the vertices that may rotate, feathered
+#: by ``feather`` rings (default: the run's ``region_feather``, else 0), as ``--mask``/``--region``.
+RegionArg = Union[str, np.ndarray]
 
 
 @dataclass
@@ -80,6 +86,49 @@ class SavedDeformation:
             raise ValueError(f"{self.path}: unknown rotation rule {rule!r} in key `rotation_rule`")
         return rule
 
+    def region_weights(self) -> Optional[np.ndarray]:
+        """The saved region's per-vertex weights (extra key ``region_weights`` of a localized run,
+        feathered as the run was), float64 (V,); ``None`` for a whole-mesh run."""
+        value = self.extra.get("region_weights")
+        if value is None:
+            return None
+        if value.dtype.kind != "f" or value.shape != (len(self.verts),):
+            raise ValueError(
+                f"{self.path}: `region_weights` must hold one f64 per vertex ({len(self.verts)}), "
+                f"got dtype {value.dtype} shape {value.shape}"
+            )
+        return np.asarray(value, dtype=np.float64)
+
+    @property
+    def region_feather(self) -> Optional[int]:
+        """The saved run's feather rings (extra key ``region_feather``), if recorded."""
+        value = self.extra.get("region_feather")
+        if value is None or value.size != 1 or value.dtype.kind not in "iu":
+            return None
+        return int(value.reshape(-1)[0])
+
+    def resolve_region(self, region: RegionArg = "saved", feather: Optional[int] = None) -> Optional[np.ndarray]:
+        """The per-vertex weights that ``region`` means (see :data:`RegionArg`), ``None`` for every
+        vertex free: exactly the weights ``stylize apply`` gives the layer."""
+        if isinstance(region, str):
+            if region == "saved":
+                return self.region_weights()
+            if region == "whole":
+                return None
+            raise ValueError(f"region must be 'saved', 'whole' or a (V,) bool array, got {region!r}")
+        free = np.asarray(region)
+        if free.dtype != np.bool_ or free.shape != (len(self.verts),):
+            raise ValueError(
+                f"region must be a ({len(self.verts)},) bool array (True where a vertex may rotate), "
+                f"got dtype {free.dtype} shape {free.shape}"
+            )
+        if not free.any():
+            raise ValueError("the region selects no vertex: a localized apply would change nothing")
+        rings = feather if feather is not None else (self.region_feather or 0)
+        if rings < 0:
+            raise ValueError(f"feather rings must be ≥ 0, got {rings}")
+        return feather_weights(free, self.faces, rings)
+
     def rest_positions(self) -> np.ndarray:
         """``verts`` in float64, normalized to the side-2 cube (longest bbox side [−1, 1], bbox
         centred at the origin), as ``stylize apply`` and the reference do."""
@@ -95,9 +144,13 @@ class SavedDeformation:
         lam: Optional[float] = None,
         rotation_rule: Optional[str] = None,
         mask: Optional[np.ndarray] = None,
+        region: RegionArg = "saved",
+        feather: Optional[int] = None,
     ) -> Darap:
         """A :class:`Darap` layer on :meth:`rest_positions` with the saved λ and rotation rule
-        unless given (λ 8 when the file records none)."""
+        unless given (λ 8 when the file records none), and the region of ``region``/``feather``
+        (:meth:`resolve_region`; by default the saved one, as ``stylize apply``). A ``mask``
+        (hard, unfeathered) replaces the region."""
         if not self.normalize_target_normals:
             raise ValueError(
                 f"{self.path}: `normalize_target_normals` is false; only normalized target "
@@ -105,23 +158,30 @@ class SavedDeformation:
             )
         if lam is None:
             lam = self.lam if self.lam is not None else 8.0
-        return Darap(
+        weights = None if mask is not None else self.resolve_region(region, feather)
+        layer = Darap(
             self.rest_positions(),
             self.faces,
             lam=lam,
             rotation_rule=rotation_rule if rotation_rule is not None else self.rotation_rule,
             mask=mask,
         )
+        if weights is not None:
+            layer.set_region_weights(weights)
+        return layer
 
     def apply(
         self,
         lam: Optional[float] = None,
         rotation_rule: Optional[str] = None,
         mask: Optional[np.ndarray] = None,
+        region: RegionArg = "saved",
+        feather: Optional[int] = None,
     ) -> np.ndarray:
         """The deformed positions (V, 3) float64, as ``stylize apply`` writes them (normalized
-        frame, ``recenter_rescale``)."""
-        layer = self.layer(lam=lam, rotation_rule=rotation_rule, mask=mask)
+        frame, ``recenter_rescale``; a localized run with its saved region unless ``region`` or
+        ``mask`` says otherwise)."""
+        layer = self.layer(lam=lam, rotation_rule=rotation_rule, mask=mask, region=region, feather=feather)
         return layer.forward(self.targets()).positions
 
 

@@ -748,7 +748,41 @@ pub fn write_glb(
     mesh: &TriMesh,
     normals: Option<&[[f64; 3]]>,
 ) -> Result<(), MeshError> {
+    write_glb_with_colors(path, mesh, normals, None)
+}
+
+/// [`write_glb`] with optional per-vertex colours: `COLOR_0`, `f32` VEC3, **linear** RGB in
+/// [0, 1] as glTF defines it (convert sRGB colours first), one per vertex.
+pub fn write_glb_with_colors(
+    path: &Path,
+    mesh: &TriMesh,
+    normals: Option<&[[f64; 3]]>,
+    colors: Option<&[[f32; 3]]>,
+) -> Result<(), MeshError> {
     let nv = mesh.positions.len();
+    for (what, len) in [
+        ("normals", normals.map(<[_]>::len)),
+        ("colors", colors.map(<[_]>::len)),
+    ] {
+        if let Some(len) = len
+            && len != nv
+        {
+            return Err(MeshError::Invalid(format!(
+                "{}: {len} {what} for {nv} vertices",
+                path.display()
+            )));
+        }
+    }
+    if let Some(c) = colors
+        && let Some(v) = c
+            .iter()
+            .position(|c| c.iter().any(|x| !(0.0..=1.0).contains(x)))
+    {
+        return Err(MeshError::Invalid(format!(
+            "{}: colour of vertex {v} is outside [0, 1]",
+            path.display()
+        )));
+    }
     let mut bin: Vec<u8> = Vec::with_capacity(nv * 24 + mesh.faces.len() * 12);
     let mut lo = [f32::INFINITY; 3];
     let mut hi = [f32::NEG_INFINITY; 3];
@@ -779,6 +813,15 @@ pub fn write_glb(
         }
     }
     let nrm_len = bin.len() - pos_len;
+    let col_off = bin.len();
+    if let Some(cs) = colors {
+        for c in cs {
+            for &x in c {
+                bin.extend_from_slice(&x.to_le_bytes());
+            }
+        }
+    }
+    let col_len = bin.len() - col_off;
     let idx_off = bin.len();
     for f in &mesh.faces {
         for &v in f {
@@ -803,6 +846,12 @@ pub fn write_glb(
         buffer_views.push(serde_json::json!({"buffer": 0, "byteOffset": pos_len, "byteLength": nrm_len, "target": 34962}));
         accessors.push(serde_json::json!({"bufferView": 1, "componentType": 5126, "count": nv, "type": "VEC3"}));
         attributes["NORMAL"] = serde_json::json!(1);
+    }
+    if colors.is_some() {
+        let view = buffer_views.len();
+        buffer_views.push(serde_json::json!({"buffer": 0, "byteOffset": col_off, "byteLength": col_len, "target": 34962}));
+        attributes["COLOR_0"] = serde_json::json!(accessors.len());
+        accessors.push(serde_json::json!({"bufferView": view, "componentType": 5126, "count": nv, "type": "VEC3"}));
     }
     let iv = buffer_views.len();
     buffer_views.push(serde_json::json!({"buffer": 0, "byteOffset": idx_off, "byteLength": idx_len, "target": 34963}));

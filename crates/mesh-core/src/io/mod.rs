@@ -18,7 +18,7 @@ use std::path::Path;
 use crate::{MeshError, TriMesh};
 
 pub use format::Format;
-pub use gltf::{read_gltf, read_gltf_with_parts, write_glb};
+pub use gltf::{read_gltf, read_gltf_with_parts, write_glb, write_glb_with_colors};
 pub use obj::{read_obj, read_obj_with_parts, write_obj};
 pub use off::{read_off, write_off};
 pub use ply::{PlyEncoding, read_ply, read_ply_with_parts, write_ply};

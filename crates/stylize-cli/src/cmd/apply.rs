@@ -1,8 +1,13 @@
 //! `stylize apply`: re-apply a saved deformation (spec §8) at one or several strengths λ.
 //!
 //! After each output, one line of λ sanity ([`crate::sanity`]: volume ratio, face-area ratio,
-//! share of vertices whose rotation flipped past 90°), and a warning on stderr when the result
-//! is collapsing.
+//! share of vertices whose rotation flipped past 90°, self-intersecting pairs and faces and those
+//! new against the source), and a warning on stderr when the result is collapsing or has new
+//! self-intersections.
+//!
+//! **`--lambda max-safe[:UPPER]`** writes the result at the strongest safe λ in `(0, UPPER]`
+//! (default UPPER: the saved λ), searched by [`crate::max_safe`] (a scan, then bisection of the
+//! first crossing to 1 %; it says when safety is not monotone over the scan).
 //!
 //! Reads the saved `.npz`, builds its dARAP layer ([`SavedDeformation::ready_layer`]: `verts`
 //! normalized to the side-2 cube in f64) with the requested λ (default: the saved
@@ -40,9 +45,11 @@ pub struct Args {
     /// Output mesh (`.obj`, `.ply` or `.glb`). With several λ: one file per λ, `OUT_lambda<λ>.ext`.
     #[arg(short, long = "out", alias = "output", value_name = "FILE")]
     pub output: PathBuf,
-    /// Strength(s) λ ≥ 0, comma separated (default: the λ saved in the file).
-    #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
-    pub lambda: Vec<f64>,
+    /// Strength(s) λ ≥ 0, comma separated (default: the λ saved in the file); or
+    /// `max-safe[:UPPER]`: the strongest λ in (0, UPPER] whose result is safe (no new
+    /// self-intersections, flips, collapse), UPPER defaulting to the saved λ.
+    #[arg(long, value_delimiter = ',', allow_negative_numbers = true, value_parser = parse_lambda)]
+    pub lambda: Vec<LambdaArg>,
     /// Rotation rule: `gis` (the reference's; what saved files and the paper's λ values assume) or
     /// `procrustes` (textbook Kabsch, needs a larger λ). Default: the file's `rotation_rule` key
     /// if present, else `gis`.
@@ -64,6 +71,38 @@ pub struct Args {
     #[arg(long)]
     pub force: bool,
 }
+
+/// One `--lambda` value.
+#[derive(Clone, Debug, PartialEq)]
+pub enum LambdaArg {
+    /// A strength.
+    Value(f64),
+    /// `max-safe[:UPPER]`: search the strongest safe λ up to UPPER (None: the saved λ).
+    MaxSafe(Option<f64>),
+}
+
+/// Parses `8`, `max-safe` or `max-safe:12` (the ranges are checked by [`run`]).
+pub fn parse_lambda(s: &str) -> Result<LambdaArg, String> {
+    let s = s.trim();
+    if let Some(rest) = s.strip_prefix("max-safe") {
+        if rest.is_empty() {
+            return Ok(LambdaArg::MaxSafe(None));
+        }
+        let Some(upper) = rest.strip_prefix(':') else {
+            return Err(format!("`{s}`: write max-safe or max-safe:UPPER"));
+        };
+        let upper: f64 = upper
+            .parse()
+            .map_err(|_| format!("`{s}`: the upper end `{upper}` is not a number"))?;
+        return Ok(LambdaArg::MaxSafe(Some(upper)));
+    }
+    s.parse()
+        .map(LambdaArg::Value)
+        .map_err(|_| format!("`{s}` is neither a number nor max-safe[:UPPER]"))
+}
+
+/// The largest UPPER `max-safe` accepts (the viewer's slider stops at 100).
+pub const MAX_SAFE_UPPER_LIMIT: f64 = 1000.0;
 
 /// The output path for each λ (the path itself when there is one λ): a format written with
 /// normals ([`Format::WITH_NORMALS`]); with several λ the extension is written in lower case.
@@ -177,15 +216,37 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         );
     }
 
-    let lambdas = if args.lambda.is_empty() {
-        vec![
-            saved
-                .recorded_lambda()
-                .map_err(|why| anyhow::anyhow!("{}: {why}; pass --lambda", args.saved.display()))?,
-        ]
-    } else {
-        args.lambda.clone()
+    let recorded = || {
+        saved
+            .recorded_lambda()
+            .map_err(|why| anyhow::anyhow!("{}: {why}; pass --lambda", args.saved.display()))
     };
+    let mut max_safe_upper = None;
+    let mut lambdas = Vec::new();
+    for a in &args.lambda {
+        match a {
+            LambdaArg::Value(l) => lambdas.push(*l),
+            LambdaArg::MaxSafe(upper) => {
+                ensure!(
+                    args.lambda.len() == 1,
+                    "--lambda max-safe stands alone (not with other λ values)"
+                );
+                let upper = match upper {
+                    Some(u) => *u,
+                    None => recorded()?,
+                };
+                ensure!(
+                    upper.is_finite() && upper > 0.0 && upper <= MAX_SAFE_UPPER_LIMIT,
+                    "--lambda max-safe:{upper}: the upper end must be a number in (0, {MAX_SAFE_UPPER_LIMIT}]"
+                );
+                max_safe_upper = Some(upper);
+                lambdas.push(upper);
+            }
+        }
+    }
+    if lambdas.is_empty() {
+        lambdas.push(recorded()?);
+    }
     for &l in &lambdas {
         ensure!(
             l.is_finite() && l >= 0.0,
@@ -232,12 +293,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut ready = saved.ready_layer(&args.saved, lambdas[0], Some(rule))?;
     let region = region(&args, &saved, &ready.rest.positions)?;
     ready.set_region(&saved, &args.saved, region)?;
+    let mut source = stylize::intersections::SourceIntersections::new(&ready.rest)
+        .context("self-intersection check of the saved rest mesh")?;
+    if let Some(upper) = max_safe_upper {
+        lambdas = vec![max_safe(&mut ready, &mut source, upper)?];
+    }
 
     for (&lambda, out) in lambdas.iter().zip(&outputs) {
         let deformed = ready
             .at_lambda(lambda)
             .with_context(|| format!("dARAP forward failed at λ = {lambda}"))?;
-        let sanity = crate::sanity::LambdaSanity::assess(&ready.rest, &deformed, lambda)?;
+        let sanity =
+            crate::sanity::LambdaSanity::assess(&ready.rest, &mut source, &deformed, lambda)?;
         let mesh = TriMesh::new(deformed.positions, saved.faces.clone());
         let normals =
             mesh_core::normals::vertex_normals_area_weighted(&mesh.positions, &mesh.faces);
@@ -258,4 +325,82 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     }
     Ok(())
+}
+
+/// `--lambda max-safe:UPPER`: searches ([`crate::max_safe::search`]) and prints what it found;
+/// returns the λ to write.
+fn max_safe(
+    ready: &mut stylize::saved::ReadyLayer,
+    source: &mut stylize::intersections::SourceIntersections,
+    upper: f64,
+) -> anyhow::Result<f64> {
+    let mut unsafe_warnings: Vec<(f64, Vec<String>)> = Vec::new();
+    let searched = crate::max_safe::search(upper, |lambda| {
+        let deformed = ready
+            .at_lambda(lambda)
+            .with_context(|| format!("dARAP forward failed at λ = {lambda}"))?;
+        let s = crate::sanity::LambdaSanity::assess(&ready.rest, source, &deformed, lambda)?;
+        let safe = s.is_safe();
+        if !safe {
+            unsafe_warnings.push((lambda, s.warnings()));
+        }
+        Ok(safe)
+    });
+    let found = match searched {
+        Ok(f) => f,
+        Err(e) => {
+            // Unsafe at λ = 0 (e.g. a layer that does not reproduce the rest mesh): say why.
+            let why: Vec<String> = unsafe_warnings
+                .iter()
+                .filter(|(l, _)| *l == 0.0)
+                .flat_map(|(_, w)| w.iter().cloned())
+                .collect();
+            if why.is_empty() {
+                return Err(e);
+            }
+            bail!("{e}: {}", why.join("; "));
+        }
+    };
+    match found.first_unsafe {
+        None => println!(
+            "max-safe: every λ scanned up to {upper} is safe ({} evaluations): λ = {upper}",
+            found.evaluations
+        ),
+        Some(hi) => {
+            let why = unsafe_warnings
+                .iter()
+                .find(|(l, _)| *l == hi)
+                .map(|(_, w)| w.join("; "))
+                .unwrap_or_default();
+            println!(
+                "max-safe: λ = {} (within {}% of the first unsafe λ = {hi}; {} evaluations up to {upper})",
+                found.lambda,
+                100.0 * crate::max_safe::RELATIVE_TOLERANCE,
+                found.evaluations
+            );
+            println!("  unsafe at λ = {hi}: {why}");
+            if found.lambda == 0.0 {
+                eprintln!(
+                    "warning: max-safe: no λ > 0 was found safe (unsafe down to λ = {hi}); writing the result at λ = 0"
+                );
+            }
+        }
+    }
+    if !found.safe_again.is_empty() {
+        const SHOWN: usize = 5;
+        let mut list: Vec<String> = found
+            .safe_again
+            .iter()
+            .take(SHOWN)
+            .map(|l| format!("{l}"))
+            .collect();
+        if found.safe_again.len() > SHOWN {
+            list.push(format!("… ({} grid points in all)", found.safe_again.len()));
+        }
+        eprintln!(
+            "warning: max-safe: safety is not monotone over the scan: after the first crossing the result is safe again at λ = {} (the answer is the first crossing)",
+            list.join(", ")
+        );
+    }
+    Ok(found.lambda)
 }

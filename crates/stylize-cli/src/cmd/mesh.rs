@@ -1,5 +1,7 @@
 //! `stylize mesh`: mesh utilities. `stylize mesh check FILE [--json]` reads a mesh, runs the
-//! validation of `mesh_core::validate` and prints what repair finds and would do.
+//! validation of `mesh_core::validate` and prints what repair finds and would do, then the
+//! self-intersections of the repaired mesh ([`self_intersection_section`]: exact,
+//! `mesh_core::intersect`; pairs, faces, per component).
 //! `--regions` lists instead the parts the file offers for `stylize run --region` (named parts
 //! and scalar properties, with the vertex counts they select on the repaired mesh).
 
@@ -67,14 +69,25 @@ fn check(a: CheckArgs) -> anyhow::Result<()> {
         ..RepairOptions::default()
     };
     let report = validate(&mesh, &options);
+    let intersections = if report.is_refused() {
+        None
+    } else {
+        Some(self_intersection_section(&mesh, &options)?)
+    };
     if a.json {
-        let json = report_json(&a.file, &report);
+        let mut json = report_json(&a.file, &report);
+        if let Some(x) = &intersections {
+            json["self_intersections"] = x.json();
+        }
         println!(
             "{}",
             serde_json::to_string_pretty(&json).context("cannot format the report as JSON")?
         );
     } else {
         print!("{}", report_table(&a.file, &report));
+        if let Some(x) = &intersections {
+            print!("{}", x.table());
+        }
     }
     if report.is_refused() {
         anyhow::bail!(
@@ -84,6 +97,99 @@ fn check(a: CheckArgs) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+/// The self-intersections of the repaired mesh (what a run uses), for `mesh check`.
+struct SelfIntersectionSection {
+    result: mesh_core::intersect::SelfIntersections,
+}
+
+/// How many example pairs `mesh check` lists.
+const EXAMPLE_PAIRS: usize = 10;
+
+/// Repairs `mesh` as a run would and checks the result for self-intersections.
+fn self_intersection_section(
+    mesh: &mesh_core::TriMesh,
+    options: &RepairOptions,
+) -> anyhow::Result<SelfIntersectionSection> {
+    let repaired = mesh_core::validate::repair(mesh, options).context("cannot repair the mesh")?;
+    if repaired.mesh.faces.is_empty() {
+        return Ok(SelfIntersectionSection {
+            result: mesh_core::intersect::SelfIntersections::default(),
+        });
+    }
+    let result =
+        mesh_core::intersect::self_intersections(&repaired.mesh.positions, &repaired.mesh.faces)
+            .context("self-intersection check of the repaired mesh")?;
+    Ok(SelfIntersectionSection { result })
+}
+
+impl SelfIntersectionSection {
+    fn json(&self) -> serde_json::Value {
+        let r = &self.result;
+        serde_json::json!({
+            "pairs": r.pairs.len(),
+            "faces": r.faces.len(),
+            "degenerate_faces": r.degenerate.len(),
+            "example_pairs": r.pairs.iter().take(EXAMPLE_PAIRS).collect::<Vec<_>>(),
+            "per_component": r.per_component.iter().map(|c| serde_json::json!({
+                "faces": c.faces,
+                "involved_faces": c.involved_faces,
+                "pairs_within": c.pairs_within,
+                "pairs_across": c.pairs_across,
+            })).collect::<Vec<_>>(),
+            "numbering": "faces of the repaired mesh",
+        })
+    }
+
+    fn table(&self) -> String {
+        use std::fmt::Write;
+        let r = &self.result;
+        let mut s = String::new();
+        if r.pairs.is_empty() {
+            let _ = writeln!(
+                s,
+                "\nself-intersections: none ({} faces checked exactly)",
+                r.num_faces
+            );
+        } else {
+            let _ = writeln!(
+                s,
+                "\nself-intersections: {} pair{} of faces intersect ({} faces of {}; repaired mesh numbering)",
+                r.pairs.len(),
+                if r.pairs.len() == 1 { "" } else { "s" },
+                r.faces.len(),
+                r.num_faces
+            );
+            let examples: Vec<String> = r
+                .pairs
+                .iter()
+                .take(EXAMPLE_PAIRS)
+                .map(|(a, b)| format!("{a}–{b}"))
+                .collect();
+            let _ = writeln!(s, "  e.g. {}", examples.join(", "));
+            if r.per_component.len() > 1 {
+                for (i, c) in r.per_component.iter().enumerate() {
+                    if c.pairs_within + c.pairs_across > 0 {
+                        let _ = writeln!(
+                            s,
+                            "  part {i}: {} of {} faces, {} pairs within, {} with other parts",
+                            c.involved_faces, c.faces, c.pairs_within, c.pairs_across
+                        );
+                    }
+                }
+            }
+        }
+        if !r.degenerate.is_empty() {
+            let _ = writeln!(
+                s,
+                "  {} zero-area face{} (never counted as intersecting)",
+                r.degenerate.len(),
+                if r.degenerate.len() == 1 { "" } else { "s" }
+            );
+        }
+        s
+    }
 }
 
 /// One row of `--regions`: spec, kind, vertices it selects on the repaired mesh, a note.

@@ -230,6 +230,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             if let Some((before, after)) = outcome.alignment {
                 eprintln!("normal alignment (area-weighted mean n·t): {before:.4} → {after:.4}");
             }
+            match crate::max_safe::end_of_run(&args.out) {
+                Ok(Some(line)) => eprintln!("{line}"),
+                Ok(None) => {}
+                Err(e) => eprintln!("warning: the strongest-safe-λ check failed: {e:#}"),
+            }
             crate::open_hint::lines(&args.out, &crate::open_hint::program())
                 .iter()
                 .for_each(|l| eprintln!("{l}"));

@@ -124,6 +124,10 @@ struct LoadedRun {
     /// The rest mesh (side-2 cube frame, the frame of every result), the saved target normals
     /// and the layer, as the run saved them.
     ready: ReadyLayer,
+    /// The rest mesh's self-intersections and a checker refitted at each λ.
+    source: stylize::intersections::SourceIntersections,
+    /// The strongest safe λ up to the slider's end, once asked for (`api/items/ID/max-safe`).
+    max_safe: Option<(f64, crate::max_safe::SafeLambda)>,
 }
 
 /// A run directory named on the command line.
@@ -336,13 +340,41 @@ impl RunItem {
                     anyhow::Error::from(e).context(format!("dARAP forward failed at λ = {lambda}")),
                 )
             })?;
-            let sanity = LambdaSanity::assess(&l.ready.rest, &deformation, lambda)
+            let sanity = LambdaSanity::assess(&l.ready.rest, &mut l.source, &deformation, lambda)
                 .map_err(ViewError::Failed)?;
             Ok(Shape {
                 positions: deformation.positions,
                 faces: l.ready.rest.faces.clone(),
                 sanity: Some(sanity),
             })
+        })
+    }
+
+    /// The strongest safe λ in `(0, upper]` ([`crate::max_safe::search`], `upper` validated as a
+    /// λ), computed once per `upper` while `deformation.npz` is unchanged.
+    pub fn max_safe(&self, upper: f64) -> Result<crate::max_safe::SafeLambda, ViewError> {
+        let upper = validate_lambda(upper)?;
+        if upper == 0.0 {
+            return Err(ViewError::BadRequest(
+                "max-safe needs an upper end λ > 0".into(),
+            ));
+        }
+        self.with_loaded(|l| {
+            if let Some((u, found)) = &l.max_safe
+                && *u == upper
+            {
+                return Ok(found.clone());
+            }
+            let LoadedRun { ready, source, .. } = l;
+            let found = crate::max_safe::search(upper, |lambda| {
+                let d = ready
+                    .at_lambda(lambda)
+                    .with_context(|| format!("dARAP forward failed at λ = {lambda}"))?;
+                Ok(LambdaSanity::assess(&ready.rest, source, &d, lambda)?.is_safe())
+            })
+            .map_err(ViewError::Failed)?;
+            l.max_safe = Some((upper, found.clone()));
+            Ok(found)
         })
     }
 
@@ -514,7 +546,14 @@ fn load_run(npz: &Path, stamp: (SystemTime, u64)) -> anyhow::Result<LoadedRun> {
         .with_context(|| format!("cannot read saved deformation {}", npz.display()))?;
     // A localized run is shown with its saved region, as `apply` re-applies it.
     let ready = saved.ready_layer_as_saved(npz)?;
-    Ok(LoadedRun { stamp, ready })
+    let source = stylize::intersections::SourceIntersections::new(&ready.rest)
+        .context("self-intersection check of the saved rest mesh")?;
+    Ok(LoadedRun {
+        stamp,
+        ready,
+        source,
+        max_safe: None,
+    })
 }
 
 /// A mesh file named on the command line (shown as is).
@@ -659,6 +698,17 @@ impl Item {
             Item::Run(r) => r.target_normals(),
             Item::Mesh(m) => Err(ViewError::NotFound(format!(
                 "{} is a mesh, not a run: it has no target normals",
+                m.name
+            ))),
+        }
+    }
+
+    /// The strongest safe λ up to `upper` (runs only; see [`RunItem::max_safe`]).
+    pub fn max_safe(&self, upper: f64) -> Result<crate::max_safe::SafeLambda, ViewError> {
+        match self {
+            Item::Run(r) => r.max_safe(upper),
+            Item::Mesh(m) => Err(ViewError::NotFound(format!(
+                "{} is a mesh, not a run: it has no λ",
                 m.name
             ))),
         }

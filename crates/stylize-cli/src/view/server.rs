@@ -7,6 +7,9 @@
 //! /TOKEN/api/items                          JSON: one ItemInfo per command-line argument
 //! /TOKEN/api/items/ID/source                framed: header JSON + f32 positions + u32 faces
 //! /TOKEN/api/items/ID/result?lambda=L       framed: header JSON (λ diagnostics) + f32 positions
+//! /TOKEN/api/items/ID/max-safe?upper=L     JSON: the strongest safe λ in (0, L] (`lambda`,
+//!                                           `first_unsafe`, `safe_again`, `evaluations`;
+//!                                           `crate::max_safe`), cached per run and L
 //! /TOKEN/api/items/ID/download?lambda=L&format=obj|ply|glb   the mesh at λ as a file
 //! /TOKEN/api/items/ID/files/PATH            a file inside a run directory (images, metrics)
 //! /TOKEN/api/items/ID/targets               framed: header JSON + f32 unit target normals, one
@@ -24,7 +27,9 @@
 //! bytes of UTF-8 JSON, zero bytes up to the next multiple of 4, then the payload: `3·n`
 //! little-endian `f32` positions (side-2 cube frame), and for `source` also `3·m` little-endian
 //! `u32` vertex indices. The header holds `vertices`, `faces` and, for results, the λ diagnostics
-//! ([`crate::sanity::LambdaSanity`]) and their `warnings`.
+//! ([`crate::sanity::LambdaSanity`]: `intersections` with the figures, `intersecting_faces` and
+//! `new_intersecting_faces` with the face indices, each list cut at
+//! [`MAX_LISTED_FACES`] — `intersecting_faces_truncated` says when) and their `warnings`.
 //!
 //! Status codes: 400 bad λ or path (λ must be finite and in `[0, LAMBDA_MAX]`), 403 missing or
 //! wrong token, 404 no such item or file, 405 other methods, 409 a run without its result yet,
@@ -74,6 +79,7 @@ pub fn router(viewer: Arc<Viewer>) -> Router {
         .route(&format!("/{t}/api/items/{{id}}/source"), get(source))
         .route(&format!("/{t}/api/items/{{id}}/result"), get(result))
         .route(&format!("/{t}/api/items/{{id}}/download"), get(download))
+        .route(&format!("/{t}/api/items/{{id}}/max-safe"), get(max_safe))
         .route(&format!("/{t}/api/items/{{id}}/files/{{*path}}"), get(file))
         .route(&format!("/{t}/api/items/{{id}}/metrics"), get(metrics))
         .route(&format!("/{t}/api/items/{{id}}/targets"), get(targets))
@@ -234,8 +240,40 @@ fn result_header(shape: &Shape) -> serde_json::Value {
         head["area_ratio_mean"] = s.area_ratio_mean.into();
         head["area_ratio_std"] = s.area_ratio_std.into();
         head["warnings"] = s.warnings().into();
+        head["intersections"] = serde_json::to_value(&s.intersections).unwrap_or_default();
+        let listed = |faces: &[u32]| faces[..faces.len().min(MAX_LISTED_FACES)].to_vec();
+        head["intersecting_faces"] = listed(&s.intersecting_faces).into();
+        head["new_intersecting_faces"] = listed(&s.new_intersecting_faces).into();
+        head["intersecting_faces_truncated"] =
+            (s.intersecting_faces.len() > MAX_LISTED_FACES).into();
     }
     head
+}
+
+/// The most intersecting faces a result header lists (the figures count them all).
+pub const MAX_LISTED_FACES: usize = 200_000;
+
+/// `?upper=L` (required).
+#[derive(Debug, Deserialize)]
+struct UpperQuery {
+    upper: f64,
+}
+
+async fn max_safe(
+    State(viewer): State<Arc<Viewer>>,
+    Path(id): Path<usize>,
+    Query(q): Query<UpperQuery>,
+) -> Response {
+    match on_item(viewer, id, move |item| item.max_safe(q.upper)).await {
+        Ok(found) => json_response(&serde_json::json!({
+            "upper": q.upper,
+            "lambda": found.lambda,
+            "first_unsafe": found.first_unsafe,
+            "safe_again": found.safe_again,
+            "evaluations": found.evaluations,
+        })),
+        Err(e) => e.into_response(),
+    }
 }
 
 async fn result(

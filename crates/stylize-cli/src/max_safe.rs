@@ -1,0 +1,192 @@
+//! The strongest safe λ (`stylize apply SAVED --lambda max-safe[:UPPER]`, the viewer's button):
+//! the largest λ below the first λ > 0 at which the re-applied result stops being safe
+//! ([`crate::sanity::LambdaSanity::is_safe`]: new self-intersections, flips, volume, face area).
+//!
+//! Safety need not be monotone in λ (a fold can open and close again), so nothing assumes it:
+//! 1. **Scan** λ = 0 and the grid `UPPER·i/STEPS`, `i = 1..=STEPS` ([`SCAN_STEPS`]), every point;
+//! 2. **refine** the first crossing — the last safe grid point `lo` and the first unsafe one `hi`
+//!    — by bisection, keeping `lo` safe and `hi` unsafe, until `hi − lo ≤ 1 % · lo`
+//!    ([`RELATIVE_TOLERANCE`]);
+//! 3. report every grid point after the crossing that is **safe again** (safety is then not
+//!    monotone over the scan, and the answer is the first crossing, not the last).
+//!
+//! An unsafe stretch narrower than one grid step (`UPPER / STEPS`) can be missed by the scan; the
+//! result is then still safe, but not the first crossing. The work is bounded: `STEPS + 1`
+//! evaluations for the scan and at most [`MAX_BISECTIONS`] for the refinement.
+
+/// Grid points of the scan above 0.
+pub const SCAN_STEPS: usize = 32;
+/// The refinement stops when the bracket is this narrow relative to its safe end.
+pub const RELATIVE_TOLERANCE: f64 = 0.01;
+/// The most bisection steps (reached only when the first grid point is unsafe and no λ > 0 is
+/// safe: the bracket then shrinks towards 0 by 2⁻⁴⁰ of one grid step).
+pub const MAX_BISECTIONS: usize = 40;
+
+/// What the search found.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SafeLambda {
+    /// The answer: the largest λ found safe below the first crossing (UPPER when the whole scan
+    /// is safe; 0 when no λ > 0 was found safe).
+    pub lambda: f64,
+    /// The unsafe end of the final bracket (None when the whole scan is safe):
+    /// `lambda < first_unsafe ≤ lambda · (1 + RELATIVE_TOLERANCE)` unless `lambda` is 0.
+    pub first_unsafe: Option<f64>,
+    /// Grid points after the first crossing that are safe again (empty: monotone over the scan).
+    pub safe_again: Vec<f64>,
+    /// Evaluations made.
+    pub evaluations: usize,
+}
+
+/// Searches the first crossing in `(0, upper]` (see the module documentation). `is_safe(λ)`
+/// evaluates one λ; an error there ends the search with that error. Refuses an `upper` that is
+/// not finite and positive, and a result unsafe at λ = 0 (the source itself).
+pub fn search(
+    upper: f64,
+    mut is_safe: impl FnMut(f64) -> anyhow::Result<bool>,
+) -> anyhow::Result<SafeLambda> {
+    anyhow::ensure!(
+        upper.is_finite() && upper > 0.0,
+        "max-safe: the upper end λ must be a finite number > 0, got {upper}"
+    );
+    let mut evaluations = 0usize;
+    let mut eval = |l: f64| -> anyhow::Result<bool> {
+        evaluations += 1;
+        is_safe(l)
+    };
+    anyhow::ensure!(
+        eval(0.0)?,
+        "max-safe: the result is not safe even at λ = 0 (the source re-applied without rotation)"
+    );
+    let grid: Vec<f64> = (1..=SCAN_STEPS)
+        .map(|i| upper * i as f64 / SCAN_STEPS as f64)
+        .collect();
+    let mut safe = Vec::with_capacity(grid.len());
+    for &l in &grid {
+        safe.push(eval(l)?);
+    }
+    let Some(k) = safe.iter().position(|s| !s) else {
+        return Ok(SafeLambda {
+            lambda: upper,
+            first_unsafe: None,
+            safe_again: Vec::new(),
+            evaluations,
+        });
+    };
+    let safe_again: Vec<f64> = grid[k + 1..]
+        .iter()
+        .zip(&safe[k + 1..])
+        .filter(|(_, s)| **s)
+        .map(|(l, _)| *l)
+        .collect();
+    let (mut lo, mut hi) = (if k == 0 { 0.0 } else { grid[k - 1] }, grid[k]);
+    for _ in 0..MAX_BISECTIONS {
+        if lo > 0.0 && hi - lo <= RELATIVE_TOLERANCE * lo {
+            break;
+        }
+        let mid = 0.5 * (lo + hi);
+        if eval(mid)? {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    Ok(SafeLambda {
+        lambda: lo,
+        first_unsafe: Some(hi),
+        safe_again,
+        evaluations,
+    })
+}
+
+/// The end of a run: when the result at the run's λ is not safe, one line with the strongest safe
+/// λ below it (None when the result is safe — the common case costs one evaluation — or the run
+/// saved no usable λ). Reads the run's `deformation.npz` (with its saved region) as `apply` does.
+pub fn end_of_run(run_dir: &std::path::Path) -> anyhow::Result<Option<String>> {
+    let npz = run_dir.join("deformation.npz");
+    let saved = stylize::saved::SavedDeformation::read(&npz)?;
+    let Ok(lambda) = saved.recorded_lambda() else {
+        return Ok(None);
+    };
+    if lambda <= 0.0 {
+        return Ok(None);
+    }
+    let mut ready = saved.ready_layer_as_saved(&npz)?;
+    let mut source = stylize::intersections::SourceIntersections::new(&ready.rest)?;
+    let mut is_safe = |l: f64| -> anyhow::Result<bool> {
+        let d = ready.at_lambda(l)?;
+        Ok(crate::sanity::LambdaSanity::assess(&ready.rest, &mut source, &d, l)?.is_safe())
+    };
+    if is_safe(lambda)? {
+        return Ok(None);
+    }
+    let found = search(lambda, is_safe)?;
+    Ok(Some(format!(
+        "the result at the run's λ = {lambda} is not safe (see the warnings); the strongest safe λ \
+         up to it is {} — `stylize apply {} -o OUT.obj --lambda max-safe` writes it",
+        found.lambda,
+        npz.display()
+    )))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ok(r: anyhow::Result<SafeLambda>) -> SafeLambda {
+        r.unwrap_or_else(|e| panic!("{e:#}"))
+    }
+
+    fn refused(r: anyhow::Result<SafeLambda>) -> String {
+        match r {
+            Ok(f) => panic!("accepted: {f:?}"),
+            Err(e) => e.to_string(),
+        }
+    }
+
+    #[test]
+    fn one_crossing_is_found_within_one_percent() {
+        for crossing in [0.3, 4.9, 7.77, 9.99] {
+            let r = ok(search(10.0, |l| Ok(l < crossing)));
+            assert!(r.lambda < crossing, "{r:?}");
+            let hi = r.first_unsafe.unwrap_or(f64::NAN);
+            assert!(hi >= crossing && hi - r.lambda <= 0.01 * r.lambda, "{r:?}");
+            assert!(r.lambda * 1.01 >= crossing, "{r:?}");
+            assert!(r.safe_again.is_empty());
+            assert!(r.evaluations <= 1 + SCAN_STEPS + MAX_BISECTIONS);
+        }
+    }
+
+    #[test]
+    fn two_crossings_give_the_first_and_say_it_is_not_monotone() {
+        // Unsafe on [3, 4.5), safe again on [4.5, 8), unsafe from 8.
+        let r = ok(search(10.0, |l| Ok(!(3.0..4.5).contains(&l) && l < 8.0)));
+        assert!(r.lambda < 3.0 && r.lambda * 1.01 >= 3.0, "{r:?}");
+        assert!(!r.safe_again.is_empty(), "{r:?}");
+        assert!(r.safe_again.iter().all(|l| (4.5..8.0).contains(l)), "{r:?}");
+    }
+
+    #[test]
+    fn all_safe_returns_the_upper_end_and_nothing_safe_returns_zero() {
+        let r = ok(search(6.0, |_| Ok(true)));
+        assert_eq!((r.lambda, r.first_unsafe), (6.0, None));
+        assert_eq!(r.evaluations, 1 + SCAN_STEPS);
+        let r = ok(search(6.0, |l| Ok(l == 0.0)));
+        assert_eq!(r.lambda, 0.0);
+        assert!(r.first_unsafe.is_some_and(|hi| hi > 0.0), "{r:?}");
+        assert_eq!(r.evaluations, 1 + SCAN_STEPS + MAX_BISECTIONS);
+    }
+
+    #[test]
+    fn bad_upper_ends_and_unsafe_sources_are_refused() {
+        for upper in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+            assert!(search(upper, |_| Ok(true)).is_err(), "{upper}");
+        }
+        let e = refused(search(5.0, |_| Ok(false)));
+        assert!(e.contains("λ = 0"), "{e}");
+        let e = refused(search(5.0, |l| {
+            anyhow::ensure!(l < 2.0, "boom");
+            Ok(true)
+        }));
+        assert_eq!(e, "boom");
+    }
+}
