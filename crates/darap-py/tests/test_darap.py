@@ -496,6 +496,39 @@ def test_darap_torch_without_torch_raises_a_clear_import_error() -> None:
         import darap.torch  # noqa: F401
 
 
+def z_up_frame() -> np.ndarray:
+    """A ``to_input_frame`` of a z-up input in millimetres with an offset: q ↦ Rᵀ q / s + t."""
+    r = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])  # +z ↦ +y (mesh.up = +z)
+    m = np.eye(4)
+    m[:3, :3] = r.T * 500.0
+    m[:3, 3] = [120.0, -40.0, 2000.0]
+    return m
+
+
+def test_to_input_frame_places_results_as_the_rust_cli_apply(tmp_path: Path) -> None:
+    path = write_saved(tmp_path / "framed.npz", to_input_frame=z_up_frame())
+    saved = darap.load_saved(path)
+    np.testing.assert_array_equal(saved.input_frame, z_up_frame())
+    normalized = saved.apply()
+    placed = saved.to_input_frame(normalized)
+    m = z_up_frame()
+    expected = (normalized + saved.rest_positions().mean(axis=0)) @ m[:3, :3].T + m[:3, 3]
+    np.testing.assert_allclose(placed, expected, rtol=0, atol=1e-9)
+    with pytest.raises(ValueError, match="does not record its input frame"):
+        darap.load_saved(GOLDEN / "bunny_targets.npz").to_input_frame(normalized)
+    bad = m.copy()
+    bad[3, 0] = 1.0
+    with pytest.raises(ValueError, match="to_input_frame"):
+        darap.load_saved(write_saved(tmp_path / "bad.npz", to_input_frame=bad)).input_frame
+    exe = find_stylize()
+    if exe is None:
+        pytest.skip("no stylize binary in target/ (cargo build --bin stylize) and DARAP_STYLIZE_BIN unset")
+    out = tmp_path / "applied.obj"
+    subprocess.run([str(exe), "apply", str(path), "-o", str(out)], check=True, capture_output=True, timeout=300)
+    cli_positions, _ = read_obj(out)
+    err = np.abs(placed - cli_positions).max()
+    assert err <= 1e-9 * 2000.0, f"max |Δposition| vs stylize apply = {err:.3e}"
+
 # ---------------------------------------------------------------------------------------------
 # Feathered regions: the weights of `stylize run --region-feather` / `stylize apply`
 

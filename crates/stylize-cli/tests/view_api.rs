@@ -394,6 +394,78 @@ fn downloads_are_meshes_at_the_chosen_lambda() {
 }
 
 #[test]
+fn downloads_come_in_the_runs_input_frame_unless_asked_for_the_normalized_one() {
+    use stylize::frame::{InputFrame, OutputFrame, UpAxis};
+    let dir = tempfile::tempdir().unwrap();
+    let run = complete_run(dir.path(), "framed");
+    // The golden run as if its input had been z-up, in millimetres, far from the origin.
+    let npz = run.join("deformation.npz");
+    let mut saved = stylize::saved::SavedDeformation::read(&npz).unwrap();
+    let frame = InputFrame::from_normalization(UpAxis::PosZ, [120.0, 40.0, -2000.0], 1.0 / 500.0);
+    saved
+        .set_input_frame(&frame, OutputFrame::Input, UpAxis::PosZ)
+        .unwrap();
+    saved.write(&npz).unwrap();
+    let plain = complete_run(dir.path(), "plain");
+    let app = app(&[run, plain]);
+    let download = |item: usize, query: &str| {
+        let app = app.clone();
+        let uri = format!("/{TOKEN}/api/items/{item}/download?lambda=5&format=obj{query}");
+        let path = dir.path().join(format!("got{item}{}.obj", query.len()));
+        let r = rt().block_on(async { get(&app, &uri).await });
+        assert_eq!(r.status, StatusCode::OK, "{uri}: {}", r.text());
+        r.body.pipe_to(&path)
+    };
+    let own = download(0, "");
+    let normalized = download(0, "&frame=normalized");
+    let golden5 = mesh_core::io::read_mesh(golden("bunny_lambda5_gis.obj")).unwrap();
+    let rest = saved.rest_positions();
+    let expected = frame.place_result(&normalized.positions, &rest, true);
+    let err = |a: &[[f64; 3]], b: &[[f64; 3]]| {
+        a.iter()
+            .flatten()
+            .zip(b.iter().flatten())
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0, f64::max)
+    };
+    assert!(err(&normalized.positions, &golden5.positions) < 1e-5);
+    assert!(
+        err(&own.positions, &expected) < 1e-9,
+        "{}",
+        err(&own.positions, &expected)
+    );
+    assert!(err(&own.positions, &normalized.positions) > 1.0);
+    // A run that records no input frame: normalized by default, an explicit `input` refused.
+    let plain_default = download(1, "");
+    assert!(err(&plain_default.positions, &golden5.positions) < 1e-5);
+    rt().block_on(async {
+        for (query, status) in [
+            ("&frame=input", StatusCode::BAD_REQUEST),
+            ("&frame=sideways", StatusCode::BAD_REQUEST),
+        ] {
+            let r = get(
+                &app,
+                &format!("/{TOKEN}/api/items/1/download?lambda=5&format=obj{query}"),
+            )
+            .await;
+            assert_eq!(r.status, status, "{query}: {}", r.text());
+        }
+    });
+}
+
+/// Writes downloaded bytes to a file and reads them as a mesh.
+trait PipeTo {
+    fn pipe_to(self, path: &Path) -> mesh_core::TriMesh;
+}
+
+impl PipeTo for Vec<u8> {
+    fn pipe_to(self, path: &Path) -> mesh_core::TriMesh {
+        std::fs::write(path, &self).unwrap();
+        mesh_core::io::read_mesh(path).unwrap()
+    }
+}
+
+#[test]
 fn files_are_served_from_inside_the_run_only() {
     let dir = tempfile::tempdir().unwrap();
     let run = complete_run(dir.path(), "run");

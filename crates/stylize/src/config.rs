@@ -5,7 +5,8 @@
 //! ```toml
 //! [darap]    lambda = 8.0, rotation_rule = "gis", post_process = "recenter_rescale"
 //! [optim]    lr = 0.002, iterations = 2500, steps_per_batch = 2, beta1, beta2, eps
-//! [camera]   views = 8, elevation_deg, azimuth_deg, distance, fov_deg = 90, adapt_distance
+//! [camera]   views = 8, preset = "default", elevation_deg, azimuth_deg, distance, fov_deg = 90,
+//!            adapt_distance
 //! [render]   width = 512, height = 512, backend = "auto"
 //! [guidance] scale = 100, t_min = 20, t_max = 980, loss_scale = 100, stage1_weight = 1,
 //!            stage2_weight = "0.0>0.2:1000; 0.2>0.3:750", negative_prompt = "", grad_clip = 0 (off),
@@ -15,7 +16,9 @@
 //!            cuda_memory_limit_gib = 0 (none), cuda_tf32 = true
 //! [style]    iterations, lr, objective   (the model-free path, see `crate::style`)
 //! [run]      seed, checkpoint_every, preview_every, turntable_views, turntable_size,
-//!            turntable_gif_frames, snapshot_every
+//!            turntable_gif_frames, snapshot_every, output_frame = "input"
+//! [region]   specs, feather, tint
+//! [mesh]     remesh = "auto" | "on" | "off" | edge length (`0.03`, `"1.5%"`), up = "+y"
 //! ```
 //! `docs/cli.md` lists every key with its meaning.
 
@@ -92,6 +95,10 @@ pub struct CameraSection {
     pub views: usize,
     /// Scale the distance by the deformed mesh's extent from iteration 2 on (spec §5): true.
     pub adapt_distance: bool,
+    /// The view ranges by name ([`CameraPreset`]): `default` (the keys below as given: the
+    /// paper's unless set), `tall` (the paper's preset for tall, slender shapes) or `auto`
+    /// (`tall` for tall, slim meshes by [`CameraPreset::TALL_ASPECT`], else `default`).
+    pub preset: CameraPreset,
     /// The ranges of the per-view draws and the field of view (flattened: the file's `[camera]`
     /// keys `elevation_deg`, `azimuth_deg`, `distance`, `fov_deg`).
     #[serde(flatten)]
@@ -103,8 +110,114 @@ impl Default for CameraSection {
         Self {
             views: 8,
             adapt_distance: true,
+            preset: CameraPreset::Default,
             sampler: raster_diff::CameraConfig::default(),
         }
+    }
+}
+
+/// `camera.preset`: the view sampler's ranges by name (`--camera`).
+///
+/// The paper's numbers (its supplementary, and `raster_diff::CameraConfig`): `default` draws
+/// each view's elevation uniformly in [0°, 60°] above the xz-plane, azimuth in [0°, 361°] and
+/// distance in [2.5, 3.0] (times the adaptive multiplier), field of view 90° (focal length 1);
+/// `tall`, which the paper uses for humans and other tall, slender shapes, draws elevation in
+/// [0°, 30°] and distance in [1.4, 2.6] (azimuth and field of view unchanged), so the camera comes
+/// closer and stays lower.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CameraPreset {
+    /// The `[camera]` ranges as configured (the paper's default unless set).
+    #[default]
+    Default,
+    /// The paper's preset for tall, slender shapes: elevation [0°, 30°], distance [1.4, 2.6].
+    Tall,
+    /// `tall` when the prepared mesh (after `mesh.up`) is tall and slim: its height (y extent) is
+    /// at least [`CameraPreset::TALL_ASPECT`] times its larger horizontal extent (x or z); else
+    /// `default`. Resolved when the run starts; the run records the resolved preset.
+    Auto,
+}
+
+impl CameraPreset {
+    /// `auto` picks `tall` when height ≥ this × max(x extent, z extent): 1.5 (a standing person
+    /// is about 3–4, a seated figure or a chair about 1–1.5, a four-legged animal below 1).
+    pub const TALL_ASPECT: f64 = 1.5;
+
+    /// `default`, `tall` or `auto`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Default => "default",
+            Self::Tall => "tall",
+            Self::Auto => "auto",
+        }
+    }
+
+    /// What `auto` picks for a mesh of bounding-box extents `size` (x, y, z; y up), with the
+    /// reason in words.
+    pub fn auto_choice(size: [f64; 3]) -> (Self, String) {
+        let horizontal = size[0].max(size[2]);
+        let aspect = if horizontal > 0.0 {
+            size[1] / horizontal
+        } else {
+            f64::INFINITY
+        };
+        let pick = if aspect >= Self::TALL_ASPECT {
+            Self::Tall
+        } else {
+            Self::Default
+        };
+        (
+            pick,
+            format!(
+                "camera: auto → {} (height / widest horizontal extent = {aspect:.2}; tall from {})",
+                pick.name(),
+                Self::TALL_ASPECT
+            ),
+        )
+    }
+}
+
+impl std::fmt::Display for CameraPreset {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for CameraPreset {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Self> {
+        match s.trim().to_ascii_lowercase().as_str() {
+            "default" => Ok(Self::Default),
+            "tall" => Ok(Self::Tall),
+            "auto" => Ok(Self::Auto),
+            other => Err(Error::Invalid(format!(
+                "unknown camera preset {other:?} (known: default, tall, auto)"
+            ))),
+        }
+    }
+}
+
+impl Config {
+    /// The configuration a run on a prepared mesh (positions after `mesh.up` and normalization)
+    /// uses: `camera.preset = auto` resolved to `tall` or `default` ([`CameraPreset::auto_choice`])
+    /// and a `tall` preset's ranges written into `[camera]` (`elevation_deg`, `distance`), so
+    /// that `config.toml` and the task identity hold what the views are drawn from. Returns the
+    /// line that says what `auto` chose (None for other presets).
+    pub fn with_camera_resolved(mut self, positions: &[[f64; 3]]) -> (Self, Option<String>) {
+        let mut note = None;
+        if self.camera.preset == CameraPreset::Auto {
+            let (lo, hi) = mesh_core::geometry::bbox(positions);
+            let size: [f64; 3] = std::array::from_fn(|k| (hi[k] - lo[k]).max(0.0));
+            let (pick, why) = CameraPreset::auto_choice(size);
+            self.camera.preset = pick;
+            note = Some(why);
+        }
+        if self.camera.preset == CameraPreset::Tall {
+            let tall = raster_diff::CameraConfig::tall();
+            self.camera.sampler.elevation_deg = tall.elevation_deg;
+            self.camera.sampler.distance = tall.distance;
+        }
+        (self, note)
     }
 }
 
@@ -370,6 +483,10 @@ pub struct RunSection {
     /// Save the deformed positions to `snapshots.npz` every N iterations, plus iteration 0 and the
     /// last (0: no snapshots): 50.
     pub snapshot_every: u64,
+    /// The frame mesh outputs (`mesh.obj/.ply/.glb`) are written in: `input` (the input's own
+    /// coordinates, axes and scale; the default) or `normalized` (the reference's side-2 frame).
+    /// Presentation only: never part of the task identity ([`crate::frame`]).
+    pub output_frame: crate::frame::OutputFrame,
 }
 
 impl Default for RunSection {
@@ -382,8 +499,21 @@ impl Default for RunSection {
             turntable_size: 256,
             turntable_gif_frames: 36,
             snapshot_every: 50,
+            output_frame: crate::frame::OutputFrame::Input,
         }
     }
+}
+
+/// `[mesh]`: what is done to the input mesh before it is normalized and optimized.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct MeshSection {
+    /// `auto` (default), `on`, `off`, or an edge length (`0.03` side-2 units, `1.5%`)
+    /// ([`crate::remeshing`]).
+    pub remesh: crate::remeshing::RemeshSetting,
+    /// The input's up axis, turned to +y before normalization and back on output: `+y`
+    /// ([`crate::frame::UpAxis`]; `+z` for most CAD files and scans).
+    pub up: crate::frame::UpAxis,
 }
 
 /// `[region]`: localized stylization (`docs/cli.md`, `mesh_core::region`).
@@ -419,6 +549,8 @@ pub struct Config {
     pub run: RunSection,
     /// `[region]`.
     pub region: RegionSection,
+    /// `[mesh]`: what is done to the input before it is optimized (remeshing, orientation).
+    pub mesh: MeshSection,
 }
 
 impl Config {

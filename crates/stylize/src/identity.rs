@@ -5,6 +5,10 @@
 //! - `mesh`: SHA-256 of the prepared mesh (repaired, normalized: exactly what is optimized) over
 //!   the vertex and face counts (u64 LE), the positions (f64 LE) and the faces (u32 LE); two meshes
 //!   with the same vertex count but different geometry or connectivity differ.
+//! - `mesh.remeshed` (only when `[mesh] remesh` remeshed the input, so identities of kept meshes
+//!   are unchanged): the target edge length, rounds and feature angle
+//!   ([`crate::remeshing::RemeshReport::identity_value`]); the setting itself is never a
+//!   `config.` field ([`RECORDED_BY_THE_PREPARED_MESH`]).
 //! - the task kind's own fields ([`TaskKind::identity_fields`]): `objective` (`style` or
 //!   `prompt`); for a style, `style` (`cube`, `octahedron`, `exemplar`) and for exemplars the
 //!   SHA-256 of the exemplar's target normals (its content, not its path); for a prompt, `prompt`,
@@ -73,11 +77,21 @@ pub const PRESENTATION_KEYS: &[&str] = &[
     "guidance.cuda_memory_limit_gib",
     "guidance.cuda_tf32",
     "region.tint",
+    "run.output_frame",
 ];
 
+/// Keys every run reads whose whole effect is on the prepared mesh, which the identity records
+/// already (`mesh.sha256`): they are never `config.*` fields. `mesh.remesh` at `auto` keeps an
+/// even mesh exactly, so the identities of runs made before it are unchanged; when a run's input
+/// is remeshed, the runner adds the field `mesh.remeshed` (edge length, iterations, feature
+/// angle: [`crate::remeshing::RemeshReport::identity_value`]) beside the remeshed mesh's hash, so
+/// a resume with settings that remesh differently (or not at all) is refused by name.
+pub const RECORDED_BY_THE_PREPARED_MESH: &[&str] = &["mesh.remesh"];
+
 /// Sections every run reads whatever its kind: the runner builds dARAP from `[darap]` and
-/// `[region]` (the region is recorded by [`TaskIdentity::with_region`]).
-pub const COMMON_SECTIONS: &[&str] = &["darap", "region"];
+/// `[region]` (the region is recorded by [`TaskIdentity::with_region`]), and turns the input by
+/// `[mesh]` (`mesh.up`).
+pub const COMMON_SECTIONS: &[&str] = &["darap", "region", "mesh"];
 
 /// Keys every run reads whatever its kind: the runner seeds the generator from `run.seed` and runs
 /// Adam with `optim.beta1/beta2/eps`.
@@ -90,7 +104,7 @@ const PICTURE_KEYS: &[&str] = &["camera.fov_deg"];
 /// Configuration keys added after identities were first written that change the result: they
 /// join the identity only when set away from their default (see the module documentation), so
 /// the identities of runs made before them are unchanged.
-pub const RECORDED_UNLESS_DEFAULT: &[&str] = &[];
+pub const RECORDED_UNLESS_DEFAULT: &[&str] = &["mesh.up", "camera.preset"];
 
 /// Inserts `name = value` into identity `fields` unless `value` is `default` (the rule for new
 /// settings of the module documentation). Returns whether it was inserted.
@@ -130,6 +144,7 @@ pub fn unread_settings(config: &Config, kind: &dyn TaskKind) -> Result<Vec<Strin
         for (key, value) in keys {
             let name = format!("{section}.{key}");
             if PRESENTATION_KEYS.contains(&name.as_str())
+                || RECORDED_BY_THE_PREPARED_MESH.contains(&name.as_str())
                 || run_reads(kind, section, &name)
                 || PICTURE_KEYS.contains(&name.as_str())
             {
@@ -221,7 +236,9 @@ impl TaskIdentityExt for TaskIdentity {
             let default_keys = defaults.get(section).and_then(|d| d.as_table());
             for (key, value) in keys {
                 let name = format!("{section}.{key}");
-                if PRESENTATION_KEYS.contains(&name.as_str()) {
+                if PRESENTATION_KEYS.contains(&name.as_str())
+                    || RECORDED_BY_THE_PREPARED_MESH.contains(&name.as_str())
+                {
                     continue;
                 }
                 if RECORDED_UNLESS_DEFAULT.contains(&name.as_str())
@@ -430,6 +447,57 @@ mod tests {
             "config.render.width",
         ]);
         assert_eq!(names(&Prompt::new("a cat")), text);
+    }
+
+    /// `mesh.remesh` acts through the prepared mesh only: never a `config.` field, never an
+    /// unread setting, whatever its value and whatever the kind.
+    #[test]
+    fn the_remesh_setting_is_recorded_by_the_prepared_mesh_only() {
+        use crate::remeshing::RemeshSetting;
+        for kind in [&Style::Cube as &dyn TaskKind, &Prompt::new("a cat")] {
+            let default = id(kind, &Config::default());
+            for r in [RemeshSetting::Off, RemeshSetting::On] {
+                let mut c = Config::default();
+                c.mesh.remesh = r;
+                assert_eq!(id(kind, &c), default, "{r}");
+                assert_eq!(unread_settings(&c, kind).ok(), Some(Vec::new()), "{r}");
+            }
+        }
+    }
+
+    #[test]
+    fn orientation_and_camera_preset_join_only_away_from_their_default_and_the_frame_never() {
+        let with = |sets: &[&str]| {
+            let c = Config::default()
+                .with_overrides(sets)
+                .unwrap_or_else(|e| panic!("{e}"));
+            (
+                id(&Style::Cube, &c).fields,
+                id(&Prompt::new("a cat"), &c).fields,
+            )
+        };
+        let (style0, text0) = with(&[]);
+        // The output frame is presentation: no identity changes.
+        assert_eq!(
+            with(&["run.output_frame=normalized"]),
+            (style0.clone(), text0.clone())
+        );
+        // Explicit defaults are absent too.
+        assert_eq!(
+            with(&["mesh.up=+y", "camera.preset=default"]),
+            (style0.clone(), text0.clone())
+        );
+        let (style, text) = with(&["mesh.up=+z"]);
+        for f in [&style, &text] {
+            assert_eq!(f.get("config.mesh.up").map(String::as_str), Some("\"+z\""));
+        }
+        // A resolved preset: recorded for the text path (which reads [camera]), not the style's.
+        let (style, text) = with(&["camera.preset=tall"]);
+        assert_eq!(style, style0);
+        assert_eq!(
+            text.get("config.camera.preset").map(String::as_str),
+            Some("\"tall\"")
+        );
     }
 
     #[test]

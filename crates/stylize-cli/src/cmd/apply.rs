@@ -11,8 +11,14 @@
 //!
 //! Reads the saved `.npz`, builds its dARAP layer ([`SavedDeformation::ready_layer`]: `verts`
 //! normalized to the side-2 cube in f64) with the requested λ (default: the saved
-//! `local_step_procrustes.lamb`), runs local step → global step → `recenter_rescale`, and writes the deformed mesh (in the normalized frame, as the
-//! reference) with area-weighted vertex normals.
+//! `local_step_procrustes.lamb`), runs local step → global step → `recenter_rescale`, and writes
+//! the deformed mesh with area-weighted vertex normals.
+//!
+//! **Frame** (`--output-frame`): by default the input's own coordinates, axes and scale, through
+//! the file's `to_input_frame` (a run of ours records it; the result is placed as the run places
+//! its `mesh.*`, see `stylize::frame`); `normalized` writes the reference's side-2 frame. A file
+//! without `to_input_frame` (the reference's, or one written before output frames existed) is
+//! written in the normalized frame with a note; `--output-frame input` on it is an error.
 //!
 //! **Mask file** (`--mask FILE`): plain text, one vertex index per line (0-based, the saved file's
 //! vertex order) of the vertices that **may rotate**; every other vertex keeps `R = I`. Blank
@@ -35,6 +41,7 @@ use anyhow::{Context, bail, ensure};
 use darap::RotationRule;
 use mesh_core::TriMesh;
 use mesh_core::io::Format;
+use stylize::frame::{InputFrame, OutputFrame};
 use stylize::saved::{Region, SavedDeformation, SavedError};
 
 /// Arguments of `stylize apply`.
@@ -67,9 +74,39 @@ pub struct Args {
     /// Ignore the saved region: every vertex may rotate.
     #[arg(long, conflicts_with_all = ["mask", "region"])]
     pub no_region: bool,
+    /// The frame of the written mesh: `input` (the run's input file's coordinates, through the
+    /// saved `to_input_frame`; the default when the file records it) or `normalized` (the
+    /// reference's side-2 frame; the default for files without it).
+    #[arg(long, value_name = "input|normalized")]
+    pub output_frame: Option<OutputFrame>,
     /// Overwrite existing output files.
     #[arg(long)]
     pub force: bool,
+}
+
+/// The map to apply to results: `Some(frame)` for the input frame, `None` for the normalized one.
+fn output_map(args: &Args, saved: &SavedDeformation) -> anyhow::Result<Option<InputFrame>> {
+    let recorded = saved
+        .input_frame()
+        .with_context(|| format!("{}", args.saved.display()))?;
+    Ok(match (args.output_frame, recorded) {
+        (Some(OutputFrame::Normalized), _) => None,
+        (_, Some(frame)) => Some(frame),
+        (Some(OutputFrame::Input), None) => bail!(
+            "--output-frame input: {} does not record its input's frame (`to_input_frame`: a \
+             file from the reference, or from a run before output frames existed); use \
+             --output-frame normalized",
+            args.saved.display()
+        ),
+        (None, None) => {
+            eprintln!(
+                "note: {} does not record its input's frame (`to_input_frame`); writing the \
+                 normalized side-2 frame",
+                args.saved.display()
+            );
+            None
+        }
+    })
 }
 
 /// One `--lambda` value.
@@ -290,6 +327,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         );
     }
 
+    let to_input = output_map(&args, &saved)?;
     let mut ready = saved.ready_layer(&args.saved, lambdas[0], Some(rule))?;
     let region = region(&args, &saved, &ready.rest.positions)?;
     ready.set_region(&saved, &args.saved, region)?;
@@ -305,7 +343,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .with_context(|| format!("dARAP forward failed at λ = {lambda}"))?;
         let sanity =
             crate::sanity::LambdaSanity::assess(&ready.rest, &mut source, &deformed, lambda)?;
-        let mesh = TriMesh::new(deformed.positions, saved.faces.clone());
+        // `ready_layer` post-processes with `recenter_rescale`: the result is recentred.
+        let positions = match &to_input {
+            Some(frame) => frame.place_result(&deformed.positions, &ready.rest.positions, true),
+            None => deformed.positions,
+        };
+        let mesh = TriMesh::new(positions, saved.faces.clone());
         let normals =
             mesh_core::normals::vertex_normals_area_weighted(&mesh.positions, &mesh.faces);
         if let Some(parent) = out.parent()

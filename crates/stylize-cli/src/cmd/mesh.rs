@@ -69,6 +69,12 @@ fn check(a: CheckArgs) -> anyhow::Result<()> {
         ..RepairOptions::default()
     };
     let report = validate(&mesh, &options);
+    let quality = if report.is_refused() {
+        None
+    } else {
+        Some(repaired_quality(&mesh, &options)?)
+    };
+    let extents = Extents::of(&mesh.positions);
     let intersections = if report.is_refused() {
         None
     } else {
@@ -79,14 +85,25 @@ fn check(a: CheckArgs) -> anyhow::Result<()> {
         if let Some(x) = &intersections {
             json["self_intersections"] = x.json();
         }
+        if let Some(q) = &quality {
+            json["quality"] = stylize::remeshing::quality_json(q);
+            json["remeshing_advised"] = serde_json::json!(remesh_advice(q).0);
+            json["remeshing_advice"] = serde_json::json!(remesh_advice(q).1);
+        }
+        json["extents"] = serde_json::json!(extents.size);
+        json["up_hint"] = serde_json::json!(extents.up_hint());
         println!(
             "{}",
             serde_json::to_string_pretty(&json).context("cannot format the report as JSON")?
         );
     } else {
         print!("{}", report_table(&a.file, &report));
+        print!("{}", extents.table());
         if let Some(x) = &intersections {
             print!("{}", x.table());
+        }
+        if let Some(q) = &quality {
+            print!("{}", quality_table(q));
         }
     }
     if report.is_refused() {
@@ -97,6 +114,44 @@ fn check(a: CheckArgs) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+/// Triangle quality of the mesh after the repair `options` make (what a run would optimize,
+/// before `[mesh] remesh`).
+fn repaired_quality(
+    mesh: &mesh_core::TriMesh,
+    options: &RepairOptions,
+) -> anyhow::Result<mesh_core::remesh::Quality> {
+    let repaired = mesh_core::validate::repair(mesh, options).context("cannot repair the mesh")?;
+    mesh_core::remesh::quality(&repaired.mesh.positions, &repaired.mesh.faces)
+        .context("cannot measure the triangles")
+}
+
+/// Whether remeshing is advised (the criterion of `--remesh auto`,
+/// [`stylize::remeshing::remeshing_advised`]) and the sentence that says so.
+fn remesh_advice(q: &mesh_core::remesh::Quality) -> (bool, String) {
+    match stylize::remeshing::remeshing_advised(q) {
+        Some(why) => (
+            true,
+            format!(
+                "remeshing advised ({why}): `stylize run` remeshes it by default (`--remesh \
+                 auto`); `stylize remesh` does it alone"
+            ),
+        ),
+        None => (
+            false,
+            "triangles even enough: `stylize run` keeps them as they are (`--remesh auto`)".into(),
+        ),
+    }
+}
+
+/// The quality figures and the advice, for people.
+fn quality_table(q: &mesh_core::remesh::Quality) -> String {
+    format!(
+        "\ntriangles (after repair): {}\n{}\n",
+        stylize::remeshing::quality_line(q),
+        remesh_advice(q).1
+    )
 }
 
 /// The self-intersections of the repaired mesh (what a run uses), for `mesh check`.
@@ -187,6 +242,58 @@ impl SelfIntersectionSection {
                 r.degenerate.len(),
                 if r.degenerate.len() == 1 { "" } else { "s" }
             );
+        }
+        s
+    }
+}
+
+/// The bounding box extents per axis of a mesh's finite vertices, and the orientation hint.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Extents {
+    /// max − min along x, y, z (0 without finite vertices).
+    size: [f64; 3],
+}
+
+/// The hint fires when the y extent is below this share of the largest extent (and the smallest).
+const FLAT_Y_SHARE: f64 = 2.0 / 3.0;
+
+impl Extents {
+    fn of(positions: &[[f64; 3]]) -> Self {
+        let mut lo = [f64::INFINITY; 3];
+        let mut hi = [f64::NEG_INFINITY; 3];
+        for p in positions.iter().filter(|p| p.iter().all(|c| c.is_finite())) {
+            for k in 0..3 {
+                lo[k] = lo[k].min(p[k]);
+                hi[k] = hi[k].max(p[k]);
+            }
+        }
+        Self {
+            size: std::array::from_fn(|k| if hi[k] >= lo[k] { hi[k] - lo[k] } else { 0.0 }),
+        }
+    }
+
+    /// A hint that the mesh may lie on its side: the renders put +y up (the view sampler's
+    /// elevations are above the xz-plane), and most upright objects are not flattest along their
+    /// up axis. The rule: y is the smallest extent and below [`FLAT_Y_SHARE`] of the largest.
+    fn up_hint(&self) -> Option<String> {
+        let [x, y, z] = self.size;
+        let largest = x.max(y).max(z);
+        (largest > 0.0 && y < x && y < z && y < FLAT_Y_SHARE * largest).then(|| {
+            format!(
+                "the mesh is flattest along y ({:.0}% of its largest extent): stylization renders \
+                 it with +y up, so if it lies on its side (a z-up export: CAD, scans), pass \
+                 --up z (or the axis that points up: --up x, --up -z, …); a mesh that is really \
+                 flat, such as a rug, is fine as it is",
+                100.0 * y / largest
+            )
+        })
+    }
+
+    fn table(&self) -> String {
+        let [x, y, z] = self.size;
+        let mut s = format!("extents: x {x:.6}, y {y:.6}, z {z:.6} (renders put +y up)\n");
+        if let Some(h) = self.up_hint() {
+            s += &format!("hint: {h}\n");
         }
         s
     }
@@ -482,8 +589,54 @@ mod tests {
     }
 
     #[test]
+    fn quality_advice_follows_the_auto_criterion() {
+        let q = |name: &str| {
+            let mesh = mesh_core::io::read_mesh(fixture(name)).unwrap_or_else(|e| panic!("{e}"));
+            repaired_quality(&mesh, &RepairOptions::default()).unwrap_or_else(|e| panic!("{e:#}"))
+        };
+        for (name, advised) in [
+            ("bunny.obj", false),
+            ("fandisk.off", false),
+            ("cow.off", true),
+            ("triceratops.off", true),
+        ] {
+            let quality = q(name);
+            let (got, text) = remesh_advice(&quality);
+            assert_eq!(got, advised, "{name}: {text}");
+            let table = quality_table(&quality);
+            assert!(
+                table.contains("std/mean") && table.contains(&text),
+                "{table}"
+            );
+        }
+    }
+
+    #[test]
+    fn extents_hint_that_a_mesh_lies_on_its_side_only_when_it_is_flattest_along_y() {
+        // A tall, slim box standing up (y-up) gets no hint; the same box lying along z does, and
+        // turning it back with mesh.up = +z removes it.
+        let standing = vec![[0.0, 0.0, 0.0], [1.0, 3.0, 0.8]];
+        assert_eq!(Extents::of(&standing).up_hint(), None);
+        let mut lying: Vec<[f64; 3]> = standing.iter().map(|p| [p[0], -p[2], p[1]]).collect();
+        let hint = Extents::of(&lying).up_hint().unwrap_or_default();
+        assert!(hint.contains("--up z"), "{hint}");
+        stylize::frame::UpAxis::PosZ.turn(&mut lying);
+        assert_eq!(Extents::of(&lying).up_hint(), None);
+        assert_eq!(Extents::of(&lying).size, Extents::of(&standing).size);
+        // A cube-ish mesh and one without finite vertices: no hint.
+        assert_eq!(Extents::of(&[[0.0; 3], [1.0, 0.9, 1.0]]).up_hint(), None);
+        assert_eq!(Extents::of(&[[f64::NAN; 3]]).up_hint(), None);
+        let t = Extents::of(&standing).table();
+        assert!(
+            t.starts_with("extents: x 1.000000, y 3.000000, z 0.800000"),
+            "{t}"
+        );
+    }
+
+    #[test]
     fn check_succeeds_on_repairable_meshes_and_fails_on_refused_or_unreadable_ones() {
         assert!(check(args("bone.ply", false)).is_ok());
+        assert!(check(args("cow.off", false)).is_ok());
         assert!(check(args("triceratops.off", true)).is_ok());
         let e = check(args("bad/nan_coordinates.obj", false)).expect_err("refused");
         assert!(format!("{e:#}").contains("vertex 3"), "{e:#}");

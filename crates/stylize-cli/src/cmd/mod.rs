@@ -7,6 +7,7 @@ pub mod doctor;
 pub mod embed;
 pub mod eval;
 pub mod mesh;
+pub mod remesh;
 pub mod render;
 pub mod run;
 pub mod shared;

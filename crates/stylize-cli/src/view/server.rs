@@ -10,7 +10,9 @@
 //! /TOKEN/api/items/ID/max-safe?upper=L     JSON: the strongest safe λ in (0, L] (`lambda`,
 //!                                           `first_unsafe`, `safe_again`, `evaluations`;
 //!                                           `crate::max_safe`), cached per run and L
-//! /TOKEN/api/items/ID/download?lambda=L&format=obj|ply|glb   the mesh at λ as a file
+//! /TOKEN/api/items/ID/download?lambda=L&format=obj|ply|glb[&frame=input|normalized]
+//!                                                          the mesh at λ as a file, in the run's
+//!                                                          input frame by default
 //! /TOKEN/api/items/ID/files/PATH            a file inside a run directory (images, metrics)
 //! /TOKEN/api/items/ID/targets               framed: header JSON + f32 unit target normals, one
 //!                                           per source vertex (the saved deformation's)
@@ -295,6 +297,9 @@ async fn result(
 struct DownloadQuery {
     lambda: f64,
     format: String,
+    /// `input` (the default when the run records its input frame) or `normalized`.
+    #[serde(default)]
+    frame: Option<String>,
 }
 
 async fn download(
@@ -312,10 +317,19 @@ async fn download(
         ))
         .into_response();
     };
+    let frame = match q
+        .frame
+        .as_deref()
+        .map(str::parse::<stylize::frame::OutputFrame>)
+    {
+        None => None,
+        Some(Ok(f)) => Some(f),
+        Some(Err(e)) => return ViewError::BadRequest(e.to_string()).into_response(),
+    };
     let format = format.extension();
     let fmt = format;
     let made = on_item(viewer, id, move |item| {
-        let shape = item.at_lambda(q.lambda)?;
+        let shape = item.in_frame(item.at_lambda(q.lambda)?, frame)?;
         let mesh = mesh_core::TriMesh::new(shape.positions, shape.faces);
         let normals =
             mesh_core::normals::vertex_normals_area_weighted(&mesh.positions, &mesh.faces);
