@@ -55,6 +55,9 @@ fn run(mesh: &Path, out: &Path) {
         "--out",
         s(out),
         "--quiet",
+        // The triceratops as it is, needles included: `--remesh auto` would remesh it.
+        "--remesh",
+        "off",
         "--set",
         "style.iterations=40",
         "--set",

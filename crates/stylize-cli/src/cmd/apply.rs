@@ -295,7 +295,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         None => saved.rotation_rule()?.unwrap_or_default(),
     };
 
-    let outputs = output_paths(&args.output, &lambdas)?;
+    let mut outputs = output_paths(&args.output, &lambdas)?;
+    // Several λ: the labelled comparison sheet too (cmd::apply_grid), checked like the meshes.
+    let grid = if lambdas.len() > 1 {
+        let path = super::apply_grid::grid_path(&args.output)?;
+        outputs.push(path.clone());
+        Some(path)
+    } else {
+        None
+    };
     let mut inputs = vec![("saved deformation".to_string(), args.saved.clone())];
     if let Some(m) = &args.mask {
         inputs.push(("mask file".into(), m.clone()));
@@ -337,12 +345,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         lambdas = vec![max_safe(&mut ready, &mut source, upper)?];
     }
 
+    let mut columns = Vec::new();
     for (&lambda, out) in lambdas.iter().zip(&outputs) {
         let deformed = ready
             .at_lambda(lambda)
             .with_context(|| format!("dARAP forward failed at λ = {lambda}"))?;
         let sanity =
             crate::sanity::LambdaSanity::assess(&ready.rest, &mut source, &deformed, lambda)?;
+        if grid.is_some() {
+            // The sheet's tiles are rendered in the side-2 frame, whatever frame the files use.
+            columns.push((
+                lambda,
+                super::apply_grid::tiles(&deformed.positions, &saved.faces)?,
+            ));
+        }
         // `ready_layer` post-processes with `recenter_rescale`: the result is recentred.
         let positions = match &to_input {
             Some(frame) => frame.place_result(&deformed.positions, &ready.rest.positions, true),
@@ -366,6 +382,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         for w in sanity.warnings() {
             eprintln!("warning: {w}");
         }
+    }
+    if let Some(path) = &grid {
+        super::apply_grid::write_sheet(path, &columns)?;
+        println!("wrote {} (λ = {} by column)", path.display(), {
+            let l: Vec<String> = lambdas.iter().map(f64::to_string).collect();
+            l.join(", ")
+        });
     }
     Ok(())
 }
