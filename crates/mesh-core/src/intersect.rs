@@ -336,11 +336,49 @@ fn o3(a: [f64; 3], b: [f64; 3], c: [f64; 3], d: [f64; 3]) -> Sign {
 
 /// Faces `(u, v, a)` and `(v, u, b)` sharing edge `uv`: a fold (coplanar, same side).
 fn edge_fold(u: [f64; 3], v: [f64; 3], a: [f64; 3], b: [f64; 3], ta: &Tri) -> bool {
+    if clearly_opposite_sides(u, v, a, b) {
+        return false;
+    }
     if o3(u, v, a, b) != Sign::Zero {
         return false;
     }
     let Some(k) = ta.drop else { return false };
     orient2d_projected(u, v, a, k) == orient2d_projected(u, v, b, k)
+}
+
+/// A filter before the fold test: `true` only when `a` and `b` are certainly on opposite sides of
+/// the line `uv` (their components perpendicular to `uv` make an angle over 90°), so the faces
+/// cannot fold onto each other whatever the exact `orient3d` says. It decides the common case of
+/// flat or nearly flat neighbours, where `orient3d(u, v, a, b)` is close to 0 and its filter would
+/// hand the sign to the exact fallback.
+///
+/// By Binet–Cauchy, `(e × da)·(e × db) = |e|²·(a⊥·b⊥)` with `e = v − u`, `da = a − u`,
+/// `db = b − u`. In `f64` its error is below about `12ε·M` with `M = |e|₁²·|da|₁·|db|₁`
+/// (the differences, the cross products and the dot each add a few roundings), so a computed
+/// value below `−1e-12·M` is certainly negative. Anything else — including differences whose
+/// 1-norms leave `[2⁻¹⁰⁰, 2¹⁰⁰]` — is left to the exact test.
+#[inline]
+fn clearly_opposite_sides(u: [f64; 3], v: [f64; 3], a: [f64; 3], b: [f64; 3]) -> bool {
+    let sub = |p: [f64; 3], q: [f64; 3]| [p[0] - q[0], p[1] - q[1], p[2] - q[2]];
+    let cross = |p: [f64; 3], q: [f64; 3]| {
+        [
+            p[1] * q[2] - p[2] * q[1],
+            p[2] * q[0] - p[0] * q[2],
+            p[0] * q[1] - p[1] * q[0],
+        ]
+    };
+    let norm1 = |p: [f64; 3]| p[0].abs() + p[1].abs() + p[2].abs();
+    let (e, da, db) = (sub(v, u), sub(a, u), sub(b, u));
+    let (ne, na, nb) = (norm1(e), norm1(da), norm1(db));
+    // 2⁻¹⁰⁰ ≤ each 1-norm ≤ 2¹⁰⁰: no overflow, and underflow (absolute 2⁻¹⁰⁷⁴ per product,
+    // times at most 2²⁰⁰) stays far below the margin 1e-12·M ≥ 2⁻⁴⁴⁰.
+    let in_range = |x: f64| (7.9e-31..=1.26e30).contains(&x);
+    if !(in_range(ne) && in_range(na) && in_range(nb)) {
+        return false;
+    }
+    let (ca, cb) = (cross(e, da), cross(e, db));
+    let dot = ca[0] * cb[0] + ca[1] * cb[1] + ca[2] * cb[2];
+    dot < -1e-12 * (ne * ne * na * nb)
 }
 
 /// `(v, a₁, b₁)` and `(v, a₂, b₂)` sharing corner `v`: do they meet other than at `v`?
