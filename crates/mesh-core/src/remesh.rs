@@ -68,9 +68,11 @@
 
 mod halfedge;
 mod quality;
+mod transfer;
 
 use halfedge::{HalfEdgeMesh, NONE, dist, opp};
 pub use quality::{Hausdorff, Quality, hausdorff, quality};
+pub use transfer::{TransferSource, transfer_parts};
 
 use crate::bvh::{Bvh, BvhError};
 use crate::geometry::{cross, dot, norm, sub};
@@ -190,6 +192,10 @@ pub enum RemeshError {
         /// Second vertex.
         b: u32,
     },
+    /// Attributes could not be carried onto the remeshed mesh ([`transfer_parts`]): inconsistent
+    /// source faces.
+    #[error("cannot carry attributes onto the remeshed mesh: {0}")]
+    Transfer(String),
     /// A vertex whose faces form more than one fan.
     #[error(
         "non-manifold vertex {vertex}: its faces form more than one fan (two parts touch there); repair the mesh first"

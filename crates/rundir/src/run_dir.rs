@@ -70,6 +70,7 @@ pub const RUN_FILES: &[&str] = &[
     "before_after.png",
     "snapshots.npz",
     "run.json",
+    "source_remeshed.obj",
 ];
 
 /// The `format` value of `task.json`.

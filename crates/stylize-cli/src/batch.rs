@@ -13,6 +13,7 @@
 //! | `overrides` | list of `"section.key=value"`, optional | applied after the base config |
 //! | `region` | list of region specs, optional | replaces `region.specs` (`vertices:FILE` relative to the manifest's folder) |
 //! | `region_feather` | integer, optional | replaces `region.feather` |
+//! | `remesh` | string or number, optional | replaces `mesh.remesh` (`auto`, `on`, `off`, `0.03`, `"1.5%"`) |
 //!
 //! Rows are numbered from 0 in file order; shard `i` of `n` takes the rows with `index % n == i`.
 //! At load time, an empty `out` and two rows writing the same run directory (after path
@@ -70,6 +71,9 @@ pub struct Row {
     /// Feather rings (replace `region.feather`).
     #[serde(default)]
     pub region_feather: Option<u32>,
+    /// Remeshing (replaces `mesh.remesh`).
+    #[serde(default)]
+    pub remesh: Option<stylize::remeshing::RemeshSetting>,
 }
 
 #[derive(Deserialize)]
@@ -422,6 +426,9 @@ fn run_row(
     if let Some(n) = &row.negative_prompt {
         config.guidance.negative_prompt = n.clone();
     }
+    if let Some(r) = row.remesh {
+        config.mesh.remesh = r;
+    }
     let config = config.with_region_flags(&row.region, row.region_feather, false)?;
     let request = RunRequest {
         mesh: row.mesh.clone(),
@@ -587,6 +594,44 @@ mod tests {
         assert_eq!(config.region.feather, 2);
         let e = Config::default().with_region_flags(&["box:1".to_string()], None, false);
         assert!(format!("{:#}", e.expect_err("an error")).contains("region.specs"));
+    }
+
+    #[test]
+    fn the_remesh_column_takes_settings_and_lengths_and_refuses_others() {
+        use stylize::remeshing::{EdgeLength, RemeshSetting};
+        let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+        let jsonl = dir.path().join("m.jsonl");
+        std::fs::write(
+            &jsonl,
+            "{\"mesh\": \"a.obj\", \"style\": \"cube\", \"out\": \"a\", \"remesh\": \"off\"}\n\
+             {\"mesh\": \"a.obj\", \"style\": \"cube\", \"out\": \"b\", \"remesh\": 0.03}\n\
+             {\"mesh\": \"a.obj\", \"style\": \"cube\", \"out\": \"c\", \"remesh\": \"2%\"}\n\
+             {\"mesh\": \"a.obj\", \"style\": \"cube\", \"out\": \"d\"}\n",
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        let rows = read_manifest(&jsonl).unwrap_or_else(|e| panic!("{e:#}"));
+        let got: Vec<Option<RemeshSetting>> = rows.iter().map(|r| r.remesh).collect();
+        assert_eq!(
+            got,
+            [
+                Some(RemeshSetting::Off),
+                Some(RemeshSetting::EdgeLength(EdgeLength::Absolute(0.03))),
+                Some(RemeshSetting::EdgeLength(EdgeLength::PercentOfDiagonal(
+                    2.0
+                ))),
+                None
+            ]
+        );
+        std::fs::write(
+            &jsonl,
+            "{\"mesh\": \"a.obj\", \"style\": \"cube\", \"out\": \"a\", \"remesh\": \"maybe\"}\n",
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        let e = read_manifest(&jsonl)
+            .err()
+            .map(|e| format!("{e:#}"))
+            .unwrap_or_default();
+        assert!(e.contains("line 1") && e.contains("auto"), "{e}");
     }
 
     #[test]

@@ -21,6 +21,8 @@ enum Command {
     Mesh(cmd::mesh::Args),
     /// Render a mesh: turntable frames and a contact sheet.
     Render(cmd::render::Args),
+    /// Remesh a mesh isotropically (even triangles of one edge length) with a quality report.
+    Remesh(cmd::remesh::Args),
     /// Precompute and cache prompt embeddings with the T5 encoder.
     Embed(cmd::embed::Args),
     /// Stylize one mesh (text-guided with --model, or a model-free normal style).
@@ -82,6 +84,7 @@ fn main() -> std::process::ExitCode {
         Command::Apply(a) => cmd::apply::run(a),
         Command::Mesh(a) => cmd::mesh::run(a),
         Command::Render(a) => cmd::render::run(a),
+        Command::Remesh(a) => cmd::remesh::run(a),
         #[cfg(feature = "text")]
         Command::Embed(a) => cmd::embed::run(a),
         #[cfg(not(feature = "text"))]

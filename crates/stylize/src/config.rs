@@ -13,6 +13,7 @@
 //! [style]    iterations, lr, objective   (the model-free path, see `crate::style`)
 //! [run]      seed, checkpoint_every, preview_every, turntable_views, turntable_size,
 //!            turntable_gif_frames, snapshot_every
+//! [mesh]     remesh = "auto" | "on" | "off" | edge length (`0.03`, `"1.5%"`)
 //! ```
 //! `docs/cli.md` lists every key with its meaning.
 
@@ -301,6 +302,9 @@ pub struct Config {
     pub run: RunSection,
     /// `[region]`.
     pub region: RegionSection,
+    /// `[mesh]`: what is done to the input before it is optimized (remeshing,
+    /// [`crate::remeshing`]).
+    pub mesh: crate::remeshing::MeshSection,
 }
 
 impl Config {

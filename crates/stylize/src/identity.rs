@@ -5,6 +5,10 @@
 //! - `mesh`: SHA-256 of the prepared mesh (repaired, normalized: exactly what is optimized) over
 //!   the vertex and face counts (u64 LE), the positions (f64 LE) and the faces (u32 LE); two meshes
 //!   with the same vertex count but different geometry or connectivity differ.
+//! - `mesh.remeshed` (only when `[mesh] remesh` remeshed the input, so identities of kept meshes
+//!   are unchanged): the target edge length, rounds and feature angle
+//!   ([`crate::remeshing::RemeshReport::identity_value`]); the setting itself is never a
+//!   `config.` field ([`RECORDED_BY_THE_PREPARED_MESH`]).
 //! - the task kind's own fields ([`TaskKind::identity_fields`]): `objective` (`style` or
 //!   `prompt`); for a style, `style` (`cube`, `octahedron`, `exemplar`) and for exemplars the
 //!   SHA-256 of the exemplar's target normals (its content, not its path); for a prompt, `prompt`,
@@ -67,6 +71,14 @@ pub const PRESENTATION_KEYS: &[&str] = &[
     "region.tint",
 ];
 
+/// Keys every run reads whose whole effect is on the prepared mesh, which the identity records
+/// already (`mesh.sha256`): they are never `config.*` fields. `mesh.remesh` at `auto` keeps an
+/// even mesh exactly, so the identities of runs made before it are unchanged; when a run's input
+/// is remeshed, the runner adds the field `mesh.remeshed` (edge length, iterations, feature
+/// angle: [`crate::remeshing::RemeshReport::identity_value`]) beside the remeshed mesh's hash, so
+/// a resume with settings that remesh differently (or not at all) is refused by name.
+pub const RECORDED_BY_THE_PREPARED_MESH: &[&str] = &["mesh.remesh"];
+
 /// Sections every run reads whatever its kind: the runner builds dARAP from `[darap]` and
 /// `[region]` (the region is recorded by [`TaskIdentity::with_region`]).
 pub const COMMON_SECTIONS: &[&str] = &["darap", "region"];
@@ -122,6 +134,7 @@ pub fn unread_settings(config: &Config, kind: &dyn TaskKind) -> Result<Vec<Strin
         for (key, value) in keys {
             let name = format!("{section}.{key}");
             if PRESENTATION_KEYS.contains(&name.as_str())
+                || RECORDED_BY_THE_PREPARED_MESH.contains(&name.as_str())
                 || run_reads(kind, section, &name)
                 || PICTURE_KEYS.contains(&name.as_str())
             {
@@ -213,7 +226,9 @@ impl TaskIdentityExt for TaskIdentity {
             let default_keys = defaults.get(section).and_then(|d| d.as_table());
             for (key, value) in keys {
                 let name = format!("{section}.{key}");
-                if PRESENTATION_KEYS.contains(&name.as_str()) {
+                if PRESENTATION_KEYS.contains(&name.as_str())
+                    || RECORDED_BY_THE_PREPARED_MESH.contains(&name.as_str())
+                {
                     continue;
                 }
                 if RECORDED_UNLESS_DEFAULT.contains(&name.as_str())
@@ -400,6 +415,22 @@ mod tests {
             "config.render.width",
         ]);
         assert_eq!(names(&Prompt::new("a cat")), text);
+    }
+
+    /// `mesh.remesh` acts through the prepared mesh only: never a `config.` field, never an
+    /// unread setting, whatever its value and whatever the kind.
+    #[test]
+    fn the_remesh_setting_is_recorded_by_the_prepared_mesh_only() {
+        use crate::remeshing::RemeshSetting;
+        for kind in [&Style::Cube as &dyn TaskKind, &Prompt::new("a cat")] {
+            let default = id(kind, &Config::default());
+            for r in [RemeshSetting::Off, RemeshSetting::On] {
+                let mut c = Config::default();
+                c.mesh.remesh = r;
+                assert_eq!(id(kind, &c), default, "{r}");
+                assert_eq!(unread_settings(&c, kind).ok(), Some(Vec::new()), "{r}");
+            }
+        }
     }
 
     #[test]

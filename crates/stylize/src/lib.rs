@@ -6,6 +6,7 @@
 //! - [`task`]: kinds of task behind two traits ([`task::TaskKind`]: identity and settings read;
 //!   [`task::Task`]: schedule, objective, what it reports), with the style and prompt kinds;
 //! - [`config`]: every setting of a run, with the reference's defaults;
+//! - [`remeshing`]: `[mesh] remesh`: whether and how a run's input is remeshed first;
 //! - [`runner`]: one run from mesh file to complete run directory, with a [`runner::Progress`]
 //!   the run, for replay; [`run_pictures`]: the before/after sheet, the turntable (PNG, GIF) and
 //!   the orbit, tint and grid helpers the previews share;
@@ -37,6 +38,7 @@ pub mod intersections;
 pub mod malloc;
 pub mod models;
 pub mod pipeline;
+pub mod remeshing;
 pub mod run_pictures;
 pub mod runner;
 pub mod saved;

@@ -21,6 +21,7 @@ use crate::checkpoint::{CHECKPOINT_VERSION, Checkpoint, CheckpointState};
 use crate::config::Config;
 use crate::identity::{TaskIdentity, TaskIdentityExt};
 use crate::pipeline::{IterationRecord, LoopSpec, LoopState, Objective, Observer, run_loop};
+use crate::remeshing::{RemeshReport, RemeshSetting};
 use crate::run_pictures::{tint_region, turntable, write_grid};
 use crate::saved::SavedDeformation;
 use crate::task::{BuiltTask, Figure, Task, TaskKind};
@@ -99,6 +100,10 @@ pub struct RunOutcome {
     pub already_complete: bool,
 }
 
+/// The run-directory file of a remeshed input: the rest mesh as optimized (side-2 frame; also
+/// the `verts`/`faces` of `deformation.npz`).
+pub const REMESHED_SOURCE: &str = "source_remeshed.obj";
+
 /// A mesh prepared as the reference does: repaired, side-2 cube normalized, rounded to the f32
 /// values `deformation.npz` stores and normalized again in f64 — so `stylize apply` on the saved
 /// file rebuilds exactly this rest mesh.
@@ -157,39 +162,123 @@ pub fn resolve_region(
 }
 
 /// [`prepare_mesh`] and the region of `section` on it (parts of the file and repair maps
-/// followed; boxes and spheres evaluated on the prepared, normalized positions).
+/// followed; boxes and spheres evaluated on the prepared, normalized positions). The input is
+/// never remeshed (`[mesh] remesh = "off"`); [`prepare_run_mesh`] applies the setting.
 pub fn prepare_mesh_with_region(
     path: &Path,
     section: &crate::config::RegionSection,
 ) -> Result<(TriMesh, Vec<String>, Option<ResolvedRegion>)> {
+    let p = prepare_run_mesh(path, RemeshSetting::Off, section)?;
+    Ok((p.mesh, p.warnings, p.region))
+}
+
+/// A run's input as it is optimized ([`prepare_run_mesh`]).
+#[derive(Clone, Debug)]
+pub struct PreparedMesh {
+    /// Repaired, side-2 normalized (f32-exact), remeshed when the setting said so.
+    pub mesh: TriMesh,
+    /// What the repair did.
+    pub warnings: Vec<String>,
+    /// The region on `mesh`.
+    pub region: Option<ResolvedRegion>,
+    /// What `[mesh] remesh` decided and did.
+    pub remesh: RemeshReport,
+}
+
+/// Side-2 normalization, rounded to the f32 values `deformation.npz` stores and normalized again
+/// in f64 (so a saved rest mesh rebuilds exactly).
+fn normalize_f32_exact(positions: &mut [[f64; 3]]) {
+    mesh_core::normalize::side2_cube(positions);
+    for p in positions.iter_mut() {
+        *p = p.map(|c| f64::from(c as f32));
+    }
+    mesh_core::normalize::side2_cube(positions);
+}
+
+/// A run's input from `path`: read, repaired, normalized ([`prepare_mesh`]), then remeshed as
+/// `remesh` says ([`crate::remeshing`]; the remeshed mesh is normalized again) and the region of
+/// `section` resolved on the result. After a remesh, the file's parts and properties follow the
+/// faces they came from ([`mesh_core::remesh::transfer_parts`]); `vertices:` specs name input
+/// vertex numbers that remeshing replaces, and are refused then.
+pub fn prepare_run_mesh(
+    path: &Path,
+    remesh: RemeshSetting,
+    section: &crate::config::RegionSection,
+) -> Result<PreparedMesh> {
     let (mesh, parts) = mesh_core::io::read_mesh_with_parts(path)
         .with_context(|| format!("cannot read mesh {}", path.display()))?;
     let repaired =
         mesh_core::validate::repair(&mesh, &mesh_core::validate::RepairOptions::default())
             .with_context(|| format!("mesh {} cannot be used", path.display()))?;
-    let warnings: Vec<String> = repaired
+    let mut warnings: Vec<String> = repaired
         .report
         .issues
         .iter()
         .map(|i| i.message.clone())
         .collect();
     let mut m = repaired.mesh.clone();
-    mesh_core::normalize::side2_cube(&mut m.positions);
-    for p in &mut m.positions {
-        *p = p.map(|c| f64::from(c as f32));
-    }
-    mesh_core::normalize::side2_cube(&mut m.positions);
-    let mut warnings = warnings;
-    let input = RegionInput {
-        positions: &m.positions,
-        faces: &m.faces,
-        vertex_map: &repaired.vertex_map,
-        face_map: &repaired.face_map,
-        parts: &parts,
+    normalize_f32_exact(&mut m.positions);
+    let (remeshed, report) = crate::remeshing::remesh_input(&m.positions, &m.faces, remesh)
+        .with_context(|| format!("mesh {}", path.display()))?;
+    warnings.extend(report.warning());
+    let region = match remeshed {
+        None => {
+            let input = RegionInput {
+                positions: &m.positions,
+                faces: &m.faces,
+                vertex_map: &repaired.vertex_map,
+                face_map: &repaired.face_map,
+                parts: &parts,
+            };
+            resolve_region(section, &input, &mut warnings)
+                .with_context(|| format!("region of {}", path.display()))?
+        }
+        Some(r) => {
+            for spec in &section.specs {
+                if !RegionSpec::parse(spec)?.files().is_empty() {
+                    return Err(Error::Invalid(format!(
+                        "region `{spec}` names vertices of the input file, which remeshing \
+                         replaces ({}); use `--remesh off`, or a part:, property:, box: or \
+                         sphere: region",
+                        report.reason
+                    )));
+                }
+            }
+            let source = mesh_core::remesh::TransferSource {
+                positions: &m.positions,
+                faces: &m.faces,
+                vertex_map: &repaired.vertex_map,
+                face_map: &repaired.face_map,
+            };
+            let moved = mesh_core::remesh::transfer_parts(
+                &parts,
+                &source,
+                &r.positions,
+                &r.faces,
+                &r.source_faces,
+            )
+            .map_err(|e| Error::Invalid(e.to_string()))?;
+            // The input's needle faces are gone: its advice to remesh is moot.
+            warnings = repaired
+                .report
+                .issues
+                .iter()
+                .filter(|i| i.kind != mesh_core::validate::IssueKind::NeedleFaces)
+                .map(|i| i.message.clone())
+                .collect();
+            m = TriMesh::new(r.positions, r.faces);
+            normalize_f32_exact(&mut m.positions);
+            let input = RegionInput::unrepaired(&m.positions, &m.faces, &moved);
+            resolve_region(section, &input, &mut warnings)
+                .with_context(|| format!("region of {} (remeshed)", path.display()))?
+        }
     };
-    let region = resolve_region(section, &input, &mut warnings)
-        .with_context(|| format!("region of {}", path.display()))?;
-    Ok((m, warnings, region))
+    Ok(PreparedMesh {
+        mesh: m,
+        warnings,
+        region,
+        remesh: report,
+    })
 }
 
 /// dARAP options from the configuration (the `[darap]` section is darap's own options).
@@ -375,6 +464,8 @@ pub struct Prepared {
     pub setup_seconds: f64,
     /// The region of a localized run (`[region]`), already set on `darap`.
     pub region: Option<ResolvedRegion>,
+    /// What `[mesh] remesh` decided and did.
+    pub remesh: RemeshReport,
     /// The scale of `mesh_heat.glb` (its largest displacement, [`crate::heat`]) once written.
     pub heat_max_displacement: Option<f64>,
 }
@@ -386,8 +477,19 @@ pub fn prepare(request: &RunRequest, kind: &dyn TaskKind) -> Result<Prepared> {
     let config = &request.config;
     config.validate()?;
     let config_toml = config.to_toml_string()?;
-    let (mesh, warnings, region) = prepare_mesh_with_region(&request.mesh, &config.region)?;
+    let PreparedMesh {
+        mesh,
+        warnings,
+        region,
+        remesh,
+    } = prepare_run_mesh(&request.mesh, config.mesh.remesh, &config.region)?;
     let mut identity = TaskIdentity::new(&mesh.positions, &mesh.faces, kind, config)?;
+    crate::identity::insert_unless_default(
+        &mut identity.fields,
+        "mesh.remeshed",
+        &remesh.identity_value().unwrap_or_default(),
+        &String::new(),
+    );
     if let Some(r) = &region {
         identity = identity.with_region(&config.region.specs, config.region.feather, &r.weights);
     }
@@ -401,6 +503,7 @@ pub fn prepare(request: &RunRequest, kind: &dyn TaskKind) -> Result<Prepared> {
     }
     Ok(Prepared {
         region,
+        remesh,
         mesh,
         warnings,
         identity,
@@ -584,6 +687,14 @@ pub fn write_outputs(
             }
             Err(e) => return Err(e).with_context(|| format!("cannot write {}", path.display())),
         }
+    }
+    if prepared.remesh.remeshed.is_some() {
+        // The rest mesh the run optimized (side-2 frame), what apply, eval and view use.
+        let path = dir.file(REMESHED_SOURCE);
+        rundir::durable::replace_with(&path, |tmp| {
+            mesh_core::io::write_mesh(tmp, mesh, None).map_err(Error::from)
+        })
+        .with_context(|| format!("cannot write {}", path.display()))?;
     }
     // The displacement heat map (crate::heat), beside the plain mesh files.
     let heat_path = dir.file("mesh_heat.glb");
@@ -923,6 +1034,9 @@ impl ObservedLoop<'_> {
             request.mesh.display(),
             mesh.positions.len()
         )];
+        if prepared.remesh.remeshed.is_some() {
+            headline.extend(prepared.remesh.lines());
+        }
         if let Some(why) = renderer_choice {
             headline.push(format!("renderer: {why}"));
         }
@@ -1040,6 +1154,7 @@ fn write_summary(
             "vertices": r.free.iter().filter(|&&f| f).count(),
         })),
         "task": prepared.identity.fields,
+        "remesh": prepared.remesh.to_json(),
     });
     if let Some(x) = intersections {
         summary["self_intersections"] = serde_json::to_value(x)?;

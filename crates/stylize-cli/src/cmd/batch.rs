@@ -37,7 +37,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if args.jsonl {
         settings.log_format = LogFormat::Jsonl;
     }
-    let config = resolve_config(settings.config.as_deref(), &settings.set, None, None)?;
+    let config = settings.apply_remesh(resolve_config(
+        settings.config.as_deref(),
+        &settings.set,
+        None,
+        None,
+    )?);
     let shard = match &args.shard {
         Some(s) => Shard::parse(s)?,
         None => Shard::from_env(|k| std::env::var(k).ok())?.unwrap_or(Shard::ALL),

@@ -69,6 +69,11 @@ fn check(a: CheckArgs) -> anyhow::Result<()> {
         ..RepairOptions::default()
     };
     let report = validate(&mesh, &options);
+    let quality = if report.is_refused() {
+        None
+    } else {
+        Some(repaired_quality(&mesh, &options)?)
+    };
     let intersections = if report.is_refused() {
         None
     } else {
@@ -79,6 +84,11 @@ fn check(a: CheckArgs) -> anyhow::Result<()> {
         if let Some(x) = &intersections {
             json["self_intersections"] = x.json();
         }
+        if let Some(q) = &quality {
+            json["quality"] = stylize::remeshing::quality_json(q);
+            json["remeshing_advised"] = serde_json::json!(remesh_advice(q).0);
+            json["remeshing_advice"] = serde_json::json!(remesh_advice(q).1);
+        }
         println!(
             "{}",
             serde_json::to_string_pretty(&json).context("cannot format the report as JSON")?
@@ -87,6 +97,9 @@ fn check(a: CheckArgs) -> anyhow::Result<()> {
         print!("{}", report_table(&a.file, &report));
         if let Some(x) = &intersections {
             print!("{}", x.table());
+        }
+        if let Some(q) = &quality {
+            print!("{}", quality_table(q));
         }
     }
     if report.is_refused() {
@@ -97,6 +110,44 @@ fn check(a: CheckArgs) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+/// Triangle quality of the mesh after the repair `options` make (what a run would optimize,
+/// before `[mesh] remesh`).
+fn repaired_quality(
+    mesh: &mesh_core::TriMesh,
+    options: &RepairOptions,
+) -> anyhow::Result<mesh_core::remesh::Quality> {
+    let repaired = mesh_core::validate::repair(mesh, options).context("cannot repair the mesh")?;
+    mesh_core::remesh::quality(&repaired.mesh.positions, &repaired.mesh.faces)
+        .context("cannot measure the triangles")
+}
+
+/// Whether remeshing is advised (the criterion of `--remesh auto`,
+/// [`stylize::remeshing::remeshing_advised`]) and the sentence that says so.
+fn remesh_advice(q: &mesh_core::remesh::Quality) -> (bool, String) {
+    match stylize::remeshing::remeshing_advised(q) {
+        Some(why) => (
+            true,
+            format!(
+                "remeshing advised ({why}): `stylize run` remeshes it by default (`--remesh \
+                 auto`); `stylize remesh` does it alone"
+            ),
+        ),
+        None => (
+            false,
+            "triangles even enough: `stylize run` keeps them as they are (`--remesh auto`)".into(),
+        ),
+    }
+}
+
+/// The quality figures and the advice, for people.
+fn quality_table(q: &mesh_core::remesh::Quality) -> String {
+    format!(
+        "\ntriangles (after repair): {}\n{}\n",
+        stylize::remeshing::quality_line(q),
+        remesh_advice(q).1
+    )
 }
 
 /// The self-intersections of the repaired mesh (what a run uses), for `mesh check`.
@@ -483,8 +534,32 @@ mod tests {
     }
 
     #[test]
+    fn quality_advice_follows_the_auto_criterion() {
+        let q = |name: &str| {
+            let mesh = mesh_core::io::read_mesh(fixture(name)).unwrap_or_else(|e| panic!("{e}"));
+            repaired_quality(&mesh, &RepairOptions::default()).unwrap_or_else(|e| panic!("{e:#}"))
+        };
+        for (name, advised) in [
+            ("bunny.obj", false),
+            ("fandisk.off", false),
+            ("cow.off", true),
+            ("triceratops.off", true),
+        ] {
+            let quality = q(name);
+            let (got, text) = remesh_advice(&quality);
+            assert_eq!(got, advised, "{name}: {text}");
+            let table = quality_table(&quality);
+            assert!(
+                table.contains("std/mean") && table.contains(&text),
+                "{table}"
+            );
+        }
+    }
+
+    #[test]
     fn check_succeeds_on_repairable_meshes_and_fails_on_refused_or_unreadable_ones() {
         assert!(check(args("bone.ply", false)).is_ok());
+        assert!(check(args("cow.off", false)).is_ok());
         assert!(check(args("triceratops.off", true)).is_ok());
         let e = check(args("bad/nan_coordinates.obj", false)).expect_err("refused");
         assert!(format!("{e:#}").contains("vertex 3"), "{e:#}");

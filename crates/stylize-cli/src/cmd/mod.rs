@@ -6,6 +6,7 @@ pub mod debug_guidance;
 pub mod embed;
 pub mod eval;
 pub mod mesh;
+pub mod remesh;
 pub mod render;
 pub mod run;
 pub mod shared;

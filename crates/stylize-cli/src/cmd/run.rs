@@ -119,6 +119,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let no_config_flags = args.settings.config.is_none()
         && args.settings.set.is_empty()
         && args.seed.is_none()
+        && args.settings.remesh.is_none()
         && args.negative_prompt.is_none();
     // `--resume` alone continues with the run's own resolved configuration.
     let config_file = if args.resume && no_config_flags && saved.is_file() {
@@ -132,7 +133,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         args.seed,
         args.negative_prompt.as_deref(),
     )?;
-    let config = config.with_region_flags(&args.region, args.region_feather, args.tint_region)?;
+    let config = args.settings.apply_remesh(config).with_region_flags(
+        &args.region,
+        args.region_feather,
+        args.tint_region,
+    )?;
     let mut options = RunOptions::default();
     if let Some(c) = &config_file {
         options.inputs.push(("config file".into(), c.clone()));

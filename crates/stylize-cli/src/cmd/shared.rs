@@ -28,6 +28,12 @@ pub struct RunSettings {
     /// Override a config key, e.g. `--set darap.lambda=5` (repeatable).
     #[arg(long = "set", value_name = "KEY=VALUE", allow_hyphen_values = true)]
     pub set: Vec<String>,
+    /// Remesh the input first: `auto` (when its triangles are uneven; see `stylize mesh check`),
+    /// `on` (to 1.5 % of the bounding-box diagonal), `off` (keep its triangles exactly), or a
+    /// target edge length (`0.03` in the side-2 frame, or `1.5%` of the diagonal). Same as `--set
+    /// mesh.remesh=…`; the default is the configuration's (`auto`).
+    #[arg(long, value_name = "auto|on|off|LENGTH")]
+    pub remesh: Option<stylize::remeshing::RemeshSetting>,
     /// No progress output.
     #[arg(long, short)]
     pub quiet: bool,
@@ -38,6 +44,14 @@ pub struct RunSettings {
 }
 
 impl RunSettings {
+    /// `--remesh` on top of `config` (unchanged without it).
+    pub fn apply_remesh(&self, mut config: stylize::config::Config) -> stylize::config::Config {
+        if let Some(r) = self.remesh {
+            config.mesh.remesh = r;
+        }
+        config
+    }
+
     /// How the runner reports progress.
     pub fn log_mode(&self) -> LogMode {
         match (self.quiet, self.log_format) {
