@@ -41,6 +41,18 @@ fi
 # in their own venv .venv-blender/ (git-ignored), for the headless extension tests and Blender's
 # extension build tool; skipped when present, and where python3 is not 3.11 (no bpy wheel: the
 # extension tests are then skipped by scripts/test.sh, which says so).
+# bpy links a few X11/GL client libraries even headless (`ldd bpy/__init__.so`: everything else
+# ships in the wheel); Debian packages, installed when missing.
+need_apt=()
+for pkg in libx11-6 libxext6 libxrender1 libxfixes3 libxi6 libxkbcommon0 libsm6 libice6 libgl1; do
+  dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || need_apt+=("$pkg")
+done
+if ((${#need_apt[@]})); then
+  echo "setup: installing ${need_apt[*]} (apt, for bpy)"
+  SUDO=""; [ "$(id -u)" -ne 0 ] && SUDO="sudo"
+  $SUDO apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends "${need_apt[@]}" >/dev/null
+fi
 if ! .venv-blender/bin/python -c "import bpy, pytest" 2>/dev/null; then
   if python3 -c 'import sys; sys.exit(sys.version_info[:2] != (3, 11))'; then
     echo "setup: creating .venv-blender with bpy 4.5 (PyPI, ~480 MB) and pytest"

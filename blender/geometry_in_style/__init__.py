@@ -112,6 +112,9 @@ class GIS_ObjectSettings(bpy.types.PropertyGroup):
     suspend_update: BoolProperty(default=False, options={"HIDDEN", "SKIP_SAVE"})
     sanity: StringProperty(default="")
     warnings: StringProperty(default="")
+    # What `stylize apply` printed for the last Write λ: its sanity line (with the
+    # self-intersection counts where the binary reports them) and warnings, " | "-separated.
+    written_report: StringProperty(default="")
     status: StringProperty(default="")
 
 
@@ -515,6 +518,7 @@ class GIS_OT_write_lambda(bpy.types.Operator):
             self.report({"ERROR"}, f"stylize apply failed: {done.stderr.strip()}")
             return {"CANCELLED"}
         obj["stylize_written"] = out
+        obj.gis.written_report = " | ".join(core.apply_report(done.stdout + "\n" + done.stderr))
         self.report({"INFO"}, f"Wrote {out}")
         return {"FINISHED"}
 
@@ -602,6 +606,11 @@ class GIS_PT_panel(bpy.types.Panel):
                         box.label(text=chunk)
                 for w in filter(None, s.warnings.split(" | ")):
                     box.label(text=w, icon="ERROR")
+                if s.written_report and "stylize_written" in obj:
+                    box.label(text=f"stylize apply → {os.path.basename(obj['stylize_written'])}:")
+                    for line in s.written_report.split(" | "):
+                        for chunk in _wrap(line):
+                            box.label(text=chunk, icon="ERROR" if line.startswith("warning") else "NONE")
                 row = box.row()
                 row.operator("gis.write_lambda")
                 row.operator("gis.forget")

@@ -290,6 +290,13 @@ def parse_progress(line: str) -> Optional[int]:
     return it if isinstance(it, int) and not isinstance(it, bool) else None
 
 
+def apply_report(output: str) -> List[str]:
+    """The sanity lines (``λ = …: volume ratio …``, with self-intersection counts where the binary
+    reports them) and ``warning:`` lines of ``stylize apply``'s output."""
+    lines = [l.strip() for l in output.splitlines()]
+    return [l for l in lines if (l.startswith("λ = ") and ": volume ratio" in l) or l.startswith("warning:")]
+
+
 # ---------------------------------------------------------------------------------------------
 # Frames
 

@@ -187,6 +187,17 @@ def test_stylize_cube_shape_key_equals_cli_mesh_obj_and_slider_equals_apply(ext,
     assert bpy.ops.gis.write_lambda() == {"FINISHED"}
     written, _ = read_obj(obj["stylize_written"])
     np.testing.assert_allclose(written, cli5, atol=1e-12)
+    # The panel shows what `stylize apply` printed for it (self-intersections included when the
+    # binary reports them).
+    cli_line = next(l.strip() for l in printed.splitlines() if ": volume ratio" in l)
+    assert obj.gis.written_report.split(" | ")[0] == cli_line
+    labels = [r[1] for r in draw_panel(ext, obj) if r[0] == "label"]
+    start = next(i for i, t in enumerate(labels) if t.startswith("stylize apply → mesh_lambda3.obj"))
+    shown, k = [], start + 1
+    while len(" ".join(shown)) < len(cli_line):
+        shown.append(labels[k])
+        k += 1
+    assert " ".join(shown) == cli_line, (shown, cli_line)
 
 
 def test_feathered_vertex_group_region_reapplies_as_stylize_apply(ext, tmp_path) -> None:
@@ -354,3 +365,24 @@ def test_region_from_selected_vertices_and_vertex_group(ext) -> None:
         ext.region_indices(obj, obj.gis)
     obj.gis.region = "ALL"
     assert ext.region_indices(obj, obj.gis) is None
+
+
+def test_remeshed_run_comes_back_as_a_new_object(ext) -> None:
+    exe = str(_stylize())
+    if "--remesh" not in subprocess.run([exe, "run", "--help"], capture_output=True, text=True).stdout:
+        pytest.skip("this stylize binary has no --remesh")
+    obj = quad_sphere("Remeshed")
+    rest = rest_verts(obj)
+    obj.gis.iterations = 10
+    obj.gis.remesh = "ON"
+    assert bpy.ops.gis.stylize() == {"FINISHED"}, obj.gis.status
+    new = bpy.data.objects.get("Remeshed_stylized")
+    assert new is not None, "a new object for the remeshed result"
+    assert obj.data.shape_keys is None, "the original is left alone"
+    run_dir = Path(new[ext.RUN_DIR_KEY])
+    assert obj[ext.RUN_DIR_KEY] == str(run_dir)
+    cli, faces = read_obj(run_dir / "mesh.obj")
+    assert len(new.data.vertices) == len(cli) != len(rest)
+    got = shape_key(new)
+    expected = to_object_frame(cli, run_dir, rest)
+    assert close(got, expected, rest) < 1e-6

@@ -94,7 +94,9 @@ pub enum CotanError {
     /// The numeric Cholesky factorization met a non-positive pivot.
     #[error(
         "the pinned Laplacian is not numerically positive definite (Cholesky pivot {pivot} of {size}); \
-         likely causes: degenerate (zero-area or sliver) faces, or a component without a pin"
+         likely causes: degenerate (zero-area or sliver) faces, a component without a pin, or a \
+         component far smaller than the mesh (debris whose faces fall under the cotangent weights' \
+         area floor; `stylize mesh check` lists the parts: remove the small ones)"
     )]
     NotPositiveDefinite {
         /// Index of the failing pivot, in the fill-reducing order.

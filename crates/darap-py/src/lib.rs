@@ -13,6 +13,13 @@
 //!
 //! The GIL is released during the precompute (`Darap(...)`), `forward` and `backward`.
 //!
+//! # Threads
+//! A layer may be used from several Python threads at once (`forward`/`backward` in a thread pool,
+//! a setter from another thread): it holds its state behind a read-write lock, taken with the GIL
+//! released and never held while waiting for the GIL, so calls run side by side (reads) or one
+//! after another (setters) instead of raising "Already borrowed". A `forward` records the λ, rule
+//! and mask it ran with, whatever a setter changes meanwhile.
+//!
 //! # Errors
 //! Bad array types or dtypes raise `TypeError`, bad shapes and option values `ValueError`, and
 //! every error of the Rust layer (non-finite input, out-of-range face index, singular Laplacian, …)
@@ -20,6 +27,7 @@
 //! user input.
 
 use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{PoisonError, RwLock};
 
 use darap::{Darap, DarapOptions, Deformation, PostProcess, RotationRule};
 use numpy::ndarray::ArrayView2;
@@ -306,12 +314,14 @@ fn post_name(mode: PostProcess) -> &'static str {
     }
 }
 
+/// λ from Python: finite and ≥ 0 (a negative strength pulls the normals away from their targets;
+/// `stylize` refuses it in configurations too).
 fn check_lambda(lam: f64) -> PyResult<f64> {
-    if lam.is_finite() {
+    if lam.is_finite() && lam >= 0.0 {
         Ok(lam)
     } else {
         Err(PyValueError::new_err(format!(
-            "lam must be a finite number, got {lam}"
+            "lam must be a finite number >= 0, got {lam}"
         )))
     }
 }
@@ -334,10 +344,23 @@ fn rows3_to_numpy<'py>(py: Python<'py>, rows: &[[f64; 3]]) -> PyResult<Bound<'py
 /// rotation_rule: "gis" (the reference's) or "procrustes". mask: (V,) bool, True where the vertex
 /// may rotate. post_process: "recenter_rescale", "recenter_only" or "none". The lowest vertex of
 /// each connected component is pinned at rest.
-#[pyclass(name = "Darap", module = "darap")]
+#[pyclass(name = "Darap", module = "darap", frozen)]
 struct PyDarap {
-    inner: Darap,
+    /// The layer; see the module documentation ("Threads").
+    inner: RwLock<Darap>,
     id: u64,
+}
+
+impl PyDarap {
+    /// `f` on the layer under the shared lock, waited for and run with the GIL released.
+    fn read<T: Send>(&self, py: Python<'_>, f: impl FnOnce(&Darap) -> T + Send) -> T {
+        py.detach(|| f(&self.inner.read().unwrap_or_else(PoisonError::into_inner)))
+    }
+
+    /// `f` on the layer under the exclusive lock, waited for and run with the GIL released.
+    fn write<T: Send>(&self, py: Python<'_>, f: impl FnOnce(&mut Darap) -> T + Send) -> T {
+        py.detach(|| f(&mut self.inner.write().unwrap_or_else(PoisonError::into_inner)))
+    }
 }
 
 /// The result of Darap.forward: deformed positions plus the record Darap.backward needs
@@ -379,7 +402,7 @@ impl PyDarap {
             .map_err(layer_error)?;
         inner.set_mask(free).map_err(layer_error)?;
         Ok(Self {
-            inner,
+            inner: RwLock::new(inner),
             id: NEXT_LAYER_ID.fetch_add(1, Ordering::Relaxed),
         })
     }
@@ -387,15 +410,17 @@ impl PyDarap {
     /// Deformed positions for raw target normals x (V, 3) float64/float32; only directions
     /// matter. Returns a Deformation (GIL released). Raises DarapError for non-finite targets.
     fn forward(&self, py: Python<'_>, x: &Bound<'_, PyAny>) -> PyResult<PyDeformation> {
-        let n = self.inner.num_vertices();
+        let n = self.read(py, Darap::num_vertices);
         let targets = read_rows3(x, "x", Some(n))?;
-        let layer = &self.inner;
-        let state = py.detach(|| layer.forward(&targets)).map_err(layer_error)?;
+        let (state, lambda) = self.read(py, |layer| {
+            (layer.forward(&targets), layer.options().lambda)
+        });
+        let state = state.map_err(layer_error)?;
         let positions = rows3_to_numpy(py, &state.positions)?.unbind();
         Ok(PyDeformation {
             state,
             layer_id: self.id,
-            lambda: self.inner.options().lambda,
+            lambda,
             positions,
         })
     }
@@ -415,68 +440,70 @@ impl PyDarap {
                  layer whose forward produced it",
             ));
         }
-        let n = self.inner.num_vertices();
+        let n = self.read(py, Darap::num_vertices);
         let grad = read_rows3(grad_positions, "grad_positions", Some(n))?;
-        let layer = &self.inner;
         let state = &d.state;
-        let grad_x = py
-            .detach(|| layer.try_backward(state, &grad))
+        let grad_x = self
+            .read(py, |layer| layer.try_backward(state, &grad))
             .map_err(layer_error)?;
         rows3_to_numpy(py, &grad_x)
     }
 
     /// Area-weighted rest vertex normals (V, 3): the usual initial x.
     fn rest_normals<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        rows3_to_numpy(py, self.inner.rest_normals())
+        rows3_to_numpy(py, &self.read(py, |l| l.rest_normals().to_vec()))
     }
 
     /// The rest positions as given (V, 3) float64.
     fn rest_positions<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        rows3_to_numpy(py, self.inner.rest_positions())
+        rows3_to_numpy(py, &self.read(py, |l| l.rest_positions().to_vec()))
     }
 
     /// Mixed-Voronoi vertex areas a_v (V,).
     fn mass<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        PyArray1::from_slice(py, self.inner.mass())
+        PyArray1::from_vec(py, self.read(py, |l| l.mass().to_vec()))
     }
 
     /// Pinned vertices (sorted): the lowest vertex of each connected component.
     fn pins<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<i64>> {
-        let pins: Vec<i64> = self
-            .inner
-            .pins()
-            .iter()
-            .map(|&p| i64::try_from(p).unwrap_or(i64::MAX))
-            .collect();
+        let pins: Vec<i64> = self.read(py, |l| {
+            l.pins()
+                .iter()
+                .map(|&p| i64::try_from(p).unwrap_or(i64::MAX))
+                .collect()
+        });
         PyArray1::from_vec(py, pins)
     }
 
-    /// Changes λ (must be finite); nothing is recomputed.
-    fn set_lambda(&mut self, lam: f64) -> PyResult<()> {
-        self.inner.set_lambda(check_lambda(lam)?);
+    /// Changes λ (finite, ≥ 0); nothing is recomputed.
+    fn set_lambda(&self, py: Python<'_>, lam: f64) -> PyResult<()> {
+        let lam = check_lambda(lam)?;
+        self.write(py, |l| l.set_lambda(lam));
         Ok(())
     }
 
     /// "gis" or "procrustes"; nothing is recomputed.
-    fn set_rotation_rule(&mut self, rotation_rule: &str) -> PyResult<()> {
-        self.inner.set_rotation_rule(parse_rule(rotation_rule)?);
+    fn set_rotation_rule(&self, py: Python<'_>, rotation_rule: &str) -> PyResult<()> {
+        let rule = parse_rule(rotation_rule)?;
+        self.write(py, |l| l.set_rotation_rule(rule));
         Ok(())
     }
 
     /// "recenter_rescale", "recenter_only" or "none".
-    fn set_post_process(&mut self, post_process: &str) -> PyResult<()> {
-        self.inner.set_post_process(parse_post(post_process)?);
+    fn set_post_process(&self, py: Python<'_>, post_process: &str) -> PyResult<()> {
+        let mode = parse_post(post_process)?;
+        self.write(py, |l| l.set_post_process(mode));
         Ok(())
     }
 
     /// (V,) bool, True where the vertex may rotate; None lets every vertex rotate.
     #[pyo3(signature = (mask))]
-    fn set_mask(&mut self, mask: Option<&Bound<'_, PyAny>>) -> PyResult<()> {
+    fn set_mask(&self, py: Python<'_>, mask: Option<&Bound<'_, PyAny>>) -> PyResult<()> {
         let free = match mask {
-            Some(m) if !m.is_none() => Some(read_mask(m, self.inner.num_vertices())?),
+            Some(m) if !m.is_none() => Some(read_mask(m, self.read(py, Darap::num_vertices))?),
             _ => None,
         };
-        self.inner.set_mask(free).map_err(layer_error)
+        self.write(py, |l| l.set_mask(free)).map_err(layer_error)
     }
 
     /// A feathered region: (V,) float64/float32 weights w in [0, 1] scaling the strength per
@@ -484,51 +511,55 @@ impl PyDarap {
     /// `stylize apply` use (`feather_weights` builds them). None lets every vertex rotate. Replaces
     /// any mask.
     #[pyo3(signature = (weights))]
-    fn set_region_weights(&mut self, weights: Option<&Bound<'_, PyAny>>) -> PyResult<()> {
+    fn set_region_weights(
+        &self,
+        py: Python<'_>,
+        weights: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<()> {
         let w = match weights {
-            Some(w) if !w.is_none() => Some(read_weights(w, self.inner.num_vertices())?),
+            Some(w) if !w.is_none() => Some(read_weights(w, self.read(py, Darap::num_vertices))?),
             _ => None,
         };
-        self.inner.set_region_weights(w).map_err(layer_error)
+        self.write(py, |l| l.set_region_weights(w))
+            .map_err(layer_error)
     }
 
     /// The region's per-vertex weights (V,) float64 (1 free, 0 masked, the feather weight in
     /// between), or None when every vertex may rotate.
     fn region_weights<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyArray1<f64>>> {
-        self.inner
-            .region_weights()
+        self.read(py, Darap::region_weights)
             .map(|w| PyArray1::from_vec(py, w))
     }
 
     /// Strength λ.
     #[getter]
-    fn lam(&self) -> f64 {
-        self.inner.options().lambda
+    fn lam(&self, py: Python<'_>) -> f64 {
+        self.read(py, |l| l.options().lambda)
     }
 
     /// "gis" or "procrustes".
     #[getter]
-    fn rotation_rule(&self) -> &'static str {
-        rule_name(self.inner.options().rotation_rule)
+    fn rotation_rule(&self, py: Python<'_>) -> &'static str {
+        rule_name(self.read(py, |l| l.options().rotation_rule))
     }
 
     /// "recenter_rescale", "recenter_only" or "none".
     #[getter]
-    fn post_process(&self) -> &'static str {
-        post_name(self.inner.options().post_process)
+    fn post_process(&self, py: Python<'_>) -> &'static str {
+        post_name(self.read(py, |l| l.options().post_process))
     }
 
     /// Number of vertices V.
     #[getter]
-    fn num_vertices(&self) -> usize {
-        self.inner.num_vertices()
+    fn num_vertices(&self, py: Python<'_>) -> usize {
+        self.read(py, Darap::num_vertices)
     }
 
-    fn __repr__(&self) -> String {
-        let o = self.inner.options();
+    fn __repr__(&self, py: Python<'_>) -> String {
+        let (o, n) = self.read(py, |l| (l.options(), l.num_vertices()));
         format!(
             "darap.Darap({} vertices, lam={}, rotation_rule={:?}, post_process={:?})",
-            self.inner.num_vertices(),
+            n,
             o.lambda,
             rule_name(o.rotation_rule),
             post_name(o.post_process)

@@ -398,11 +398,15 @@ def test_bad_options_raise() -> None:
         darap.Darap(verts, faces, rotation_rule="kabsch")
     with pytest.raises(ValueError, match="post_process must be"):
         darap.Darap(verts, faces, post_process="rescale")
-    with pytest.raises(ValueError, match="lam must be a finite number, got NaN"):
+    with pytest.raises(ValueError, match="lam must be a finite number >= 0, got NaN"):
         darap.Darap(verts, faces, lam=float("nan"))
+    with pytest.raises(ValueError, match="lam must be a finite number >= 0, got -1"):
+        darap.Darap(verts, faces, lam=-1.0)
     layer = darap.Darap(verts, faces)
-    with pytest.raises(ValueError, match="lam must be a finite number, got inf"):
+    with pytest.raises(ValueError, match="lam must be a finite number >= 0, got inf"):
         layer.set_lambda(float("inf"))
+    with pytest.raises(ValueError, match="lam must be a finite number >= 0, got -0.5"):
+        layer.set_lambda(-0.5)
     assert layer.lam == 8.0
     with pytest.raises(ValueError, match=r"mask must have shape \(42,\)"):
         darap.Darap(verts, faces, mask=np.ones(41, dtype=bool))
@@ -496,6 +500,39 @@ def test_darap_torch_without_torch_raises_a_clear_import_error() -> None:
         import darap.torch  # noqa: F401
 
 
+def z_up_frame() -> np.ndarray:
+    """A ``to_input_frame`` of a z-up input in millimetres with an offset: q ↦ Rᵀ q / s + t."""
+    r = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])  # +z ↦ +y (mesh.up = +z)
+    m = np.eye(4)
+    m[:3, :3] = r.T * 500.0
+    m[:3, 3] = [120.0, -40.0, 2000.0]
+    return m
+
+
+def test_to_input_frame_places_results_as_the_rust_cli_apply(tmp_path: Path) -> None:
+    path = write_saved(tmp_path / "framed.npz", to_input_frame=z_up_frame())
+    saved = darap.load_saved(path)
+    np.testing.assert_array_equal(saved.input_frame, z_up_frame())
+    normalized = saved.apply()
+    placed = saved.to_input_frame(normalized)
+    m = z_up_frame()
+    expected = (normalized + saved.rest_positions().mean(axis=0)) @ m[:3, :3].T + m[:3, 3]
+    np.testing.assert_allclose(placed, expected, rtol=0, atol=1e-9)
+    with pytest.raises(ValueError, match="does not record its input frame"):
+        darap.load_saved(GOLDEN / "bunny_targets.npz").to_input_frame(normalized)
+    bad = m.copy()
+    bad[3, 0] = 1.0
+    with pytest.raises(ValueError, match="to_input_frame"):
+        darap.load_saved(write_saved(tmp_path / "bad.npz", to_input_frame=bad)).input_frame
+    exe = find_stylize()
+    if exe is None:
+        pytest.skip("no stylize binary in target/ (cargo build --bin stylize) and DARAP_STYLIZE_BIN unset")
+    out = tmp_path / "applied.obj"
+    subprocess.run([str(exe), "apply", str(path), "-o", str(out)], check=True, capture_output=True, timeout=300)
+    cli_positions, _ = read_obj(out)
+    err = np.abs(placed - cli_positions).max()
+    assert err <= 1e-9 * 2000.0, f"max |Δposition| vs stylize apply = {err:.3e}"
+
 # ---------------------------------------------------------------------------------------------
 # Feathered regions: the weights of `stylize run --region-feather` / `stylize apply`
 
@@ -588,3 +625,27 @@ def test_feathered_localized_run_reapplies_as_stylize_apply(tmp_path: Path) -> N
     assert np.abs(saved.apply(lam=5.0) - saved.apply(lam=5.0, region="whole")).max() > 1e-4
     with pytest.raises(ValueError, match="selects no vertex"):
         saved.apply(region=np.zeros(len(saved.verts), dtype=bool))
+
+
+def test_one_layer_is_usable_from_several_threads_at_once(rng: np.random.Generator) -> None:
+    """Forward and backward in several threads while another thread changes λ used to raise
+    "Already borrowed"; each forward records the λ it ran with, and its result is that λ's."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    layer = sphere_layer(2)
+    x = tilted_targets(layer, rng)
+    g = rng.standard_normal((layer.num_vertices, 3))
+    expected = {lam: sphere_layer(2, lam=lam).forward(x).positions for lam in (4.0, 8.0)}
+
+    def work(i: int) -> float:
+        if i % 4 == 0:
+            layer.set_lambda(4.0 if i % 8 == 0 else 8.0)
+            return -1.0
+        out = layer.forward(x)
+        layer.backward(out, g)
+        np.testing.assert_array_equal(out.positions, expected[out.lam])
+        return out.lam
+
+    with ThreadPoolExecutor(max_workers=4) as pool:
+        lams = list(pool.map(work, range(64)))
+    assert {lam for lam in lams if lam >= 0} <= {4.0, 8.0}

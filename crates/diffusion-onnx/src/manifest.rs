@@ -14,6 +14,17 @@ pub const FORMAT_VERSION: u32 = 1;
 
 /// The uncond value that selects IF's shipped empty-prompt T5-v1.1-XXL embedding.
 pub const BUILTIN_IF_UNCOND: &str = "builtin:if-t5-v1_1-xxl-empty";
+/// The most tokens per prompt a manifest may declare (IF: 77).
+pub const MAX_TOKENS: usize = 4096;
+/// The widest embedding a manifest may declare (IF: 4096).
+pub const MAX_EMBEDDING_DIM: usize = 65_536;
+/// The largest native resolution a stage may declare (IF: 64 and 256).
+pub const MAX_SAMPLE_SIZE: usize = 4096;
+/// The most output channels a stage may declare (IF: 6).
+pub const MAX_CHANNELS: usize = 64;
+/// The most training timesteps a schedule may declare (IF: 1000).
+pub const MAX_TRAIN_TIMESTEPS: usize = 100_000;
+
 /// The tokenizer value that selects the shipped T5 tokenizer.
 pub const BUILTIN_T5_TOKENIZER: &str = "builtin:t5";
 
@@ -181,6 +192,33 @@ impl Stage {
     }
 }
 
+/// The largest `manifest.toml` read (ours are ~2 KiB).
+pub const MAX_MANIFEST_BYTES: u64 = 1 << 20;
+
+/// Reads a manifest as text: a regular file (after links) of at most [`MAX_MANIFEST_BYTES`], a
+/// leading UTF-8 byte-order mark dropped.
+pub(crate) fn read_bounded(path: &Path) -> std::io::Result<String> {
+    use std::io::Read;
+    let file = std::fs::File::open(path)?;
+    let meta = file.metadata()?;
+    if !meta.is_file() {
+        return Err(std::io::Error::other("not a regular file"));
+    }
+    let mut bytes = Vec::new();
+    file.take(MAX_MANIFEST_BYTES + 1).read_to_end(&mut bytes)?;
+    if bytes.len() as u64 > MAX_MANIFEST_BYTES {
+        return Err(std::io::Error::other(format!(
+            "larger than {MAX_MANIFEST_BYTES} bytes, which no manifest is"
+        )));
+    }
+    let text = String::from_utf8(bytes)
+        .map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidData, e))?;
+    Ok(match text.strip_prefix('\u{feff}') {
+        Some(rest) => rest.to_string(),
+        None => text,
+    })
+}
+
 /// A validated model directory.
 #[derive(Clone, Debug)]
 pub struct ModelDir {
@@ -203,7 +241,7 @@ impl ModelDir {
             ));
         }
         let path = root.join("manifest.toml");
-        let text = std::fs::read_to_string(&path).map_err(|e| {
+        let text = read_bounded(&path).map_err(|e| {
             err(format!(
                 "cannot read manifest.toml ({e}); a model directory is made by scripts/export_if_onnx.py (see docs/models.md)"
             ))
@@ -381,6 +419,54 @@ impl ModelDir {
                 "[embeddings] dim = {} and tokens = {} must be positive",
                 e.dim, e.tokens
             ));
+        }
+        // Sizes from the file size buffers (embeddings, token ids, schedules, images): each is
+        // bounded by what a model of this kind can be, so a typo cannot demand gigabytes.
+        if e.tokens > MAX_TOKENS || e.dim > MAX_EMBEDDING_DIM {
+            return err(format!(
+                "[embeddings] tokens = {} and dim = {} must be at most {MAX_TOKENS} and \
+                 {MAX_EMBEDDING_DIM} (IF: 77 and 4096)",
+                e.tokens, e.dim
+            ));
+        }
+        if let Some(t) = &m.text_encoder
+            && (t.max_tokens > MAX_TOKENS || t.embedding_dim > MAX_EMBEDDING_DIM)
+        {
+            return err(format!(
+                "[text_encoder] max_tokens = {} and embedding_dim = {} must be at most \
+                 {MAX_TOKENS} and {MAX_EMBEDDING_DIM} (IF: 77 and 4096)",
+                t.max_tokens, t.embedding_dim
+            ));
+        }
+        for stage in [Stage::One, Stage::Two] {
+            let Some(s) = self.stage(stage) else { continue };
+            let key = stage.key();
+            if !(1..=MAX_SAMPLE_SIZE).contains(&s.sample_size) {
+                return err(format!(
+                    "[{key}] sample_size = {} must be within 1..={MAX_SAMPLE_SIZE} (IF: 64 and 256)",
+                    s.sample_size
+                ));
+            }
+            if s.out_channels > MAX_CHANNELS {
+                return err(format!(
+                    "[{key}] out_channels = {} must be at most {MAX_CHANNELS} (IF: 6)",
+                    s.out_channels
+                ));
+            }
+            for (which, sch) in [
+                ("scheduler", Some(&s.scheduler)),
+                ("noising_scheduler", s.noising_scheduler.as_ref()),
+            ] {
+                if let Some(sch) = sch
+                    && !(1..=MAX_TRAIN_TIMESTEPS).contains(&sch.num_train_timesteps)
+                {
+                    return err(format!(
+                        "[{key}.{which}] num_train_timesteps = {} must be within \
+                         1..={MAX_TRAIN_TIMESTEPS} (IF: 1000)",
+                        sch.num_train_timesteps
+                    ));
+                }
+            }
         }
         if e.uncond == BUILTIN_IF_UNCOND {
             if (e.tokens, e.dim) != (builtin::IF_UNCOND_TOKENS, builtin::IF_UNCOND_DIM) {

@@ -296,7 +296,8 @@ pub enum Device {
 pub struct SessionOptions {
     /// Execution provider.
     pub device: Device,
-    /// Threads inside one operator (None: ONNX Runtime's default, one per physical core).
+    /// Threads inside one operator (None: ONNX Runtime's default, one per physical core); at most
+    /// [`max_intra_threads`] (a session with more is refused).
     pub intra_threads: Option<usize>,
     /// ONNX Runtime's CPU memory arena (its default, on): freed tensors stay in a growing pool for
     /// reuse. Off, every tensor goes back to the system allocator: with the tiny IF fixtures the
@@ -361,6 +362,29 @@ impl SessionOptions {
     }
 }
 
+/// The most intra-op threads a session is given: 4 × the threads this process may run at once
+/// (`std::thread::available_parallelism`, 64 when unknown), at most 1024. More only oversubscribe
+/// the cores; a count from input far beyond it made ONNX Runtime crash (100,000) or hang (2,000
+/// under a memory limit).
+pub fn max_intra_threads() -> usize {
+    std::thread::available_parallelism()
+        .map_or(64, |n| n.get().saturating_mul(4))
+        .min(1024)
+}
+
+/// Checks an intra-op thread count: within `1..=`[`max_intra_threads`].
+pub fn check_intra_threads(n: usize) -> Result<usize, String> {
+    let max = max_intra_threads();
+    if (1..=max).contains(&n) {
+        Ok(n)
+    } else {
+        Err(format!(
+            "{n} intra-op threads: must be within 1..={max} (4 × the threads this machine runs at \
+             once, at most 1024); leave it unset for ONNX Runtime's default"
+        ))
+    }
+}
+
 /// Opens an ONNX model file as a session with `options`.
 pub(crate) fn open_session(
     model: &Path,
@@ -388,6 +412,10 @@ pub(crate) fn open_session(
         .with_intra_op_spinning(options.intra_op_spinning)
         .map_err(|e| OnnxError::ort(ctx("setting intra-op spinning"), e))?;
     if let Some(n) = options.intra_threads {
+        let n = check_intra_threads(n).map_err(|message| OnnxError::Ort {
+            context: ctx("setting the thread count"),
+            message,
+        })?;
         builder = builder
             .with_intra_threads(n)
             .map_err(|e| OnnxError::ort(ctx("setting the thread count"), e))?;

@@ -679,3 +679,41 @@ fn max_batch_zero_is_refused_with_the_reason() {
     let msg = err_text(OnnxDenoiser::open(&model, Stage::One, &opts));
     assert!(msg.contains("max_batch = 0"), "{msg}");
 }
+
+/// Sizes that size buffers are bounded before anything is allocated from them: a manifest with a
+/// huge token count, resolution or schedule is refused with the bound, not an abort.
+#[test]
+fn huge_sizes_in_a_manifest_are_refused_before_anything_is_allocated() {
+    for (from, to, says) in [
+        ("tokens = 77", "tokens = 4000000000", "must be at most 4096"),
+        (
+            "max_tokens = 77",
+            "max_tokens = 4000000000",
+            "must be at most 4096",
+        ),
+        ("dim = 8", "dim = 100000000", "65536"),
+        ("sample_size = 256", "sample_size = 1000000", "1..=4096"),
+        (
+            "num_train_timesteps = 1000",
+            "num_train_timesteps = 0",
+            "1..=100000",
+        ),
+        (
+            "num_train_timesteps = 1000",
+            "num_train_timesteps = 10000000000",
+            "1..=100000",
+        ),
+    ] {
+        let tmp = edited("tiny-if", |s| {
+            assert!(s.contains(from), "the fixture has {from}");
+            // `max_tokens = 77` must not also match `tokens = 77`'s edit and vice versa.
+            s.replacen(&format!("\n{from}"), &format!("\n{to}"), 1)
+        });
+        let msg = err_text(ModelDir::open(tmp.path()));
+        assert!(msg.contains(says), "{to}: {msg}");
+    }
+    // A manifest.toml far larger than any manifest is refused unread.
+    let tmp = edited("tiny-if", |s| s + &"#".repeat(2 << 20));
+    let msg = err_text(ModelDir::open(tmp.path()));
+    assert!(msg.contains("larger than"), "{msg}");
+}

@@ -154,6 +154,17 @@ pub enum RegionSpec {
     Not(Box<RegionSpec>),
 }
 
+/// `spec` as an error quotes it: at most 200 characters, then `…`.
+fn abbreviated(spec: &str) -> String {
+    match spec.char_indices().nth(200) {
+        Some((at, _)) => format!("{}…", &spec[..at]),
+        None => spec.to_string(),
+    }
+}
+
+/// The most `not:` a spec may nest ([`RegionSpec::parse`] refuses more).
+pub const MAX_NOT_DEPTH: usize = 64;
+
 fn fmt_num(x: f64) -> String {
     format!("{x}")
 }
@@ -221,7 +232,7 @@ impl RegionSpec {
     pub fn parse(spec: &str) -> Result<RegionSpec, RegionError> {
         let s = spec.trim();
         let err = |message: String| RegionError::Parse {
-            spec: spec.to_string(),
+            spec: abbreviated(spec),
             message,
         };
         let (kind, body) = s.split_once(':').ok_or_else(|| {
@@ -231,12 +242,32 @@ impl RegionSpec {
             )
         })?;
         match kind.trim() {
-            "not" => Ok(RegionSpec::Not(Box::new(RegionSpec::parse(body).map_err(
-                |e| match e {
+            "not" => {
+                // Counted in a loop, not by recursion: a spec of 15,000 `not:` must not overflow
+                // the stack here, nor in what walks the nested specs later (drop included).
+                let mut depth = 1usize;
+                let mut rest = body;
+                while let Some((k, b)) = rest.trim_start().split_once(':')
+                    && k.trim() == "not"
+                {
+                    depth += 1;
+                    if depth > MAX_NOT_DEPTH {
+                        return Err(err(format!(
+                            "more than {MAX_NOT_DEPTH} nested `not:` (two cancel out: write \
+                             `not:` once or not at all)"
+                        )));
+                    }
+                    rest = b;
+                }
+                let mut spec = RegionSpec::parse(rest).map_err(|e| match e {
                     RegionError::Parse { message, .. } => err(message),
                     other => other,
-                },
-            )?))),
+                })?;
+                for _ in 0..depth {
+                    spec = RegionSpec::Not(Box::new(spec));
+                }
+                Ok(spec)
+            }
             "box" => {
                 let v = parse_numbers(spec, body, 6, "a box")?;
                 let lo = [v[0], v[1], v[2]];
@@ -346,6 +377,8 @@ impl RegionSpec {
 /// starting with `#` are ignored. Errors name the line.
 pub fn parse_index_list(text: &str) -> Result<Vec<usize>, String> {
     let mut out = Vec::new();
+    // A leading UTF-8 byte-order mark (Windows editors) is not part of the first index.
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     for (lineno, line) in text.lines().enumerate() {
         let line = line.trim();
         if line.is_empty() || line.starts_with('#') {
@@ -827,6 +860,23 @@ mod tests {
     }
 
     #[test]
+    fn deeply_nested_not_is_refused_without_recursion() {
+        let ok = format!("{}part:legs", "not:".repeat(MAX_NOT_DEPTH));
+        let spec = RegionSpec::parse(&ok).expect("the deepest allowed nesting parses");
+        assert_eq!(spec.to_string(), ok);
+        // 15,000 levels used to overflow the stack: now a parse error, found in a loop.
+        for n in [MAX_NOT_DEPTH + 1, 15_000, 1_000_000] {
+            let deep = format!("{}box:0,0,0,1,1,1", " not :".repeat(n));
+            let e = RegionSpec::parse(&deep).expect_err("too deep");
+            assert!(e.to_string().contains("nested `not:`"), "{n}: {e}");
+            assert!(
+                e.to_string().len() < 400,
+                "the message quotes an abbreviated spec"
+            );
+        }
+    }
+
+    #[test]
     fn parse_errors_name_the_spec_and_the_problem() {
         for (s, needle) in [
             ("cube", "expected KIND"),
@@ -1034,6 +1084,7 @@ mod tests {
     #[test]
     fn index_lists_parse_and_report_the_line() {
         assert_eq!(parse_index_list("# head\n3\n\n 7 \n").expect("ok"), [3, 7]);
+        assert_eq!(parse_index_list("\u{feff}3\n7\n").expect("a BOM"), [3, 7]);
         let e = parse_index_list("1\n-2\n").expect_err("an error");
         assert!(e.contains("line 2") && e.contains("-2"), "{e}");
     }

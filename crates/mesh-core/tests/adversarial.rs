@@ -198,6 +198,49 @@ fn gltf_triangle_reads_and_byte_stride_smaller_than_an_element_is_refused() {
     assert!(e.contains("do not fit in bufferView 0"), "{e}");
 }
 
+/// A non-unit rotation quaternion used to scale the mesh by its squared length: one off by f32
+/// rounding is normalized, one clearly off (or zero, or not finite) is refused naming the node.
+#[test]
+fn gltf_non_unit_quaternions_are_normalized_when_rounding_and_refused_otherwise() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let with_rotation = |q: &str| {
+        triangle_gltf(
+            &format!(
+                r#""scene": 0, "scenes": [{{"nodes": [0]}}], "nodes": [{{"mesh": 0, "rotation": {q}}}],"#
+            ),
+            "VEC3",
+            5126,
+            0,
+        )
+    };
+    let m = read_mesh(put(
+        dir.path(),
+        "near.gltf",
+        with_rotation("[0, 0, 0, 1.0004]").as_bytes(),
+    ))
+    .expect("a quaternion within rounding of unit length");
+    assert_eq!(m.positions[1], [1.0, 0.0, 0.0], "not scaled");
+    for q in ["[0, 0, 0, 2]", "[0, 0, 0, 0]", "[0, 0, 0.5, 0.5]"] {
+        let e = err_of(read_mesh(put(
+            dir.path(),
+            "far.gltf",
+            with_rotation(q).as_bytes(),
+        )));
+        assert!(
+            e.contains("node 0: rotation") && e.contains("unit quaternions"),
+            "{q}: {e}"
+        );
+    }
+    // A byte-order mark before the JSON (Windows editors) is not part of it.
+    let bom = [
+        b"\xEF\xBB\xBF".as_slice(),
+        triangle_gltf(ONE_NODE, "VEC3", 5126, 0).as_bytes(),
+    ]
+    .concat();
+    let m = read_mesh(put(dir.path(), "bom.gltf", &bom)).expect("a BOM");
+    assert_eq!(m.faces, vec![[0, 1, 2]]);
+}
+
 #[test]
 fn gltf_attribute_naming_a_missing_accessor_is_an_error() {
     // Found by `cargo xtask fuzz` (gltf, seed 7): the `gltf` crate's validation indexed it.

@@ -331,3 +331,53 @@ fn headers_announcing_billions_of_elements_fail_fast_as_truncated() {
     let e = read_mesh(put(dir.path(), "big.ply", ply)).expect_err("lying header");
     assert!(e.to_string().contains("truncated"), "{e}");
 }
+
+#[test]
+fn glb_with_vertex_colors_reads_back_and_refuses_bad_colors() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let mesh = mesh_core::shapes::icosphere(1);
+    let n = mesh.positions.len();
+    let colors: Vec<[f32; 3]> = (0..n).map(|v| [v as f32 / n as f32, 0.5, 1.0]).collect();
+    let path = dir.path().join("heat.glb");
+    mesh_core::io::write_glb_with_colors(&path, &mesh, None, Some(&colors)).expect("writes");
+    // The reader (and the gltf crate's validation under it) accepts the file; geometry kept.
+    let back = read_mesh(&path).expect("reads");
+    assert_eq!(back.faces, mesh.faces);
+    for (a, b) in back.positions.iter().zip(&mesh.positions) {
+        for k in 0..3 {
+            assert_eq!(a[k], f64::from(b[k] as f32));
+        }
+    }
+    let gltf = gltf::Gltf::open(&path).expect("gltf parses");
+    let prim = gltf
+        .meshes()
+        .next()
+        .and_then(|m| m.primitives().next())
+        .expect("a primitive");
+    let color = prim
+        .attributes()
+        .find(|(s, _)| *s == gltf::Semantic::Colors(0))
+        .map(|(_, a)| a)
+        .expect("COLOR_0");
+    assert_eq!(
+        (color.count(), color.dimensions()),
+        (n, gltf::accessor::Dimensions::Vec3)
+    );
+    let short = &colors[..n - 1];
+    let e = mesh_core::io::write_glb_with_colors(&path, &mesh, None, Some(short))
+        .expect_err("one colour missing");
+    assert!(
+        e.to_string()
+            .contains(&format!("{} colors for {n} vertices", n - 1)),
+        "{e}"
+    );
+    let mut bad = colors.clone();
+    bad[3] = [1.5, 0.0, 0.0];
+    let e = mesh_core::io::write_glb_with_colors(&path, &mesh, None, Some(&bad))
+        .expect_err("out of range");
+    assert!(
+        e.to_string()
+            .contains("colour of vertex 3 is outside [0, 1]"),
+        "{e}"
+    );
+}

@@ -2,9 +2,11 @@
 //!
 //! The entries are parsed and written by [`crate::parse_npy`] / [`crate::write_npy`]. Zip entries
 //! may be stored or deflated; we write stored entries (like `np.savez`). Reading is bounded: only
-//! the directory is read on open, and an entry is inflated to at most its declared size.
+//! the directory is read on open, an entry is inflated to at most its declared size, and all the
+//! entries read from one file together to at most a total ([`NpzReader::total_limit`]): a small
+//! file of many entries, each under the per-entry cap, cannot make a reader allocate gigabytes.
 
-use std::cell::{OnceCell, RefCell};
+use std::cell::{Cell, OnceCell, RefCell};
 use std::fs::File;
 use std::io::{BufWriter, Read, Write};
 use std::path::{Path, PathBuf};
@@ -13,6 +15,14 @@ use crate::{NpyArray, NpyData, NpyError, ensure_regular_file, parse_npy, write_n
 
 /// The most bytes one entry may declare (uncompressed) before it is refused unread.
 pub const MAX_ENTRY_BYTES: u64 = 1 << 32;
+
+/// By default, the entries read from one file may inflate to at most this many times the file's
+/// size in total ([`NpzReader::total_limit`]). Arrays of mesh data deflate by a factor of about
+/// 1–8 (`np.savez` stores them uncompressed, factor 1); deflate itself reaches ~1000 on zeros.
+pub const MAX_INFLATION: u64 = 64;
+
+/// The default total is never below this (small files of legitimately compressible arrays).
+pub const MIN_TOTAL_BYTES: u64 = 64 << 20;
 
 /// One `*.npy` entry of the zip's central directory.
 #[derive(Debug)]
@@ -26,12 +36,18 @@ struct Entry {
 /// The arrays of an `.npz` file, read lazily: [`NpzReader::open`] reads only the zip's directory,
 /// and an entry is inflated (at most its declared size, which must not exceed
 /// [`MAX_ENTRY_BYTES`]) and parsed the first time it is asked for, then kept. Entries nobody asks
-/// for are never inflated, so a large unused entry costs nothing.
+/// for are never inflated, so a large unused entry costs nothing. The declared sizes of the
+/// entries read are charged against a total ([`NpzReader::total_limit`]); an entry that would
+/// exceed it is refused unread.
 pub struct NpzReader {
     path: PathBuf,
     zip: RefCell<zip::ZipArchive<std::io::BufReader<File>>>,
     entries: Vec<Entry>,
     loaded: Vec<OnceCell<NpyArray>>,
+    /// The total the entries read may inflate to.
+    total_limit: u64,
+    /// Bytes charged so far (declared sizes of the entries read).
+    inflated: Cell<u64>,
 }
 
 impl std::fmt::Debug for NpzReader {
@@ -50,6 +66,7 @@ impl NpzReader {
         let path = path.as_ref().to_path_buf();
         ensure_regular_file(&path).map_err(|e| NpyError::io(&path, e))?;
         let file = File::open(&path).map_err(|e| NpyError::io(&path, e))?;
+        let file_len = file.metadata().map_err(|e| NpyError::io(&path, e))?.len();
         let mut zip =
             zip::ZipArchive::new(std::io::BufReader::new(file)).map_err(|e| NpyError::Archive {
                 path: path.clone(),
@@ -83,7 +100,23 @@ impl NpzReader {
             zip: RefCell::new(zip),
             entries,
             loaded,
+            total_limit: file_len.saturating_mul(MAX_INFLATION).max(MIN_TOTAL_BYTES),
+            inflated: Cell::new(0),
         })
+    }
+
+    /// The most bytes the entries read from this file may inflate to in total (declared sizes).
+    /// By default [`MAX_INFLATION`] × the file's size, at least [`MIN_TOTAL_BYTES`].
+    pub fn total_limit(&self) -> u64 {
+        self.total_limit
+    }
+
+    /// Lowers (never raises) the total: a caller that knows what the file can hold for its task
+    /// (e.g. the arrays of a mesh of known size) bounds it by that.
+    #[must_use]
+    pub fn with_total_limit(mut self, bytes: u64) -> Self {
+        self.total_limit = self.total_limit.min(bytes);
+        self
     }
 
     /// The file this was read from.
@@ -130,6 +163,21 @@ impl NpzReader {
                 ),
             ));
         }
+        let charged = self.inflated.get().saturating_add(size);
+        if charged > self.total_limit {
+            return Err(self.err(
+                key,
+                format!(
+                    "the zip entry declares {size} bytes uncompressed; with the {} bytes of the \
+                     entries read before, that is more than the {} bytes this file may inflate to \
+                     ({MAX_INFLATION} × its size, at least {MIN_TOTAL_BYTES}, or what the task \
+                     needs): a decompression bomb or a corrupt file",
+                    self.inflated.get(),
+                    self.total_limit
+                ),
+            ));
+        }
+        self.inflated.set(charged);
         let mut zip = self.zip.borrow_mut();
         let entry = zip
             .by_index(index)
@@ -390,5 +438,50 @@ mod tests {
             NpzReader::open(dir.path()),
             Err(NpyError::Io { .. })
         ));
+    }
+
+    /// A small file of many deflated entries, each far under [`MAX_ENTRY_BYTES`]: the entries
+    /// read may not inflate to more than the file's total, whichever entries are asked for.
+    #[test]
+    fn many_small_bombs_are_refused_by_the_total_not_only_per_entry() {
+        use zip::write::SimpleFileOptions;
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("bomb.npz");
+        // 20 MiB of zeros per entry, deflated to ~20 KiB each.
+        let n = 5 << 20;
+        let zeros = write_npy(&NpyArray::new(vec![n], NpyData::F32(vec![0.0; n])).expect("array"));
+        let mut zip = zip::ZipWriter::new(File::create(&path).expect("create"));
+        let options =
+            SimpleFileOptions::default().compression_method(zip::CompressionMethod::Deflated);
+        for k in 0..5 {
+            zip.start_file(format!("a{k}.npy"), options).expect("entry");
+            zip.write_all(&zeros).expect("write");
+        }
+        zip.finish().expect("finish");
+        let file_len = std::fs::metadata(&path).expect("len").len();
+        assert!(file_len < 1 << 20, "the bomb is small: {file_len} bytes");
+
+        let r = NpzReader::open(&path).expect("open");
+        assert_eq!(r.total_limit(), MIN_TOTAL_BYTES);
+        // Three entries (60 MiB + headers) fit under 64 MiB, the fourth does not.
+        for k in 0..3 {
+            assert_eq!(r.require(&format!("a{k}")).expect("fits").data.len(), n);
+        }
+        let e = r.require("a3").expect_err("over the total");
+        assert!(e.to_string().contains("decompression bomb"), "{e}");
+        // A caller's own bound is lower still.
+        let r = NpzReader::open(&path)
+            .expect("open")
+            .with_total_limit(1 << 20);
+        let e = r.require("a0").expect_err("over the caller's bound");
+        assert!(
+            e.to_string()
+                .contains("1048576 bytes this file may inflate to"),
+            "{e}"
+        );
+        assert!(
+            NpzReader::open(&path).expect("open").into_arrays().is_err(),
+            "reading every entry is refused as a whole"
+        );
     }
 }

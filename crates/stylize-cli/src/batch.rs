@@ -7,13 +7,16 @@
 //! |---|---|---|
 //! | `mesh` | path | input mesh (relative paths: from the manifest's folder) |
 //! | `out` | path | run directory (relative: from the manifest's folder) |
-//! | `prompt` *or* `style` | string | text path (needs `--model`) or model-free style |
+//! | `prompt` *or* `style` | string | text path (needs `--model`) or model-free style (`exemplar:FILE` relative to the manifest's folder) |
 //! | `negative_prompt` | string, optional | overrides `guidance.negative_prompt` |
 //! | `seed` | integer, optional | overrides `run.seed` |
-//! | `overrides` | list of `"section.key=value"`, optional | applied after the base config |
+//! | `overrides` | list of `"section.key=value"`, optional | applied after the base config (`vertices:FILE` in `region.specs` relative to the manifest's folder) |
 //! | `region` | list of region specs, optional | replaces `region.specs` (`vertices:FILE` relative to the manifest's folder) |
 //! | `region_feather` | integer, optional | replaces `region.feather` |
 //! | `remesh` | string or number, optional | replaces `mesh.remesh` (`auto`, `on`, `off`, `0.03`, `"1.5%"`) |
+//! | `up` | string, optional | the mesh's up axis, replaces `mesh.up` (`+z`, `-x`, …) |
+//! | `output_frame` | string, optional | `input` or `normalized`, replaces `run.output_frame` |
+//! | `camera` | string, optional | `default`, `tall` or `auto`, replaces `camera.preset` |
 //!
 //! Rows are numbered from 0 in file order; shard `i` of `n` takes the rows with `index % n == i`.
 //! At load time, an empty `out` and two rows writing the same run directory (after path
@@ -74,6 +77,36 @@ pub struct Row {
     /// Remeshing (replaces `mesh.remesh`).
     #[serde(default)]
     pub remesh: Option<stylize::remeshing::RemeshSetting>,
+    /// The mesh's up axis (replaces `mesh.up`).
+    #[serde(default)]
+    pub up: Option<String>,
+    /// The frame of the mesh outputs (replaces `run.output_frame`).
+    #[serde(default)]
+    pub output_frame: Option<String>,
+    /// The camera preset (replaces `camera.preset`).
+    #[serde(default)]
+    pub camera: Option<String>,
+}
+
+impl Row {
+    /// The row's `up`, `output_frame` and `camera` columns, parsed.
+    pub fn view_flags(&self) -> anyhow::Result<crate::cmd::shared::ViewFlags> {
+        fn parse<T: std::str::FromStr<Err = stylize::Error>>(
+            column: &str,
+            value: &Option<String>,
+        ) -> anyhow::Result<Option<T>> {
+            value
+                .as_deref()
+                .map(str::parse::<T>)
+                .transpose()
+                .with_context(|| format!("`{column}`"))
+        }
+        Ok(crate::cmd::shared::ViewFlags {
+            up: parse("up", &self.up)?,
+            output_frame: parse("output_frame", &self.output_frame)?,
+            camera: parse("camera", &self.camera)?,
+        })
+    }
 }
 
 #[derive(Deserialize)]
@@ -95,6 +128,61 @@ fn rebase_vertex_file(spec: &str, base: &Path) -> anyhow::Result<String> {
     Ok(rebase(RegionSpec::parse(spec)?, base).to_string())
 }
 
+/// A row's `style` with a relative `exemplar:FILE` resolved against `base` (other styles as they
+/// are).
+fn rebase_style(style: &str, base: &Path) -> String {
+    match style.trim().strip_prefix("exemplar:") {
+        Some(file) if Path::new(file).is_relative() => {
+            format!("exemplar:{}", base.join(file).display())
+        }
+        _ => style.to_string(),
+    }
+}
+
+/// A row's `section.key=value` override with the relative `vertices:FILE` specs of a
+/// `region.specs` array resolved against `base` (other overrides as they are; a malformed one is
+/// left for the configuration to report).
+fn rebase_override(assignment: &str, base: &Path) -> anyhow::Result<String> {
+    let Some((key, raw)) = assignment.split_once('=') else {
+        return Ok(assignment.to_string());
+    };
+    if key.trim() != "region.specs" {
+        return Ok(assignment.to_string());
+    }
+    let Ok(doc) = toml::from_str::<toml::Table>(&format!("v = {raw}")) else {
+        return Ok(assignment.to_string());
+    };
+    let Some(toml::Value::Array(specs)) = doc.get("v") else {
+        return Ok(assignment.to_string());
+    };
+    let mut rebased = Vec::with_capacity(specs.len());
+    for spec in specs {
+        match spec {
+            toml::Value::String(s) => {
+                rebased.push(toml::Value::String(rebase_vertex_file(s, base)?));
+            }
+            other => rebased.push(other.clone()),
+        }
+    }
+    Ok(format!("{}={}", key.trim(), toml::Value::Array(rebased)))
+}
+
+/// `path` with its symbolic links followed (at most 40, as the kernel does; a link whose target
+/// does not exist yet is followed too), for comparing an input with the rows' outputs.
+fn follow_links(path: &Path) -> PathBuf {
+    let mut p = path.to_path_buf();
+    for _ in 0..40 {
+        let Ok(target) = std::fs::read_link(&p) else {
+            break;
+        };
+        p = match p.parent() {
+            Some(parent) if target.is_relative() => parent.join(target),
+            _ => target,
+        };
+    }
+    p
+}
+
 /// Reads a manifest; relative paths are resolved against its folder.
 pub fn read_manifest(path: &Path) -> anyhow::Result<Vec<Row>> {
     let text = crate::input::read_to_string(path)
@@ -109,7 +197,8 @@ pub fn read_manifest(path: &Path) -> anyhow::Result<Vec<Row>> {
     } else {
         let mut rows = Vec::new();
         for (i, line) in text.lines().enumerate() {
-            let line = line.trim();
+            // A byte-order mark at a line's start (files concatenated from Windows editors).
+            let line = line.trim_start_matches('\u{feff}').trim();
             if line.is_empty() || line.starts_with('#') {
                 continue;
             }
@@ -141,6 +230,8 @@ pub fn read_manifest(path: &Path) -> anyhow::Result<Vec<Row>> {
         if r.mesh.to_str().is_some_and(|t| t.trim().is_empty()) {
             bail!("manifest {} row {i}: `mesh` is empty", path.display());
         }
+        r.view_flags()
+            .with_context(|| format!("manifest {} row {i}", path.display()))?;
         let written = r.out.clone();
         if r.mesh.is_relative() {
             r.mesh = base.join(&r.mesh);
@@ -151,6 +242,13 @@ pub fn read_manifest(path: &Path) -> anyhow::Result<Vec<Row>> {
         for spec in &mut r.region {
             *spec = rebase_vertex_file(spec, base)
                 .with_context(|| format!("manifest {} row {i}: region", path.display()))?;
+        }
+        if let Some(style) = &mut r.style {
+            *style = rebase_style(style, base);
+        }
+        for o in &mut r.overrides {
+            *o = rebase_override(o, base)
+                .with_context(|| format!("manifest {} row {i}: overrides", path.display()))?;
         }
         let key = normalized_dir(&r.out);
         if let Some((j, other)) = seen.get(&key) {
@@ -185,22 +283,22 @@ pub fn read_manifest(path: &Path) -> anyhow::Result<Vec<Row>> {
             ancestor = a.parent();
         }
     }
-    // A row's input must not be another row's output (its mesh.obj, or anything in its previews/).
-    for (i, r) in rows.iter().enumerate() {
-        let Some(name) = r.mesh.file_name().and_then(|n| n.to_str()) else {
-            continue;
-        };
-        let parent = normalized_dir(r.mesh.parent().unwrap_or(Path::new(".")));
-        let writer = if rundir::RUN_FILES.contains(&name) {
-            seen.get(&parent)
-        } else {
-            None
+    // A row's input must not be another row's output (its mesh.obj, or anything in its previews/),
+    // neither as written nor through a link to it (a file link, or links of folders).
+    let writer_of = |mesh: &Path| {
+        let name = mesh.file_name().and_then(|n| n.to_str())?;
+        let parent = normalized_dir(mesh.parent().unwrap_or(Path::new(".")));
+        if rundir::RUN_FILES.contains(&name)
+            && let Some(w) = seen.get(&parent)
+        {
+            return Some(w);
         }
-        .or_else(|| {
-            (parent.file_name().is_some_and(|n| n == "previews"))
-                .then(|| parent.parent().and_then(|p| seen.get(p)))
-                .flatten()
-        });
+        (parent.file_name().is_some_and(|n| n == "previews"))
+            .then(|| parent.parent().and_then(|p| seen.get(p)))
+            .flatten()
+    };
+    for (i, r) in rows.iter().enumerate() {
+        let writer = writer_of(&r.mesh).or_else(|| writer_of(&follow_links(&r.mesh)));
         if let Some((j, _)) = writer {
             bail!(
                 "manifest {}: row {i}'s mesh {} is an output of row {j}; a run never replaces \
@@ -430,6 +528,7 @@ fn run_row(
         config.mesh.remesh = r;
     }
     let config = config.with_region_flags(&row.region, row.region_feather, false)?;
+    let config = crate::cmd::shared::with_view_flags(config, row.view_flags()?)?;
     let request = RunRequest {
         mesh: row.mesh.clone(),
         out: row.out.clone(),
@@ -490,7 +589,7 @@ fn run_row(
                         if let Ok(s) = &set
                             && let Some(w) = s.cpu_time_warning(&options.config)
                         {
-                            eprintln!("warning: {w}");
+                            errln!("warning: {w}");
                         }
                         set.map_err(anyhow::Error::from)
                     });
@@ -674,5 +773,71 @@ mod tests {
             .map(|e| format!("{e:#}"))
             .unwrap_or_default();
         assert!(e.contains("line 1") && e.contains("styel"), "{e}");
+    }
+
+    /// Every file a row names is found from the manifest's folder, wherever the batch starts:
+    /// an exemplar (`style = "exemplar:…"`) and the `vertices:` specs of a `region.specs`
+    /// override used to be resolved against the current directory.
+    #[test]
+    fn rows_resolve_every_file_against_the_manifest_folder_bom_or_not() {
+        let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+        let jsonl = dir.path().join("m.jsonl");
+        std::fs::write(
+            &jsonl,
+            "\u{feff}{\"mesh\": \"a.obj\", \"out\": \"a\", \"style\": \"exemplar:shapes/e.obj\", \"overrides\": [\"region.specs=[\\\"vertices:v.txt\\\", \\\"not:vertices:/abs/w.txt\\\", \\\"box:0,0,0,1,1,1\\\"]\", \"darap.lambda=5\"]}\r\n\u{feff}{\"mesh\": \"b.obj\", \"out\": \"b\", \"style\": \"exemplar:/abs/e.obj\"}\n",
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        let rows = read_manifest(&jsonl).unwrap_or_else(|e| panic!("{e:#}"));
+        let d = dir.path().display();
+        assert_eq!(
+            rows[0].style.as_deref(),
+            Some(format!("exemplar:{d}/shapes/e.obj").as_str())
+        );
+        assert_eq!(rows[1].style.as_deref(), Some("exemplar:/abs/e.obj"));
+        assert_eq!(
+            rows[0].overrides,
+            [
+                format!(
+                    "region.specs=[\"vertices:{d}/v.txt\", \"not:vertices:/abs/w.txt\", \
+                     \"box:0,0,0,1,1,1\"]"
+                ),
+                "darap.lambda=5".to_string()
+            ]
+        );
+        // The rebased override still applies.
+        let config = Config::default()
+            .with_overrides(&rows[0].overrides)
+            .unwrap_or_else(|e| panic!("{e:#}"));
+        assert_eq!(config.region.specs[0], format!("vertices:{d}/v.txt"));
+    }
+
+    /// A row whose mesh is a file link to another row's output (existing or not yet) is refused
+    /// like the folder-link and the plain forms.
+    #[test]
+    fn a_mesh_linking_to_another_rows_output_is_refused() {
+        let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+        std::os::unix::fs::symlink(
+            dir.path().join("runs/a/mesh.obj"),
+            dir.path().join("in.obj"),
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        std::os::unix::fs::symlink("in.obj", dir.path().join("in2.obj"))
+            .unwrap_or_else(|e| panic!("{e}"));
+        for mesh in ["in.obj", "in2.obj"] {
+            let path = dir.path().join("m.toml");
+            std::fs::write(
+                &path,
+                format!(
+                    "[[run]]\nmesh = \"x.obj\"\nstyle = \"cube\"\nout = \"runs/a\"\n\n[[run]]\nmesh = \"{mesh}\"\nstyle = \"cube\"\nout = \"runs/b\"\n"
+                ),
+            )
+            .unwrap_or_else(|e| panic!("{e}"));
+            let e = read_manifest(&path).map(|_| ()).expect_err("refused");
+            assert!(
+                format!("{e:#}").contains("row 1's mesh")
+                    && format!("{e:#}").contains("output of row 0"),
+                "{mesh}: {e:#}"
+            );
+        }
     }
 }

@@ -20,7 +20,7 @@ pub fn load(path: &Path) -> anyhow::Result<Config> {
         let (config, notes) = crate::reference_config::from_reference_json(&text)
             .with_context(|| format!("in reference config {}", path.display()))?;
         for n in notes {
-            eprintln!("note: {}: {n}", path.display());
+            errln!("note: {}: {n}", path.display());
         }
         return Ok(config);
     }

@@ -4,10 +4,28 @@
 
 use std::path::Path;
 
-/// [`std::fs::read_to_string`] of a regular file.
+/// [`std::fs::read_to_string`] of a regular file, without a leading UTF-8 byte-order mark (which
+/// Windows editors write; left in place it would hide the first key, row or index). Text in UTF-16
+/// (a byte-order mark `FF FE` or `FE FF`) is refused with what to do, not as invalid UTF-8.
 pub fn read_to_string(path: &Path) -> std::io::Result<String> {
     mesh_core::io::ensure_regular_file(path)?;
-    std::fs::read_to_string(path)
+    text(std::fs::read(path)?)
+}
+
+/// `bytes` as UTF-8 text without a leading byte-order mark (see [`read_to_string`]).
+pub fn text(bytes: Vec<u8>) -> std::io::Result<String> {
+    if bytes.starts_with(b"\xFF\xFE") || bytes.starts_with(b"\xFE\xFF") {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            "the file is UTF-16 text; save it as UTF-8",
+        ));
+    }
+    let text = String::from_utf8(bytes)
+        .map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidData, e))?;
+    Ok(match text.strip_prefix('\u{feff}') {
+        Some(rest) => rest.to_string(),
+        None => text,
+    })
 }
 
 /// [`std::fs::read`] of a regular file.
@@ -20,6 +38,17 @@ pub fn read(path: &Path) -> std::io::Result<Vec<u8>> {
 mod tests {
     use std::path::Path;
     use std::time::Duration;
+
+    #[test]
+    fn byte_order_marks_are_dropped_and_utf16_is_named() {
+        assert_eq!(
+            super::text(b"\xEF\xBB\xBFa = 1".to_vec()).expect("utf-8"),
+            "a = 1"
+        );
+        assert_eq!(super::text(b"a = 1".to_vec()).expect("utf-8"), "a = 1");
+        let e = super::text(b"\xFF\xFEa\0".to_vec()).expect_err("utf-16");
+        assert!(e.to_string().contains("UTF-16"), "{e}");
+    }
 
     #[test]
     fn configs_manifests_and_masks_that_are_not_regular_files_are_refused_without_blocking() {

@@ -1,5 +1,8 @@
 //! `stylize`: text-guided, identity-preserving mesh stylization (Geometry in Style).
 
+// Printing goes through `stylize_cli::output` (never panics on a closed pipe).
+#![deny(clippy::print_stdout, clippy::print_stderr)]
+
 use clap::{Parser, Subcommand};
 use stylize_cli::cmd;
 #[cfg(not(all(feature = "text", feature = "view")))]
@@ -104,8 +107,9 @@ fn main() -> std::process::ExitCode {
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e:#}");
-            // 128 + signal after SIGINT/SIGTERM, 75 when a run directory is locked, else 1.
+            stylize_cli::errln!("error: {e:#}");
+            // 128 + signal after SIGINT/SIGTERM, 75 when a run directory is locked, 141 when
+            // stdout's reader hung up, else 1.
             std::process::ExitCode::from(stylize_cli::signals::exit_code(&e))
         }
     }

@@ -41,20 +41,23 @@ struct Quiet;
 
 impl Progress for Quiet {
     fn warning(&mut self, message: &str) {
-        eprintln!("{message}");
+        errln!("{message}");
     }
 }
 
-/// `metrics.jsonl` lines on stdout.
+/// `metrics.jsonl` lines on stdout. When stdout cannot be written (the reader hung up), the run
+/// stops as if signalled ([`crate::signals::output_closed`]): checkpoint, exit 141.
 struct JsonLines;
 
 impl Progress for JsonLines {
     fn iteration(&mut self, _record: &IterationRecord, json: &str) {
-        println!("{json}");
+        if outln!("{json}").is_err() {
+            crate::signals::output_closed();
+        }
     }
 
     fn warning(&mut self, message: &str) {
-        eprintln!("{message}");
+        errln!("{message}");
     }
 }
 
@@ -85,8 +88,8 @@ impl Progress for Bar {
 
     fn warning(&mut self, message: &str) {
         match &self.0 {
-            Some(bar) => bar.suspend(|| eprintln!("{message}")),
-            None => eprintln!("{message}"),
+            Some(bar) => bar.suspend(|| errln!("{message}")),
+            None => errln!("{message}"),
         }
     }
 

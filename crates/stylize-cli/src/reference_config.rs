@@ -77,6 +77,8 @@ pub fn effective_fov_deg(fov_deg: f64) -> anyhow::Result<f64> {
 /// Parses a reference JSON configuration. Returns the configuration (our defaults for anything the
 /// file does not set) and notes about keys that were ignored.
 pub fn from_reference_json(text: &str) -> anyhow::Result<(Config, Vec<String>)> {
+    // A leading byte-order mark (Windows editors) is not JSON.
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     let root: Value = serde_json::from_str(text).context("not valid JSON")?;
     let d = root
         .get("deform_by_csd")

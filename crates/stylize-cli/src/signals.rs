@@ -8,7 +8,7 @@ use std::path::PathBuf;
 use std::sync::Once;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
-use signal_hook::consts::signal::{SIGINT, SIGTERM};
+use signal_hook::consts::signal::{SIGINT, SIGPIPE, SIGTERM};
 
 static RECEIVED: AtomicBool = AtomicBool::new(false);
 static WHICH: AtomicUsize = AtomicUsize::new(0);
@@ -38,6 +38,15 @@ pub fn flag() -> &'static AtomicBool {
     &RECEIVED
 }
 
+/// Stops the run the way a signal does, as if `SIGPIPE` had been received: called when standard
+/// output cannot be written (`--log-format jsonl` into a pipe whose reader hung up; see
+/// [`crate::output`]). The loop ends its iteration, writes a checkpoint, and the command exits
+/// with 141 (128 + `SIGPIPE`).
+pub fn output_closed() {
+    WHICH.store(SIGPIPE as usize, Ordering::SeqCst);
+    RECEIVED.store(true, Ordering::SeqCst);
+}
+
 /// The signal received so far, if any.
 pub fn pending() -> Option<i32> {
     if !RECEIVED.load(Ordering::SeqCst) {
@@ -54,6 +63,7 @@ pub fn name(signal: i32) -> &'static str {
     match signal {
         SIGINT => "SIGINT",
         SIGTERM => "SIGTERM",
+        SIGPIPE => "a closed standard output (SIGPIPE)",
         _ => "a signal",
     }
 }
@@ -94,10 +104,17 @@ impl Interrupted {
 }
 
 /// The exit status for an error: 128 + signal for [`Interrupted`], 75 (`EX_TEMPFAIL`) when a run
-/// directory is locked by another process, 1 otherwise.
+/// directory is locked by another process, 141 or 74 when standard output cannot be written
+/// ([`crate::output::OutputClosed`]), 1 otherwise.
 pub fn exit_code(e: &anyhow::Error) -> u8 {
     if let Some(i) = e.downcast_ref::<Interrupted>() {
         return i.exit_code();
+    }
+    if let Some(o) = e
+        .chain()
+        .find_map(|c| c.downcast_ref::<crate::output::OutputClosed>())
+    {
+        return o.exit_code();
     }
     use rundir::LockError;
     let locked = |l: &LockError| matches!(l, LockError::Held { .. } | LockError::Busy { .. });

@@ -34,8 +34,33 @@ fn args(out: PathBuf) -> Args {
         region: vec![],
         region_feather: None,
         no_region: false,
+        output_frame: None,
         force: false,
     }
+}
+
+#[test]
+fn a_file_without_a_recorded_frame_is_written_normalized_and_refuses_the_input_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    // The golden file (the reference's keys only): the default writes the normalized frame (the
+    // golden result, checked below), an explicit input frame is an error naming the key.
+    let e = run(Args {
+        output_frame: Some(stylize::frame::OutputFrame::Input),
+        ..args(dir.path().join("x.obj"))
+    })
+    .expect_err("no to_input_frame");
+    assert!(format!("{e:#}").contains("to_input_frame"), "{e:#}");
+    assert!(!dir.path().join("x.obj").exists());
+    run(Args {
+        output_frame: Some(stylize::frame::OutputFrame::Normalized),
+        ..args(dir.path().join("n.obj"))
+    })
+    .unwrap();
+    run(args(dir.path().join("d.obj"))).unwrap();
+    assert_eq!(
+        std::fs::read(dir.path().join("n.obj")).unwrap(),
+        std::fs::read(dir.path().join("d.obj")).unwrap()
+    );
 }
 
 #[test]

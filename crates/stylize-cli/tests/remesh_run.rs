@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 
 use mesh_core::TriMesh;
 use stylize::config::RegionSection;
+use stylize::frame::UpAxis;
 use stylize::remeshing::{EdgeLength, RemeshSetting};
 use stylize::runner::{RunRequest, prepare_mesh_with_region, prepare_run_mesh};
 use stylize::saved::SavedDeformation;
@@ -102,7 +103,12 @@ fn auto_keeps_every_even_mesh_the_fidelity_tests_use_exactly() {
         octahedron,
     ] {
         let section = RegionSection::default();
-        let kept = ok(prepare_run_mesh(&path, RemeshSetting::Auto, &section));
+        let kept = ok(prepare_run_mesh(
+            &path,
+            RemeshSetting::Auto,
+            UpAxis::PosY,
+            &section,
+        ));
         assert!(
             kept.remesh.remeshed.is_none(),
             "{}: {}",
@@ -117,6 +123,7 @@ fn auto_keeps_every_even_mesh_the_fidelity_tests_use_exactly() {
         let r = ok(prepare_run_mesh(
             &fixture(name),
             RemeshSetting::Auto,
+            UpAxis::PosY,
             &RegionSection::default(),
         ));
         let after = &r.remesh.remeshed.as_ref().map(|o| o.after);
@@ -236,7 +243,12 @@ fn parts_select_the_same_side_after_remeshing_and_vertex_lists_are_refused() {
         specs: vec!["part:top".into()],
         ..RegionSection::default()
     };
-    let p = ok(prepare_run_mesh(&mesh, RemeshSetting::On, &section));
+    let p = ok(prepare_run_mesh(
+        &mesh,
+        RemeshSetting::On,
+        UpAxis::PosY,
+        &section,
+    ));
     assert!(p.remesh.remeshed.is_some());
     let free = p.region.map(|r| r.free).unwrap_or_default();
     assert_eq!(free.len(), p.mesh.positions.len());
@@ -261,10 +273,10 @@ fn parts_select_the_same_side_after_remeshing_and_vertex_lists_are_refused() {
         specs: vec![format!("vertices:{}", list.display())],
         ..RegionSection::default()
     };
-    let e = prepare_run_mesh(&mesh, RemeshSetting::Auto, &section)
+    let e = prepare_run_mesh(&mesh, RemeshSetting::Auto, UpAxis::PosY, &section)
         .expect_err("vertex numbers do not survive a remesh");
     assert!(e.to_string().contains("--remesh off"), "{e}");
-    assert!(prepare_run_mesh(&mesh, RemeshSetting::Off, &section).is_ok());
+    assert!(prepare_run_mesh(&mesh, RemeshSetting::Off, UpAxis::PosY, &section).is_ok());
 }
 
 #[test]

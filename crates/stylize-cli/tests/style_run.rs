@@ -203,6 +203,9 @@ fn saved_deformation_reapplies_to_the_saved_mesh() {
         },
     ));
     let applied = ok(layer.forward(&saved.verts_normals_f64())).positions;
+    // mesh.obj is in the input's frame (the default): placed by the recorded map.
+    let frame = ok(saved.input_frame()).unwrap_or_else(|| panic!("no to_input_frame"));
+    let applied = frame.place_result(&applied, &rest, true);
     let written = ok(mesh_core::io::read_mesh(out.join("mesh.obj")));
     assert_eq!(written.faces, saved.faces);
     let worst = applied
@@ -286,12 +289,17 @@ fn glb_vec3(path: &Path, attribute: &str) -> Vec<[f32; 3]> {
 /// rest mesh (at its vertex centroid) through the documented colormap, with the scale in run.json.
 fn check_heat_map(mesh: &Path, out: &Path) {
     let rest = ok(stylize::runner::prepare_mesh(mesh)).0.positions;
-    let result = ok(mesh_core::io::read_mesh(out.join("mesh.obj"))).positions;
+    // mesh.obj (and the heat map's positions) are in the input's frame (the default); the
+    // displacement is measured in the normalized frame: mesh.obj mapped back by the saved map.
+    let written = ok(mesh_core::io::read_mesh(out.join("mesh.obj"))).positions;
+    let saved = ok(SavedDeformation::read(out.join("deformation.npz")));
+    let frame = ok(saved.input_frame()).unwrap_or_else(|| panic!("no to_input_frame"));
+    let result = ok(frame.unplace_result(&written, &rest, true));
     let heat = out.join("mesh_heat.glb");
     // A valid glTF for the reader too, with the result's geometry.
     let read = ok(mesh_core::io::read_mesh(&heat));
     assert_eq!(read.positions.len(), result.len());
-    for (g, r) in glb_vec3(&heat, "POSITION").iter().zip(&result) {
+    for (g, r) in glb_vec3(&heat, "POSITION").iter().zip(&written) {
         for k in 0..3 {
             assert_eq!(g[k], r[k] as f32);
         }

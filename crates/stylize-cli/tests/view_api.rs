@@ -394,6 +394,78 @@ fn downloads_are_meshes_at_the_chosen_lambda() {
 }
 
 #[test]
+fn downloads_come_in_the_runs_input_frame_unless_asked_for_the_normalized_one() {
+    use stylize::frame::{InputFrame, OutputFrame, UpAxis};
+    let dir = tempfile::tempdir().unwrap();
+    let run = complete_run(dir.path(), "framed");
+    // The golden run as if its input had been z-up, in millimetres, far from the origin.
+    let npz = run.join("deformation.npz");
+    let mut saved = stylize::saved::SavedDeformation::read(&npz).unwrap();
+    let frame = InputFrame::from_normalization(UpAxis::PosZ, [120.0, 40.0, -2000.0], 1.0 / 500.0);
+    saved
+        .set_input_frame(&frame, OutputFrame::Input, UpAxis::PosZ)
+        .unwrap();
+    saved.write(&npz).unwrap();
+    let plain = complete_run(dir.path(), "plain");
+    let app = app(&[run, plain]);
+    let download = |item: usize, query: &str| {
+        let app = app.clone();
+        let uri = format!("/{TOKEN}/api/items/{item}/download?lambda=5&format=obj{query}");
+        let path = dir.path().join(format!("got{item}{}.obj", query.len()));
+        let r = rt().block_on(async { get(&app, &uri).await });
+        assert_eq!(r.status, StatusCode::OK, "{uri}: {}", r.text());
+        r.body.pipe_to(&path)
+    };
+    let own = download(0, "");
+    let normalized = download(0, "&frame=normalized");
+    let golden5 = mesh_core::io::read_mesh(golden("bunny_lambda5_gis.obj")).unwrap();
+    let rest = saved.rest_positions();
+    let expected = frame.place_result(&normalized.positions, &rest, true);
+    let err = |a: &[[f64; 3]], b: &[[f64; 3]]| {
+        a.iter()
+            .flatten()
+            .zip(b.iter().flatten())
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0, f64::max)
+    };
+    assert!(err(&normalized.positions, &golden5.positions) < 1e-5);
+    assert!(
+        err(&own.positions, &expected) < 1e-9,
+        "{}",
+        err(&own.positions, &expected)
+    );
+    assert!(err(&own.positions, &normalized.positions) > 1.0);
+    // A run that records no input frame: normalized by default, an explicit `input` refused.
+    let plain_default = download(1, "");
+    assert!(err(&plain_default.positions, &golden5.positions) < 1e-5);
+    rt().block_on(async {
+        for (query, status) in [
+            ("&frame=input", StatusCode::BAD_REQUEST),
+            ("&frame=sideways", StatusCode::BAD_REQUEST),
+        ] {
+            let r = get(
+                &app,
+                &format!("/{TOKEN}/api/items/1/download?lambda=5&format=obj{query}"),
+            )
+            .await;
+            assert_eq!(r.status, status, "{query}: {}", r.text());
+        }
+    });
+}
+
+/// Writes downloaded bytes to a file and reads them as a mesh.
+trait PipeTo {
+    fn pipe_to(self, path: &Path) -> mesh_core::TriMesh;
+}
+
+impl PipeTo for Vec<u8> {
+    fn pipe_to(self, path: &Path) -> mesh_core::TriMesh {
+        std::fs::write(path, &self).unwrap();
+        mesh_core::io::read_mesh(path).unwrap()
+    }
+}
+
+#[test]
 fn files_are_served_from_inside_the_run_only() {
     let dir = tempfile::tempdir().unwrap();
     let run = complete_run(dir.path(), "run");
@@ -940,4 +1012,171 @@ fn target_normals_are_unit_vectors_per_source_vertex() {
         let r = get(&app, &format!("/{TOKEN}/api/items/2/targets")).await;
         assert_eq!(r.status, StatusCode::NOT_FOUND, "{}", r.text());
     });
+}
+
+// ---------- hostile clients (no token needed to connect) ----------
+
+/// `stylize view … RUN` with `extra` options under `sh -c 'ulimit -n FDS'` (when given); returns
+/// the child and the `127.0.0.1:PORT/TOKEN/` of its URL.
+fn spawn_viewer(run: &Path, fds: Option<u32>, extra: &[&str]) -> (std::process::Child, String) {
+    let bin = env!("CARGO_BIN_EXE_stylize");
+    let mut cmd = match fds {
+        Some(n) => {
+            let mut c = std::process::Command::new("sh");
+            c.args(["-c", &format!("ulimit -n {n} && exec \"$@\""), "sh", bin]);
+            c
+        }
+        None => std::process::Command::new(bin),
+    };
+    let mut child = cmd
+        .args(["view", "--port", "0"])
+        .args(extra)
+        .arg(run)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut lines = BufReader::new(child.stdout.take().unwrap()).lines();
+    let url = loop {
+        let line = lines
+            .next()
+            .expect("the server exited before printing its URL")
+            .unwrap();
+        if let Some(u) = line.trim().strip_prefix("http://") {
+            break u.to_string();
+        }
+    };
+    (child, url)
+}
+
+/// Connects to `authority` within `timeout` (`None` when refused or timed out).
+fn connect(authority: &str, timeout: std::time::Duration) -> Option<std::net::TcpStream> {
+    let addr: std::net::SocketAddr = authority.parse().unwrap();
+    std::net::TcpStream::connect_timeout(&addr, timeout).ok()
+}
+
+/// `GET path` on a fresh connection: the status line, or `None` when the server closed the
+/// connection without an answer (refused over its cap) or did not answer within 5 s.
+fn status_of(authority: &str, path: &str) -> Option<String> {
+    use std::time::Duration;
+    let mut s = connect(authority, Duration::from_secs(2))?;
+    s.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+    write!(
+        s,
+        "GET {path} HTTP/1.1\r\nHost: {authority}\r\nConnection: close\r\n\r\n"
+    )
+    .ok()?;
+    let mut out = String::new();
+    s.read_to_string(&mut out).ok()?;
+    out.lines().next().map(str::to_string)
+}
+
+/// Polls `GET path` until it is answered (at most `rounds` tries, 250 ms apart).
+fn answered_within(authority: &str, path: &str, rounds: usize) -> Option<String> {
+    (0..rounds).find_map(|_| {
+        let r = status_of(authority, path);
+        if r.is_none() {
+            std::thread::sleep(std::time::Duration::from_millis(250));
+        }
+        r
+    })
+}
+
+/// About 1,000 idle connections at the usual 1,024-descriptor limit made the server panic
+/// ("timers are disabled") on the accept error. Here the limit is 64 descriptors and the cap is
+/// set above it, so 200 idle connections make `accept` fail with EMFILE: the server reports it,
+/// keeps running, times the idle connections out (1 s here), and then answers the token's
+/// request.
+#[test]
+fn idle_connections_past_the_descriptor_limit_neither_kill_nor_block_the_viewer() {
+    use std::time::Duration;
+    let dir = tempfile::tempdir().unwrap();
+    let run = complete_run(dir.path(), "run");
+    let (mut child, url) = spawn_viewer(
+        &run,
+        Some(64),
+        &["--max-connections", "1000", "--header-timeout", "1"],
+    );
+    let (authority, path) = url.split_once('/').unwrap();
+    let token = path.trim_end_matches('/');
+    let idle: Vec<_> = (0..200)
+        .filter_map(|_| connect(authority, Duration::from_millis(500)))
+        .collect();
+    assert!(idle.len() > 64, "only {} connections were made", idle.len());
+    std::thread::sleep(Duration::from_millis(500));
+    assert!(
+        child.try_wait().unwrap().is_none(),
+        "the viewer died with idle connections open"
+    );
+    let answer = answered_within(authority, &format!("/{token}/api/items"), 80);
+    let alive = child.try_wait().unwrap().is_none();
+    drop(idle);
+    child.kill().unwrap();
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(alive, "the viewer died: {err}");
+    assert!(!err.contains("panicked"), "{err}");
+    assert_eq!(
+        answer.as_deref(),
+        Some("HTTP/1.1 200 OK"),
+        "the token's request was not answered after the idle connections timed out: {err}"
+    );
+    assert!(
+        err.contains("cannot accept a connection") && err.contains("still serving"),
+        "the descriptor exhaustion is reported: {err}"
+    );
+}
+
+/// Over the connection cap (4 here), connections are closed as soon as they are accepted, so
+/// a flood holds no descriptor of the server; a client that sends half a request is closed
+/// after the header timeout; and the page's request gets through once the slots free.
+#[test]
+fn a_flood_of_connections_and_a_slow_client_cost_the_viewer_no_descriptors() {
+    use std::time::{Duration, Instant};
+    let dir = tempfile::tempdir().unwrap();
+    let run = complete_run(dir.path(), "run");
+    let (mut child, url) = spawn_viewer(
+        &run,
+        None,
+        &["--max-connections", "4", "--header-timeout", "1"],
+    );
+    let (authority, path) = url.split_once('/').unwrap();
+    let token = path.trim_end_matches('/');
+    let fds = || std::fs::read_dir(format!("/proc/{}/fd", child.id())).map(|d| d.count());
+    // The baseline once the server has answered (its runtime and the run's files are open).
+    assert!(answered_within(authority, &format!("/{token}/api/items"), 40).is_some());
+    let before = fds();
+    // A slow client: half a request line, then silence.
+    let mut slow = connect(authority, Duration::from_secs(2)).unwrap();
+    write!(slow, "GET /{token}/api/items HTTP/1.1\r\nHost: x\r\n").unwrap();
+    let started = Instant::now();
+    let flood: Vec<_> = (0..100)
+        .filter_map(|_| connect(authority, Duration::from_millis(500)))
+        .collect();
+    std::thread::sleep(Duration::from_millis(300));
+    let during = fds();
+    slow.set_read_timeout(Some(Duration::from_secs(20)))
+        .unwrap();
+    let mut buf = Vec::new();
+    let _ = slow.read_to_end(&mut buf);
+    let slow_closed_after = started.elapsed();
+    let answer = answered_within(authority, &format!("/{token}/api/items"), 80);
+    drop(flood);
+    child.kill().unwrap();
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!err.contains("panicked"), "{err}");
+    if let (Ok(before), Ok(during)) = (before, during) {
+        // The 4 connections the cap lets in, and a little slack for the runtime (100 without a
+        // cap).
+        assert!(
+            during <= before + 4 + 8,
+            "{during} descriptors with 100 connections over a cap of 4 (before: {before})"
+        );
+    }
+    assert!(
+        slow_closed_after < Duration::from_secs(20),
+        "the slow client was never closed"
+    );
+    assert_eq!(answer.as_deref(), Some("HTTP/1.1 200 OK"), "{err}");
 }

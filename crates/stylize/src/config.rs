@@ -5,15 +5,17 @@
 //! ```toml
 //! [darap]    lambda = 8.0, rotation_rule = "gis", post_process = "recenter_rescale"
 //! [optim]    lr = 0.002, iterations = 2500, steps_per_batch = 2, beta1, beta2, eps
-//! [camera]   views = 8, elevation_deg, azimuth_deg, distance, fov_deg = 90, adapt_distance
+//! [camera]   views = 8, preset = "default", elevation_deg, azimuth_deg, distance, fov_deg = 90,
+//!            adapt_distance
 //! [render]   width = 512, height = 512, backend = "auto"
 //! [guidance] scale = 100, t_min = 20, t_max = 980, loss_scale = 100, stage1_weight = 1,
 //!            stage2_weight = "0.0>0.2:1000; 0.2>0.3:750", negative_prompt = "", grad_clip = 0 (off),
 //!            onnx_memory_arena = true, onnx_low_memory = false
 //! [style]    iterations, lr, objective   (the model-free path, see `crate::style`)
 //! [run]      seed, checkpoint_every, preview_every, turntable_views, turntable_size,
-//!            turntable_gif_frames, snapshot_every
-//! [mesh]     remesh = "auto" | "on" | "off" | edge length (`0.03`, `"1.5%"`)
+//!            turntable_gif_frames, snapshot_every, output_frame = "input"
+//! [region]   specs, feather, tint
+//! [mesh]     remesh = "auto" | "on" | "off" | edge length (`0.03`, `"1.5%"`), up = "+y"
 //! ```
 //! `docs/cli.md` lists every key with its meaning.
 
@@ -90,6 +92,10 @@ pub struct CameraSection {
     pub views: usize,
     /// Scale the distance by the deformed mesh's extent from iteration 2 on (spec §5): true.
     pub adapt_distance: bool,
+    /// The view ranges by name ([`CameraPreset`]): `default` (the keys below as given: the
+    /// paper's unless set), `tall` (the paper's preset for tall, slender shapes) or `auto`
+    /// (`tall` for tall, slim meshes by [`CameraPreset::TALL_ASPECT`], else `default`).
+    pub preset: CameraPreset,
     /// The ranges of the per-view draws and the field of view (flattened: the file's `[camera]`
     /// keys `elevation_deg`, `azimuth_deg`, `distance`, `fov_deg`).
     #[serde(flatten)]
@@ -101,8 +107,114 @@ impl Default for CameraSection {
         Self {
             views: 8,
             adapt_distance: true,
+            preset: CameraPreset::Default,
             sampler: raster_diff::CameraConfig::default(),
         }
+    }
+}
+
+/// `camera.preset`: the view sampler's ranges by name (`--camera`).
+///
+/// The paper's numbers (its supplementary, and `raster_diff::CameraConfig`): `default` draws
+/// each view's elevation uniformly in [0°, 60°] above the xz-plane, azimuth in [0°, 361°] and
+/// distance in [2.5, 3.0] (times the adaptive multiplier), field of view 90° (focal length 1);
+/// `tall`, which the paper uses for humans and other tall, slender shapes, draws elevation in
+/// [0°, 30°] and distance in [1.4, 2.6] (azimuth and field of view unchanged), so the camera comes
+/// closer and stays lower.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CameraPreset {
+    /// The `[camera]` ranges as configured (the paper's default unless set).
+    #[default]
+    Default,
+    /// The paper's preset for tall, slender shapes: elevation [0°, 30°], distance [1.4, 2.6].
+    Tall,
+    /// `tall` when the prepared mesh (after `mesh.up`) is tall and slim: its height (y extent) is
+    /// at least [`CameraPreset::TALL_ASPECT`] times its larger horizontal extent (x or z); else
+    /// `default`. Resolved when the run starts; the run records the resolved preset.
+    Auto,
+}
+
+impl CameraPreset {
+    /// `auto` picks `tall` when height ≥ this × max(x extent, z extent): 1.5 (a standing person
+    /// is about 3–4, a seated figure or a chair about 1–1.5, a four-legged animal below 1).
+    pub const TALL_ASPECT: f64 = 1.5;
+
+    /// `default`, `tall` or `auto`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Default => "default",
+            Self::Tall => "tall",
+            Self::Auto => "auto",
+        }
+    }
+
+    /// What `auto` picks for a mesh of bounding-box extents `size` (x, y, z; y up), with the
+    /// reason in words.
+    pub fn auto_choice(size: [f64; 3]) -> (Self, String) {
+        let horizontal = size[0].max(size[2]);
+        let aspect = if horizontal > 0.0 {
+            size[1] / horizontal
+        } else {
+            f64::INFINITY
+        };
+        let pick = if aspect >= Self::TALL_ASPECT {
+            Self::Tall
+        } else {
+            Self::Default
+        };
+        (
+            pick,
+            format!(
+                "camera: auto → {} (height / widest horizontal extent = {aspect:.2}; tall from {})",
+                pick.name(),
+                Self::TALL_ASPECT
+            ),
+        )
+    }
+}
+
+impl std::fmt::Display for CameraPreset {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for CameraPreset {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Self> {
+        match s.trim().to_ascii_lowercase().as_str() {
+            "default" => Ok(Self::Default),
+            "tall" => Ok(Self::Tall),
+            "auto" => Ok(Self::Auto),
+            other => Err(Error::Invalid(format!(
+                "unknown camera preset {other:?} (known: default, tall, auto)"
+            ))),
+        }
+    }
+}
+
+impl Config {
+    /// The configuration a run on a prepared mesh (positions after `mesh.up` and normalization)
+    /// uses: `camera.preset = auto` resolved to `tall` or `default` ([`CameraPreset::auto_choice`])
+    /// and a `tall` preset's ranges written into `[camera]` (`elevation_deg`, `distance`), so
+    /// that `config.toml` and the task identity hold what the views are drawn from. Returns the
+    /// line that says what `auto` chose (None for other presets).
+    pub fn with_camera_resolved(mut self, positions: &[[f64; 3]]) -> (Self, Option<String>) {
+        let mut note = None;
+        if self.camera.preset == CameraPreset::Auto {
+            let (lo, hi) = mesh_core::geometry::bbox(positions);
+            let size: [f64; 3] = std::array::from_fn(|k| (hi[k] - lo[k]).max(0.0));
+            let (pick, why) = CameraPreset::auto_choice(size);
+            self.camera.preset = pick;
+            note = Some(why);
+        }
+        if self.camera.preset == CameraPreset::Tall {
+            let tall = raster_diff::CameraConfig::tall();
+            self.camera.sampler.elevation_deg = tall.elevation_deg;
+            self.camera.sampler.distance = tall.distance;
+        }
+        (self, note)
     }
 }
 
@@ -226,6 +338,20 @@ impl Default for StyleSection {
     }
 }
 
+/// The largest `darap.lambda` (the reference uses 5–10; `stylize view`'s slider stops at 100).
+pub const MAX_LAMBDA: f64 = 1000.0;
+/// The largest `optim.lr` and `style.lr` (the defaults are 0.002 and 0.02).
+pub const MAX_LEARNING_RATE: f64 = 10.0;
+/// The largest `guidance.scale`, `guidance.loss_scale` and `guidance.stage1_weight` (defaults
+/// 100, 100 and 1).
+pub const MAX_WEIGHT: f64 = 1e6;
+/// The most `camera.views` (the reference uses 8).
+pub const MAX_VIEWS: usize = 256;
+/// The largest `render.width` / `render.height`, in pixels (the reference uses 512).
+pub const MAX_RENDER_SIZE: usize = 4096;
+/// The most `optim.steps_per_batch` (the reference uses 2).
+pub const MAX_STEPS_PER_BATCH: u32 = 1000;
+
 /// The largest `run.turntable_size`, in pixels (the zoomed renders behind a tile reach 4×).
 pub const MAX_TURNTABLE_SIZE: usize = 1024;
 /// The most `run.turntable_views` (tiles of the contact sheet and of `before_after.png`).
@@ -253,6 +379,10 @@ pub struct RunSection {
     /// Save the deformed positions to `snapshots.npz` every N iterations, plus iteration 0 and the
     /// last (0: no snapshots): 50.
     pub snapshot_every: u64,
+    /// The frame mesh outputs (`mesh.obj/.ply/.glb`) are written in: `input` (the input's own
+    /// coordinates, axes and scale; the default) or `normalized` (the reference's side-2 frame).
+    /// Presentation only: never part of the task identity ([`crate::frame`]).
+    pub output_frame: crate::frame::OutputFrame,
 }
 
 impl Default for RunSection {
@@ -265,8 +395,21 @@ impl Default for RunSection {
             turntable_size: 256,
             turntable_gif_frames: 36,
             snapshot_every: 50,
+            output_frame: crate::frame::OutputFrame::Input,
         }
     }
+}
+
+/// `[mesh]`: what is done to the input mesh before it is normalized and optimized.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct MeshSection {
+    /// `auto` (default), `on`, `off`, or an edge length (`0.03` side-2 units, `1.5%`)
+    /// ([`crate::remeshing`]).
+    pub remesh: crate::remeshing::RemeshSetting,
+    /// The input's up axis, turned to +y before normalization and back on output: `+y`
+    /// ([`crate::frame::UpAxis`]; `+z` for most CAD files and scans).
+    pub up: crate::frame::UpAxis,
 }
 
 /// `[region]`: localized stylization (`docs/cli.md`, `mesh_core::region`).
@@ -302,9 +445,8 @@ pub struct Config {
     pub run: RunSection,
     /// `[region]`.
     pub region: RegionSection,
-    /// `[mesh]`: what is done to the input before it is optimized (remeshing,
-    /// [`crate::remeshing`]).
-    pub mesh: crate::remeshing::MeshSection,
+    /// `[mesh]`: what is done to the input before it is optimized (remeshing, orientation).
+    pub mesh: MeshSection,
 }
 
 impl Config {
@@ -365,16 +507,58 @@ impl Config {
             }
             Ok(())
         };
-        if !(self.darap.lambda.is_finite() && self.darap.lambda >= 0.0) {
+        if !(self.darap.lambda.is_finite() && (0.0..=MAX_LAMBDA).contains(&self.darap.lambda)) {
             bad_field!(
                 "darap.lambda",
-                "darap.lambda must be finite and >= 0, got {}",
+                "darap.lambda must be within [0, {MAX_LAMBDA}] (the reference uses 5–10), got {}",
                 self.darap.lambda
             );
         }
+        // Numbers that are finite but far outside any sensible use overflow the arithmetic and
+        // end in a silently destroyed mesh (or an allocation abort): each has an upper bound.
+        let within = |name: &str, v: f64, low_exclusive: bool, max: f64| -> Result<()> {
+            let low_ok = if low_exclusive { v > 0.0 } else { v >= 0.0 };
+            if !(v.is_finite() && low_ok && v <= max) {
+                let low = if low_exclusive { "(0" } else { "[0" };
+                return Err(Error::config(
+                    name,
+                    format!("{name} must be within {low}, {max}], got {v}"),
+                ));
+            }
+            Ok(())
+        };
         finite_pos("optim.lr", self.optim.lr)?;
         finite_pos("style.lr", self.style.lr)?;
         finite_pos("optim.eps", self.optim.eps)?;
+        within("optim.lr", self.optim.lr, true, MAX_LEARNING_RATE)?;
+        within("style.lr", self.style.lr, true, MAX_LEARNING_RATE)?;
+        within("optim.eps", self.optim.eps, true, 1.0)?;
+        let g = &self.guidance;
+        within("guidance.scale", g.scale, false, MAX_WEIGHT)?;
+        within("guidance.loss_scale", g.loss_scale, false, MAX_WEIGHT)?;
+        within("guidance.stage1_weight", g.stage1_weight, false, MAX_WEIGHT)?;
+        if self.camera.views > MAX_VIEWS {
+            bad_field!(
+                "camera.views",
+                "camera.views must be at most {MAX_VIEWS} (the reference uses 8), got {}",
+                self.camera.views
+            );
+        }
+        if self.render.width > MAX_RENDER_SIZE || self.render.height > MAX_RENDER_SIZE {
+            bad_field!(
+                "render.width",
+                "render.width and render.height must be at most {MAX_RENDER_SIZE} pixels, got {}×{}",
+                self.render.width,
+                self.render.height
+            );
+        }
+        if self.optim.steps_per_batch > MAX_STEPS_PER_BATCH {
+            bad_field!(
+                "optim.steps_per_batch",
+                "optim.steps_per_batch must be at most {MAX_STEPS_PER_BATCH}, got {}",
+                self.optim.steps_per_batch
+            );
+        }
         for (name, b) in [
             ("optim.beta1", self.optim.beta1),
             ("optim.beta2", self.optim.beta2),
@@ -644,6 +828,45 @@ mod tests {
             "run.turntable_gif_frames=360",
         ]));
         ok(c.validate());
+    }
+
+    /// Finite numbers far outside any use (λ = 1e308 completed with a destroyed mesh) are refused
+    /// naming the key and its range; the bounds themselves are accepted.
+    #[test]
+    fn numeric_settings_have_ranges_not_only_signs() {
+        for (set, key) in [
+            ("darap.lambda=1e308", "darap.lambda"),
+            ("darap.lambda=1000.5", "darap.lambda"),
+            ("optim.lr=1e300", "optim.lr"),
+            ("style.lr=11", "style.lr"),
+            ("optim.eps=2", "optim.eps"),
+            ("guidance.scale=1e300", "guidance.scale"),
+            ("guidance.scale=-1", "guidance.scale"),
+            ("guidance.scale=nan", "guidance.scale"),
+            ("guidance.loss_scale=inf", "guidance.loss_scale"),
+            ("guidance.stage1_weight=-0.5", "guidance.stage1_weight"),
+            ("camera.views=1000000000", "camera.views"),
+            ("render.width=100000", "render.width"),
+            ("optim.steps_per_batch=1000000", "optim.steps_per_batch"),
+        ] {
+            let e = Config::default()
+                .with_overrides(&[set])
+                .err()
+                .map(|e| e.full_message())
+                .unwrap_or_default();
+            assert!(
+                e.contains(key) && (e.contains("within") || e.contains("at most")),
+                "{set}: {e}"
+            );
+        }
+        ok(Config::default().with_overrides(&[
+            "darap.lambda=1000",
+            "optim.lr=10",
+            "guidance.scale=0",
+            "camera.views=256",
+            "render.width=4096",
+            "optim.steps_per_batch=1000",
+        ]));
     }
 
     #[test]

@@ -53,11 +53,69 @@ pub struct PairMetrics {
     pub area_ratio_std: f64,
     /// `V_result / V_source` (NaN when the source volume is 0, e.g. an open sheet).
     pub volume_ratio: f64,
+    /// Source faces whose smallest corner angle is below [`NEEDLE_ANGLE_DEGREES`] (and of
+    /// non-zero area): needles, whose area ratio swings wildly under small vertex moves.
+    pub needle_faces: usize,
+    /// The share of the pooled area ratios' sum of squared deviations (from the pooled mean) that
+    /// this pair's needle faces contribute, in [0, 1]: at [`NEEDLE_VARIANCE_WARNING`] or more the
+    /// pair's needles dominate the reported standard deviation (see [`EvalReport::warnings`]).
+    pub needle_variance_share: f64,
     /// Self-intersections of the source and the result, and the result's new pairs.
     pub intersections: crate::intersections::IntersectionFigures,
     /// CLIP similarity of source and result (only when a CLIP model was given).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub clip: Option<ClipScore>,
+}
+
+/// A source face is a needle below this smallest corner angle, in degrees (the repair report's
+/// default, `mesh_core::validate::RepairOptions::needle_angle_degrees`).
+pub const NEEDLE_ANGLE_DEGREES: f64 = 1.0;
+
+/// [`EvalReport::warnings`] names a pair whose needle faces contribute at least this share of
+/// the pooled area ratios' variance: 0.5 (half of the reported spread comes from a handful of
+/// faces that a remesh would remove).
+pub const NEEDLE_VARIANCE_WARNING: f64 = 0.5;
+
+/// Smallest corner angle of a triangle in degrees (0 when degenerate).
+fn min_corner_angle_degrees(p: [[f64; 3]; 3]) -> f64 {
+    let sub = |a: [f64; 3], b: [f64; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+    let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    let cross = |a: [f64; 3], b: [f64; 3]| {
+        [
+            a[1] * b[2] - a[2] * b[1],
+            a[2] * b[0] - a[0] * b[2],
+            a[0] * b[1] - a[1] * b[0],
+        ]
+    };
+    let mut best = f64::INFINITY;
+    for i in 0..3 {
+        let a = sub(p[(i + 1) % 3], p[i]);
+        let b = sub(p[(i + 2) % 3], p[i]);
+        let c = cross(a, b);
+        best = best.min(dot(c, c).sqrt().atan2(dot(a, b)));
+    }
+    if best.is_finite() {
+        best.to_degrees()
+    } else {
+        0.0
+    }
+}
+
+/// Whether each face of positive area of `mesh` (in the order of the ratios of [`pair_ratios`])
+/// is a needle.
+fn needle_flags(mesh: &TriMesh) -> Vec<bool> {
+    let mut src = mesh.positions.clone();
+    mesh_core::normalize::side2_cube(&mut src);
+    let areas = face_areas(&src, &mesh.faces);
+    mesh.faces
+        .iter()
+        .zip(&areas)
+        .filter(|(_, a)| **a > 0.0)
+        .map(|(f, _)| {
+            let p = f.map(|v| src[v as usize]);
+            min_corner_angle_degrees(p) < NEEDLE_ANGLE_DEGREES
+        })
+        .collect()
 }
 
 /// CLIP similarity of one pair: mean over views of cos(image_v, text) for the source and the result.
@@ -123,6 +181,14 @@ pub struct EvalReport {
     /// Mean over the scored pairs of the result's CLIP similarity (only with a CLIP model).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub clip_result_mean: Option<f64>,
+    /// Mean and population standard deviation of the pooled `r_f` without the needle faces
+    /// (what the spread would be on well-shaped triangles).
+    pub area_ratio_mean_without_needles: f64,
+    /// See [`Self::area_ratio_mean_without_needles`].
+    pub area_ratio_std_without_needles: f64,
+    /// One line per pair whose needle faces dominate the pooled area ratio's variance
+    /// ([`NEEDLE_VARIANCE_WARNING`]).
+    pub warnings: Vec<String>,
 }
 
 fn mean_std(values: &[f64]) -> (f64, f64) {
@@ -195,10 +261,12 @@ pub fn pair_ratios(source: &TriMesh, result: &TriMesh) -> Result<(Vec<f64>, usiz
 /// Evaluates named `(source, result)` pairs.
 pub fn evaluate(pairs: &[(String, TriMesh, TriMesh)]) -> Result<EvalReport> {
     let mut pooled = Vec::new();
+    let mut needles = Vec::new();
     let mut out = Vec::new();
     for (name, source, result) in pairs {
         let (ratios, skipped, volume) =
             pair_ratios(source, result).with_context(|| name.clone())?;
+        let flags = needle_flags(source);
         let (m, s) = mean_std(&ratios);
         let intersections =
             crate::intersections::compare(source, result).with_context(|| name.clone())?;
@@ -209,12 +277,46 @@ pub fn evaluate(pairs: &[(String, TriMesh, TriMesh)]) -> Result<EvalReport> {
             area_ratio_mean: m,
             area_ratio_std: s,
             volume_ratio: volume,
+            needle_faces: flags.iter().filter(|&&n| n).count(),
+            needle_variance_share: 0.0,
             intersections,
             clip: None,
         });
         pooled.extend(ratios);
+        needles.push(flags);
     }
     let (mean, std) = mean_std(&pooled);
+    // Each pair's needle faces' share of the pooled sum of squared deviations.
+    let total: f64 = pooled.iter().map(|r| (r - mean) * (r - mean)).sum();
+    let mut at = 0;
+    let mut without = Vec::with_capacity(pooled.len());
+    let mut warnings = Vec::new();
+    for (pair, flags) in out.iter_mut().zip(&needles) {
+        let ratios = &pooled[at..at + pair.faces];
+        at += pair.faces;
+        let mut needle_ss = 0.0;
+        for (r, &needle) in ratios.iter().zip(flags) {
+            if needle {
+                needle_ss += (r - mean) * (r - mean);
+            } else {
+                without.push(*r);
+            }
+        }
+        pair.needle_variance_share = if total > 0.0 { needle_ss / total } else { 0.0 };
+        if pair.needle_variance_share >= NEEDLE_VARIANCE_WARNING {
+            warnings.push(format!(
+                "{}: {} needle face{} (smallest angle < {NEEDLE_ANGLE_DEGREES}°) make{} {:.0}% of \
+                 the pooled area ratio's variance: the ± is theirs, not the stylization's; remesh \
+                 the input (or compare the figures without needles)",
+                pair.name,
+                pair.needle_faces,
+                if pair.needle_faces == 1 { "" } else { "s" },
+                if pair.needle_faces == 1 { "s" } else { "" },
+                100.0 * pair.needle_variance_share
+            ));
+        }
+    }
+    let (mean_without, std_without) = mean_std(&without);
     let volumes: Vec<f64> = out
         .iter()
         .map(|p| p.volume_ratio)
@@ -228,7 +330,104 @@ pub fn evaluate(pairs: &[(String, TriMesh, TriMesh)]) -> Result<EvalReport> {
         volume_ratio_mean,
         clip_source_mean: None,
         clip_result_mean: None,
+        area_ratio_mean_without_needles: mean_without,
+        area_ratio_std_without_needles: std_without,
+        warnings,
     })
+}
+
+/// The report as CSV: a header, one line per pair and a `pooled` line. Columns: `name`, `faces`,
+/// `skipped_faces`, `area_ratio_mean`, `area_ratio_std`, `volume_ratio`, `needle_faces`,
+/// `needle_variance_share`, `source_intersecting_pairs`, `intersecting_pairs`,
+/// `new_intersecting_pairs`, `new_intersecting_faces` ([`crate::intersections`]), `clip_prompt`,
+/// `clip_source`, `clip_result` (empty cells where there is no value; the pooled line sums the
+/// counts). Fields with a comma, quote or line break are quoted (RFC 4180).
+pub fn csv(report: &EvalReport) -> String {
+    fn field(s: &str) -> String {
+        if s.contains([',', '"', '\n', '\r']) {
+            format!("\"{}\"", s.replace('"', "\"\""))
+        } else {
+            s.to_string()
+        }
+    }
+    let num = |v: Option<f64>| v.map(|x| format!("{x}")).unwrap_or_default();
+    let sum = |f: fn(&crate::intersections::IntersectionFigures) -> usize| {
+        report
+            .pairs
+            .iter()
+            .map(|p| f(&p.intersections))
+            .sum::<usize>()
+            .to_string()
+    };
+    let mut s = String::from(
+        "name,faces,skipped_faces,area_ratio_mean,area_ratio_std,volume_ratio,needle_faces,\
+         needle_variance_share,source_intersecting_pairs,intersecting_pairs,\
+         new_intersecting_pairs,new_intersecting_faces,clip_prompt,clip_source,clip_result\n",
+    );
+    for p in &report.pairs {
+        let clip = p.clip.as_ref();
+        s += &[
+            field(&p.name),
+            p.faces.to_string(),
+            p.skipped_faces.to_string(),
+            format!("{}", p.area_ratio_mean),
+            format!("{}", p.area_ratio_std),
+            format!("{}", p.volume_ratio),
+            p.needle_faces.to_string(),
+            format!("{}", p.needle_variance_share),
+            p.intersections.source_pairs.to_string(),
+            p.intersections.pairs.to_string(),
+            p.intersections.new_pairs.to_string(),
+            p.intersections.new_faces.to_string(),
+            field(clip.and_then(|c| c.prompt.as_deref()).unwrap_or("")),
+            num(clip.and_then(|c| c.source)),
+            num(clip.and_then(|c| c.result)),
+        ]
+        .join(",");
+        s += "\n";
+    }
+    s += &[
+        "pooled".to_string(),
+        report
+            .pairs
+            .iter()
+            .map(|p| p.faces)
+            .sum::<usize>()
+            .to_string(),
+        report
+            .pairs
+            .iter()
+            .map(|p| p.skipped_faces)
+            .sum::<usize>()
+            .to_string(),
+        format!("{}", report.area_ratio_mean),
+        format!("{}", report.area_ratio_std),
+        format!("{}", report.volume_ratio_mean),
+        report
+            .pairs
+            .iter()
+            .map(|p| p.needle_faces)
+            .sum::<usize>()
+            .to_string(),
+        format!(
+            "{}",
+            report
+                .pairs
+                .iter()
+                .map(|p| p.needle_variance_share)
+                .sum::<f64>()
+        ),
+        sum(|x| x.source_pairs),
+        sum(|x| x.pairs),
+        sum(|x| x.new_pairs),
+        sum(|x| x.new_faces),
+        String::new(),
+        num(report.clip_source_mean),
+        num(report.clip_result_mean),
+    ]
+    .join(",");
+    s += "\n";
+    s
 }
 
 #[cfg(feature = "text")]
@@ -395,7 +594,10 @@ pub fn prompt_of_dataset_cfg(dataset_cfg: &str) -> Prompt {
 }
 
 /// The pair stored in a run directory: source = `deformation.npz`'s `verts` (the normalized rest
-/// mesh), result = `mesh.obj`.
+/// mesh), result = `mesh.obj`, mapped back to the normalized frame when the run wrote it in the
+/// input's frame (`deformation.npz`'s `output_frame` and `to_input_frame`, [`crate::frame`]), so
+/// that the metrics and the CLIP renders (which turn with the orientation `mesh.up`) do not depend
+/// on the output frame.
 pub fn load_run_pair(dir: &Path) -> Result<(TriMesh, TriMesh)> {
     load_run(dir).map(|(s, r, _)| (s, r))
 }
@@ -405,8 +607,30 @@ pub fn load_run(dir: &Path) -> Result<(TriMesh, TriMesh, Prompt)> {
     let saved = crate::saved::SavedDeformation::read(dir.join("deformation.npz"))
         .with_context(|| format!("{} is not a complete run directory", dir.display()))?;
     let source = TriMesh::new(saved.verts_f64(), saved.faces.clone());
-    let result = mesh_core::io::read_mesh(dir.join("mesh.obj"))
+    let mut result = mesh_core::io::read_mesh(dir.join("mesh.obj"))
         .with_context(|| format!("cannot read {}", dir.join("mesh.obj").display()))?;
+    let npz = dir.join("deformation.npz");
+    if saved.output_frame().context(npz.display().to_string())? == crate::frame::OutputFrame::Input
+    {
+        let Some(frame) = saved.input_frame().context(npz.display().to_string())? else {
+            invalid!(
+                "{}: `output_frame` is \"input\" but `to_input_frame` is missing",
+                npz.display()
+            );
+        };
+        if result.positions.len() != source.positions.len() {
+            invalid!(
+                "{} has {} vertices, the saved rest mesh {}",
+                dir.join("mesh.obj").display(),
+                result.positions.len(),
+                source.positions.len()
+            );
+        }
+        // The run's post-process is not recorded in the file; the centroid shift is a translation,
+        // which the metrics remove anyway (the result is recentred) and the CLIP renders too.
+        result.positions =
+            frame.unplace_result(&result.positions, &saved.rest_positions(), true)?;
+    }
     Ok((source, result, prompt_of_dataset_cfg(&saved.dataset_cfg)))
 }
 
@@ -479,6 +703,22 @@ pub fn table(report: &EvalReport) -> String {
         s += &clip_cell(report.clip_result_mean);
     }
     s += "\n";
+    if report.pairs.iter().any(|p| p.needle_faces > 0) {
+        s += &format!(
+            "{:<40} {:>8} {:>8.3} ± {:<7.3}\n",
+            "pooled without needle faces",
+            report
+                .pairs
+                .iter()
+                .map(|p| p.faces - p.needle_faces)
+                .sum::<usize>(),
+            report.area_ratio_mean_without_needles,
+            report.area_ratio_std_without_needles
+        );
+    }
+    for w in &report.warnings {
+        s += &format!("warning: {w}\n");
+    }
     if with_clip {
         for p in &report.pairs {
             match &p.clip {

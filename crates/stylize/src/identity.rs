@@ -69,6 +69,7 @@ pub const PRESENTATION_KEYS: &[&str] = &[
     "guidance.onnx_memory_arena",
     "guidance.onnx_low_memory",
     "region.tint",
+    "run.output_frame",
 ];
 
 /// Keys every run reads whose whole effect is on the prepared mesh, which the identity records
@@ -80,8 +81,9 @@ pub const PRESENTATION_KEYS: &[&str] = &[
 pub const RECORDED_BY_THE_PREPARED_MESH: &[&str] = &["mesh.remesh"];
 
 /// Sections every run reads whatever its kind: the runner builds dARAP from `[darap]` and
-/// `[region]` (the region is recorded by [`TaskIdentity::with_region`]).
-pub const COMMON_SECTIONS: &[&str] = &["darap", "region"];
+/// `[region]` (the region is recorded by [`TaskIdentity::with_region`]), and turns the input by
+/// `[mesh]` (`mesh.up`).
+pub const COMMON_SECTIONS: &[&str] = &["darap", "region", "mesh"];
 
 /// Keys every run reads whatever its kind: the runner seeds the generator from `run.seed` and runs
 /// Adam with `optim.beta1/beta2/eps`.
@@ -94,7 +96,7 @@ const PICTURE_KEYS: &[&str] = &["camera.fov_deg"];
 /// Configuration keys added after identities were first written that change the result: they
 /// join the identity only when set away from their default (see the module documentation), so
 /// the identities of runs made before them are unchanged.
-pub const RECORDED_UNLESS_DEFAULT: &[&str] = &[];
+pub const RECORDED_UNLESS_DEFAULT: &[&str] = &["mesh.up", "camera.preset"];
 
 /// Inserts `name = value` into identity `fields` unless `value` is `default` (the rule for new
 /// settings of the module documentation). Returns whether it was inserted.
@@ -431,6 +433,41 @@ mod tests {
                 assert_eq!(unread_settings(&c, kind).ok(), Some(Vec::new()), "{r}");
             }
         }
+    }
+
+    #[test]
+    fn orientation_and_camera_preset_join_only_away_from_their_default_and_the_frame_never() {
+        let with = |sets: &[&str]| {
+            let c = Config::default()
+                .with_overrides(sets)
+                .unwrap_or_else(|e| panic!("{e}"));
+            (
+                id(&Style::Cube, &c).fields,
+                id(&Prompt::new("a cat"), &c).fields,
+            )
+        };
+        let (style0, text0) = with(&[]);
+        // The output frame is presentation: no identity changes.
+        assert_eq!(
+            with(&["run.output_frame=normalized"]),
+            (style0.clone(), text0.clone())
+        );
+        // Explicit defaults are absent too.
+        assert_eq!(
+            with(&["mesh.up=+y", "camera.preset=default"]),
+            (style0.clone(), text0.clone())
+        );
+        let (style, text) = with(&["mesh.up=+z"]);
+        for f in [&style, &text] {
+            assert_eq!(f.get("config.mesh.up").map(String::as_str), Some("\"+z\""));
+        }
+        // A resolved preset: recorded for the text path (which reads [camera]), not the style's.
+        let (style, text) = with(&["camera.preset=tall"]);
+        assert_eq!(style, style0);
+        assert_eq!(
+            text.get("config.camera.preset").map(String::as_str),
+            Some("\"tall\"")
+        );
     }
 
     #[test]

@@ -32,6 +32,7 @@ pub mod checkpoint;
 pub mod config;
 pub mod error;
 pub mod eval;
+pub mod frame;
 pub mod heat;
 pub mod identity;
 pub mod intersections;

@@ -168,14 +168,20 @@ pub fn prepare_mesh_with_region(
     path: &Path,
     section: &crate::config::RegionSection,
 ) -> Result<(TriMesh, Vec<String>, Option<ResolvedRegion>)> {
-    let p = prepare_run_mesh(path, RemeshSetting::Off, section)?;
+    let p = prepare_run_mesh(
+        path,
+        RemeshSetting::Off,
+        crate::frame::UpAxis::PosY,
+        section,
+    )?;
     Ok((p.mesh, p.warnings, p.region))
 }
 
 /// A run's input as it is optimized ([`prepare_run_mesh`]).
 #[derive(Clone, Debug)]
 pub struct PreparedMesh {
-    /// Repaired, side-2 normalized (f32-exact), remeshed when the setting said so.
+    /// Repaired, turned so that its up axis is +y, side-2 normalized (f32-exact), remeshed when
+    /// the setting said so.
     pub mesh: TriMesh,
     /// What the repair did.
     pub warnings: Vec<String>,
@@ -183,26 +189,37 @@ pub struct PreparedMesh {
     pub region: Option<ResolvedRegion>,
     /// What `[mesh] remesh` decided and did.
     pub remesh: RemeshReport,
+    /// The map from the normalized frame of `mesh` back to the file's coordinates
+    /// ([`crate::frame`]).
+    pub frame: crate::frame::InputFrame,
 }
 
 /// Side-2 normalization, rounded to the f32 values `deformation.npz` stores and normalized again
-/// in f64 (so a saved rest mesh rebuilds exactly).
-fn normalize_f32_exact(positions: &mut [[f64; 3]]) {
-    mesh_core::normalize::side2_cube(positions);
+/// in f64 (so a saved rest mesh rebuilds exactly). Returns `(c, s)` with
+/// `q = (p − c)·s` up to the f32 rounding between the two passes:
+/// `((p − c1)·s1 − c2)·s2 = (p − (c1 + c2/s1))·(s1·s2)`.
+fn normalize_f32_exact(positions: &mut [[f64; 3]]) -> ([f64; 3], f64) {
+    let first = mesh_core::normalize::side2_cube(positions);
     for p in positions.iter_mut() {
         *p = p.map(|c| f64::from(c as f32));
     }
-    mesh_core::normalize::side2_cube(positions);
+    let second = mesh_core::normalize::side2_cube(positions);
+    (
+        std::array::from_fn(|k| first.centre[k] + second.centre[k] / first.scale),
+        first.scale * second.scale,
+    )
 }
 
-/// A run's input from `path`: read, repaired, normalized ([`prepare_mesh`]), then remeshed as
-/// `remesh` says ([`crate::remeshing`]; the remeshed mesh is normalized again) and the region of
-/// `section` resolved on the result. After a remesh, the file's parts and properties follow the
-/// faces they came from ([`mesh_core::remesh::transfer_parts`]); `vertices:` specs name input
-/// vertex numbers that remeshing replaces, and are refused then.
+/// A run's input from `path`: read, repaired, turned so that `up` is +y, normalized
+/// ([`prepare_mesh`]), then remeshed as `remesh` says ([`crate::remeshing`]; the remeshed mesh
+/// is normalized again and the two normalizations compose into the recorded frame) and the
+/// region of `section` resolved on the result. After a remesh, the file's parts and properties
+/// follow the faces they came from ([`mesh_core::remesh::transfer_parts`]); `vertices:` specs
+/// name input vertex numbers that remeshing replaces, and are refused then.
 pub fn prepare_run_mesh(
     path: &Path,
     remesh: RemeshSetting,
+    up: crate::frame::UpAxis,
     section: &crate::config::RegionSection,
 ) -> Result<PreparedMesh> {
     let (mesh, parts) = mesh_core::io::read_mesh_with_parts(path)
@@ -217,7 +234,8 @@ pub fn prepare_run_mesh(
         .map(|i| i.message.clone())
         .collect();
     let mut m = repaired.mesh.clone();
-    normalize_f32_exact(&mut m.positions);
+    up.turn(&mut m.positions);
+    let (mut centre, mut scale) = normalize_f32_exact(&mut m.positions);
     let (remeshed, report) = crate::remeshing::remesh_input(&m.positions, &m.faces, remesh)
         .with_context(|| format!("mesh {}", path.display()))?;
     warnings.extend(report.warning());
@@ -267,17 +285,22 @@ pub fn prepare_run_mesh(
                 .map(|i| i.message.clone())
                 .collect();
             m = TriMesh::new(r.positions, r.faces);
-            normalize_f32_exact(&mut m.positions);
+            // q = ((R·p − c)·s − c')·s' = (R·p − (c + c'/s))·(s·s').
+            let (c2, s2) = normalize_f32_exact(&mut m.positions);
+            centre = std::array::from_fn(|k| centre[k] + c2[k] / scale);
+            scale *= s2;
             let input = RegionInput::unrepaired(&m.positions, &m.faces, &moved);
             resolve_region(section, &input, &mut warnings)
                 .with_context(|| format!("region of {} (remeshed)", path.display()))?
         }
     };
+    let frame = crate::frame::InputFrame::from_normalization(up, centre, scale);
     Ok(PreparedMesh {
         mesh: m,
         warnings,
         region,
         remesh: report,
+        frame,
     })
 }
 
@@ -466,6 +489,13 @@ pub struct Prepared {
     pub region: Option<ResolvedRegion>,
     /// What `[mesh] remesh` decided and did.
     pub remesh: RemeshReport,
+    /// The map from the normalized frame back to the input file's coordinates.
+    pub frame: crate::frame::InputFrame,
+    /// The configuration the run uses: the request's with `camera.preset` resolved
+    /// ([`Config::with_camera_resolved`]); `config_toml` is its text.
+    pub config: Config,
+    /// What `camera.preset = auto` chose, and why (printed when the loop starts).
+    pub camera_choice: Option<String>,
     /// The scale of `mesh_heat.glb` (its largest displacement, [`crate::heat`]) once written.
     pub heat_max_displacement: Option<f64>,
 }
@@ -474,15 +504,22 @@ pub struct Prepared {
 /// `kind` and precomputes dARAP — everything that can fail on bad input, before anything is
 /// written.
 pub fn prepare(request: &RunRequest, kind: &dyn TaskKind) -> Result<Prepared> {
-    let config = &request.config;
-    config.validate()?;
-    let config_toml = config.to_toml_string()?;
+    request.config.validate()?;
     let PreparedMesh {
         mesh,
         warnings,
         region,
         remesh,
-    } = prepare_run_mesh(&request.mesh, config.mesh.remesh, &config.region)?;
+        frame,
+    } = prepare_run_mesh(
+        &request.mesh,
+        request.config.mesh.remesh,
+        request.config.mesh.up,
+        &request.config.region,
+    )?;
+    let (config, camera_choice) = request.config.clone().with_camera_resolved(&mesh.positions);
+    let config_toml = config.to_toml_string()?;
+    let config = &config;
     let mut identity = TaskIdentity::new(&mesh.positions, &mesh.faces, kind, config)?;
     crate::identity::insert_unless_default(
         &mut identity.fields,
@@ -502,8 +539,11 @@ pub fn prepare(request: &RunRequest, kind: &dyn TaskKind) -> Result<Prepared> {
             .context("region weights")?;
     }
     Ok(Prepared {
+        config: config.clone(),
+        camera_choice,
         region,
         remesh,
+        frame,
         mesh,
         warnings,
         identity,
@@ -665,54 +705,46 @@ pub fn write_outputs(
         .forward(&x_saved)
         .context("final dARAP forward")?;
     let deformed = TriMesh::new(result.positions.clone(), mesh.faces.clone());
-    let normals =
-        mesh_core::normals::vertex_normals_area_weighted(&deformed.positions, &deformed.faces);
+    // The files are written in the output frame; the pictures below use the normalized frame.
+    let written_mesh = match config.run.output_frame {
+        crate::frame::OutputFrame::Normalized => deformed.clone(),
+        crate::frame::OutputFrame::Input => TriMesh::new(
+            prepared.frame.place_result(
+                &deformed.positions,
+                &mesh.positions,
+                crate::frame::recentres(config.darap.post_process),
+            ),
+            mesh.faces.clone(),
+        ),
+    };
     lock.ensure_held()?;
-    for ext in mesh_core::io::Format::WITH_NORMALS.map(mesh_core::io::Format::extension) {
-        let path = dir.file(&format!("mesh.{ext}"));
-        let written = rundir::durable::replace_with(&path, |tmp| {
-            mesh_core::io::write_mesh(tmp, &deformed, Some(&normals)).map_err(Error::from)
-        });
-        match written {
-            Ok(()) => {}
-            Err(e)
-                if matches!(
-                    e.kind(),
-                    Error::Mesh(mesh_core::MeshError::UnsupportedFormat { .. })
-                ) =>
-            {
-                prepared.warnings.push(format!(
-                    "mesh.{ext} not written: this build's mesh writer does not support .{ext}"
-                ));
-            }
-            Err(e) => return Err(e).with_context(|| format!("cannot write {}", path.display())),
-        }
-    }
     if prepared.remesh.remeshed.is_some() {
-        // The rest mesh the run optimized (side-2 frame), what apply, eval and view use.
+        // The rest mesh the run optimized (side-2 frame, as `deformation.npz`'s `verts`): what
+        // apply, eval and view use.
         let path = dir.file(REMESHED_SOURCE);
         rundir::durable::replace_with(&path, |tmp| {
             mesh_core::io::write_mesh(tmp, mesh, None).map_err(Error::from)
         })
         .with_context(|| format!("cannot write {}", path.display()))?;
     }
-    // The displacement heat map (crate::heat), beside the plain mesh files.
-    let heat_path = dir.file("mesh_heat.glb");
-    let mut heat_max = 0.0;
-    rundir::durable::replace_with(&heat_path, |tmp| {
-        heat_max = crate::heat::write_heat_glb(
-            tmp,
-            &mesh.positions,
-            &deformed.positions,
-            &deformed,
-            Some(&normals),
-        )?;
-        Ok::<(), Error>(())
-    })
-    .with_context(|| format!("cannot write {}", heat_path.display()))?;
-    prepared.heat_max_displacement = Some(heat_max);
+    prepared.heat_max_displacement = Some(write_mesh_outputs(
+        dir,
+        &mesh.positions,
+        &deformed.positions,
+        &written_mesh,
+        &mut prepared.warnings,
+    )?);
     let region = prepared.region.as_ref();
-    write_deformation(dir, mesh, x, config, source, record, region)?;
+    write_deformation(
+        dir,
+        mesh,
+        x,
+        config,
+        source,
+        record,
+        region,
+        &prepared.frame,
+    )?;
     let free = region
         .filter(|_| config.region.tint)
         .map(|r| r.free.as_slice());
@@ -750,6 +782,132 @@ pub fn write_outputs(
         config.camera.sampler.fov_y_deg,
     )?;
     Ok(deformed)
+}
+
+/// Writes `mesh.obj/.ply/.glb` and `mesh_heat.glb` of `written` (the result in the output frame)
+/// with area-weighted vertex normals computed in that frame; the heat map's colours measure the
+/// displacement from `rest` to `result` (both in the normalized frame, [`crate::heat`]). A mesh
+/// format this build's writer does not support becomes a warning. Returns the heat map's scale.
+fn write_mesh_outputs(
+    dir: &RunDir,
+    rest: &[[f64; 3]],
+    result: &[[f64; 3]],
+    written: &TriMesh,
+    warnings: &mut Vec<String>,
+) -> Result<f64> {
+    let normals = write_mesh_files(dir, written, warnings)?;
+    // The displacement heat map (crate::heat), beside the plain mesh files.
+    let heat_path = dir.file("mesh_heat.glb");
+    let mut heat_max = 0.0;
+    rundir::durable::replace_with(&heat_path, |tmp| {
+        heat_max = crate::heat::write_heat_glb(tmp, rest, result, written, Some(&normals))?;
+        Ok::<(), Error>(())
+    })
+    .with_context(|| format!("cannot write {}", heat_path.display()))?;
+    Ok(heat_max)
+}
+
+/// Writes `mesh.obj/.ply/.glb` with area-weighted vertex normals computed in the frame written
+/// (returned); a format this build's writer does not support becomes a warning.
+fn write_mesh_files(
+    dir: &RunDir,
+    mesh: &TriMesh,
+    warnings: &mut Vec<String>,
+) -> Result<Vec<[f64; 3]>> {
+    let normals = mesh_core::normals::vertex_normals_area_weighted(&mesh.positions, &mesh.faces);
+    for ext in mesh_core::io::Format::WITH_NORMALS.map(mesh_core::io::Format::extension) {
+        let path = dir.file(&format!("mesh.{ext}"));
+        let written = rundir::durable::replace_with(&path, |tmp| {
+            mesh_core::io::write_mesh(tmp, mesh, Some(&normals)).map_err(Error::from)
+        });
+        match written {
+            Ok(()) => {}
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    Error::Mesh(mesh_core::MeshError::UnsupportedFormat { .. })
+                ) =>
+            {
+                warnings.push(format!(
+                    "mesh.{ext} not written: this build's mesh writer does not support .{ext}"
+                ));
+            }
+            Err(e) => return Err(e).with_context(|| format!("cannot write {}", path.display())),
+        }
+    }
+    Ok(normals)
+}
+
+/// A complete run of the same task met again (a batch row) with another `run.output_frame`: its
+/// mesh files are rewritten in the asked frame (the frame is presentation, so the task is the
+/// same): dARAP is applied to the saved targets as [`write_outputs`] did — the same numbers — and
+/// placed in the asked frame; then `deformation.npz`'s and `run.json`'s `output_frame` are
+/// updated. Returns what was done, or why it could not be (a run made before output frames
+/// records no `output_frame`: its files stay as they are; `--force` redoes it).
+fn reframe_complete_run(
+    dir: &RunDir,
+    lock: &RunLock,
+    prepared: &mut Prepared,
+) -> Result<Option<String>> {
+    use crate::frame::OutputFrame;
+    let npz = dir.deformation();
+    let mut saved =
+        SavedDeformation::read(&npz).with_context(|| format!("cannot read {}", npz.display()))?;
+    let want = prepared.config.run.output_frame;
+    let was = saved.output_frame()?;
+    if was == want {
+        return Ok(None);
+    }
+    if saved.input_frame()?.is_none() {
+        return Ok(Some(format!(
+            "the complete run's mesh files are in the {was} frame, not the {want} frame asked \
+             for: it was made before output frames existed (redo it with --force)"
+        )));
+    }
+    if saved.verts_normals.len() != prepared.mesh.positions.len() {
+        invalid!(
+            "{} does not match the prepared mesh: cannot rewrite the run's mesh files",
+            npz.display()
+        );
+    }
+    let x_saved: Vec<[f64; 3]> = saved.verts_normals_f64();
+    let result = prepared
+        .darap
+        .forward(&x_saved)
+        .context("dARAP forward of the saved targets")?;
+    let positions = match want {
+        OutputFrame::Normalized => result.positions.clone(),
+        OutputFrame::Input => prepared.frame.place_result(
+            &result.positions,
+            &prepared.mesh.positions,
+            crate::frame::recentres(prepared.config.darap.post_process),
+        ),
+    };
+    lock.ensure_held()?;
+    let mesh = TriMesh::new(positions, prepared.mesh.faces.clone());
+    write_mesh_outputs(
+        dir,
+        &prepared.mesh.positions,
+        &result.positions,
+        &mesh,
+        &mut prepared.warnings,
+    )?;
+    saved.set_extra("output_frame", NpyArray::scalar_str(want.name()))?;
+    rundir::durable::replace_with(&npz, |tmp| saved.write(tmp).map_err(Error::from))
+        .with_context(|| format!("cannot write {}", npz.display()))?;
+    let summary_path = dir.summary();
+    let mut summary: serde_json::Value = serde_json::from_slice(
+        &std::fs::read(&summary_path).io_context("cannot read", &summary_path)?,
+    )?;
+    summary["output_frame"] = want.name().into();
+    rundir::durable::replace_bytes(
+        &summary_path,
+        serde_json::to_string_pretty(&summary)?.as_bytes(),
+    )
+    .context("cannot write run.json")?;
+    Ok(Some(format!(
+        "the complete run's mesh files were rewritten from the {was} frame into the {want} frame"
+    )))
 }
 
 /// Runs one request: `kind` gives the task's identity, `make_task` builds the task (e.g. loads
@@ -791,13 +949,17 @@ fn execute_prepared<'g, T: Task<'g> + 'g>(
     hooks: RunHooks<'_>,
 ) -> Result<RunOutcome> {
     let RunHooks { progress, cancel } = hooks;
-    let config = &request.config;
+    let config = &prepared.config.clone();
     let dir = RunDir::new(&request.out);
     let mut inputs = vec![("input mesh".to_string(), request.mesh.clone())];
     inputs.extend(options.inputs.iter().cloned());
     inputs.extend(task_inputs);
     let (lock, start) = claim_run_dir(&dir, request, options, &prepared, &inputs)?;
     if matches!(start, Start::Complete) {
+        if let Some(note) = reframe_complete_run(&dir, &lock, &mut prepared)? {
+            progress.warning(&format!("note: {note}"));
+            prepared.warnings.push(note);
+        }
         return Ok(RunOutcome {
             iteration: 0,
             complete: true,
@@ -1040,6 +1202,9 @@ impl ObservedLoop<'_> {
         if let Some(why) = renderer_choice {
             headline.push(format!("renderer: {why}"));
         }
+        if let Some(why) = &prepared.camera_choice {
+            headline.push(why.clone());
+        }
         progress.start(spec.iterations, state.iteration, &headline);
         let mut observer = RunObserver {
             dir,
@@ -1123,7 +1288,7 @@ fn write_summary(
     loop_seconds: f64,
     intersections: Option<&crate::intersections::IntersectionFigures>,
 ) -> Result<()> {
-    let config = &request.config;
+    let config = &prepared.config;
     let mesh = &prepared.mesh;
     let mut summary = serde_json::json!({
         "status": "complete",
@@ -1135,6 +1300,9 @@ fn write_summary(
         "lambda": config.darap.lambda,
         "rotation_rule": config.darap.rotation_rule.name(),
         "snapshot_every": config.run.snapshot_every,
+        "output_frame": config.run.output_frame.name(),
+        "up": config.mesh.up.name(),
+        "camera_preset": config.camera.preset.name(),
         "vertices": mesh.positions.len(),
         "faces": mesh.faces.len(),
         "alignment_before": alignment.map(|a| a.0),
@@ -1166,8 +1334,11 @@ fn write_summary(
     .context("cannot write run.json")
 }
 
-/// Writes `deformation.npz` in the reference format plus our keys (for a localized run:
-/// `region_weights`, one f64 per vertex, `region_specs`, newline separated, and `region_feather`).
+/// Writes `deformation.npz` in the reference format plus our keys: `to_input_frame` (the 4×4 map
+/// from the frame of `verts` to the input file's coordinates, [`crate::frame`]),
+/// `output_frame` (the frame of the run's `mesh.*`), `up` (the input's up axis) and, for a
+/// localized run, `region_weights` (one f64 per vertex), `region_specs` (newline separated) and
+/// `region_feather`.
 #[allow(clippy::too_many_arguments)]
 fn write_deformation(
     dir: &RunDir,
@@ -1177,6 +1348,7 @@ fn write_deformation(
     source: &Path,
     record: &TaskRecord,
     region: Option<&ResolvedRegion>,
+    frame: &crate::frame::InputFrame,
 ) -> Result<()> {
     // The optimizer settings this run used (`[style]`'s on the model-free path).
     let (n_iters, lr) = (record.iterations, record.lr);
@@ -1207,6 +1379,7 @@ fn write_deformation(
         "rotation_rule",
         NpyArray::scalar_str(config.darap.rotation_rule.name()),
     )?;
+    saved.set_input_frame(frame, config.run.output_frame, config.mesh.up)?;
     if let Some(r) = region {
         saved.set_extra(
             "region_weights",

@@ -73,6 +73,15 @@ pub enum SavedError {
         /// Why.
         source: DarapError,
     },
+    /// The extra key `to_input_frame` is not a finite, invertible 4×4 affine matrix, or
+    /// `output_frame` / `up` names no frame or axis.
+    #[error("{key} of the saved file: {message}")]
+    Frame {
+        /// The key.
+        key: &'static str,
+        /// What is wrong.
+        message: String,
+    },
     /// The layer refused a region (see [`ReadyLayer::set_region`]).
     #[error(transparent)]
     Darap(#[from] DarapError),
@@ -158,7 +167,7 @@ pub const FORMAT_VERSION: i64 = 1;
 /// | `dataset_cfg` | `<U…` 0-d | JSON describing the input |
 ///
 /// Any other keys (ours: `format_version`, `seed`, `rotation_rule`, …) up to [`MAX_EXTRA_BYTES`]
-/// each are kept in [`extra`] in file order (larger ones are skipped unread) and written back after the five standard keys; readers that ignore unknown keys
+/// in total are kept in [`extra`] in file order (the ones beyond are skipped unread) and written back after the five standard keys; readers that ignore unknown keys
 /// (the reference) are unaffected.
 ///
 /// [`extra`]: SavedDeformation::extra
@@ -178,7 +187,8 @@ pub struct SavedDeformation {
     pub extra: Vec<(String, NpyArray)>,
 }
 
-/// Extra (non-standard) entries larger than this (declared, uncompressed) are skipped on read.
+/// Extra (non-standard) entries are read, in file order, while their declared (uncompressed)
+/// sizes add up to at most this; the others are skipped unread.
 pub const MAX_EXTRA_BYTES: u64 = 1 << 24;
 
 const STANDARD_KEYS: [&str; 5] = [
@@ -230,13 +240,20 @@ impl SavedDeformation {
         }
         // Extra keys are metadata (ours are a few bytes); large ones are not loaded at all, so an
         // unrelated big entry cannot make reading cost memory.
+        // The bound is on their total: many entries each under it would add up without one.
         let mut extra = Vec::new();
+        let mut extra_bytes = 0u64;
         for key in r.keys() {
-            if STANDARD_KEYS.contains(&key)
-                || r.declared_size(key).is_none_or(|s| s > MAX_EXTRA_BYTES)
-            {
+            if STANDARD_KEYS.contains(&key) {
                 continue;
             }
+            let Some(size) = r
+                .declared_size(key)
+                .filter(|&s| s <= MAX_EXTRA_BYTES - extra_bytes)
+            else {
+                continue;
+            };
+            extra_bytes += size;
             extra.push((key.to_string(), r.require(key)?.clone()));
         }
         Ok(Self {
@@ -396,6 +413,83 @@ impl SavedDeformation {
             Some(NpyData::I64(v)) => v.first().map(|&k| u32::try_from(k).unwrap_or(0)),
             _ => None,
         }
+    }
+
+    /// Records the frames of a run ([`crate::frame`]): `to_input_frame` (`<f8` (4, 4), the map
+    /// from the frame of `verts` to the input file's coordinates), `output_frame` (the frame the
+    /// run wrote its `mesh.*` in: `input` or `normalized`) and `up` (the input's up axis).
+    pub fn set_input_frame(
+        &mut self,
+        frame: &crate::frame::InputFrame,
+        output: crate::frame::OutputFrame,
+        up: crate::frame::UpAxis,
+    ) -> Result<(), SavedError> {
+        let matrix = NpyArray::new(vec![4, 4], NpyData::F64(frame.to_matrix().to_vec())).map_err(
+            |message| SavedError::Frame {
+                key: "to_input_frame",
+                message,
+            },
+        )?;
+        self.set_extra("to_input_frame", matrix)?;
+        self.set_extra("output_frame", NpyArray::scalar_str(output.name()))?;
+        self.set_extra("up", NpyArray::scalar_str(up.name()))
+    }
+
+    /// The extra key `to_input_frame` (None: a file without it, e.g. the reference's, whose
+    /// input frame is unknown).
+    pub fn input_frame(&self) -> Result<Option<crate::frame::InputFrame>, SavedError> {
+        let Some(array) = self.extra("to_input_frame") else {
+            return Ok(None);
+        };
+        let bad = |message: String| SavedError::Frame {
+            key: "to_input_frame",
+            message,
+        };
+        let NpyData::F64(m) = &array.data else {
+            return Err(bad("not an array of f64".into()));
+        };
+        if array.shape != [4, 4] {
+            return Err(bad(format!("shape {:?}, expected (4, 4)", array.shape)));
+        }
+        crate::frame::InputFrame::from_matrix(m)
+            .map(Some)
+            .map_err(|e| bad(e.to_string()))
+    }
+
+    /// A string extra key parsed with `parse` (None when absent).
+    fn frame_name<T>(
+        &self,
+        key: &'static str,
+        parse: impl Fn(&str) -> crate::Result<T>,
+    ) -> Result<Option<T>, SavedError> {
+        let Some(array) = self.extra(key) else {
+            return Ok(None);
+        };
+        let NpyData::Unicode(v) = &array.data else {
+            return Err(SavedError::Frame {
+                key,
+                message: "not a string".into(),
+            });
+        };
+        let name = v.first().map(String::as_str).unwrap_or("");
+        parse(name).map(Some).map_err(|e| SavedError::Frame {
+            key,
+            message: e.to_string(),
+        })
+    }
+
+    /// The extra key `output_frame`: the frame of the run's `mesh.*` files. A file without it
+    /// (written before output frames existed, or by the reference) had them in the normalized
+    /// frame.
+    pub fn output_frame(&self) -> Result<crate::frame::OutputFrame, SavedError> {
+        Ok(self
+            .frame_name("output_frame", str::parse)?
+            .unwrap_or(crate::frame::OutputFrame::Normalized))
+    }
+
+    /// The extra key `up`: the input's up axis (+y when absent).
+    pub fn up(&self) -> Result<crate::frame::UpAxis, SavedError> {
+        Ok(self.frame_name("up", str::parse)?.unwrap_or_default())
     }
 
     /// The rest mesh's positions in the frame of every result: the saved f32 `verts` as f64,

@@ -1,6 +1,8 @@
 //! `cargo xtask fuzz [--seconds N] [--target NAME] [--seed S] [--replay FILE]`: an in-repo
-//! mutation fuzzer over every reader of user files (meshes, `.npz`/`.npy`, masks, batch manifests,
-//! checkpoints, configs). See `docs/formats.md` ("Fuzzing the readers").
+//! mutation fuzzer over every reader of user files (meshes, `.npz`/`.npy`, masks, batch manifests
+//! in TOML and JSONL with odd encodings, checkpoints, configs, region specs, model `manifest.toml`s)
+//! and over the viewer's HTTP request handling (raw bytes answered in process, no socket). See
+//! `docs/formats.md` ("Fuzzing the readers").
 //!
 //! Design:
 //! - **Supervisor and child.** The command runs each target in a child process (`xtask

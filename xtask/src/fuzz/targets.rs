@@ -107,6 +107,87 @@ fn config(path: &Path) {
     }
 }
 
+/// Region specs, one per line (also parsed back from their canonical text), as `--region`,
+/// `region.specs` and manifest rows give them.
+fn region(path: &Path) {
+    if let Ok(bytes) = std::fs::read(path) {
+        let text = String::from_utf8_lossy(&bytes);
+        for line in text.lines() {
+            if let Ok(spec) = mesh_core::region::RegionSpec::parse(line) {
+                let _ = mesh_core::region::RegionSpec::parse(&spec.to_string());
+                let _ = spec.files();
+            }
+        }
+        let _ = mesh_core::region::RegionSpec::parse(&text);
+    }
+}
+
+/// A model directory's `manifest.toml` (DeepFloyd IF and CLIP), in a folder next to the input.
+fn model_manifest(path: &Path) {
+    let Some(parent) = path.parent() else { return };
+    let dir = parent.join("model");
+    if std::fs::create_dir_all(&dir).is_err()
+        || std::fs::copy(path, dir.join("manifest.toml")).is_err()
+    {
+        return;
+    }
+    let _ = diffusion_onnx::ModelDir::open(&dir);
+    let _ = diffusion_onnx::clip::read_clip_manifest(&dir);
+}
+
+/// The token of the fuzzed viewer (the seeds' requests carry it, so mutants reach the routes).
+const VIEW_TOKEN: &str = "0123456789abcdef0123456789abcdef";
+
+/// The viewer the `view-http` target asks: one run directory (an octahedron's saved deformation,
+/// metrics, snapshots) next to the input, opened once per child process.
+fn fuzz_viewer(scratch: &Path) -> Option<std::sync::Arc<stylize_cli::view::Viewer>> {
+    static VIEWER: std::sync::OnceLock<Option<std::sync::Arc<stylize_cli::view::Viewer>>> =
+        std::sync::OnceLock::new();
+    VIEWER
+        .get_or_init(|| {
+            let run = scratch.join("view-run");
+            std::fs::create_dir_all(&run).ok()?;
+            let m = mesh_core::shapes::octahedron();
+            let verts: Vec<[f32; 3]> = m.positions.iter().map(|p| p.map(|c| c as f32)).collect();
+            SavedDeformation {
+                verts: verts.clone(),
+                faces: m.faces.clone(),
+                verts_normals: verts.clone(),
+                deform_by_csd_cfg: r#"{"local_step_procrustes": {"lamb": 8.0}}"#.into(),
+                dataset_cfg: "{}".into(),
+                extra: Vec::new(),
+            }
+            .write(run.join("deformation.npz"))
+            .ok()?;
+            std::fs::write(run.join("run.json"), "{}").ok()?;
+            std::fs::write(
+                run.join("metrics.jsonl"),
+                "{\"iteration\":1,\"loss\":0.5}\n{\"iteration\":2,\"loss\":0.25}\n",
+            )
+            .ok()?;
+            let flat: Vec<f32> = verts.iter().chain(&verts).flatten().copied().collect();
+            let it = NpyArray::new(vec![2], NpyData::I64(vec![0, 2])).ok()?;
+            let x = NpyArray::new(vec![2, verts.len(), 3], NpyData::F32(flat)).ok()?;
+            npy::npz::write_npz(run.join("snapshots.npz"), [("iterations", &it), ("x", &x)])
+                .ok()?;
+            stylize_cli::view::Viewer::open(&[run], VIEW_TOKEN.to_string())
+                .ok()
+                .map(std::sync::Arc::new)
+        })
+        .clone()
+}
+
+/// Raw HTTP/1 bytes as a client of `stylize view` sends them, answered in process (hyper's
+/// parser, the router, the handlers; no socket).
+fn view_http(path: &Path) {
+    let (Some(parent), Ok(bytes)) = (path.parent(), std::fs::read(path)) else {
+        return;
+    };
+    if let Some(viewer) = fuzz_viewer(parent) {
+        let _ = stylize_cli::view::server::answer_raw(viewer, bytes);
+    }
+}
+
 /// Every target, in the order they run.
 pub const TARGETS: &[Target] = &[
     Target {
@@ -173,6 +254,21 @@ pub const TARGETS: &[Target] = &[
         name: "config",
         ext: "toml",
         run: config,
+    },
+    Target {
+        name: "region",
+        ext: "txt",
+        run: region,
+    },
+    Target {
+        name: "model-manifest",
+        ext: "toml",
+        run: model_manifest,
+    },
+    Target {
+        name: "view-http",
+        ext: "http",
+        run: view_http,
     },
 ];
 
@@ -338,7 +434,34 @@ pub fn seeds(target: &str, root: &Path, scratch: &Path) -> anyhow::Result<Vec<Ve
         ],
         "manifest-jsonl" => vec![
             b"# rows\n{\"mesh\": \"bunny.obj\", \"out\": \"runs/a\", \"style\": \"cube\", \"seed\": 3}\n\n{\"mesh\": \"cow.off\", \"out\": \"runs/b\", \"prompt\": \"a lego cow\", \"overrides\": [\"run.iterations=10\"]}\n".to_vec(),
+            // Odd encodings: a byte-order mark (also mid-file), CRLF line ends, UTF-16.
+            b"\xEF\xBB\xBF{\"mesh\": \"a.obj\", \"out\": \"r/a\", \"style\": \"exemplar:e.obj\"}\r\n\xEF\xBB\xBF{\"mesh\": \"b.obj\", \"out\": \"r/b\", \"style\": \"cube\", \"region\": [\"not:vertices:v.txt\"], \"overrides\": [\"region.specs=[\\\"vertices:w.txt\\\"]\"]}\r\n".to_vec(),
+            b"\xFF\xFE{\0\"\0m\0e\0s\0h\0\"\0:\0 \0\"\0a\0\"\0}\0\n\0".to_vec(),
         ],
+        "region" => vec![
+            b"box:-1,-1,-1,0,1,1\nsphere:0,0.5,0,0.25\nvertices:head.txt\npart:seat\nproperty:label>=3\nnot:not:part:legs\n not : box:0,0,0,1,1,1\n".to_vec(),
+            format!("{}part:x\n", "not:".repeat(70)).into_bytes(),
+        ],
+        "model-manifest" => vec![
+            fx("fixtures/models/tiny-if/manifest.toml")?,
+            fx("fixtures/models/tiny-if-fp16/manifest.toml")?,
+            fx("fixtures/models/tiny-clip/manifest.toml")?,
+        ],
+        "view-http" => {
+            let t = VIEW_TOKEN;
+            [
+                format!("GET /{t}/api/items HTTP/1.1\r\nHost: x\r\n\r\n"),
+                format!("GET /{t}/api/items/0/result?lambda=5 HTTP/1.1\r\nHost: x\r\n\r\nGET /{t}/api/items/0/source HTTP/1.1\r\nHost: x\r\n\r\n"),
+                format!("GET /{t}/api/items/0/download?lambda=1&format=obj HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n"),
+                format!("GET /{t}/api/items/0/files/..%2Frun.json HTTP/1.1\r\nHost: x\r\n\r\n"),
+                format!("GET /{t}/api/items/0/replay/2?faces=1 HTTP/1.1\r\nHost: x\r\n\r\nGET /{t}/api/items/0/metrics HTTP/1.1\r\nHost: x\r\n\r\n"),
+                format!("POST /{t}/api/items HTTP/1.1\r\nHost: x\r\nContent-Length: 5\r\n\r\nhello"),
+                "GET /wrong/api/items HTTP/1.1\r\nHost: x\r\nTransfer-Encoding: chunked\r\n\r\n0\r\n\r\n".to_string(),
+            ]
+            .into_iter()
+            .map(String::into_bytes)
+            .collect()
+        }
         "checkpoint" => vec![checkpoint_seed(scratch)?],
         "config" => vec![
             fx("fixtures/configs/quick-style.toml")?,

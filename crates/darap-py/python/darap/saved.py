@@ -8,8 +8,11 @@
 | ``deform_by_csd_cfg`` | ``<U…`` 0-d | JSON: ``local_step_procrustes.lamb`` (λ), … |
 | ``dataset_cfg`` | ``<U…`` 0-d | JSON describing the input |
 
-Any other key (this project writes ``format_version``, ``seed``, ``rotation_rule``, …) is kept in
-:attr:`SavedDeformation.extra`.
+Any other key (this project writes ``format_version``, ``seed``, ``rotation_rule``,
+``to_input_frame``, ``output_frame``, ``up``, …) is kept in :attr:`SavedDeformation.extra`.
+``to_input_frame`` (``<f8`` (4, 4)) maps the frame of ``verts`` back to the run's input file's
+coordinates: :meth:`SavedDeformation.to_input_frame` places a result there as ``stylize apply``
+does by default.
 """
 
 from __future__ import annotations
@@ -183,6 +186,33 @@ class SavedDeformation:
         ``mask`` says otherwise)."""
         layer = self.layer(lam=lam, rotation_rule=rotation_rule, mask=mask, region=region, feather=feather)
         return layer.forward(self.targets()).positions
+
+
+    @property
+    def input_frame(self) -> Optional[np.ndarray]:
+        """The ``to_input_frame`` key: a (4, 4) float64 homogeneous matrix ``M`` with
+        ``p_input = M[:3, :3] @ q + M[:3, 3]`` for ``q`` in the frame of ``verts`` (None when the
+        file does not record it, e.g. the reference's)."""
+        m = self.extra.get("to_input_frame")
+        if m is None:
+            return None
+        m = np.asarray(m, dtype=np.float64)
+        if m.shape != (4, 4) or not np.all(np.isfinite(m)) or not np.array_equal(m[3], [0, 0, 0, 1]):
+            raise ValueError(f"{self.path}: key `to_input_frame` must be a finite (4, 4) affine matrix")
+        if np.linalg.det(m[:3, :3]) == 0.0:
+            raise ValueError(f"{self.path}: key `to_input_frame` is singular")
+        return m
+
+    def to_input_frame(self, positions: np.ndarray) -> np.ndarray:
+        """A result of :meth:`apply` (normalized frame, vertex centroid at the origin) placed in
+        the input file's coordinates, as ``stylize apply`` writes it by default: moved back by the
+        rest mesh's vertex centroid, then mapped by ``to_input_frame``. Raises ``ValueError`` when
+        the file does not record its input frame."""
+        m = self.input_frame
+        if m is None:
+            raise ValueError(f"{self.path}: the file does not record its input frame (`to_input_frame`)")
+        q = np.asarray(positions, dtype=np.float64) + self.rest_positions().mean(axis=0)
+        return q @ m[:3, :3].T + m[:3, 3]
 
 
 def _rows3(path: str, key: str, a: np.ndarray, kind: str) -> np.ndarray:

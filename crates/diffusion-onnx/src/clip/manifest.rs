@@ -104,7 +104,7 @@ pub fn read_clip_manifest(dir: &Path) -> Result<ClipManifest, OnnxError> {
             "is not a directory; pass the folder written by scripts/export_clip_onnx.py".into(),
         ));
     }
-    let text = std::fs::read_to_string(dir.join("manifest.toml")).map_err(|e| {
+    let text = crate::manifest::read_bounded(&dir.join("manifest.toml")).map_err(|e| {
         err(format!(
             "cannot read manifest.toml ({e}); a CLIP model directory is made by scripts/export_clip_onnx.py \
              (see docs/models.md, \"CLIP\")"
@@ -129,6 +129,21 @@ pub fn read_clip_manifest(dir: &Path) -> Result<ClipManifest, OnnxError> {
             "embedding_dim = {}, [image_encoder] image_size = {} must be positive and [text_encoder] \
              context_length = {} at least 2",
             m.embedding_dim, i.image_size, t.context_length
+        )));
+    }
+    if i.image_size > crate::manifest::MAX_SAMPLE_SIZE
+        || t.context_length > crate::manifest::MAX_TOKENS
+        || m.embedding_dim > crate::manifest::MAX_EMBEDDING_DIM
+    {
+        return Err(err(format!(
+            "embedding_dim = {}, [image_encoder] image_size = {} and [text_encoder] context_length \
+             = {} must be at most {}, {} and {} (ViT-B/16: 512, 224 and 77)",
+            m.embedding_dim,
+            i.image_size,
+            t.context_length,
+            crate::manifest::MAX_EMBEDDING_DIM,
+            crate::manifest::MAX_SAMPLE_SIZE,
+            crate::manifest::MAX_TOKENS
         )));
     }
     if i.std.iter().any(|s| !(s.is_finite() && *s > 0.0)) || i.mean.iter().any(|v| !v.is_finite()) {

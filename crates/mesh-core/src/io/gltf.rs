@@ -592,7 +592,7 @@ impl<'a> Collector<'a> {
             Some(v) => *v = true,
             None => return Err(parse_err(path, format!("node {ni} does not exist"))),
         }
-        let world = mat_mul(parent, &to_f64(node.transform().matrix()));
+        let world = mat_mul(parent, &to_f64(local_matrix(&node, path)?));
         if let Some(m) = node.mesh() {
             let first = self.faces.len();
             let mesh_name = m.name().map(str::to_string);
@@ -609,6 +609,49 @@ impl<'a> Collector<'a> {
             self.add_node(child, &world, depth + 1, visited, path)?;
         }
         Ok(())
+    }
+}
+
+/// How far a node's rotation quaternion may be from unit length and still be taken (normalized):
+/// exporters write f32 components, so a unit quaternion comes back within ~1e-7 of length 1.
+pub const QUATERNION_TOLERANCE: f64 = 1e-3;
+
+/// A node's local transform. glTF requires `rotation` to be a unit quaternion; one within
+/// [`QUATERNION_TOLERANCE`] of unit length is normalized (f32 rounding), anything else is refused:
+/// the matrix of a quaternion of length `s` also scales by `s²`, which would silently resize the
+/// mesh.
+fn local_matrix(node: &gltf::Node<'_>, path: &Path) -> Result<[[f32; 4]; 4], MeshError> {
+    match node.transform() {
+        gltf::scene::Transform::Decomposed {
+            translation,
+            rotation,
+            scale,
+        } => {
+            let length = rotation
+                .iter()
+                .map(|&c| f64::from(c) * f64::from(c))
+                .sum::<f64>()
+                .sqrt();
+            if !(length.is_finite() && (length - 1.0).abs() <= QUATERNION_TOLERANCE) {
+                return Err(parse_err(
+                    path,
+                    format!(
+                        "node {}: rotation {rotation:?} is a quaternion of length {length}; glTF \
+                         requires unit quaternions (within {QUATERNION_TOLERANCE} here), and a \
+                         non-unit one would scale the mesh by its squared length",
+                        node.index()
+                    ),
+                ));
+            }
+            let rotation = rotation.map(|c| (f64::from(c) / length) as f32);
+            Ok(gltf::scene::Transform::Decomposed {
+                translation,
+                rotation,
+                scale,
+            }
+            .matrix())
+        }
+        matrix => Ok(matrix.matrix()),
     }
 }
 
@@ -650,8 +693,9 @@ pub fn read_gltf_with_parts(path: &Path) -> Result<(MeshWithNormals, Parts), Mes
         gltf::Error::Io(source) => io_err(path, source),
         e => parse_err(path, format!("not a valid glTF 2.0 file: {e}")),
     };
+    // A `.gltf` (JSON) written with a UTF-8 byte-order mark is read without it.
     let gltf::Gltf { document, blob } =
-        gltf::Gltf::from_slice_without_validation(&bytes).map_err(invalid)?;
+        gltf::Gltf::from_slice_without_validation(super::strip_bom(&bytes)).map_err(invalid)?;
     // The `gltf` crate's validation indexes the POSITION accessor unchecked: check every
     // attribute's accessor index first.
     let root = document.into_json();

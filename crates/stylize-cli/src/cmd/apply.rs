@@ -11,8 +11,14 @@
 //!
 //! Reads the saved `.npz`, builds its dARAP layer ([`SavedDeformation::ready_layer`]: `verts`
 //! normalized to the side-2 cube in f64) with the requested λ (default: the saved
-//! `local_step_procrustes.lamb`), runs local step → global step → `recenter_rescale`, and writes the deformed mesh (in the normalized frame, as the
-//! reference) with area-weighted vertex normals.
+//! `local_step_procrustes.lamb`), runs local step → global step → `recenter_rescale`, and writes
+//! the deformed mesh with area-weighted vertex normals.
+//!
+//! **Frame** (`--output-frame`): by default the input's own coordinates, axes and scale, through
+//! the file's `to_input_frame` (a run of ours records it; the result is placed as the run places
+//! its `mesh.*`, see `stylize::frame`); `normalized` writes the reference's side-2 frame. A file
+//! without `to_input_frame` (the reference's, or one written before output frames existed) is
+//! written in the normalized frame with a note; `--output-frame input` on it is an error.
 //!
 //! **Mask file** (`--mask FILE`): plain text, one vertex index per line (0-based, the saved file's
 //! vertex order) of the vertices that **may rotate**; every other vertex keeps `R = I`. Blank
@@ -35,6 +41,7 @@ use anyhow::{Context, bail, ensure};
 use darap::RotationRule;
 use mesh_core::TriMesh;
 use mesh_core::io::Format;
+use stylize::frame::{InputFrame, OutputFrame};
 use stylize::saved::{Region, SavedDeformation, SavedError};
 
 /// Arguments of `stylize apply`.
@@ -45,7 +52,7 @@ pub struct Args {
     /// Output mesh (`.obj`, `.ply` or `.glb`). With several λ: one file per λ, `OUT_lambda<λ>.ext`.
     #[arg(short, long = "out", alias = "output", value_name = "FILE")]
     pub output: PathBuf,
-    /// Strength(s) λ ≥ 0, comma separated (default: the λ saved in the file); or
+    /// Strength(s) λ in [0, 1000], comma separated (default: the λ saved in the file); or
     /// `max-safe[:UPPER]`: the strongest λ in (0, UPPER] whose result is safe (no new
     /// self-intersections, flips, collapse), UPPER defaulting to the saved λ.
     #[arg(long, value_delimiter = ',', allow_negative_numbers = true, value_parser = parse_lambda)]
@@ -67,9 +74,39 @@ pub struct Args {
     /// Ignore the saved region: every vertex may rotate.
     #[arg(long, conflicts_with_all = ["mask", "region"])]
     pub no_region: bool,
+    /// The frame of the written mesh: `input` (the run's input file's coordinates, through the
+    /// saved `to_input_frame`; the default when the file records it) or `normalized` (the
+    /// reference's side-2 frame; the default for files without it).
+    #[arg(long, value_name = "input|normalized")]
+    pub output_frame: Option<OutputFrame>,
     /// Overwrite existing output files.
     #[arg(long)]
     pub force: bool,
+}
+
+/// The map to apply to results: `Some(frame)` for the input frame, `None` for the normalized one.
+fn output_map(args: &Args, saved: &SavedDeformation) -> anyhow::Result<Option<InputFrame>> {
+    let recorded = saved
+        .input_frame()
+        .with_context(|| format!("{}", args.saved.display()))?;
+    Ok(match (args.output_frame, recorded) {
+        (Some(OutputFrame::Normalized), _) => None,
+        (_, Some(frame)) => Some(frame),
+        (Some(OutputFrame::Input), None) => bail!(
+            "--output-frame input: {} does not record its input's frame (`to_input_frame`: a \
+             file from the reference, or from a run before output frames existed); use \
+             --output-frame normalized",
+            args.saved.display()
+        ),
+        (None, None) => {
+            errln!(
+                "note: {} does not record its input's frame (`to_input_frame`); writing the \
+                 normalized side-2 frame",
+                args.saved.display()
+            );
+            None
+        }
+    })
 }
 
 /// One `--lambda` value.
@@ -181,7 +218,7 @@ fn region(args: &Args, saved: &SavedDeformation, rest: &[[f64; 3]]) -> anyhow::R
         let region = mesh_core::region::select(&specs, &input)
             .context("--region (a saved file has no named parts: use box, sphere, vertices)")?;
         for w in &region.warnings {
-            eprintln!("warning: {w}");
+            errln!("warning: {w}");
         }
         region.free
     } else {
@@ -206,12 +243,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(kind) = saved.arap_energy_type()
         && kind != "spokes_and_rims_mine"
     {
-        eprintln!(
+        errln!(
             "warning: saved arap_energy_type is {kind:?}; applying with \"spokes_and_rims_mine\""
         );
     }
     if !saved.pin_first_vertex() {
-        eprintln!(
+        errln!(
             "warning: saved pin_first_vertex is false; applying with the first vertex (of each component) pinned"
         );
     }
@@ -248,9 +285,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         lambdas.push(recorded()?);
     }
     for &l in &lambdas {
+        let max = stylize::config::MAX_LAMBDA;
         ensure!(
-            l.is_finite() && l >= 0.0,
-            "--lambda {l}: the strength λ must be a finite number ≥ 0"
+            l.is_finite() && (0.0..=max).contains(&l),
+            "--lambda {l}: the strength λ must be a finite number ≥ 0 and at most {max} (the \
+             reference uses 5–10)"
         );
     }
     let rule = match args.rotation_rule {
@@ -258,7 +297,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         None => saved.rotation_rule()?.unwrap_or_default(),
     };
 
-    let outputs = output_paths(&args.output, &lambdas)?;
+    let mut outputs = output_paths(&args.output, &lambdas)?;
+    // Several λ: the labelled comparison sheet too (cmd::apply_grid), checked like the meshes.
+    let grid = if lambdas.len() > 1 {
+        let path = super::apply_grid::grid_path(&args.output)?;
+        outputs.push(path.clone());
+        Some(path)
+    } else {
+        None
+    };
     let mut inputs = vec![("saved deformation".to_string(), args.saved.clone())];
     if let Some(m) = &args.mask {
         inputs.push(("mask file".into(), m.clone()));
@@ -290,22 +337,45 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         );
     }
 
+    let to_input = output_map(&args, &saved)?;
     let mut ready = saved.ready_layer(&args.saved, lambdas[0], Some(rule))?;
     let region = region(&args, &saved, &ready.rest.positions)?;
     ready.set_region(&saved, &args.saved, region)?;
     let mut source = stylize::intersections::SourceIntersections::new(&ready.rest)
         .context("self-intersection check of the saved rest mesh")?;
+    // A closed stdout (`… | head -1`) does not stop the writing: every output is written, then the
+    // command fails with the first write error (exit 141 for a broken pipe).
+    let mut closed: Option<crate::output::OutputClosed> = None;
     if let Some(upper) = max_safe_upper {
-        lambdas = vec![max_safe(&mut ready, &mut source, upper)?];
+        let (lambda, lines) = max_safe(&mut ready, &mut source, upper)?;
+        for line in lines {
+            if closed.is_none() {
+                closed = outln!("{line}").err();
+            }
+        }
+        lambdas = vec![lambda];
     }
 
+    let mut columns = Vec::new();
     for (&lambda, out) in lambdas.iter().zip(&outputs) {
         let deformed = ready
             .at_lambda(lambda)
             .with_context(|| format!("dARAP forward failed at λ = {lambda}"))?;
         let sanity =
             crate::sanity::LambdaSanity::assess(&ready.rest, &mut source, &deformed, lambda)?;
-        let mesh = TriMesh::new(deformed.positions, saved.faces.clone());
+        if grid.is_some() {
+            // The sheet's tiles are rendered in the side-2 frame, whatever frame the files use.
+            columns.push((
+                lambda,
+                super::apply_grid::tiles(&deformed.positions, &saved.faces)?,
+            ));
+        }
+        // `ready_layer` post-processes with `recenter_rescale`: the result is recentred.
+        let positions = match &to_input {
+            Some(frame) => frame.place_result(&deformed.positions, &ready.rest.positions, true),
+            None => deformed.positions,
+        };
+        let mesh = TriMesh::new(positions, saved.faces.clone());
         let normals =
             mesh_core::normals::vertex_normals_area_weighted(&mesh.positions, &mesh.faces);
         if let Some(parent) = out.parent()
@@ -318,22 +388,39 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             mesh_core::io::write_mesh(tmp, &mesh, Some(&normals)).map_err(stylize::Error::from)
         })
         .with_context(|| format!("cannot write {}", out.display()))?;
-        println!("λ = {lambda}: wrote {}", out.display());
-        println!("  {}", sanity.summary());
+        if closed.is_none() {
+            closed = outln!(
+                "λ = {lambda}: wrote {}\n  {}",
+                out.display(),
+                sanity.summary()
+            )
+            .err();
+        }
         for w in sanity.warnings() {
-            eprintln!("warning: {w}");
+            errln!("warning: {w}");
         }
     }
-    Ok(())
+    if let Some(path) = &grid {
+        super::apply_grid::write_sheet(path, &columns)?;
+        if closed.is_none() {
+            closed = outln!("wrote {} (λ = {} by column)", path.display(), {
+                let l: Vec<String> = lambdas.iter().map(f64::to_string).collect();
+                l.join(", ")
+            })
+            .err();
+        }
+    }
+    closed.map_or(Ok(()), |e| Err(e.into()))
 }
 
-/// `--lambda max-safe:UPPER`: searches ([`crate::max_safe::search`]) and prints what it found;
-/// returns the λ to write.
+/// `--lambda max-safe:UPPER`: searches ([`crate::max_safe::search`]); returns the λ to write and
+/// the lines that report what it found, for stdout (warnings go to stderr here).
 fn max_safe(
     ready: &mut stylize::saved::ReadyLayer,
     source: &mut stylize::intersections::SourceIntersections,
     upper: f64,
-) -> anyhow::Result<f64> {
+) -> anyhow::Result<(f64, Vec<String>)> {
+    let mut lines = Vec::new();
     let mut unsafe_warnings: Vec<(f64, Vec<String>)> = Vec::new();
     let searched = crate::max_safe::search(upper, |lambda| {
         let deformed = ready
@@ -362,25 +449,25 @@ fn max_safe(
         }
     };
     match found.first_unsafe {
-        None => println!(
+        None => lines.push(format!(
             "max-safe: every λ scanned up to {upper} is safe ({} evaluations): λ = {upper}",
             found.evaluations
-        ),
+        )),
         Some(hi) => {
             let why = unsafe_warnings
                 .iter()
                 .find(|(l, _)| *l == hi)
                 .map(|(_, w)| w.join("; "))
                 .unwrap_or_default();
-            println!(
+            lines.push(format!(
                 "max-safe: λ = {} (within {}% of the first unsafe λ = {hi}; {} evaluations up to {upper})",
                 found.lambda,
                 100.0 * crate::max_safe::RELATIVE_TOLERANCE,
                 found.evaluations
-            );
-            println!("  unsafe at λ = {hi}: {why}");
+            ));
+            lines.push(format!("  unsafe at λ = {hi}: {why}"));
             if found.lambda == 0.0 {
-                eprintln!(
+                errln!(
                     "warning: max-safe: no λ > 0 was found safe (unsafe down to λ = {hi}); writing the result at λ = 0"
                 );
             }
@@ -397,10 +484,10 @@ fn max_safe(
         if found.safe_again.len() > SHOWN {
             list.push(format!("… ({} grid points in all)", found.safe_again.len()));
         }
-        eprintln!(
+        errln!(
             "warning: max-safe: safety is not monotone over the scan: after the first crossing the result is safe again at λ = {} (the answer is the first crossing)",
             list.join(", ")
         );
     }
-    Ok(found.lambda)
+    Ok((found.lambda, lines))
 }

@@ -43,6 +43,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         None,
         None,
     )?);
+    let config = crate::cmd::shared::with_view_flags(config, settings.view_flags())?;
     let shard = match &args.shard {
         Some(s) => Shard::parse(s)?,
         None => Shard::from_env(|k| std::env::var(k).ok())?.unwrap_or(Shard::ALL),
@@ -73,16 +74,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 format!("FAILED: {e}")
             }
         };
-        eprintln!(
+        errln!(
             "row {i} {} → {}: {what}",
             row.mesh.display(),
             row.out.display()
         );
         for w in warnings {
-            eprintln!("  warning: {w}");
+            errln!("  warning: {w}");
         }
     }
-    eprintln!(
+    errln!(
         "shard {}/{}: {}, {} failed",
         shard.index,
         shard.count,
@@ -91,7 +92,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
     if let Some(i) = interrupted {
         let command: Vec<String> = std::env::args().map(|a| shell_quote(&a)).collect();
-        eprintln!(
+        errln!(
             "batch stopped by {}; run the same command again to resume (complete rows are \
              skipped, the interrupted row continues from its checkpoint):\n  {}",
             crate::signals::name(i.signal),

@@ -65,8 +65,8 @@ pub struct Args {
     /// Embedding cache directory (default: see `stylize embed`).
     #[arg(long)]
     pub cache: Option<PathBuf>,
-    /// ONNX Runtime intra-op threads (default: one per core).
-    #[arg(long)]
+    /// ONNX Runtime intra-op threads (default: one per core; at most 4 × the cores).
+    #[arg(long, value_parser = crate::cmd::shared::thread_count)]
     pub threads: Option<usize>,
     /// Turn ONNX Runtime's CPU memory arena off.
     #[arg(long)]
@@ -266,7 +266,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .context("writing embedding_uncond")?;
     w.finish()
         .with_context(|| format!("finishing {}", args.out.display()))?;
-    println!(
+    outln!(
         "wrote {} (loss I {:.6e}, loss II {:.6e}, |grad| max {:.3e})",
         args.out.display(),
         trace.output.loss_stage1,
@@ -277,7 +277,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .rgb
             .iter()
             .fold(0.0f32, |m, v| m.max(v.abs()))
-    );
+    )?;
     Ok(())
 }
 

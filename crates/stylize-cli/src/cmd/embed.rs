@@ -24,8 +24,8 @@ pub struct Args {
     /// Re-encode prompts that are already cached.
     #[arg(long)]
     pub force: bool,
-    /// ONNX Runtime intra-op threads (default: one per core).
-    #[arg(long, allow_negative_numbers = true)]
+    /// ONNX Runtime intra-op threads (default: one per core; at most 4 × the cores).
+    #[arg(long, allow_negative_numbers = true, value_parser = crate::cmd::shared::thread_count)]
     pub threads: Option<usize>,
 }
 
@@ -44,12 +44,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut todo = Vec::new();
     for p in &args.prompts {
         if T5Tokenizer::preprocess(p).is_empty() {
-            println!("(empty prompt) uses the model's unconditional embedding; nothing to cache");
+            outln!("(empty prompt) uses the model's unconditional embedding; nothing to cache")?;
             continue;
         }
         let path = cache.path(&identity, p);
         if !args.force && path.is_file() {
-            println!("cached  {}  {p:?}", path.display());
+            outln!("cached  {}  {p:?}", path.display())?;
         } else {
             todo.push(p.as_str());
         }
@@ -70,6 +70,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ..SessionOptions::default()
     };
     let mut encoder = T5Encoder::open(&model, &options).context("loading the text encoder")?;
+    let mut closed: Option<crate::output::OutputClosed> = None;
     for p in todo {
         let e = encoder
             .embed_batch(&[p])
@@ -80,9 +81,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let path = cache
             .put(&identity, p, e)
             .with_context(|| format!("caching {p:?}"))?;
-        println!("encoded {}  {p:?}", path.display());
+        // A closed stdout does not stop the encoding: every prompt is cached, then the command
+        // fails with the first write error (exit 141 for a broken pipe).
+        if closed.is_none() {
+            closed = outln!("encoded {}  {p:?}", path.display()).err();
+        }
     }
-    Ok(())
+    closed.map_or(Ok(()), |e| Err(e.into()))
 }
 
 #[cfg(all(test, feature = "text"))]

@@ -5,9 +5,7 @@ use std::path::{Path, PathBuf};
 #[cfg(feature = "text")]
 use std::time::Instant;
 
-#[cfg(feature = "text")]
-use anyhow::Context;
-use anyhow::bail;
+use anyhow::{Context, bail};
 use mesh_core::TriMesh;
 
 use stylize::eval::{
@@ -20,6 +18,16 @@ pub struct Args {
     /// Run directories (source: `deformation.npz` verts; result: `mesh.obj`; prompt: the one the run
     /// was given, recorded in `deformation.npz`).
     pub runs: Vec<PathBuf>,
+    /// A batch manifest (repeatable): every finished row's run directory, in manifest order
+    /// (unfinished rows are listed on stderr and left out).
+    #[arg(long, value_name = "FILE")]
+    pub manifest: Vec<PathBuf>,
+    /// Also write the report as CSV to FILE (one line per pair and a `pooled` line).
+    #[arg(long, value_name = "FILE")]
+    pub csv: Option<PathBuf>,
+    /// Also write the report as JSON to FILE (what `--json` prints).
+    #[arg(long, value_name = "FILE")]
+    pub json_out: Option<PathBuf>,
     /// A source mesh and its result (same faces), repeatable: `--pair SOURCE RESULT`.
     #[arg(long, num_args = 2, value_names = ["SOURCE", "RESULT"])]
     pub pair: Vec<PathBuf>,
@@ -52,11 +60,40 @@ pub struct Args {
     pub prompt: Option<String>,
 }
 
+/// The finished rows' run directories of `manifest`, in order; the unfinished ones are named on
+/// stderr.
+pub fn manifest_runs(manifest: &Path) -> anyhow::Result<Vec<PathBuf>> {
+    let rows = crate::batch::read_manifest(manifest)?;
+    let mut dirs = Vec::new();
+    let mut unfinished = Vec::new();
+    for (i, row) in rows.iter().enumerate() {
+        if rundir::RunDir::new(&row.out).is_complete() {
+            dirs.push(row.out.clone());
+        } else {
+            unfinished.push(format!("row {i} ({})", row.out.display()));
+        }
+    }
+    if !unfinished.is_empty() {
+        errln!(
+            "{}: {} not finished, left out: {}",
+            manifest.display(),
+            crate::cmd::shared::count_noun(unfinished.len(), "row", "rows"),
+            unfinished.join(", ")
+        );
+    }
+    Ok(dirs)
+}
+
 /// Runs `stylize eval`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     let mut pairs = Vec::new();
     let mut prompts = Vec::new();
-    for dir in &args.runs {
+    let mut runs = Vec::new();
+    for m in &args.manifest {
+        runs.extend(manifest_runs(m)?);
+    }
+    runs.extend(args.runs.iter().cloned());
+    for dir in &runs {
         let (s, r, p) = load_run(dir)?;
         pairs.push((label(dir), s, r));
         prompts.push(p);
@@ -73,7 +110,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         });
     }
     if pairs.is_empty() {
-        bail!("nothing to evaluate: give run directories or --pair SOURCE RESULT");
+        bail!(
+            "nothing to evaluate: give run directories, --manifest FILE (with finished rows) or \
+             --pair SOURCE RESULT"
+        );
     }
     let mut report = evaluate(&pairs)?;
     if let Some(dir) = &args.clip {
@@ -90,10 +130,22 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         };
         add_clip(dir, &settings, &mut report, &pairs, &prompts)?;
     }
+    let json = serde_json::to_string_pretty(&report)?;
+    if let Some(path) = &args.json_out {
+        rundir::durable::replace_bytes(path, format!("{json}\n").as_bytes())
+            .with_context(|| format!("cannot write {}", path.display()))?;
+    }
+    if let Some(path) = &args.csv {
+        rundir::durable::replace_bytes(path, stylize::eval::csv(&report).as_bytes())
+            .with_context(|| format!("cannot write {}", path.display()))?;
+    }
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&report)?);
+        outln!("{json}")?;
+        for w in &report.warnings {
+            errln!("warning: {w}");
+        }
     } else {
-        print!("{}", table(&report));
+        outp!("{}", table(&report))?;
     }
     Ok(())
 }
@@ -113,7 +165,7 @@ fn add_clip(
         .with_context(|| format!("--clip {}", dir.display()))?;
     let opened = start.elapsed().as_secs_f64();
     let t = stylize::eval::add_clip_scores(report, pairs, prompts, &mut clip, settings)?;
-    eprintln!(
+    errln!(
         "CLIP ({}): {} mesh(es) × {} views at {} px; open {opened:.3} s, render {:.3} s, \
          image embedding {:.3} s, text embedding {:.3} s",
         clip.manifest().name,

@@ -69,11 +69,21 @@ fn check(a: CheckArgs) -> anyhow::Result<()> {
         ..RepairOptions::default()
     };
     let report = validate(&mesh, &options);
+    // A mesh the repairs accept must also be one a run can solve on: the same preparation and
+    // dARAP precomputation as `stylize run`, so the verdicts agree (tiny debris components made
+    // the factorization fail while the report said "usable").
+    // (Only with the default repairs: `--drop-…` preview repairs a run does not make.)
+    let solver_error = if report.is_refused() || a.drop_nonfinite || a.drop_out_of_range {
+        None
+    } else {
+        solver_check(&a.file)
+    };
     let quality = if report.is_refused() {
         None
     } else {
         Some(repaired_quality(&mesh, &options)?)
     };
+    let extents = Extents::of(&mesh.positions);
     let intersections = if report.is_refused() {
         None
     } else {
@@ -81,6 +91,7 @@ fn check(a: CheckArgs) -> anyhow::Result<()> {
     };
     if a.json {
         let mut json = report_json(&a.file, &report);
+        json["solver_error"] = solver_error.clone().into();
         if let Some(x) = &intersections {
             json["self_intersections"] = x.json();
         }
@@ -89,17 +100,23 @@ fn check(a: CheckArgs) -> anyhow::Result<()> {
             json["remeshing_advised"] = serde_json::json!(remesh_advice(q).0);
             json["remeshing_advice"] = serde_json::json!(remesh_advice(q).1);
         }
-        println!(
+        json["extents"] = serde_json::json!(extents.size);
+        json["up_hint"] = serde_json::json!(extents.up_hint());
+        outln!(
             "{}",
             serde_json::to_string_pretty(&json).context("cannot format the report as JSON")?
-        );
+        )?;
     } else {
-        print!("{}", report_table(&a.file, &report));
+        outp!("{}", report_table(&a.file, &report))?;
+        outp!("{}", extents.table())?;
         if let Some(x) = &intersections {
-            print!("{}", x.table());
+            outp!("{}", x.table())?;
         }
         if let Some(q) = &quality {
-            print!("{}", quality_table(q));
+            outp!("{}", quality_table(q))?;
+        }
+        if let Some(e) = &solver_error {
+            outln!("but a run cannot use it: {e}")?;
         }
     }
     if report.is_refused() {
@@ -109,7 +126,29 @@ fn check(a: CheckArgs) -> anyhow::Result<()> {
             report.refusal_message()
         );
     }
+    if let Some(e) = solver_error {
+        anyhow::bail!("{} cannot be used for a run: {e}", a.file.display());
+    }
     Ok(())
+}
+
+/// Why `stylize run` could not start its dARAP layer on `file` (prepared exactly as a run with
+/// the default configuration prepares it: default repairs, `mesh.remesh`'s default, side-2
+/// normalization), if it could not.
+fn solver_check(file: &std::path::Path) -> Option<String> {
+    let defaults = crate::config::Config::default();
+    let rest = match stylize::runner::prepare_run_mesh(
+        file,
+        defaults.mesh.remesh,
+        defaults.mesh.up,
+        &defaults.region,
+    ) {
+        Ok(prepared) => prepared.mesh,
+        Err(e) => return Some(format!("{e:#}")),
+    };
+    darap::Darap::new(&rest.positions, &rest.faces, darap::DarapOptions::default())
+        .err()
+        .map(|e| format!("dARAP precomputation: {e}"))
 }
 
 /// Triangle quality of the mesh after the repair `options` make (what a run would optimize,
@@ -244,6 +283,58 @@ impl SelfIntersectionSection {
     }
 }
 
+/// The bounding box extents per axis of a mesh's finite vertices, and the orientation hint.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Extents {
+    /// max − min along x, y, z (0 without finite vertices).
+    size: [f64; 3],
+}
+
+/// The hint fires when the y extent is below this share of the largest extent (and the smallest).
+const FLAT_Y_SHARE: f64 = 2.0 / 3.0;
+
+impl Extents {
+    fn of(positions: &[[f64; 3]]) -> Self {
+        let mut lo = [f64::INFINITY; 3];
+        let mut hi = [f64::NEG_INFINITY; 3];
+        for p in positions.iter().filter(|p| p.iter().all(|c| c.is_finite())) {
+            for k in 0..3 {
+                lo[k] = lo[k].min(p[k]);
+                hi[k] = hi[k].max(p[k]);
+            }
+        }
+        Self {
+            size: std::array::from_fn(|k| if hi[k] >= lo[k] { hi[k] - lo[k] } else { 0.0 }),
+        }
+    }
+
+    /// A hint that the mesh may lie on its side: the renders put +y up (the view sampler's
+    /// elevations are above the xz-plane), and most upright objects are not flattest along their
+    /// up axis. The rule: y is the smallest extent and below [`FLAT_Y_SHARE`] of the largest.
+    fn up_hint(&self) -> Option<String> {
+        let [x, y, z] = self.size;
+        let largest = x.max(y).max(z);
+        (largest > 0.0 && y < x && y < z && y < FLAT_Y_SHARE * largest).then(|| {
+            format!(
+                "the mesh is flattest along y ({:.0}% of its largest extent): stylization renders \
+                 it with +y up, so if it lies on its side (a z-up export: CAD, scans), pass \
+                 --up z (or the axis that points up: --up x, --up -z, …); a mesh that is really \
+                 flat, such as a rug, is fine as it is",
+                100.0 * y / largest
+            )
+        })
+    }
+
+    fn table(&self) -> String {
+        let [x, y, z] = self.size;
+        let mut s = format!("extents: x {x:.6}, y {y:.6}, z {z:.6} (renders put +y up)\n");
+        if let Some(h) = self.up_hint() {
+            s += &format!("hint: {h}\n");
+        }
+        s
+    }
+}
+
 /// One row of `--regions`: spec, kind, vertices it selects on the repaired mesh, a note.
 fn region_rows(file: &std::path::Path) -> anyhow::Result<Vec<(String, String, usize, String)>> {
     use mesh_core::region::{Comparison, RegionInput, RegionSpec, select_vertices};
@@ -332,26 +423,26 @@ fn list_regions(a: &CheckArgs) -> anyhow::Result<()> {
                 serde_json::json!({ "spec": spec, "kind": kind, "vertices": n, "note": note })
             })
             .collect();
-        println!(
+        outln!(
             "{}",
             serde_json::to_string_pretty(&json).context("cannot format the parts as JSON")?
-        );
+        )?;
         return Ok(());
     }
     if rows.is_empty() {
-        println!(
+        outln!(
             "{}: no named parts or properties (use box:, sphere: or vertices: regions)",
             a.file.display()
-        );
+        )?;
         return Ok(());
     }
-    println!(
+    outln!(
         "{}: regions on offer (vertices on the repaired mesh)",
         a.file.display()
-    );
+    )?;
     let width = rows.iter().map(|r| r.0.chars().count()).max().unwrap_or(0);
     for (spec, kind, n, note) in &rows {
-        println!("  {spec:<width$}  {kind:<16} {n:>8} vertices  {note}");
+        outln!("  {spec:<width$}  {kind:<16} {n:>8} vertices  {note}")?;
     }
     Ok(())
 }
@@ -444,6 +535,57 @@ fn report_table(file: &std::path::Path, r: &ValidationReport) -> String {
 mod tests {
     use super::*;
     use mesh_core::TriMesh;
+
+    /// The bunny and a well-shaped icosahedron 1e-9 of its size: the repairs keep both parts, but
+    /// the dARAP factorization fails on the debris; `mesh check` says so, as `run` would.
+    #[test]
+    fn tiny_debris_that_a_run_cannot_factor_is_reported_by_mesh_check() {
+        let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+        let bunny = mesh_core::io::read_mesh(
+            PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/meshes/bunny.obj"),
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        let extent = mesh_core::geometry::bbox_diagonal(&bunny.positions);
+        let (mut p, mut f) = (bunny.positions.clone(), bunny.faces.clone());
+        let (dp, df) = mesh_core::shapes::icosphere(0).into_parts();
+        let base = p.len() as u32;
+        let at = [p[0][0] + 0.3 * extent, p[0][1], p[0][2]];
+        let s = 1e-9 * extent;
+        p.extend(
+            dp.iter()
+                .map(|v| [at[0] + s * v[0], at[1] + s * v[1], at[2] + s * v[2]]),
+        );
+        f.extend(df.iter().map(|t| t.map(|i| i + base)));
+        let args = |file: PathBuf| CheckArgs {
+            file,
+            json: false,
+            drop_nonfinite: false,
+            drop_out_of_range: false,
+            needle_angle: 1.0,
+            regions: false,
+        };
+        // Written with every digit (the debris lives in the 10th significant one).
+        let mut obj = String::new();
+        for v in &p {
+            obj.push_str(&format!("v {:?} {:?} {:?}\n", v[0], v[1], v[2]));
+        }
+        for t in &f {
+            obj.push_str(&format!("f {} {} {}\n", t[0] + 1, t[1] + 1, t[2] + 1));
+        }
+        let debris = dir.path().join("debris.obj");
+        std::fs::write(&debris, obj).unwrap_or_else(|e| panic!("{e}"));
+        let e = check(args(debris)).expect_err("a run could not use it");
+        assert!(
+            format!("{e:#}").contains("cannot be used for a run")
+                && format!("{e:#}").contains("component far smaller than the mesh"),
+            "{e:#}"
+        );
+        let (p, f) = mesh_core::shapes::icosphere(2).into_parts();
+        let sphere = dir.path().join("sphere.obj");
+        mesh_core::io::write_mesh(&sphere, &TriMesh::new(p, f), None)
+            .unwrap_or_else(|e| panic!("{e}"));
+        check(args(sphere)).unwrap_or_else(|e| panic!("{e:#}"));
+    }
 
     fn two_parts_with_nan() -> TriMesh {
         TriMesh::new(
@@ -554,6 +696,28 @@ mod tests {
                 "{table}"
             );
         }
+    }
+
+    #[test]
+    fn extents_hint_that_a_mesh_lies_on_its_side_only_when_it_is_flattest_along_y() {
+        // A tall, slim box standing up (y-up) gets no hint; the same box lying along z does, and
+        // turning it back with mesh.up = +z removes it.
+        let standing = vec![[0.0, 0.0, 0.0], [1.0, 3.0, 0.8]];
+        assert_eq!(Extents::of(&standing).up_hint(), None);
+        let mut lying: Vec<[f64; 3]> = standing.iter().map(|p| [p[0], -p[2], p[1]]).collect();
+        let hint = Extents::of(&lying).up_hint().unwrap_or_default();
+        assert!(hint.contains("--up z"), "{hint}");
+        stylize::frame::UpAxis::PosZ.turn(&mut lying);
+        assert_eq!(Extents::of(&lying).up_hint(), None);
+        assert_eq!(Extents::of(&lying).size, Extents::of(&standing).size);
+        // A cube-ish mesh and one without finite vertices: no hint.
+        assert_eq!(Extents::of(&[[0.0; 3], [1.0, 0.9, 1.0]]).up_hint(), None);
+        assert_eq!(Extents::of(&[[f64::NAN; 3]]).up_hint(), None);
+        let t = Extents::of(&standing).table();
+        assert!(
+            t.starts_with("extents: x 1.000000, y 3.000000, z 0.800000"),
+            "{t}"
+        );
     }
 
     #[test]

@@ -1,6 +1,7 @@
 //! One module per `stylize` subcommand; each has `Args` (clap) and `run(Args)`.
 
 pub mod apply;
+pub mod apply_grid;
 pub mod batch;
 pub mod debug_guidance;
 pub mod embed;

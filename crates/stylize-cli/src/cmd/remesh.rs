@@ -159,23 +159,23 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             "hausdorff_in_to_out_percent_of_diagonal": 100.0 * h.b_to_a / diag,
             "seconds": seconds,
         });
-        println!("{}", serde_json::to_string_pretty(&j)?);
+        outln!("{}", serde_json::to_string_pretty(&j)?)?;
     } else {
-        println!(
+        outln!(
             "{} → {}: edge length {l:.6} ({:.2} % of the diagonal), {} iterations, feature angle {}°, {seconds:.2} s",
             a.input.display(),
             a.out.display(),
             100.0 * l / diag,
             options.iterations,
             options.feature_angle_deg
-        );
-        println!("  before: {}", quality_line(&before));
-        println!("  after:  {}", quality_line(&after));
-        println!(
+        )?;
+        outln!("  before: {}", quality_line(&before))?;
+        outln!("  after:  {}", quality_line(&after))?;
+        outln!(
             "  Hausdorff distance: output → input {:.3} %, input → output {:.3} % of the diagonal",
             100.0 * h.a_to_b / diag,
             100.0 * h.b_to_a / diag
-        );
+        )?;
     }
     Ok(())
 }

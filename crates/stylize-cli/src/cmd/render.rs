@@ -168,7 +168,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Backend::Auto
     };
     let (mut renderer, why) = select_renderer(backend)?;
-    eprintln!("renderer: {why}");
+    errln!("renderer: {why}");
     let views = orbit_views(args.turntable, args.elevation, args.distance, args.fov);
     let encoding = if args.srgb {
         Encoding::SrgbFromLinear
@@ -223,14 +223,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             std::fs::remove_file(p).with_context(|| format!("cannot remove {}", p.display()))?;
         }
         if !stale.is_empty() {
-            eprintln!(
+            errln!(
                 "removed {} file(s) left by an earlier render ({} …)",
                 stale.len(),
                 stale[0].display()
             );
         }
     }
-    eprintln!(
+    errln!(
         "wrote {} frames, contact_sheet.png{} to {}",
         args.turntable,
         if args.no_gif {

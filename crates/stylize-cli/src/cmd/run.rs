@@ -138,6 +138,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         args.region_feather,
         args.tint_region,
     )?;
+    let config = crate::cmd::shared::with_view_flags(config, args.settings.view_flags())?;
     let mut options = RunOptions::default();
     if let Some(c) = &config_file {
         options.inputs.push(("config file".into(), c.clone()));
@@ -162,7 +163,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             if let Some(m) = &args.settings.model
                 && !args.settings.quiet
             {
-                eprintln!(
+                errln!(
                     "warning: --model {} is not used by a --style run (model-free)",
                     m.display()
                 );
@@ -193,7 +194,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 || {
                     let set = stylize::models::ModelSet::open(model, &config)?;
                     if let Some(w) = set.cpu_time_warning(&config) {
-                        eprintln!("warning: {w}");
+                        errln!("warning: {w}");
                     }
                     let warnings = set.prompt_warnings(prompt, &config)?;
                     Ok(PromptTask {
@@ -213,35 +214,35 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             if let Some(i) = e.downcast_ref::<Interrupted>()
                 && i.checkpoint_iteration.is_some()
             {
-                eprintln!("{i}");
-                eprintln!("resume with:\n  {}", resume_command(&args));
+                errln!("{i}");
+                errln!("resume with:\n  {}", resume_command(&args));
             }
             return Err(e).with_context(|| format!("run on {}", args.mesh.display()));
         }
     };
     if !args.settings.quiet {
         for w in &outcome.warnings {
-            eprintln!("warning: {w}");
+            errln!("warning: {w}");
         }
         if outcome.complete {
-            eprintln!(
+            errln!(
                 "done: {} iterations → {}",
                 outcome.iteration,
                 args.out.display()
             );
             if let Some((before, after)) = outcome.alignment {
-                eprintln!("normal alignment (area-weighted mean n·t): {before:.4} → {after:.4}");
+                errln!("normal alignment (area-weighted mean n·t): {before:.4} → {after:.4}");
             }
             match crate::max_safe::end_of_run(&args.out) {
-                Ok(Some(line)) => eprintln!("{line}"),
+                Ok(Some(line)) => errln!("{line}"),
                 Ok(None) => {}
-                Err(e) => eprintln!("warning: the strongest-safe-λ check failed: {e:#}"),
+                Err(e) => errln!("warning: the strongest-safe-λ check failed: {e:#}"),
             }
             crate::open_hint::lines(&args.out, &crate::open_hint::program())
                 .iter()
-                .for_each(|l| eprintln!("{l}"));
+                .for_each(|l| errln!("{l}"));
         } else {
-            eprintln!(
+            errln!(
                 "stopped after iteration {} (resume with --resume)",
                 outcome.iteration
             );

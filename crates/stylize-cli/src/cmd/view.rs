@@ -29,6 +29,22 @@ pub struct Args {
     /// Open the page in the default browser (`xdg-open`).
     #[arg(long)]
     pub open: bool,
+    /// Connections served at once (more are closed on accept).
+    #[arg(long, default_value_t = 64, value_parser = clap::value_parser!(u16).range(1..=1024), hide = true)]
+    pub max_connections: u16,
+    /// Seconds a client has to send a request's headers (idle connections are closed after it).
+    #[arg(long, default_value_t = 10.0, value_parser = positive_seconds, hide = true)]
+    pub header_timeout: f64,
+}
+
+/// A number of seconds in (0, 3600].
+fn positive_seconds(s: &str) -> Result<f64, String> {
+    let v: f64 = s.parse().map_err(|e| format!("{e}"))?;
+    if v.is_finite() && v > 0.0 && v <= 3600.0 {
+        Ok(v)
+    } else {
+        Err(format!("must be a number of seconds in (0, 3600], got {s}"))
+    }
 }
 
 /// The first default port tried.
@@ -60,6 +76,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     use crate::view::{Viewer, random_token};
 
     let viewer = Arc::new(Viewer::open(&args.paths, random_token())?);
+    let limits = crate::view::server::Limits {
+        max_connections: usize::from(args.max_connections),
+        header_timeout: std::time::Duration::from_secs_f64(args.header_timeout),
+        ..crate::view::server::Limits::default()
+    };
     let listener = bind(args.host, args.port)?;
     let addr = listener
         .local_addr()
@@ -72,7 +93,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         SocketAddr::V4(a) => format!("http://{}:{}/{}/", a.ip(), a.port(), viewer.token),
     };
     if !addr.ip().is_loopback() {
-        eprintln!(
+        errln!(
             "warning: listening on {} — anyone who can reach this address and knows the URL can see these runs",
             addr.ip()
         );
@@ -94,22 +115,26 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .and_then(|()| out.flush())
         .is_err()
     {
-        eprintln!("stylize view: serving at {url}");
+        errln!("stylize view: serving at {url}");
     }
     drop(out);
     if args.open
         && let Err(e) = std::process::Command::new("xdg-open").arg(&url).spawn()
     {
-        eprintln!("warning: cannot open a browser (xdg-open: {e}); open the URL above yourself");
+        errln!("warning: cannot open a browser (xdg-open: {e}); open the URL above yourself");
     }
+    // Timers: the accept loop's back-off and the connections' timeouts. The blocking pool (mesh
+    // loading, dARAP solves) is bounded; at most `max_connections` requests wait for it.
     let runtime = tokio::runtime::Builder::new_current_thread()
         .enable_io()
+        .enable_time()
+        .max_blocking_threads(8)
         .build()
         .context("cannot start the server's runtime")?;
     runtime.block_on(async move {
         let listener = tokio::net::TcpListener::from_std(listener)
             .context("cannot register the listening socket")?;
-        crate::view::server::serve(listener, viewer)
+        crate::view::server::serve_with(listener, viewer, limits)
             .await
             .context("the server stopped")
     })

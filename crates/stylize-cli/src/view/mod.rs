@@ -124,6 +124,8 @@ struct LoadedRun {
     /// The rest mesh (side-2 cube frame, the frame of every result), the saved target normals
     /// and the layer, as the run saved them.
     ready: ReadyLayer,
+    /// The saved `to_input_frame` (None: the file does not record it).
+    to_input: Option<stylize::frame::InputFrame>,
     /// The rest mesh's self-intersections and a checker refitted at each λ.
     source: stylize::intersections::SourceIntersections,
     /// The strongest safe λ up to the slider's end, once asked for (`api/items/ID/max-safe`).
@@ -350,6 +352,33 @@ impl RunItem {
         })
     }
 
+    /// A result `shape` of [`Self::at_lambda`] in the frame `frame` (None: the input's when the
+    /// run recorded it, else the normalized one), placed as the run placed its `mesh.*`
+    /// (`stylize::frame`): what downloads hold. `Some(Input)` on a run that does not record its
+    /// input frame is a bad request.
+    pub fn in_frame(
+        &self,
+        shape: Shape,
+        frame: Option<stylize::frame::OutputFrame>,
+    ) -> Result<Shape, ViewError> {
+        use stylize::frame::OutputFrame;
+        if frame == Some(OutputFrame::Normalized) {
+            return Ok(shape);
+        }
+        self.with_loaded(|l| match (&l.to_input, frame) {
+            (Some(to_input), _) => Ok(Shape {
+                positions: to_input.place_result(&shape.positions, &l.ready.rest.positions, true),
+                ..shape
+            }),
+            (None, Some(OutputFrame::Input)) => Err(ViewError::BadRequest(format!(
+                "run {} does not record its input's frame (deformation.npz has no \
+                 to_input_frame); ask for frame=normalized",
+                self.name
+            ))),
+            (None, _) => Ok(shape),
+        })
+    }
+
     /// The strongest safe λ in `(0, upper]` ([`crate::max_safe::search`], `upper` validated as a
     /// λ), computed once per `upper` while `deformation.npz` is unchanged.
     pub fn max_safe(&self, upper: f64) -> Result<crate::max_safe::SafeLambda, ViewError> {
@@ -546,11 +575,15 @@ fn load_run(npz: &Path, stamp: (SystemTime, u64)) -> anyhow::Result<LoadedRun> {
         .with_context(|| format!("cannot read saved deformation {}", npz.display()))?;
     // A localized run is shown with its saved region, as `apply` re-applies it.
     let ready = saved.ready_layer_as_saved(npz)?;
+    let to_input = saved
+        .input_frame()
+        .with_context(|| format!("{}", npz.display()))?;
     let source = stylize::intersections::SourceIntersections::new(&ready.rest)
         .context("self-intersection check of the saved rest mesh")?;
     Ok(LoadedRun {
         stamp,
         ready,
+        to_input,
         source,
         max_safe: None,
     })
@@ -722,6 +755,18 @@ impl Item {
                 "{} is a mesh, not a run: it has no deformation to re-apply",
                 m.name
             ))),
+        }
+    }
+
+    /// [`RunItem::in_frame`] (runs only; a mesh item has no results).
+    pub fn in_frame(
+        &self,
+        shape: Shape,
+        frame: Option<stylize::frame::OutputFrame>,
+    ) -> Result<Shape, ViewError> {
+        match self {
+            Item::Run(r) => r.in_frame(shape, frame),
+            Item::Mesh(_) => Ok(shape),
         }
     }
 

@@ -10,7 +10,9 @@
 //! /TOKEN/api/items/ID/max-safe?upper=L     JSON: the strongest safe λ in (0, L] (`lambda`,
 //!                                           `first_unsafe`, `safe_again`, `evaluations`;
 //!                                           `crate::max_safe`), cached per run and L
-//! /TOKEN/api/items/ID/download?lambda=L&format=obj|ply|glb   the mesh at λ as a file
+//! /TOKEN/api/items/ID/download?lambda=L&format=obj|ply|glb[&frame=input|normalized]
+//!                                                          the mesh at λ as a file, in the run's
+//!                                                          input frame by default
 //! /TOKEN/api/items/ID/files/PATH            a file inside a run directory (images, metrics)
 //! /TOKEN/api/items/ID/targets               framed: header JSON + f32 unit target normals, one
 //!                                           per source vertex (the saved deformation's)
@@ -34,8 +36,20 @@
 //! Status codes: 400 bad λ or path (λ must be finite and in `[0, LAMBDA_MAX]`), 403 missing or
 //! wrong token, 404 no such item or file, 405 other methods, 409 a run without its result yet,
 //! 500 a file that cannot be read.
+//!
+//! **Connections** ([`serve_with`], [`Limits`]): any local process can connect, token or not, so
+//! the accept loop is built not to be taken down: at most [`Limits::max_connections`] are served at
+//! once (more are closed as soon as they are accepted, so they cost no descriptor), a client must
+//! send a request's headers within [`Limits::header_timeout`] (idle keep-alive connections and
+//! slow senders are closed), a connection is asked to close after
+//! [`Limits::connection_lifetime`] (the request in flight is finished, for at most
+//! [`Limits::grace`] more), and an accept error (`EMFILE` when descriptors run out, a connection
+//! reset before it was accepted) is reported on stderr at most every few seconds and never stops
+//! the server.
 
 use std::sync::Arc;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::{Duration, Instant};
 
 use axum::Router;
 use axum::extract::{Path, Query, State};
@@ -295,6 +309,9 @@ async fn result(
 struct DownloadQuery {
     lambda: f64,
     format: String,
+    /// `input` (the default when the run records its input frame) or `normalized`.
+    #[serde(default)]
+    frame: Option<String>,
 }
 
 async fn download(
@@ -312,10 +329,19 @@ async fn download(
         ))
         .into_response();
     };
+    let frame = match q
+        .frame
+        .as_deref()
+        .map(str::parse::<stylize::frame::OutputFrame>)
+    {
+        None => None,
+        Some(Ok(f)) => Some(f),
+        Some(Err(e)) => return ViewError::BadRequest(e.to_string()).into_response(),
+    };
     let format = format.extension();
     let fmt = format;
     let made = on_item(viewer, id, move |item| {
-        let shape = item.at_lambda(q.lambda)?;
+        let shape = item.in_frame(item.at_lambda(q.lambda)?, frame)?;
         let mesh = mesh_core::TriMesh::new(shape.positions, shape.faces);
         let normals =
             mesh_core::normals::vertex_normals_area_weighted(&mesh.positions, &mesh.faces);
@@ -394,9 +420,108 @@ async fn file(
     }
 }
 
-/// Serves until the process ends.
+/// How many clients the server keeps, and for how long (see the module documentation).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Limits {
+    /// Connections served at once; more are closed as soon as they are accepted.
+    pub max_connections: usize,
+    /// Time a client has to send a request's headers (also how long an idle keep-alive
+    /// connection is kept).
+    pub header_timeout: Duration,
+    /// Age after which a connection is asked to close (after its request in flight).
+    pub connection_lifetime: Duration,
+    /// Time a connection asked to close has to finish its response.
+    pub grace: Duration,
+}
+
+impl Default for Limits {
+    /// 64 connections (a page makes a handful), 10 s for headers, 60 s per connection, 10 s grace.
+    fn default() -> Self {
+        Self {
+            max_connections: 64,
+            header_timeout: Duration::from_secs(10),
+            connection_lifetime: Duration::from_secs(60),
+            grace: Duration::from_secs(10),
+        }
+    }
+}
+
+/// The wait after an accept error before the next accept (lets a full descriptor table drain).
+const ACCEPT_BACKOFF: Duration = Duration::from_millis(50);
+
+/// The least time between two accept-error reports on stderr.
+const ACCEPT_REPORT_INTERVAL: Duration = Duration::from_secs(10);
+
+/// Serves with the default [`Limits`] until the process ends.
 pub async fn serve(listener: tokio::net::TcpListener, viewer: Arc<Viewer>) -> std::io::Result<()> {
-    axum::serve(listener, router(viewer)).await
+    serve_with(listener, viewer, Limits::default()).await
+}
+
+/// Decrements the open-connection count when a connection's task ends.
+struct Open(Arc<AtomicUsize>);
+
+impl Drop for Open {
+    fn drop(&mut self) {
+        self.0.fetch_sub(1, Ordering::SeqCst);
+    }
+}
+
+/// Serves `viewer` on `listener` with `limits` until the process ends (never returns an error:
+/// accept errors are reported and waited out).
+pub async fn serve_with(
+    listener: tokio::net::TcpListener,
+    viewer: Arc<Viewer>,
+    limits: Limits,
+) -> std::io::Result<()> {
+    use hyper_util::rt::{TokioIo, TokioTimer};
+    use hyper_util::service::TowerToHyperService;
+
+    let app = router(viewer);
+    let open = Arc::new(AtomicUsize::new(0));
+    let mut last_report: Option<Instant> = None;
+    let mut unreported = 0u64;
+    loop {
+        let stream = match listener.accept().await {
+            Ok((stream, _)) => stream,
+            Err(e) => {
+                unreported += 1;
+                if last_report.is_none_or(|t| t.elapsed() >= ACCEPT_REPORT_INTERVAL) {
+                    errln!(
+                        "stylize view: cannot accept a connection ({e}; {unreported} such error(s) \
+                         since the last report); still serving"
+                    );
+                    last_report = Some(Instant::now());
+                    unreported = 0;
+                }
+                tokio::time::sleep(ACCEPT_BACKOFF).await;
+                continue;
+            }
+        };
+        if open.load(Ordering::SeqCst) >= limits.max_connections {
+            // Closed at once: a flood of idle connections costs no descriptor.
+            drop(stream);
+            continue;
+        }
+        open.fetch_add(1, Ordering::SeqCst);
+        let guard = Open(Arc::clone(&open));
+        let service = TowerToHyperService::new(app.clone());
+        tokio::spawn(async move {
+            let _guard = guard;
+            let mut conn = std::pin::pin!(
+                hyper::server::conn::http1::Builder::new()
+                    .timer(TokioTimer::new())
+                    .header_read_timeout(limits.header_timeout)
+                    .serve_connection(TokioIo::new(stream), service)
+            );
+            tokio::select! {
+                _ = conn.as_mut() => {}
+                () = tokio::time::sleep(limits.connection_lifetime) => {
+                    conn.as_mut().graceful_shutdown();
+                    let _ = tokio::time::timeout(limits.grace, conn).await;
+                }
+            }
+        });
+    }
 }
 
 fn json_response(value: &serde_json::Value) -> Response {
@@ -547,4 +672,86 @@ async fn targets(State(viewer): State<Arc<Viewer>>, Path(id): Path<usize>) -> Re
         )),
         Err(e) => e.into_response(),
     }
+}
+
+/// A connection whose bytes are in memory: reads give `input` then end of file, writes go to
+/// `output` (for [`answer_raw`]).
+struct MemoryIo {
+    input: Vec<u8>,
+    at: usize,
+    output: Arc<std::sync::Mutex<Vec<u8>>>,
+}
+
+impl hyper::rt::Read for MemoryIo {
+    fn poll_read(
+        self: std::pin::Pin<&mut Self>,
+        _cx: &mut std::task::Context<'_>,
+        mut buf: hyper::rt::ReadBufCursor<'_>,
+    ) -> std::task::Poll<std::io::Result<()>> {
+        let this = self.get_mut();
+        let n = (this.input.len() - this.at).min(buf.remaining());
+        buf.put_slice(&this.input[this.at..this.at + n]);
+        this.at += n;
+        std::task::Poll::Ready(Ok(()))
+    }
+}
+
+impl hyper::rt::Write for MemoryIo {
+    fn poll_write(
+        self: std::pin::Pin<&mut Self>,
+        _cx: &mut std::task::Context<'_>,
+        data: &[u8],
+    ) -> std::task::Poll<std::io::Result<usize>> {
+        self.output
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .extend_from_slice(data);
+        std::task::Poll::Ready(Ok(data.len()))
+    }
+
+    fn poll_flush(
+        self: std::pin::Pin<&mut Self>,
+        _cx: &mut std::task::Context<'_>,
+    ) -> std::task::Poll<std::io::Result<()>> {
+        std::task::Poll::Ready(Ok(()))
+    }
+
+    fn poll_shutdown(
+        self: std::pin::Pin<&mut Self>,
+        _cx: &mut std::task::Context<'_>,
+    ) -> std::task::Poll<std::io::Result<()>> {
+        std::task::Poll::Ready(Ok(()))
+    }
+}
+
+/// The bytes the server writes back on a connection that sends `request` (raw HTTP/1, one or
+/// several pipelined requests) and then ends: hyper's parser, the router and the handlers as
+/// [`serve_with`] runs them, without a socket (`cargo xtask fuzz --target view-http`). At most
+/// 10 s per call.
+pub fn answer_raw(viewer: Arc<Viewer>, request: Vec<u8>) -> std::io::Result<Vec<u8>> {
+    use hyper_util::rt::TokioTimer;
+    use hyper_util::service::TowerToHyperService;
+
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_time()
+        .max_blocking_threads(2)
+        .build()?;
+    let output = Arc::new(std::sync::Mutex::new(Vec::new()));
+    let io = MemoryIo {
+        input: request,
+        at: 0,
+        output: Arc::clone(&output),
+    };
+    runtime.block_on(async move {
+        let conn = hyper::server::conn::http1::Builder::new()
+            .timer(TokioTimer::new())
+            .header_read_timeout(Limits::default().header_timeout)
+            .serve_connection(io, TowerToHyperService::new(router(viewer)));
+        let _ = tokio::time::timeout(Duration::from_secs(10), conn).await;
+    });
+    let bytes = output
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
+        .clone();
+    Ok(bytes)
 }
