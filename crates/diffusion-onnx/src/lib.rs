@@ -16,7 +16,9 @@ pub mod clip;
 mod denoiser;
 mod error;
 mod manifest;
+pub mod memory;
 pub mod npy;
+pub mod probe;
 pub mod runtime;
 mod session;
 mod text;
@@ -31,6 +33,6 @@ pub use manifest::{
     BUILTIN_IF_UNCOND, BUILTIN_T5_TOKENIZER, Dtype, EmbeddingsManifest, FORMAT_VERSION, Manifest,
     ModelDir, SchedulerManifest, Stage, StageManifest, TextEncoderManifest,
 };
-pub use runtime::{Device, SessionOptions};
+pub use runtime::{ArenaGrowth, ConvAlgorithmSearch, CudaOptions, Device, SessionOptions};
 pub use text::T5Encoder;
 pub use tokenizer::{T5Tokenizer, Tokens};

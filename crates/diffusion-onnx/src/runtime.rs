@@ -10,6 +10,7 @@
 //! API is used (ort would otherwise panic on a bad library); anything older than
 //! [`MINIMUM_ORT_VERSION`] is refused with a message that says how to get a good one.
 
+use std::fmt;
 use std::path::{Path, PathBuf};
 use std::sync::{Mutex, OnceLock};
 
@@ -273,7 +274,7 @@ pub fn environment() -> Result<Environment, OnnxError> {
     environment_from(&path)
 }
 
-/// Where sessions run.
+/// Where sessions run. Displayed `cpu` or `cuda:N` (the spelling of the run configuration's device keys).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Device {
     /// ONNX Runtime's CPU execution provider.
@@ -285,6 +286,75 @@ pub enum Device {
         /// CUDA device ordinal.
         device_id: i32,
     },
+}
+
+impl Device {
+    /// `"cpu"` or `"cuda"`: the kind of device, without the ordinal.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Self::Cpu => "cpu",
+            Self::Cuda { .. } => "cuda",
+        }
+    }
+}
+
+impl fmt::Display for Device {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Cpu => f.write_str("cpu"),
+            Self::Cuda { device_id } => write!(f, "cuda:{device_id}"),
+        }
+    }
+}
+
+/// cuDNN's convolution algorithm choice in the CUDA execution provider (`cudnn_conv_algo_search`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum ConvAlgorithmSearch {
+    /// Benchmark every algorithm on the first call of each shape (ONNX Runtime's default): the first
+    /// call is slow, later ones use the fastest kernel. The setting users of large UNets need.
+    #[default]
+    Exhaustive,
+    /// cuDNN's heuristics, no benchmarking: a fast first call, possibly slower kernels.
+    Heuristic,
+    /// The implicit-precomputed-GEMM algorithm always: the least workspace memory, often slowest.
+    Default,
+}
+
+/// How the CUDA execution provider's memory arena grows (`arena_extend_strategy`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum ArenaGrowth {
+    /// Each extension doubles the previous one (ONNX Runtime's default): fewer allocations, but the
+    /// arena can overshoot what the model needs by up to 2×.
+    #[default]
+    NextPowerOfTwo,
+    /// Extend by exactly what is requested: the tightest fit, for cards near their memory.
+    SameAsRequested,
+}
+
+/// The CUDA execution provider's options that matter for IF's UNets (defaults: ONNX Runtime 1.31's
+/// own). Ignored on the CPU.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct CudaOptions {
+    /// cuDNN convolution algorithm search: exhaustive.
+    pub conv_algorithm_search: ConvAlgorithmSearch,
+    /// Arena growth: next power of two.
+    pub arena_growth: ArenaGrowth,
+    /// Cap on the provider's arena in bytes (`gpu_mem_limit`; None: no cap).
+    pub memory_limit: Option<u64>,
+    /// TF32 tensor-core math for fp32 MatMul/Conv on Ampere and later (`use_tf32`; on): ≈ 10-bit
+    /// mantissa products. Only fp32 models are affected; fp16 models compute in fp16 anyway.
+    pub tf32: bool,
+}
+
+impl Default for CudaOptions {
+    fn default() -> Self {
+        Self {
+            conv_algorithm_search: ConvAlgorithmSearch::Exhaustive,
+            arena_growth: ArenaGrowth::NextPowerOfTwo,
+            memory_limit: None,
+            tf32: true,
+        }
+    }
 }
 
 /// Options for every session this crate creates.
@@ -329,6 +399,13 @@ pub struct SessionOptions {
     /// caller's own threads (resizes, the renderer, dARAP) run right after each UNet call on the same
     /// cores, and spinning workers take CPU from them (docs/benchmarks.md, "The loop").
     pub intra_op_spinning: bool,
+    /// UNet calls through a persistent ONNX Runtime IO binding (default on): inputs written in
+    /// place, the text embeddings re-bound only when they change, the output preallocated and
+    /// reused (`OnnxDenoiser`). Off, each call builds fresh input and output tensors. Bit-identical
+    /// results on the CPU provider (tested); fewer copies (docs/benchmarks.md, "IO binding").
+    pub io_binding: bool,
+    /// CUDA execution provider options (used only when `device` is CUDA).
+    pub cuda: CudaOptions,
 }
 
 impl Default for SessionOptions {
@@ -342,6 +419,8 @@ impl Default for SessionOptions {
             graph_optimizations: true,
             max_batch: None,
             intra_op_spinning: false,
+            io_binding: true,
+            cuda: CudaOptions::default(),
         }
     }
 }
@@ -431,10 +510,25 @@ pub(crate) fn open_session(
         }
         #[cfg(feature = "cuda")]
         Device::Cuda { device_id } => {
-            let ep = ort::ep::CUDA::default()
+            let c = &options.cuda;
+            let mut cuda = ort::ep::CUDA::default()
                 .with_device_id(device_id)
-                .build()
-                .error_on_failure();
+                .with_conv_algorithm_search(match c.conv_algorithm_search {
+                    ConvAlgorithmSearch::Exhaustive => {
+                        ort::ep::cuda::ConvAlgorithmSearch::Exhaustive
+                    }
+                    ConvAlgorithmSearch::Heuristic => ort::ep::cuda::ConvAlgorithmSearch::Heuristic,
+                    ConvAlgorithmSearch::Default => ort::ep::cuda::ConvAlgorithmSearch::Default,
+                })
+                .with_arena_extend_strategy(match c.arena_growth {
+                    ArenaGrowth::NextPowerOfTwo => ort::ep::ArenaExtendStrategy::NextPowerOfTwo,
+                    ArenaGrowth::SameAsRequested => ort::ep::ArenaExtendStrategy::SameAsRequested,
+                })
+                .with_tf32(c.tf32);
+            if let Some(limit) = c.memory_limit {
+                cuda = cuda.with_memory_limit(usize::try_from(limit).unwrap_or(usize::MAX));
+            }
+            let ep = cuda.build().error_on_failure();
             builder = builder
                 .with_execution_providers([ep])
                 .map_err(|e| OnnxError::ort(ctx("registering the CUDA execution provider"), e))?;

@@ -336,6 +336,9 @@ fn o3(a: [f64; 3], b: [f64; 3], c: [f64; 3], d: [f64; 3]) -> Sign {
 
 /// Faces `(u, v, a)` and `(v, u, b)` sharing edge `uv`: a fold (coplanar, same side).
 fn edge_fold(u: [f64; 3], v: [f64; 3], a: [f64; 3], b: [f64; 3], ta: &Tri) -> bool {
+    if clearly_opposite_sides(u, v, a, b) {
+        return false;
+    }
     if o3(u, v, a, b) != Sign::Zero {
         return false;
     }
@@ -343,10 +346,87 @@ fn edge_fold(u: [f64; 3], v: [f64; 3], a: [f64; 3], b: [f64; 3], ta: &Tri) -> bo
     orient2d_projected(u, v, a, k) == orient2d_projected(u, v, b, k)
 }
 
+/// A filter before the fold test: `true` only when `a` and `b` are certainly on opposite sides of
+/// the line `uv` (their components perpendicular to `uv` make an angle over 90°), so the faces
+/// cannot fold onto each other whatever the exact `orient3d` says. It decides the common case of
+/// flat or nearly flat neighbours, where `orient3d(u, v, a, b)` is close to 0 and its filter would
+/// hand the sign to the exact fallback.
+///
+/// By Binet–Cauchy, `(e × da)·(e × db) = |e|²·(a⊥·b⊥)` with `e = v − u`, `da = a − u`,
+/// `db = b − u`. In `f64` its error is below about `12ε·M` with `M = |e|₁²·|da|₁·|db|₁`
+/// (the differences, the cross products and the dot each add a few roundings), so a computed
+/// value below `−1e-12·M` is certainly negative. Anything else — including differences whose
+/// 1-norms leave `[2⁻¹⁰⁰, 2¹⁰⁰]` — is left to the exact test.
+#[inline]
+fn clearly_opposite_sides(u: [f64; 3], v: [f64; 3], a: [f64; 3], b: [f64; 3]) -> bool {
+    let sub = |p: [f64; 3], q: [f64; 3]| [p[0] - q[0], p[1] - q[1], p[2] - q[2]];
+    let cross = |p: [f64; 3], q: [f64; 3]| {
+        [
+            p[1] * q[2] - p[2] * q[1],
+            p[2] * q[0] - p[0] * q[2],
+            p[0] * q[1] - p[1] * q[0],
+        ]
+    };
+    let norm1 = |p: [f64; 3]| p[0].abs() + p[1].abs() + p[2].abs();
+    let (e, da, db) = (sub(v, u), sub(a, u), sub(b, u));
+    let (ne, na, nb) = (norm1(e), norm1(da), norm1(db));
+    // 2⁻¹⁰⁰ ≤ each 1-norm ≤ 2¹⁰⁰: no overflow, and underflow (absolute 2⁻¹⁰⁷⁴ per product,
+    // times at most 2²⁰⁰) stays far below the margin 1e-12·M ≥ 2⁻⁴⁴⁰.
+    let in_range = |x: f64| (7.9e-31..=1.26e30).contains(&x);
+    if !(in_range(ne) && in_range(na) && in_range(nb)) {
+        return false;
+    }
+    let (ca, cb) = (cross(e, da), cross(e, db));
+    let dot = ca[0] * cb[0] + ca[1] * cb[1] + ca[2] * cb[2];
+    dot < -1e-12 * (ne * ne * na * nb)
+}
+
+/// A filter before the exact tests: `true` only when the plane through `origin` with normal `d`
+/// certainly separates `pos` (every point strictly on the `+d` side) from `neg` (strictly on the
+/// `−d` side). Two triangles separated so — or two sharing the corner `origin`, with their other
+/// corners separated so — meet nowhere else, whatever the exact predicates say; on flat regions,
+/// where `orient3d` is near zero and goes to the exact fallback, this decides most pairs in `f64`.
+///
+/// Each `(p − origin)·d` is computed in `f64` with an error below about `8ε·|p − origin|₁·|d|₁`
+/// (the difference, three products, two sums); a value beyond `1e-12·|p − origin|₁·|d|₁` has the
+/// sign it shows. Differences and `d` with 1-norms outside `[2⁻¹⁰⁰, 2¹⁰⁰]` are left to the exact
+/// tests (no overflow; underflow stays far below the margin).
+#[inline]
+fn certainly_separated(origin: [f64; 3], d: [f64; 3], pos: &[[f64; 3]], neg: &[[f64; 3]]) -> bool {
+    let norm1 = |p: [f64; 3]| p[0].abs() + p[1].abs() + p[2].abs();
+    let in_range = |x: f64| (7.9e-31..=1.26e30).contains(&x);
+    let nd = norm1(d);
+    if !in_range(nd) {
+        return false;
+    }
+    let side = |p: [f64; 3], sign: f64| {
+        let q = [p[0] - origin[0], p[1] - origin[1], p[2] - origin[2]];
+        let nq = norm1(q);
+        in_range(nq) && sign * (q[0] * d[0] + q[1] * d[1] + q[2] * d[2]) > 1e-12 * nq * nd
+    };
+    pos.iter().all(|&p| side(p, 1.0)) && neg.iter().all(|&p| side(p, -1.0))
+}
+
+/// The direction from the centroid of `b` to that of `a` (three times it; only the direction
+/// matters) — the separating-plane normal [`certainly_separated`] tries.
+#[inline]
+fn centroid_direction(a: &[[f64; 3]], b: &[[f64; 3]]) -> [f64; 3] {
+    let sum = |t: &[[f64; 3]], k: usize| t.iter().map(|p| p[k]).sum::<f64>() / t.len() as f64;
+    [0, 1, 2].map(|k| sum(a, k) - sum(b, k))
+}
+
 /// `(v, a₁, b₁)` and `(v, a₂, b₂)` sharing corner `v`: do they meet other than at `v`?
 fn vertex_adjacent_intersect(ta: &Tri, tb: &Tri) -> bool {
     let [v, a1, b1] = ta.p;
     let [_, a2, b2] = tb.p;
+    if certainly_separated(
+        v,
+        centroid_direction(&[a1, b1], &[a2, b2]),
+        &[a1, b1],
+        &[a2, b2],
+    ) {
+        return false;
+    }
     // The shared corner is on both planes; when the other two corners of one face are strictly
     // on one side of the other's plane, that face meets the plane only at the corner: no more.
     let sb = [Sign::Zero, o3(v, a1, b1, a2), o3(v, a1, b1, b2)];
@@ -396,6 +476,14 @@ fn strictly_one_side(s: &[Sign; 3]) -> bool {
 
 /// Two non-degenerate closed triangles share a point.
 pub(crate) fn triangles_intersect(ta: &Tri, tb: &Tri) -> bool {
+    let d = centroid_direction(&ta.p, &tb.p);
+    let mid = [0, 1, 2].map(|k| {
+        0.5 * ((ta.p[0][k] + ta.p[1][k] + ta.p[2][k]) / 3.0
+            + (tb.p[0][k] + tb.p[1][k] + tb.p[2][k]) / 3.0)
+    });
+    if certainly_separated(mid, d, &ta.p, &tb.p) {
+        return false;
+    }
     let sb = plane_sides(ta, tb);
     if strictly_one_side(&sb) {
         return false;

@@ -609,11 +609,21 @@ fn run_row(
             let Some(model) = &options.model else {
                 bail!("prompt rows need --model DIR (docs/models.md)");
             };
-            if config.guidance.onnx_memory_arena != options.config.guidance.onnx_memory_arena
-                || config.guidance.onnx_low_memory != options.config.guidance.onnx_low_memory
+            let (g, whole) = (&config.guidance, &options.config.guidance);
+            if g.onnx_memory_arena != whole.onnx_memory_arena
+                || g.onnx_low_memory != whole.onnx_low_memory
+                || g.onnx_io_binding != whole.onnx_io_binding
+                || g.stage1_device != whole.stage1_device
+                || g.stage2_device != whole.stage2_device
+                || g.text_encoder_device != whole.text_encoder_device
+                || g.cuda_conv_search != whole.cuda_conv_search
+                || g.cuda_arena_growth != whole.cuda_arena_growth
+                || g.cuda_memory_limit_gib != whole.cuda_memory_limit_gib
+                || g.cuda_tf32 != whole.cuda_tf32
             {
                 bail!(
-                    "guidance.onnx_memory_arena and guidance.onnx_low_memory cannot be overridden \
+                    "guidance.onnx_memory_arena, guidance.onnx_low_memory, guidance.onnx_io_binding, the \
+                     devices (guidance.*_device) and the CUDA options (guidance.cuda_*) cannot be overridden \
                      per row: the batch opens its models once (set them for the whole batch with --set)"
                 );
             }
@@ -635,10 +645,13 @@ fn run_row(
                 move || {
                     let set = models.get_or_insert_with(|| {
                         let set = ModelSet::open(model, &options.config);
-                        if let Ok(s) = &set
-                            && let Some(w) = s.cpu_time_warning(&options.config)
-                        {
-                            errln!("warning: {w}");
+                        if let Ok(s) = &set {
+                            if let Some(w) = s.cpu_time_warning(&options.config) {
+                                errln!("warning: {w}");
+                            }
+                            for w in s.memory_warnings() {
+                                errln!("warning: {w}");
+                            }
                         }
                         set.map_err(anyhow::Error::from)
                     });

@@ -36,6 +36,8 @@ enum Command {
     Eval(cmd::eval::Args),
     /// Show runs and meshes in a local web page with a live λ slider (prints the URL).
     View(cmd::view::Args),
+    /// What this machine and build can do for the text path (ONNX Runtime, CUDA, GPUs, models).
+    Doctor(cmd::doctor::Args),
     /// Run one guidance evaluation with given noise/timesteps and dump every intermediate to .npz.
     #[command(hide = true, name = "debug-guidance")]
     DebugGuidance(cmd::debug_guidance::Args),
@@ -93,6 +95,7 @@ fn main() -> std::process::ExitCode {
         #[cfg(not(feature = "text"))]
         Command::Embed(_) => Err(not_built("text", "stylize embed")),
         Command::Run(a) => cmd::run::run(a),
+        Command::Doctor(a) => cmd::doctor::run(a),
         Command::Batch(a) => cmd::batch::run(a),
         Command::Eval(a) => cmd::eval::run(a),
         #[cfg(feature = "view")]

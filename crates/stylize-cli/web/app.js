@@ -113,7 +113,7 @@ function showIntersections(head) {
 }
 
 // The strongest safe λ up to the slider's end (server: api/items/ID/max-safe), shown on the
-// slider's track (green up to it, red beyond) and behind the "max safe λ" button.
+// bar under the slider (green up to it, red beyond) and behind the "max safe λ" button.
 let safe = null;   // { upper, lambda, first_unsafe, safe_again, ... } of the current item
 const AUTO_MAX_SAFE_FACES = 20000;
 async function loadMaxSafe() {
@@ -125,9 +125,14 @@ async function loadMaxSafe() {
   if (current !== item) return;
   safe = j;
   const pct = (100 * j.lambda / upper).toFixed(2);
-  ui.lambda.style.background = j.first_unsafe === null
-    ? '#cfe8cf'
-    : `linear-gradient(to right, #cfe8cf 0%, #cfe8cf ${pct}%, #f4c4c4 ${pct}%, #f4c4c4 100%)`;
+  // A bar under the slider: green up to the safe λ, red beyond.
+  const track = document.getElementById('safe-track');
+  track.style.left = `${ui.lambda.offsetLeft}px`;
+  track.style.width = `${ui.lambda.offsetWidth}px`;
+  track.style.background = j.first_unsafe === null
+    ? '#3a9a3a'
+    : `linear-gradient(to right, #3a9a3a 0%, #3a9a3a ${pct}%, #d62828 ${pct}%, #d62828 100%)`;
+  track.hidden = false;
   ui.maxSafe.hidden = false;
   ui.maxSafe.dataset.lambda = String(j.lambda);
   ui.safeNote.textContent = j.first_unsafe === null
@@ -137,7 +142,7 @@ async function loadMaxSafe() {
 }
 function clearMaxSafe() {
   safe = null;
-  ui.lambda.style.background = '';
+  document.getElementById('safe-track').hidden = true;
   ui.maxSafe.hidden = true;  // shown again for runs
   ui.safeNote.textContent = '';
   delete document.documentElement.dataset.maxSafe;

@@ -10,7 +10,10 @@
 //! [render]   width = 512, height = 512, backend = "auto"
 //! [guidance] scale = 100, t_min = 20, t_max = 980, loss_scale = 100, stage1_weight = 1,
 //!            stage2_weight = "0.0>0.2:1000; 0.2>0.3:750", negative_prompt = "", grad_clip = 0 (off),
-//!            onnx_memory_arena = true, onnx_low_memory = false
+//!            onnx_memory_arena = true, onnx_low_memory = false, onnx_io_binding = true,
+//!            stage1_device = "cpu", stage2_device = "cpu", text_encoder_device = "cpu",
+//!            cuda_conv_search = "exhaustive", cuda_arena_growth = "next_power_of_two",
+//!            cuda_memory_limit_gib = 0 (none), cuda_tf32 = true
 //! [style]    iterations, lr, objective   (the model-free path, see `crate::style`)
 //! [run]      seed, checkpoint_every, preview_every, turntable_views, turntable_size,
 //!            turntable_gif_frames, snapshot_every, output_frame = "input"
@@ -276,6 +279,113 @@ pub struct GuidanceSection {
     /// results may differ from the default settings' in the last bits (other kernels). Process-wide
     /// like `onnx_memory_arena`.
     pub onnx_low_memory: bool,
+    /// UNet calls through ONNX Runtime IO binding (`diffusion_onnx::SessionOptions::io_binding`):
+    /// true. Bit-identical results on the CPU; false builds fresh tensors per call.
+    pub onnx_io_binding: bool,
+    /// Where the stage-I UNet runs: `cpu` or `cuda:N` ([`Device`]). Speed/memory only (never in
+    /// the task identity). Needs a binary built with the `cuda` feature and the `onnxruntime-gpu`
+    /// library for `cuda:N`.
+    pub stage1_device: String,
+    /// Where the stage-II UNet runs (`cpu` | `cuda:N`): the stages can sit on two GPUs.
+    pub stage2_device: String,
+    /// Where the T5 text encoder runs when a prompt is not cached (`cpu` | `cuda:N`); `cpu` keeps
+    /// the 9.5 GB encoder off the GPUs (it runs once per prompt).
+    pub text_encoder_device: String,
+    /// cuDNN convolution algorithm search on CUDA: `exhaustive` (ONNX Runtime's default: the
+    /// first call of each shape benchmarks the kernels), `heuristic`, `default`.
+    pub cuda_conv_search: String,
+    /// CUDA memory arena growth: `next_power_of_two` (ONNX Runtime's default) or
+    /// `same_as_requested` (tightest, for cards near their memory).
+    pub cuda_arena_growth: String,
+    /// Cap on each CUDA device's ONNX Runtime arena, GiB (0: no cap, ONNX Runtime's default).
+    /// Also the memory the estimate checks against when set.
+    pub cuda_memory_limit_gib: f64,
+    /// TF32 math for fp32 models on Ampere and later GPUs: true (ONNX Runtime's default). fp16
+    /// models are unaffected.
+    pub cuda_tf32: bool,
+}
+
+/// A device a model runs on: `guidance.stage1_device`, `stage2_device`, `text_encoder_device`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Device {
+    /// `cpu`.
+    Cpu,
+    /// `cuda:N` (`cuda` alone is `cuda:0`): CUDA device ordinal N.
+    Cuda(u32),
+}
+
+impl Device {
+    /// Parses `cpu`, `cuda` or `cuda:N`.
+    pub fn parse(s: &str) -> std::result::Result<Self, String> {
+        match s.trim() {
+            "cpu" => Ok(Self::Cpu),
+            "cuda" => Ok(Self::Cuda(0)),
+            t => match t.strip_prefix("cuda:").map(str::parse::<u32>) {
+                Some(Ok(n)) if n < 1024 => Ok(Self::Cuda(n)),
+                Some(_) => Err(format!(
+                    "`{s}`: the CUDA device ordinal must be a number 0, 1, … (as `cuda:0`)"
+                )),
+                None => Err(format!(
+                    "`{s}`: write `cpu` or `cuda:N` (N the GPU's ordinal, e.g. `cuda:0`)"
+                )),
+            },
+        }
+    }
+
+    /// `cpu` or `cuda`, without the ordinal.
+    pub fn kind(self) -> &'static str {
+        match self {
+            Self::Cpu => "cpu",
+            Self::Cuda(_) => "cuda",
+        }
+    }
+}
+
+impl std::fmt::Display for Device {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Cpu => f.write_str("cpu"),
+            Self::Cuda(n) => write!(f, "cuda:{n}"),
+        }
+    }
+}
+
+/// `guidance.cuda_conv_search` values.
+pub const CUDA_CONV_SEARCH: [&str; 3] = ["exhaustive", "heuristic", "default"];
+/// `guidance.cuda_arena_growth` values.
+pub const CUDA_ARENA_GROWTH: [&str; 2] = ["next_power_of_two", "same_as_requested"];
+
+impl GuidanceSection {
+    /// The three devices `(stage I, stage II, text encoder)`, parsed (an error names the key).
+    pub fn devices(&self) -> Result<[Device; 3]> {
+        let parse = |name: &str, v: &str| {
+            Device::parse(v).map_err(|e| Error::config(name, format!("{name} = {e}")))
+        };
+        Ok([
+            parse("guidance.stage1_device", &self.stage1_device)?,
+            parse("guidance.stage2_device", &self.stage2_device)?,
+            parse("guidance.text_encoder_device", &self.text_encoder_device)?,
+        ])
+    }
+
+    /// A note for a resume whose stage devices differ in kind (CPU ↔ CUDA) from the run's
+    /// `config.toml` of the previous start (`previous`): the run continues, but not bit for bit
+    /// as it would have on the old device. None when the kinds match or `previous` cannot be read.
+    pub fn device_change_note(&self, previous: &str) -> Option<String> {
+        let old: Config = Config::from_toml_str(previous).ok()?;
+        let [o1, o2, _] = old.guidance.devices().ok()?;
+        let [n1, n2, _] = self.devices().ok()?;
+        if o1.kind() == n1.kind() && o2.kind() == n2.kind() {
+            return None;
+        }
+        Some(format!(
+            "this run was started with the UNets on {o1} / {o2} (stage I / stage II) and resumes on {n1} / {n2}: \
+             the task is the same (devices are not part of its identity), but the UNets' outputs differ between \
+             devices — by about 1e-6 relative for fp32 models without TF32 (other kernels, other summation order), \
+             about 1e-3 relative with TF32 or fp16 — so the continuation follows a slightly different trajectory \
+             than an uninterrupted run on the first device would"
+        ))
+    }
 }
 
 impl Default for GuidanceSection {
@@ -294,6 +404,14 @@ impl Default for GuidanceSection {
             // under the `text` feature keeps the two equal).
             onnx_memory_arena: true,
             onnx_low_memory: false,
+            onnx_io_binding: true,
+            stage1_device: "cpu".into(),
+            stage2_device: "cpu".into(),
+            text_encoder_device: "cpu".into(),
+            cuda_conv_search: CUDA_CONV_SEARCH[0].into(),
+            cuda_arena_growth: CUDA_ARENA_GROWTH[0].into(),
+            cuda_memory_limit_gib: 0.0,
+            cuda_tf32: true,
         }
     }
 }
@@ -576,6 +694,31 @@ impl Config {
         if self.camera.views == 0 {
             bad_field!("camera.views", "camera.views must be at least 1");
         }
+        self.guidance.devices()?;
+        let g = &self.guidance;
+        if !CUDA_CONV_SEARCH.contains(&g.cuda_conv_search.as_str()) {
+            bad_field!(
+                "guidance.cuda_conv_search",
+                "guidance.cuda_conv_search must be one of {}, got {:?}",
+                CUDA_CONV_SEARCH.join(", "),
+                g.cuda_conv_search
+            );
+        }
+        if !CUDA_ARENA_GROWTH.contains(&g.cuda_arena_growth.as_str()) {
+            bad_field!(
+                "guidance.cuda_arena_growth",
+                "guidance.cuda_arena_growth must be one of {}, got {:?}",
+                CUDA_ARENA_GROWTH.join(", "),
+                g.cuda_arena_growth
+            );
+        }
+        if !(g.cuda_memory_limit_gib.is_finite() && g.cuda_memory_limit_gib >= 0.0) {
+            bad_field!(
+                "guidance.cuda_memory_limit_gib",
+                "guidance.cuda_memory_limit_gib must be a finite number of GiB >= 0 (0: no cap), got {}",
+                g.cuda_memory_limit_gib
+            );
+        }
         let sampler = &self.camera.sampler;
         for (name, r) in [
             ("camera.elevation_deg", sampler.elevation_deg),
@@ -758,6 +901,71 @@ mod tests {
         let w = ok(c.stage2_schedule());
         assert!((w.at(1500) - 0.26662).abs() < 5e-6);
         ok(c.validate());
+    }
+
+    #[test]
+    fn devices_and_cuda_options_are_validated_naming_the_key() {
+        let c = ok(Config::default().with_overrides(&[
+            "guidance.stage1_device=cuda:1",
+            "guidance.stage2_device=cuda",
+            "guidance.cuda_conv_search=heuristic",
+            "guidance.cuda_arena_growth=same_as_requested",
+            "guidance.cuda_memory_limit_gib=20.5",
+        ]));
+        assert_eq!(
+            ok(c.guidance.devices()),
+            [Device::Cuda(1), Device::Cuda(0), Device::Cpu]
+        );
+        for (bad, key) in [
+            ("guidance.stage1_device=gpu", "guidance.stage1_device"),
+            ("guidance.stage2_device=cuda:x", "guidance.stage2_device"),
+            (
+                "guidance.text_encoder_device=cuda:-1",
+                "guidance.text_encoder_device",
+            ),
+            (
+                "guidance.cuda_conv_search=fast",
+                "guidance.cuda_conv_search",
+            ),
+            (
+                "guidance.cuda_arena_growth=double",
+                "guidance.cuda_arena_growth",
+            ),
+            (
+                "guidance.cuda_memory_limit_gib=-1",
+                "guidance.cuda_memory_limit_gib",
+            ),
+        ] {
+            let e = Config::default()
+                .with_overrides(&[bad])
+                .expect_err(bad)
+                .full_message();
+            assert!(e.contains(key), "{bad}: {e}");
+        }
+        let e = Config::default()
+            .with_overrides(&["guidance.stage1_device=gpu"])
+            .expect_err("gpu")
+            .full_message();
+        assert!(e.contains("cuda:N") && e.contains("cpu"), "{e}");
+    }
+
+    #[test]
+    fn a_resume_on_another_kind_of_device_says_so() {
+        let cpu = Config::default();
+        let previous = ok(cpu.to_toml_string());
+        assert_eq!(cpu.guidance.device_change_note(&previous), None);
+        let gpu = ok(Config::default().with_overrides(&["guidance.stage2_device=cuda:0"]));
+        let note = gpu.guidance.device_change_note(&previous).expect("a note");
+        assert!(
+            note.contains("cpu / cpu") && note.contains("cpu / cuda:0") && note.contains("1e-3"),
+            "{note}"
+        );
+        // Another GPU of the same kind is not a change of numerics worth a note.
+        let other = ok(Config::default().with_overrides(&["guidance.stage2_device=cuda:1"]));
+        assert_eq!(
+            other.guidance.device_change_note(&ok(gpu.to_toml_string())),
+            None
+        );
     }
 
     #[cfg(feature = "text")]

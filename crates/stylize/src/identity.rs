@@ -68,6 +68,14 @@ pub const PRESENTATION_KEYS: &[&str] = &[
     "run.snapshot_every",
     "guidance.onnx_memory_arena",
     "guidance.onnx_low_memory",
+    "guidance.onnx_io_binding",
+    "guidance.stage1_device",
+    "guidance.stage2_device",
+    "guidance.text_encoder_device",
+    "guidance.cuda_conv_search",
+    "guidance.cuda_arena_growth",
+    "guidance.cuda_memory_limit_gib",
+    "guidance.cuda_tf32",
     "region.tint",
     "run.output_frame",
 ];
@@ -280,6 +288,28 @@ mod tests {
     fn id(objective: &dyn TaskKind, config: &Config) -> TaskIdentity {
         let (p, f) = tri();
         TaskIdentity::new(&p, &f, objective, config).unwrap_or_else(|e| panic!("{e:#}"))
+    }
+
+    #[test]
+    fn devices_and_provider_options_never_change_the_identity() {
+        let base = id(&Prompt::new("a cat"), &Config::default());
+        let moved = Config::default()
+            .with_overrides(&[
+                "guidance.stage1_device=cuda:0",
+                "guidance.stage2_device=cuda:1",
+                "guidance.text_encoder_device=cuda:0",
+                "guidance.onnx_io_binding=false",
+                "guidance.cuda_conv_search=heuristic",
+                "guidance.cuda_arena_growth=same_as_requested",
+                "guidance.cuda_memory_limit_gib=20",
+                "guidance.cuda_tf32=false",
+            ])
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(id(&Prompt::new("a cat"), &moved), base);
+        assert_eq!(
+            unread_settings(&moved, &Style::Cube).unwrap_or_default(),
+            Vec::<String>::new()
+        );
     }
 
     #[test]

@@ -113,18 +113,193 @@ pub fn cpu_time_warning(dir: &ModelDir, device: &Device, config: &Config) -> Opt
     ))
 }
 
-/// The ONNX Runtime session settings of `config`: [`SessionOptions::low_memory`] with
-/// `guidance.onnx_low_memory`, else the defaults with `guidance.onnx_memory_arena`.
+/// The ONNX Runtime session settings of `config` on the CPU: [`SessionOptions::low_memory`] with
+/// `guidance.onnx_low_memory`, else the defaults with `guidance.onnx_memory_arena`; IO binding from
+/// `guidance.onnx_io_binding`, and the CUDA provider options of `guidance.cuda_*` (used when a
+/// device is CUDA, [`device_options`]).
 #[cfg(feature = "text")]
 pub fn session_options(config: &Config) -> SessionOptions {
-    if config.guidance.onnx_low_memory {
+    let g = &config.guidance;
+    let base = if g.onnx_low_memory {
         SessionOptions::low_memory()
     } else {
         SessionOptions {
-            cpu_memory_arena: config.guidance.onnx_memory_arena,
+            cpu_memory_arena: g.onnx_memory_arena,
             ..SessionOptions::default()
         }
+    };
+    SessionOptions {
+        io_binding: g.onnx_io_binding,
+        cuda: diffusion_onnx::CudaOptions {
+            conv_algorithm_search: match g.cuda_conv_search.as_str() {
+                "heuristic" => diffusion_onnx::ConvAlgorithmSearch::Heuristic,
+                "default" => diffusion_onnx::ConvAlgorithmSearch::Default,
+                _ => diffusion_onnx::ConvAlgorithmSearch::Exhaustive,
+            },
+            arena_growth: match g.cuda_arena_growth.as_str() {
+                "same_as_requested" => diffusion_onnx::ArenaGrowth::SameAsRequested,
+                _ => diffusion_onnx::ArenaGrowth::NextPowerOfTwo,
+            },
+            memory_limit: (g.cuda_memory_limit_gib > 0.0)
+                .then_some((g.cuda_memory_limit_gib * GIB) as u64),
+            tf32: g.cuda_tf32,
+        },
+        ..base
     }
+}
+
+#[cfg(feature = "text")]
+const GIB: f64 = 1_073_741_824.0;
+
+/// The session settings of `(stage I, stage II, text encoder)`: [`session_options`] on the devices
+/// of `guidance.stage1_device`, `stage2_device` and `text_encoder_device` (validated here too).
+#[cfg(feature = "text")]
+pub fn device_options(config: &Config) -> Result<[SessionOptions; 3]> {
+    let base = session_options(config);
+    Ok(config.guidance.devices()?.map(|d| SessionOptions {
+        device: match d {
+            crate::config::Device::Cpu => Device::Cpu,
+            crate::config::Device::Cuda(n) => Device::Cuda {
+                device_id: n as i32,
+            },
+        },
+        ..base.clone()
+    }))
+}
+
+/// The memory estimate of one device before the first iteration.
+#[cfg(feature = "text")]
+#[derive(Clone, Debug)]
+pub struct DeviceMemory {
+    /// The device.
+    pub device: Device,
+    /// The stages on it with their estimates.
+    pub stages: Vec<(Stage, diffusion_onnx::memory::StageMemory)>,
+    /// Estimated peak: the stages' peaks summed (both stay loaded) plus the fixed overhead of the
+    /// device ([`diffusion_onnx::memory::CPU_BASE_BYTES`] / `CUDA_BASE_BYTES`).
+    pub estimate: u64,
+    /// What the device has (bytes) and where that figure comes from, when known.
+    pub capacity: Option<(u64, String)>,
+}
+
+#[cfg(feature = "text")]
+impl DeviceMemory {
+    /// Whether the estimate exceeds the known capacity.
+    pub fn over(&self) -> bool {
+        self.capacity
+            .as_ref()
+            .is_some_and(|(c, _)| self.estimate > *c)
+    }
+
+    /// One line: `cuda:0: estimate 21.30 GiB (stage1 …) of 79.19 GiB (NVIDIA H100 …)`.
+    pub fn describe(&self) -> String {
+        use diffusion_onnx::memory::gib;
+        let parts: Vec<String> = self
+            .stages
+            .iter()
+            .map(|(s, m)| {
+                format!(
+                    "{}: weights {} + activations {} for {} samples per call",
+                    s.key(),
+                    gib(m.weights),
+                    gib(m.activations),
+                    m.samples_per_call
+                )
+            })
+            .collect();
+        format!(
+            "{}: estimated peak {} ({}) of {}",
+            self.device,
+            gib(self.estimate),
+            parts.join("; "),
+            self.capacity
+                .as_ref()
+                .map_or("unknown capacity".to_string(), |(c, src)| format!(
+                    "{} ({src})",
+                    gib(*c)
+                ))
+        )
+    }
+}
+
+/// The memory estimate per device for the UNets of `dir` with `options` = `[stage I, stage II]`,
+/// at `config`'s batch (2 × views samples; stage I at 64², stage II at 256²). Capacities: the
+/// host's `MemTotal` for the CPU; for CUDA `guidance.cuda_memory_limit_gib` when set, else the
+/// device's total memory from the NVIDIA driver (`diffusion_onnx::probe::probe_driver`).
+#[cfg(feature = "text")]
+pub fn memory_plan(
+    dir: &ModelDir,
+    options: &[SessionOptions; 2],
+    config: &Config,
+    gpus: &[diffusion_onnx::probe::GpuInfo],
+) -> Vec<DeviceMemory> {
+    use diffusion_onnx::memory::{
+        CPU_BASE_BYTES, CUDA_BASE_BYTES, estimate_stage, host_memory_bytes,
+    };
+    let batch = 2 * config.camera.views;
+    let g = csd::GuidanceConfig::default();
+    let mut plan: Vec<DeviceMemory> = Vec::new();
+    for (stage, opts, side) in [
+        (Stage::One, &options[0], g.stage1_resolution),
+        (Stage::Two, &options[1], g.stage2_resolution),
+    ] {
+        let Some(m) = estimate_stage(dir, stage, opts, batch, side * side) else {
+            continue;
+        };
+        if let Some(d) = plan.iter_mut().find(|d| d.device == opts.device) {
+            d.stages.push((stage, m));
+            d.estimate += m.total();
+            continue;
+        }
+        let (base, capacity) = match opts.device {
+            Device::Cpu => (
+                CPU_BASE_BYTES,
+                host_memory_bytes().map(|b| (b, "MemTotal of this machine".to_string())),
+            ),
+            Device::Cuda { device_id } => (
+                CUDA_BASE_BYTES,
+                if let Some(limit) = opts.cuda.memory_limit {
+                    Some((limit, "guidance.cuda_memory_limit_gib".to_string()))
+                } else {
+                    gpus.iter()
+                        .find(|g| g.ordinal == device_id)
+                        .map(|g| (g.memory_bytes, g.name.clone()))
+                },
+            ),
+        };
+        plan.push(DeviceMemory {
+            device: opts.device,
+            stages: vec![(stage, m)],
+            estimate: base + m.total(),
+            capacity,
+        });
+    }
+    plan
+}
+
+/// Refuses a plan in which a CUDA device's estimate exceeds its known memory (the run would fail
+/// with an out-of-memory error after loading), naming the ways out; returns warnings for the CPU
+/// (swap and the kernel's reclaim of file-backed weight pages make an over-estimate survivable
+/// there, only slow).
+#[cfg(feature = "text")]
+pub fn check_memory(plan: &[DeviceMemory]) -> Result<Vec<String>> {
+    let mut warnings = Vec::new();
+    for d in plan.iter().filter(|d| d.over()) {
+        let advice = "lower the samples per call (guidance.onnx_low_memory = true runs one at a time), \
+                      put the stages on separate devices (guidance.stage1_device / stage2_device), use an fp16 \
+                      export on a GPU, or fewer camera.views (changes the task)";
+        if matches!(d.device, Device::Cuda { .. }) {
+            invalid!(
+                "the models will not fit: {} (docs/models.md, \"Memory per device\"). To fit: {advice}",
+                d.describe()
+            );
+        }
+        warnings.push(format!(
+            "the models may not fit in memory: {} — expect swapping; to fit: {advice}",
+            d.describe()
+        ));
+    }
+    Ok(warnings)
 }
 
 /// Opened model sessions, reusable across prompts.
@@ -132,6 +307,8 @@ pub fn session_options(config: &Config) -> SessionOptions {
 pub struct ModelSet {
     dir: ModelDir,
     options: SessionOptions,
+    text_options: SessionOptions,
+    memory_warnings: Vec<String>,
     cache: Option<EmbeddingCache>,
     stage1: OnnxDenoiser,
     stage2: Option<OnnxDenoiser>,
@@ -155,6 +332,12 @@ impl ModelSet {
         cpu_time_warning(&self.dir, &self.options.device, config)
     }
 
+    /// Warnings of the memory estimate made when the set was opened ([`check_memory`]: a CPU
+    /// estimate over the machine's memory).
+    pub fn memory_warnings(&self) -> &[String] {
+        &self.memory_warnings
+    }
+
     /// [`prompt_warnings`] for this set's model directory.
     pub fn prompt_warnings(&self, prompt: &str, config: &Config) -> Result<Vec<String>> {
         prompt_warnings(&self.dir, prompt, config)
@@ -165,16 +348,30 @@ impl ModelSet {
     pub fn open(model: &Path, config: &Config) -> Result<Self> {
         let dir = ModelDir::open(model)
             .with_context(|| format!("cannot open model directory {}", model.display()))?;
-        let options = session_options(config);
+        let [options, options2, text_options] = device_options(config)?;
+        let gpus = if [&options, &options2]
+            .iter()
+            .any(|o| matches!(o.device, Device::Cuda { .. }))
+        {
+            diffusion_onnx::probe::probe_driver().gpus
+        } else {
+            Vec::new()
+        };
+        let plan = memory_plan(&dir, &[options.clone(), options2.clone()], config, &gpus);
+        let memory_warnings = check_memory(&plan)?;
         let cache = EmbeddingCache::at_default().ok();
         let stage1 = OnnxDenoiser::open(&dir, Stage::One, &options).context("IF stage I")?;
         let stage2 = match dir.stage(Stage::Two) {
-            Some(_) => Some(OnnxDenoiser::open(&dir, Stage::Two, &options).context("IF stage II")?),
+            Some(_) => {
+                Some(OnnxDenoiser::open(&dir, Stage::Two, &options2).context("IF stage II")?)
+            }
             None => None,
         };
         Ok(Self {
             dir,
             options,
+            text_options,
+            memory_warnings,
             cache,
             stage1,
             stage2,
@@ -201,7 +398,7 @@ impl ModelSet {
             prompt,
             &config.guidance.negative_prompt,
             self.cache.as_ref(),
-            &self.options,
+            &self.text_options,
         )
         .context("prompt embeddings")
     }
@@ -267,6 +464,11 @@ impl ModelSet {
 
     /// Unreachable (no value exists).
     pub fn prompt_warnings(&self, _prompt: &str, _config: &Config) -> Result<Vec<String>> {
+        match *self {}
+    }
+
+    /// Unreachable (no value exists).
+    pub fn memory_warnings(&self) -> &[String] {
         match *self {}
     }
 
@@ -344,6 +546,68 @@ mod tests {
             "{w:?}"
         );
         assert!(w[1].starts_with("the negative prompt"), "{w:?}");
+    }
+
+    #[test]
+    fn a_gpu_too_small_for_both_real_size_stages_is_refused_before_loading() {
+        // IF's fp16 sizes: stage I 8.6 GB, stage II 2.5 GB (sparse files).
+        let tmp = fake_model(8_600_000_000, Some(2_500_000_000));
+        let dir = ModelDir::open(tmp.path()).expect("model");
+        let gpu = |ordinal, gib: u64| diffusion_onnx::probe::GpuInfo {
+            ordinal,
+            name: format!("GPU {ordinal} with {gib} GiB"),
+            memory_bytes: gib << 30,
+        };
+        let plan_for = |overrides: &[&str], gpus: &[diffusion_onnx::probe::GpuInfo]| {
+            let config = Config::default()
+                .with_overrides(overrides)
+                .expect("overrides");
+            let [o1, o2, _] = device_options(&config).expect("devices");
+            memory_plan(&dir, &[o1, o2], &config, gpus)
+        };
+        let both = [
+            "guidance.stage1_device=cuda:0",
+            "guidance.stage2_device=cuda:0",
+        ];
+        let small = [gpu(0, 24), gpu(1, 24)];
+        let plan = plan_for(&both, &small);
+        assert_eq!(plan.len(), 1, "{plan:?}");
+        let e = check_memory(&plan).expect_err("24 GiB cannot hold both stages at 8 views");
+        let msg = e.to_string();
+        assert!(
+            msg.contains("cuda:0")
+                && msg.contains("GPU 0 with 24 GiB")
+                && msg.contains("stage1")
+                && msg.contains("stage2")
+                && msg.contains("onnx_low_memory"),
+            "{msg}"
+        );
+        // The ways out the message names: an 80 GiB card, two cards, one sample per call.
+        assert!(check_memory(&plan_for(&both, &[gpu(0, 80)])).is_ok_and(|w| w.is_empty()));
+        let split = plan_for(
+            &[
+                "guidance.stage1_device=cuda:0",
+                "guidance.stage2_device=cuda:1",
+            ],
+            &small,
+        );
+        assert_eq!(split.len(), 2);
+        assert!(check_memory(&split).is_ok());
+        let low: Vec<&str> = both
+            .iter()
+            .copied()
+            .chain(["guidance.onnx_low_memory=true"])
+            .collect();
+        assert!(check_memory(&plan_for(&low, &small)).is_ok());
+        // A cap set in the configuration is what the check uses.
+        let capped: Vec<&str> = both
+            .iter()
+            .copied()
+            .chain(["guidance.cuda_memory_limit_gib=10"])
+            .collect();
+        let capped = plan_for(&capped, &[gpu(0, 80)]);
+        let msg = check_memory(&capped).expect_err("over the cap").to_string();
+        assert!(msg.contains("guidance.cuda_memory_limit_gib"), "{msg}");
     }
 
     /// A model directory whose stage files have the given sizes (sparse files: nothing is written).

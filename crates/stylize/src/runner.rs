@@ -968,6 +968,13 @@ fn execute_prepared<'g, T: Task<'g> + 'g>(
             already_complete: true,
         });
     }
+    if matches!(start, Start::Resume(_))
+        && let Ok(previous) = std::fs::read_to_string(dir.config())
+        && let Some(w) = config.guidance.device_change_note(&previous)
+    {
+        progress.warning(&format!("warning: {w}"));
+        prepared.warnings.push(w);
+    }
     let task = make_task_unless_stopped(&dir, &start, cancel, make_task, &mut inputs)?;
     for w in task.warnings() {
         progress.warning(&format!("warning: {w}"));

@@ -564,3 +564,37 @@ fn timing_refit_and_check() {
         );
     }
 }
+
+/// The shared-edge filter never claims "opposite sides" for a configuration on one side: exact
+/// folds (both opposite corners in the plane, same side — the filter must defer, and the fold is
+/// found) and near-folds, at scales 2^-60..2^60; and it does decide flat neighbours (opposite
+/// sides) in most cases, which is its point.
+#[test]
+fn shared_edge_filter_only_decides_opposite_sides() {
+    let mut rng = Rng::new(41);
+    let mut decided = 0usize;
+    let n = 20_000;
+    for k in 0..n {
+        let s = 2f64.powi((k % 121) as i32 - 60);
+        let t = [rng.unit(), rng.unit(), rng.unit()].map(|x| (x - 0.5) * s);
+        let at = |x: f64, y: f64, z: f64| [t[0] + x * s, t[1] + y * s, t[2] + z * s];
+        let (u, v) = (at(0.0, 0.0, 0.0), at(1.0, 0.0, 0.0));
+        let (x1, x2) = (rng.unit() * 2.0 - 0.5, rng.unit() * 2.0 - 0.5);
+        let (y1, y2) = (rng.unit() + 1e-3, rng.unit() + 1e-3);
+        let dz = if k % 2 == 0 {
+            0.0
+        } else {
+            (rng.unit() - 0.5) * 1e-9
+        };
+        // Same side (a fold when dz = 0): never "clearly opposite".
+        let (a, b) = (at(x1, y1, 0.0), at(x2, y2, dz));
+        assert!(!clearly_opposite_sides(u, v, a, b), "{k}: {a:?} {b:?}");
+        // Opposite sides (a flat or nearly flat neighbour).
+        let b = at(x2, -y2, dz);
+        if clearly_opposite_sides(u, v, a, b) {
+            decided += 1;
+            assert!(!edge_fold(u, v, a, b, &Tri::new([u, v, a])));
+        }
+    }
+    assert!(decided > n * 9 / 10, "{decided} of {n}");
+}

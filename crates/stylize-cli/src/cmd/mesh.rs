@@ -239,8 +239,9 @@ impl SelfIntersectionSection {
         if r.pairs.is_empty() {
             let _ = writeln!(
                 s,
-                "\nself-intersections: none ({} faces checked exactly)",
-                r.num_faces
+                "\nself-intersections: none ({} face{} checked exactly)",
+                r.num_faces,
+                if r.num_faces == 1 { "" } else { "s" }
             );
         } else {
             let _ = writeln!(

@@ -4,6 +4,7 @@ pub mod apply;
 pub mod apply_grid;
 pub mod batch;
 pub mod debug_guidance;
+pub mod doctor;
 pub mod embed;
 pub mod eval;
 pub mod mesh;

@@ -198,6 +198,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     if let Some(w) = set.cpu_time_warning(&config) {
                         errln!("warning: {w}");
                     }
+                    for w in set.memory_warnings() {
+                        errln!("warning: {w}");
+                    }
                     let warnings = set.prompt_warnings(prompt, &config)?;
                     Ok(PromptTask {
                         prompt: kind.clone(),
