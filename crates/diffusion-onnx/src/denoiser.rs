@@ -302,16 +302,7 @@ impl OnnxDenoiser {
             float_output(value, dtype, &format!("the {label} output"))?
         };
         self.bound = Some(b);
-        let [m, _, h, w] = shape;
-        if out_shape != [m, self.spec.out_channels, h, w] {
-            return Err(OnnxError::Shape {
-                model: label,
-                message: format!(
-                    "output shape {out_shape:?}, expected [{m}, {}, {h}, {w}]",
-                    self.spec.out_channels
-                ),
-            });
-        }
+        check_output_shape(label, &out_shape, shape, self.spec.out_channels)?;
         Ok(data)
     }
 
@@ -360,15 +351,7 @@ impl OnnxDenoiser {
                 message: format!("output `{}` missing from the results", self.spec.output),
             })?;
         let (out_shape, data) = float_output(value, dtype, &format!("the {label} output"))?;
-        if out_shape != [m, self.spec.out_channels, h, w] {
-            return Err(OnnxError::Shape {
-                model: label,
-                message: format!(
-                    "output shape {out_shape:?}, expected [{m}, {}, {h}, {w}]",
-                    self.spec.out_channels
-                ),
-            });
-        }
+        check_output_shape(label, &out_shape, shape, self.spec.out_channels)?;
         Ok(data)
     }
 }
@@ -505,4 +488,23 @@ impl csd::Denoiser for OnnxDenoiser {
     ) -> Result<csd::Tensor, csd::GuidanceError> {
         Ok(self.run(sample, timesteps, embeddings, class_labels)?)
     }
+}
+
+/// The output of a UNet call on input `shape = [m, C_in, H, W]` must be `[m, out_channels, H, W]`.
+fn check_output_shape(
+    label: String,
+    out_shape: &[usize],
+    shape: [usize; 4],
+    out_channels: usize,
+) -> Result<(), OnnxError> {
+    let [m, _, h, w] = shape;
+    if out_shape != [m, out_channels, h, w] {
+        return Err(OnnxError::Shape {
+            model: label,
+            message: format!(
+                "output shape {out_shape:?}, expected [{m}, {out_channels}, {h}, {w}]"
+            ),
+        });
+    }
+    Ok(())
 }
