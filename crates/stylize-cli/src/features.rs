@@ -24,9 +24,13 @@ fn names_with(extra: Option<&str>) -> Vec<&'static str> {
         .collect()
 }
 
-/// This binary's features for `stylize --version`: `text, gpu, view`, or `none`.
+/// This binary's features for `stylize --version`: `text, gpu, view`, or `none`; a build with
+/// the non-default `cuda` feature (ONNX Runtime's CUDA provider) adds `cuda`.
 pub fn summary() -> String {
-    let names = names_with(None);
+    let mut names = names_with(None);
+    if cfg!(feature = "cuda") {
+        names.push("cuda");
+    }
     if names.is_empty() {
         "none".to_owned()
     } else {
