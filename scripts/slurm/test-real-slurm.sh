@@ -188,6 +188,13 @@ manifest tl 2 "$long_iterations" >/dev/null
 manifest tlref 2 "$long_iterations" >/dev/null
 "$stylize" batch "$work/data/tlref.jsonl" --quiet >"$work/logs/tlref.out" 2>&1 &
 tlref_pid=$!
+# The overlapping-arrays trial needs rows long enough (about 3 s each) that two arrays started
+# together must meet on a row, whatever the machine's speed; their reference, meanwhile.
+ov_iterations=$(( 3000 / per_iteration_ms + 1 ))
+manifest ov "$rows" "$ov_iterations" >/dev/null
+manifest ovref "$rows" "$ov_iterations" >/dev/null
+"$stylize" batch "$work/data/ovref.jsonl" --quiet >"$work/logs/ovref.out" 2>&1 &
+ovref_pid=$!
 
 # Checks that every row of PREFIX is complete, exactly once, and equal to the reference.
 rows_equal_reference() { # rows_equal_reference PREFIX [REFERENCE-PREFIX [ROWS]]
@@ -298,11 +305,15 @@ why=$(rows_equal_reference ps); ok=$?
 trial "--array=1 then --array=0" "task 1 runs shard 1/2 only (rows 1 3)" "$ok" "${why:-task 1 ran rows $done_rows; then all 4 identical}"
 
 # --- 6. two overlapping arrays ---------------------------------------------------------------------
-# One task each (SHARDS=1: every row), so both run at once on the node's two CPUs.
-j=$(SHARDS=1 submit ov --array=0) || fail "sbatch"
-j2=$(SHARDS=1 submit ov --array=0) || fail "sbatch"
+# One task each (SHARDS=1: every row), so both run at once on the node's two CPUs: submitted
+# held and released together, so the scheduler starts them in one pass (submitted one after the
+# other, the first could finish its short rows before the second started: then they never meet).
+j=$(SHARDS=1 submit ov --array=0 --hold) || fail "sbatch"
+j2=$(SHARDS=1 submit ov --array=0 --hold) || fail "sbatch"
+scontrol release "$j,$j2" || fail "scontrol release $j,$j2"
 wait_gone "$j" 240 && wait_gone "$j2" 240 || fail "overlapping arrays did not finish"
-why=$(rows_equal_reference ov); ok=$?
+wait "$ovref_pid" || fail "sequential reference of the overlap rows: $(cat "$work/logs/ovref.out")"
+why=$(rows_equal_reference ov ovref); ok=$?
 inuse=$(cat "$work"/logs/"$j"_*.out "$work"/logs/"$j2"_*.out | grep -c "IN USE elsewhere")
 [ "$ok" -eq 0 ] && [ "$inuse" -lt 1 ] && { ok=1; why="the two arrays never met on a row (nothing to check)"; }
 trial "two overlapping arrays" "each row done once; the other leaves it (75)" "$ok" "${why:-4 rows identical}; $inuse row refusals logged as in use; $(states "$j") / $(states "$j2")"
