@@ -6,21 +6,11 @@
 #![allow(clippy::unwrap_used)]
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
+
+mod common;
+use common::stylize_text as stylize;
 
 use stylize::saved::SavedDeformation;
-
-fn stylize(args: &[&str]) -> (bool, String, String) {
-    let o = Command::new(env!("CARGO_BIN_EXE_stylize"))
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        o.status.success(),
-        String::from_utf8_lossy(&o.stdout).into_owned(),
-        String::from_utf8_lossy(&o.stderr).into_owned(),
-    )
-}
 
 /// Runs max-safe, then applies at the answer and at 1 % above; returns (λ, max-safe's stderr).
 fn max_safe_then_check(saved: &Path, upper: f64, extra: &[&str], dir: &Path) -> (f64, String) {

@@ -27,3 +27,13 @@ pub fn stylize(args: &[&str]) -> Output {
 pub fn stderr(out: &Output) -> String {
     String::from_utf8_lossy(&out.stderr).into_owned()
 }
+
+/// Runs `stylize` with `args`: whether it succeeded, its stdout and its stderr as text.
+pub fn stylize_text(args: &[&str]) -> (bool, String, String) {
+    let o = stylize(args);
+    (
+        o.status.success(),
+        String::from_utf8_lossy(&o.stdout).into_owned(),
+        stderr(&o),
+    )
+}
