@@ -26,13 +26,26 @@
 //!    vertex onto the input surface, a feature vertex onto the input's feature lines — both by the
 //!    closest point through a [`Bvh`] over a frozen copy of the input.
 //!
+//! 5. after the last round, a **clean-up** (`Remesher::clean_up`): the shortest edge of every face
+//!    with a corner under 10° is collapsed when it is shorter than `4/5·L` and the collapse rules
+//!    allow it, and every non-feature pair with a corner under 20° is flipped when that raises its
+//!    minimum angle without folding or bending it beyond the feature angle (the last relaxation
+//!    can leave such slivers where a vertex was pulled against a feature line).
+//!
 //! # Features and boundaries
 //! An input edge is a *feature* when its dihedral angle (the angle between its two faces' normals)
-//! exceeds [`RemeshOptions::feature_angle_deg`], and every boundary edge is one too. A vertex with
+//! exceeds [`RemeshOptions::feature_angle_deg`], and every boundary edge is one too — except crease
+//! chains shorter than one target length `L` that end in the open (at a vertex with one feature
+//! edge) or close on themselves: at the target length those are noise (a scan's ridge of a few tiny
+//! faces), and kept they would lock their ends as corners with a sliver between
+//! (`prune_short_feature_chains`). Feature lines and corners closer than `0.2·L` merge: an edge that
+//! short may collapse a corner into a corner, or a feature vertex into a feature vertex or corner,
+//! across lines. A vertex with
 //! exactly two feature edges slides along its feature line; a vertex with one or more than two,
 //! or where its feature line turns by more than the feature angle (the corners of a flat
-//! square's boundary), is a *corner*: it never moves and is never removed. Feature edges are split (both halves stay
-//! features) and may be collapsed along the line, never flipped or collapsed across. So boundary
+//! square's boundary), is a *corner*: it never moves and is removed only by merging into another corner closer than `0.2·L`. Feature edges are split (both halves stay
+//! features) and may be collapsed along the line, never flipped, and collapsed across only to merge
+//! lines closer than `0.2·L` (never moving a boundary vertex). So boundary
 //! edges are split, collapsed only along the boundary and never flipped; boundary vertices slide
 //! along the boundary. Collapses keep the topology (link condition), so the number of components,
 //! the genus (Euler characteristic) and the number of boundary loops are preserved, with one
@@ -364,6 +377,9 @@ pub fn remesh(
             r.relax_and_project(&surface);
         }
     }
+    if options.iterations > 0 {
+        r.clean_up();
+    }
     let (positions, faces) = r.mesh.compact();
     let source_faces = faces
         .iter()
@@ -394,6 +410,10 @@ struct Remesher<'a> {
     lines: Bvh,
     lo: f64,
     hi: f64,
+    /// Edges shorter than this may merge two feature lines or two corners.
+    snap: f64,
+    /// The cosine of the feature angle.
+    cos_feature: f64,
     max_faces: usize,
     buf: Vec<u32>,
     buf2: Vec<u32>,
@@ -425,18 +445,24 @@ impl<'a> Remesher<'a> {
                 }
             };
             mesh.feature[e] = is_feature;
-            if is_feature {
+        }
+        let l = o.target_edge_length;
+        prune_short_feature_chains(mesh, MIN_FEATURE_CHAIN * l);
+        for e in 0..mesh.num_edges() {
+            if mesh.feature[e] {
+                let h = 2 * e as u32;
                 let b = mesh.to(h);
                 segments.push([mesh.from(h), b, b]);
             }
         }
         let lines = Bvh::new(positions, &segments)?;
-        let l = o.target_edge_length;
         let r = Remesher {
             mesh,
             lines,
             lo: 0.8 * l,
             hi: 4.0 / 3.0 * l,
+            snap: FEATURE_SNAP * l,
+            cos_feature: cos_limit,
             max_faces: o.max_faces,
             buf: Vec::new(),
             buf2: Vec::new(),
@@ -556,17 +582,24 @@ impl<'a> Remesher<'a> {
                 continue;
             };
             let v1 = self.mesh.to(g);
-            let mut scratch = std::mem::take(&mut self.buf);
-            self.mesh.collapse(g, &mut scratch);
+            self.collapse_and_recount(g, &mut counts);
             self.mesh.pos[v1 as usize] = target;
-            // Edges merged at the opposite corners may have become features: recount v1's ring.
-            self.mesh.outgoing(v1, &mut scratch);
-            let ring: Vec<u32> = scratch.iter().map(|&k| self.mesh.to(k)).collect();
-            self.buf = scratch;
-            counts[v1 as usize] = self.count_at(v1);
-            for w in ring {
-                counts[w as usize] = self.count_at(w);
-            }
+        }
+    }
+
+    /// Collapses half-edge `g` (removing `from(g)`; `to(g)` keeps its position) and recounts the
+    /// feature edges around the kept vertex: edges merged at the opposite corners may have become
+    /// features.
+    fn collapse_and_recount(&mut self, g: u32, counts: &mut [u8]) {
+        let v1 = self.mesh.to(g);
+        let mut scratch = std::mem::take(&mut self.buf);
+        self.mesh.collapse(g, &mut scratch);
+        self.mesh.outgoing(v1, &mut scratch);
+        let ring: Vec<u32> = scratch.iter().map(|&k| self.mesh.to(k)).collect();
+        self.buf = scratch;
+        counts[v1 as usize] = self.count_at(v1);
+        for w in ring {
+            counts[w as usize] = self.count_at(w);
         }
     }
 
@@ -588,11 +621,18 @@ impl<'a> Remesher<'a> {
         let o = opp(h);
         let (v0, v1) = (m.from(h), m.to(h));
         let e = (h / 2) as usize;
-        if m.locked[v0 as usize] {
+        // Feature lines closer than `snap` merge: a corner may collapse into a corner, a feature
+        // vertex into a feature vertex or corner, along any edge that short (never a boundary
+        // vertex: the boundary stays where it is).
+        let snap = m.edge_length(e) < self.snap && !m.is_boundary_vertex(v0);
+        if m.locked[v0 as usize] && !(snap && m.locked[v1 as usize]) {
             return false;
         }
         let feature_edge = m.feature[e];
-        if counts[v0 as usize] > 0 && !feature_edge {
+        if counts[v0 as usize] > 0
+            && !feature_edge
+            && !(snap && (counts[v1 as usize] > 0 || m.locked[v1 as usize]))
+        {
             return false; // a feature vertex moves only along its feature line
         }
         let boundary_edge = m.is_boundary_edge(e);
@@ -706,6 +746,121 @@ impl<'a> Remesher<'a> {
         }
     }
 
+    /// The final clean-up after the last relaxation (which can leave a sliver where a free vertex
+    /// was pulled against a feature line): up to [`CLEANUP_PASSES`] passes of
+    /// - collapsing the shortest edge of every face with a corner under [`NEEDLE_ANGLE`] when it
+    ///   is shorter than `4/5·L`, into one of its ends (so every vertex stays on the input), under
+    ///   the collapse rules of the rounds;
+    /// - flipping every interior non-feature edge whose pair has a corner under
+    ///   [`CLEANUP_FLIP_ANGLE`] when that raises the pair's minimum angle, without folding it or
+    ///   bending it by more than the feature angle.
+    fn clean_up(&mut self) {
+        for _ in 0..CLEANUP_PASSES {
+            let mut changed = false;
+            let mut counts = self.feature_counts();
+            for f in 0..self.mesh.num_face_slots() {
+                let m = &*self.mesh;
+                if !m.face_live(f) {
+                    continue;
+                }
+                let vs = m.face_vertices(f as u32);
+                let p = vs.map(|v| m.pos[v as usize]);
+                if min_angle(p[0], p[1], p[2]) >= NEEDLE_ANGLE {
+                    continue;
+                }
+                // The shortest edge's half-edge inside the face.
+                let mut h = m.face_halfedge(f as u32);
+                let mut best = (f64::INFINITY, h);
+                for _ in 0..3 {
+                    let len = m.edge_length((h / 2) as usize);
+                    if len < best.0 {
+                        best = (len, h);
+                    }
+                    h = m.next(h);
+                }
+                let (len, h) = best;
+                if len >= self.lo {
+                    continue;
+                }
+                let (a, b) = (m.from(h), m.to(h));
+                let (pa, pb) = (m.pos[a as usize], m.pos[b as usize]);
+                let chosen = if self.collapse_ok(h, &counts, pb) {
+                    Some(h)
+                } else if self.collapse_ok(opp(h), &counts, pa) {
+                    Some(opp(h))
+                } else {
+                    None
+                };
+                let Some(g) = chosen else {
+                    continue;
+                };
+                self.collapse_and_recount(g, &mut counts);
+                changed = true;
+            }
+            changed |= self.flip_for_angles();
+            if !changed {
+                break;
+            }
+        }
+    }
+
+    /// Flips every interior non-feature edge whose pair has a corner under [`CLEANUP_FLIP_ANGLE`]
+    /// when that raises the pair's minimum angle and keeps the pair unfolded and within the
+    /// feature angle of flat. Whether any edge was flipped.
+    fn flip_for_angles(&mut self) -> bool {
+        let mut ring = Vec::new();
+        let mut any = false;
+        for e in 0..self.mesh.num_edges() {
+            let m = &*self.mesh;
+            if !m.edge_live(e) || m.feature[e] || m.is_boundary_edge(e) {
+                continue;
+            }
+            let h = 2 * e as u32;
+            let o = opp(h);
+            let (a, b) = (m.from(h), m.to(h));
+            let c = m.to(m.next(h));
+            let d = m.to(m.next(o));
+            if c == d || m.valence(a) <= 3 || m.valence(b) <= 3 {
+                continue;
+            }
+            let (pa, pb, pc, pd) = (
+                m.pos[a as usize],
+                m.pos[b as usize],
+                m.pos[c as usize],
+                m.pos[d as usize],
+            );
+            let old_min = min_angle(pa, pb, pc).min(min_angle(pb, pa, pd));
+            if old_min >= CLEANUP_FLIP_ANGLE {
+                continue;
+            }
+            let new_min = min_angle(pa, pd, pc).min(min_angle(pd, pb, pc));
+            if new_min <= old_min {
+                continue;
+            }
+            m.outgoing(c, &mut ring);
+            if ring.iter().any(|&g| m.to(g) == d) {
+                continue;
+            }
+            let n_old = {
+                let n1 = cross(sub(pb, pa), sub(pc, pa));
+                let n2 = cross(sub(pa, pb), sub(pd, pb));
+                [n1[0] + n2[0], n1[1] + n2[1], n1[2] + n2[2]]
+            };
+            let (Some(n1), Some(n2)) = (
+                normalized(cross(sub(pd, pa), sub(pc, pa))),
+                normalized(cross(sub(pb, pd), sub(pc, pd))),
+            ) else {
+                continue;
+            };
+            if dot(n1, n2) < self.cos_feature || dot(n1, n_old) <= 0.0 || dot(n2, n_old) <= 0.0 {
+                continue;
+            }
+            self.mesh.flip(e);
+            any = true;
+        }
+        any
+    }
+
     fn relax_and_project(&mut self, surface: &Bvh) {
         let m = &*self.mesh;
         let nv = m.num_vertices();
@@ -811,6 +966,102 @@ impl<'a> Remesher<'a> {
                 c
             };
             self.mesh.pos[vi] = q.map_or(p, |c| c.point);
+        }
+    }
+}
+
+/// Clean-up passes after the last round (`Remesher::clean_up`).
+const CLEANUP_PASSES: usize = 5;
+
+/// The clean-up flips a pair with a corner under this whenever that raises its minimum angle.
+const CLEANUP_FLIP_ANGLE: f64 = 20.0 * std::f64::consts::PI / 180.0;
+
+/// Feature lines and corners closer than this many target lengths merge (collapse into each
+/// other): at the target length they are one crease (or noise), and kept apart they leave a
+/// sliver between them.
+const FEATURE_SNAP: f64 = 0.2;
+
+/// A dangling feature chain (from a vertex with one feature edge to the next vertex without two)
+/// or a closed feature loop shorter than this many target lengths is not a feature.
+const MIN_FEATURE_CHAIN: f64 = 1.0;
+
+/// Unmarks the crease (non-boundary) feature chains shorter than `min_len` that end in the open
+/// (at a vertex with one feature edge) or close on themselves: at the target length they are
+/// noise (a scan's ridge of a few tiny faces), and kept they would lock their ends as corners with
+/// a sliver between them. Chains between two junctions stay, whatever their length. Repeated until
+/// nothing changes (pruning a tail can leave a junction with two feature edges, joining two chains,
+/// or with one, making a new dangling chain). Deterministic: vertices in index order.
+fn prune_short_feature_chains(m: &mut HalfEdgeMesh, min_len: f64) {
+    let nv = m.num_vertices();
+    let mut ring = Vec::new();
+    let feature_edges_at = |m: &HalfEdgeMesh, v: u32, ring: &mut Vec<u32>| -> Vec<u32> {
+        m.outgoing(v, ring);
+        ring.iter()
+            .copied()
+            .filter(|&g| m.feature[(g / 2) as usize])
+            .collect()
+    };
+    let mut count = vec![0u32; nv];
+    for e in 0..m.num_edges() {
+        if m.feature[e] {
+            let h = 2 * e as u32;
+            count[m.from(h) as usize] += 1;
+            count[m.to(h) as usize] += 1;
+        }
+    }
+    loop {
+        let mut changed = false;
+        let mut seen = vec![false; nv];
+        for start in 0..nv as u32 {
+            let c = count[start as usize];
+            if !(c == 1 || (c == 2 && !seen[start as usize])) {
+                continue;
+            }
+            // Walk from `start` along its (first) feature edge through vertices with two.
+            let mut chain: Vec<u32> = Vec::new();
+            let mut length = 0.0;
+            let mut cur = start;
+            let mut from_edge = u32::MAX;
+            let mut closed = false;
+            let mut boundary = false;
+            loop {
+                seen[cur as usize] = true;
+                let Some(&g) = feature_edges_at(m, cur, &mut ring)
+                    .iter()
+                    .find(|&&g| g / 2 != from_edge)
+                else {
+                    break;
+                };
+                let e = g / 2;
+                chain.push(e);
+                boundary |= m.is_boundary_edge(e as usize);
+                length += m.edge_length(e as usize);
+                from_edge = e;
+                cur = m.to(g);
+                if cur == start {
+                    closed = true;
+                    break;
+                }
+                if count[cur as usize] != 2 || length >= min_len || boundary {
+                    break;
+                }
+            }
+            // A count-2 start is only pruned as a closed loop (its open chains are walked from
+            // their ends).
+            let dangling = c == 1;
+            if boundary || length >= min_len || !(dangling || closed) {
+                continue;
+            }
+            for &e in &chain {
+                m.feature[e as usize] = false;
+                let h = 2 * e;
+                count[m.from(h) as usize] -= 1;
+                count[m.to(h) as usize] -= 1;
+            }
+            changed = true;
+        }
+        if !changed {
+            break;
         }
     }
 }

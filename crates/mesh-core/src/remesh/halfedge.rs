@@ -235,6 +235,11 @@ impl HalfEdgeMesh {
         [self.from(h), self.to(h), self.to(h1)]
     }
 
+    /// A half-edge of live face `f` (its first, from the first corner of [`Self::face_vertices`]).
+    pub fn face_halfedge(&self, f: u32) -> u32 {
+        self.fh[f as usize]
+    }
+
     pub fn face_live(&self, f: usize) -> bool {
         self.fh[f] != NONE
     }
