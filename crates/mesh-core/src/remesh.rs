@@ -35,10 +35,9 @@
 //! # Features and boundaries
 //! An input edge is a *feature* when its dihedral angle (the angle between its two faces' normals)
 //! exceeds [`RemeshOptions::feature_angle_deg`], and every boundary edge is one too — except crease
-//! chains shorter than one target length `L` that end in the open (at a vertex with one feature
-//! edge) or close on themselves: at the target length those are noise (a scan's ridge of a few tiny
-//! faces), and kept they would lock their ends as corners with a sliver between
-//! (`prune_short_feature_chains`). Feature lines and corners closer than `0.2·L` merge: an edge that
+//! chains that are noise at the target length `L`: isolated open chains and closed loops shorter
+//! than `L`, and tails (from an open end to a junction) shorter than `L/2`; kept, they would lock
+//! their ends as corners with a sliver between (`prune_short_feature_chains`). Feature lines and corners closer than `0.2·L` merge: an edge that
 //! short may collapse a corner into a corner, or a feature vertex into a feature vertex or corner,
 //! across lines. A vertex with
 //! exactly two feature edges slides along its feature line; a vertex with one or more than two,
@@ -981,16 +980,24 @@ const CLEANUP_FLIP_ANGLE: f64 = 20.0 * std::f64::consts::PI / 180.0;
 /// sliver between them.
 const FEATURE_SNAP: f64 = 0.2;
 
-/// A dangling feature chain (from a vertex with one feature edge to the next vertex without two)
-/// or a closed feature loop shorter than this many target lengths is not a feature.
+/// An isolated open feature chain (both ends with one feature edge) or a closed feature loop
+/// shorter than this many target lengths is not a feature.
 const MIN_FEATURE_CHAIN: f64 = 1.0;
 
-/// Unmarks the crease (non-boundary) feature chains shorter than `min_len` that end in the open
-/// (at a vertex with one feature edge) or close on themselves: at the target length they are
-/// noise (a scan's ridge of a few tiny faces), and kept they would lock their ends as corners with
-/// a sliver between them. Chains between two junctions stay, whatever their length. Repeated until
-/// nothing changes (pruning a tail can leave a junction with two feature edges, joining two chains,
-/// or with one, making a new dangling chain). Deterministic: vertices in index order.
+/// A tail (a chain from an open end to a junction of three or more feature edges) shorter than this
+/// share of [`MIN_FEATURE_CHAIN`] is not a feature. Shorter than for isolated chains: the ridges
+/// meeting at a sharp tip (a claw, an ear) are such tails, and dropping them rounds the tip (on
+/// `armadillo.off` at 1.5 %, dropping tails up to `L` doubled the Hausdorff distance).
+const TAIL_FRACTION: f64 = 0.5;
+
+/// Unmarks the crease (non-boundary) feature chains that are noise at the target length: isolated
+/// open chains and closed loops shorter than `min_len`, and tails shorter than
+/// `TAIL_FRACTION·min_len` (a chain runs through vertices with two feature edges; its ends are
+/// vertices with one, an open end, or with three or more, a junction). Kept, they would lock their
+/// ends as corners with a sliver between them (a scan's ridge of a few tiny faces). Chains between
+/// two junctions stay, whatever their length. Repeated until nothing changes (dropping a tail can
+/// leave a junction with two feature edges, joining two chains, or with one, making a new open
+/// end). Deterministic: vertices in index order.
 fn prune_short_feature_chains(m: &mut HalfEdgeMesh, min_len: f64) {
     let nv = m.num_vertices();
     let mut ring = Vec::new();
@@ -1048,8 +1055,10 @@ fn prune_short_feature_chains(m: &mut HalfEdgeMesh, min_len: f64) {
             }
             // A count-2 start is only pruned as a closed loop (its open chains are walked from
             // their ends).
-            let dangling = c == 1;
-            if boundary || length >= min_len || !(dangling || closed) {
+            let isolated = c == 1 && count[cur as usize] == 1 && length < min_len;
+            let tail = c == 1 && count[cur as usize] >= 3 && length < TAIL_FRACTION * min_len;
+            let small_loop = closed && length < min_len;
+            if boundary || !(isolated || tail || small_loop) {
                 continue;
             }
             for &e in &chain {
