@@ -48,6 +48,7 @@ MESHES = [
     "fixtures/meshes/external/armadillo.off",
     "fixtures/meshes/external/bunny00.off",
     "fixtures/meshes/external/refined_elephant.off",
+    "fixtures/meshes/external/bunny00_x4.off",
 ]
 
 

@@ -65,6 +65,15 @@ if [[ $need_cgal == 1 ]]; then
   fi
 fi
 
+# bunny00_x4.off: bunny00.off (a scan, 75,408 faces) midpoint-subdivided once (1:4, the same
+# surface) to 301,632 faces — the remeshing benchmark's ≥ 200k-face input; CGAL's data has no mesh
+# that large (its dino.off is 302,502 bytes, 7,828 faces).
+if [[ -s "$DEST/bunny00.off" && ! -s "$DEST/bunny00_x4.off" ]]; then
+  awk -f "$ROOT/scripts/subdivide-off.awk" "$DEST/bunny00.off" > "$DEST/bunny00_x4.off.part"
+  mv "$DEST/bunny00_x4.off.part" "$DEST/bunny00_x4.off"
+  echo "  bunny00_x4.off (bunny00.off subdivided 1:4)"
+fi
+
 # bone.ply from the pymeshlab wheel (also committed; fetched here for checks and if removed).
 if [[ ! -s "$DEST/bone.ply" ]]; then
   if have pip && have unzip; then
