@@ -1,10 +1,11 @@
 //! The artifact measure of issue 40's end-to-end check (docs/remeshing.md, "End to end"): for
 //! each run directory given, how much the stylization distorted the triangulation it was given.
 //!
-//! - **stretched edges**: the share of edges whose length in the result (`mesh.obj`) is more than
-//!   2× or less than ½× their length in the rest mesh (`deformation.npz` `verts`: the source as
-//!   optimized, remeshed or not). The cube style flattens and straightens, so an even mesh keeps
-//!   almost every edge within 2×; spikes and crumples are edges pulled far out of proportion.
+//! - **stretched edges** (`stylize::remeshing::stretched_edges`): the share of edges whose length in
+//!   the result (`mesh.obj`, mapped back to the normalized frame) is more than 2× or less than ½×
+//!   their length in the rest mesh (`deformation.npz` `verts`: the source as optimized, remeshed or
+//!   not). The cube style flattens and straightens, so an even mesh keeps almost every edge within
+//!   2×; spikes and crumples are edges pulled far out of proportion.
 //! - **new self-intersections**: intersecting face pairs the result has and its source has not
 //!   (`mesh_core::intersect`, exact predicates).
 //!
@@ -21,34 +22,23 @@ fn main() -> anyhow::Result<()> {
     println!("|---|---:|---:|---:|---:|---|---:|");
     for dir in dirs {
         let dir = std::path::PathBuf::from(dir);
-        let saved = stylize::saved::SavedDeformation::read(dir.join("deformation.npz"))
-            .with_context(|| format!("{}", dir.display()))?;
-        let source: Vec<[f64; 3]> = saved.verts.iter().map(|p| p.map(f64::from)).collect();
-        let result = mesh_core::io::read_mesh(dir.join("mesh.obj"))?;
+        // Both in the normalized frame (mesh.obj is written in the input's frame by default).
+        let (source, result) =
+            stylize::eval::load_run_pair(&dir).with_context(|| format!("{}", dir.display()))?;
         anyhow::ensure!(
-            result.faces == saved.faces,
+            result.faces == source.faces,
             "{}: mesh.obj is not the deformation of deformation.npz's faces",
             dir.display()
         );
-        let mut edges: Vec<[u32; 2]> = saved
-            .faces
-            .iter()
-            .flat_map(|f| [[f[0], f[1]], [f[1], f[2]], [f[2], f[0]]])
-            .map(|[a, b]| [a.min(b), a.max(b)])
-            .collect();
-        edges.sort_unstable();
-        edges.dedup();
-        let len = |p: &[[f64; 3]], [a, b]: [u32; 2]| {
-            mesh_core::geometry::norm(mesh_core::geometry::sub(p[a as usize], p[b as usize]))
-        };
-        let (mut distorted, mut worst) = (0usize, 1.0f64);
-        for &e in &edges {
-            let r = len(&result.positions, e) / len(&source, e);
-            let r = if r < 1.0 { 1.0 / r } else { r };
-            worst = worst.max(r);
-            distorted += usize::from(r > 2.0);
-        }
-        let si_source = mesh_core::intersect::self_intersections(&source, &saved.faces)?;
+        let stretch = stylize::remeshing::stretched_edges(
+            &source.positions,
+            &result.positions,
+            &source.faces,
+        )?;
+        let (distorted, worst, edges) = (stretch.stretched, stretch.worst_ratio, stretch.edges);
+        let faces = &source.faces;
+        let source = &source.positions;
+        let si_source = mesh_core::intersect::self_intersections(source, faces)?;
         let si_result = mesh_core::intersect::self_intersections(&result.positions, &result.faces)?;
         let new = mesh_core::intersect::new_pairs(&si_source, &si_result)?;
         let mut involved: Vec<u32> = new.iter().flat_map(|&(a, b)| [a, b]).collect();
@@ -58,13 +48,13 @@ fn main() -> anyhow::Result<()> {
             "| {} | {} | {} | {:.2} % ({distorted} of {}) | {worst:.1}× | {} → {} ({}) | {:.2} % ({}) |",
             dir.display(),
             source.len(),
-            saved.faces.len(),
-            100.0 * distorted as f64 / edges.len() as f64,
-            edges.len(),
+            faces.len(),
+            100.0 * stretch.share(),
+            edges,
             si_source.pairs.len(),
             si_result.pairs.len(),
             new.len(),
-            100.0 * involved.len() as f64 / saved.faces.len() as f64,
+            100.0 * involved.len() as f64 / faces.len() as f64,
             involved.len()
         );
     }

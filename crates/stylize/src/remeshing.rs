@@ -305,6 +305,90 @@ impl RemeshReport {
     }
 }
 
+/// The artifact measure of issue 40's end-to-end check (`docs/remeshing.md`, "End to end"): how
+/// far a stylization pulled the triangulation it was given out of proportion.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StretchedEdges {
+    /// Distinct edges of the faces.
+    pub edges: usize,
+    /// Edges whose length in the result is more than [`STRETCH_LIMIT`]× or less than
+    /// 1/[`STRETCH_LIMIT`]× their length in the rest mesh (a zero-length rest edge that got a
+    /// length counts as stretched).
+    pub stretched: usize,
+    /// The largest ratio `max(r, 1/r)` over the edges, `r` = result length / rest length (1 when
+    /// there is no edge).
+    pub worst_ratio: f64,
+}
+
+impl StretchedEdges {
+    /// `stretched / edges` (0 without edges).
+    pub fn share(&self) -> f64 {
+        if self.edges == 0 {
+            0.0
+        } else {
+            self.stretched as f64 / self.edges as f64
+        }
+    }
+}
+
+/// An edge stretched or shrunk past this factor is an artifact ([`stretched_edges`]): the cube
+/// style flattens and straightens, which keeps an even mesh's edges within it, while spikes and
+/// crumples pull edges far past it.
+pub const STRETCH_LIMIT: f64 = 2.0;
+
+/// [`StretchedEdges`] of the deformation `rest → result` of `faces` (both in the same frame, e.g.
+/// from [`crate::eval::load_run_pair`]: `deformation.npz`'s `verts` and `mesh.obj`).
+pub fn stretched_edges(
+    rest: &[[f64; 3]],
+    result: &[[f64; 3]],
+    faces: &[[u32; 3]],
+) -> Result<StretchedEdges> {
+    let n = rest.len();
+    if result.len() != n {
+        return Err(Error::Invalid(format!(
+            "the result has {} vertices, the rest mesh {n}",
+            result.len()
+        )));
+    }
+    if let Some(f) = faces.iter().find(|f| f.iter().any(|&v| v as usize >= n)) {
+        return Err(Error::Invalid(format!(
+            "face {f:?} names a vertex beyond the {n} of the mesh"
+        )));
+    }
+    let mut edges: Vec<[u32; 2]> = faces
+        .iter()
+        .flat_map(|f| [[f[0], f[1]], [f[1], f[2]], [f[2], f[0]]])
+        .map(|[a, b]| [a.min(b), a.max(b)])
+        .filter(|[a, b]| a != b)
+        .collect();
+    edges.sort_unstable();
+    edges.dedup();
+    let len = |p: &[[f64; 3]], [a, b]: [u32; 2]| {
+        mesh_core::geometry::norm(mesh_core::geometry::sub(p[a as usize], p[b as usize]))
+    };
+    let (mut stretched, mut worst) = (0usize, 1.0f64);
+    for &e in &edges {
+        let (l0, l1) = (len(rest, e), len(result, e));
+        let r = if l0 == l1 {
+            1.0
+        } else if l0 == 0.0 || l1 == 0.0 {
+            f64::INFINITY
+        } else {
+            (l1 / l0).max(l0 / l1)
+        };
+        // NaN (a non-finite coordinate) counts as stretched too.
+        if r > STRETCH_LIMIT || r.is_nan() {
+            stretched += 1;
+        }
+        worst = worst.max(if r.is_nan() { f64::INFINITY } else { r });
+    }
+    Ok(StretchedEdges {
+        edges: edges.len(),
+        stretched,
+        worst_ratio: worst,
+    })
+}
+
 fn remesh_error(e: mesh_core::remesh::RemeshError) -> Error {
     Error::Invalid(format!(
         "cannot remesh the input: {e} (`--remesh off` keeps it as it is)"
@@ -457,6 +541,34 @@ mod tests {
             share_valence_6: 0.5,
             diagonal: 10.0,
         }
+    }
+
+    #[test]
+    fn stretched_edges_counts_ratios_past_two_either_way() {
+        // Two triangles sharing edge (1, 2): five edges.
+        let rest = [
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [1.0, 1.0, 0.0],
+        ];
+        let faces = [[0, 1, 2], [1, 3, 2]];
+        let same = stretched_edges(&rest, &rest, &faces).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!((same.edges, same.stretched, same.worst_ratio), (5, 0, 1.0));
+        // Vertex 3 pulled out to (4, 4, 0): edges (1, 3) and (2, 3) go from 1 to 5 (5×); scaling
+        // everything by 1.9 stretches nothing, by 0.4 everything (2.5× shorter).
+        let mut spike = rest;
+        spike[3] = [4.0, 4.0, 0.0];
+        let s = stretched_edges(&rest, &spike, &faces).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!((s.edges, s.stretched), (5, 2));
+        assert!((s.worst_ratio - 5.0).abs() < 1e-12 && (s.share() - 0.4).abs() < 1e-12);
+        let scaled = |k: f64| rest.map(|p| p.map(|c| c * k));
+        let s = stretched_edges(&rest, &scaled(1.9), &faces).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(s.stretched, 0);
+        let s = stretched_edges(&rest, &scaled(0.4), &faces).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(s.stretched, 5);
+        assert!(stretched_edges(&rest, &rest[..3], &faces).is_err());
+        assert!(stretched_edges(&rest, &rest, &[[0, 1, 9]]).is_err());
     }
 
     #[test]
