@@ -26,11 +26,15 @@
 //!    vertex onto the input surface, a feature vertex onto the input's feature lines — both by the
 //!    closest point through a [`Bvh`] over a frozen copy of the input.
 //!
-//! 5. after the last round, a **clean-up** (`Remesher::clean_up`): the shortest edge of every face
-//!    with a corner under 10° is collapsed when it is shorter than `4/5·L` and the collapse rules
-//!    allow it, and every non-feature pair with a corner under 20° is flipped when that raises its
-//!    minimum angle without folding or bending it beyond the feature angle (the last relaxation
-//!    can leave such slivers where a vertex was pulled against a feature line).
+//! 5. after the last round, a **clean-up** (`Remesher::clean_up`), up to five passes: every free
+//!    vertex of a face with a corner under 15° moves to the centroid of its neighbours (or a
+//!    quarter, half or three quarters of the way), projected onto the input, when that raises the
+//!    smallest angle of its faces, folds none, does not jump to an input sheet facing the other way
+//!    and keeps its faces' centroids within `max(before, 0.2·L)` of the input; the shortest edge of
+//!    every face with a corner under 10° is collapsed when it is shorter than `4/5·L` and the
+//!    collapse rules allow it; every non-feature pair with a corner under 20° is flipped when that
+//!    raises its minimum angle without folding or bending it beyond the feature angle (the last
+//!    relaxation can leave such slivers where a vertex was pulled against a feature line).
 //!
 //! # Features and boundaries
 //! An input edge is a *feature* when its dihedral angle (the angle between its two faces' normals)
@@ -377,7 +381,7 @@ pub fn remesh(
         }
     }
     if options.iterations > 0 {
-        r.clean_up();
+        r.clean_up(&surface);
     }
     let (positions, faces) = r.mesh.compact();
     let source_faces = faces
@@ -747,15 +751,16 @@ impl<'a> Remesher<'a> {
 
     /// The final clean-up after the last relaxation (which can leave a sliver where a free vertex
     /// was pulled against a feature line): up to [`CLEANUP_PASSES`] passes of
+    /// - moving the free corners of slivers ([`Self::move_needle_corners`]);
     /// - collapsing the shortest edge of every face with a corner under [`NEEDLE_ANGLE`] when it
     ///   is shorter than `4/5·L`, into one of its ends (so every vertex stays on the input), under
     ///   the collapse rules of the rounds;
     /// - flipping every interior non-feature edge whose pair has a corner under
     ///   [`CLEANUP_FLIP_ANGLE`] when that raises the pair's minimum angle, without folding it or
     ///   bending it by more than the feature angle.
-    fn clean_up(&mut self) {
+    fn clean_up(&mut self, surface: &Bvh) {
         for _ in 0..CLEANUP_PASSES {
-            let mut changed = false;
+            let mut changed = self.move_needle_corners(surface);
             let mut counts = self.feature_counts();
             for f in 0..self.mesh.num_face_slots() {
                 let m = &*self.mesh;
@@ -801,6 +806,105 @@ impl<'a> Remesher<'a> {
                 break;
             }
         }
+    }
+
+    /// Moves every free vertex of a face with a corner under [`CLEANUP_MOVE_ANGLE`] to the best of
+    /// the centroid of its neighbours and the points 3/4, 1/2 and 1/4 of the way there, each
+    /// projected onto the input, when that raises the smallest angle of its faces, folds none of
+    /// them (turns a normal by 90° or more), lands on an input face that does not face against the
+    /// one the vertex lies on (another sheet of a thin part), and keeps its faces' centroids within
+    /// `max(before, CLEANUP_MOVE_DEVIATION·L)` of the input. Whether any vertex moved.
+    fn move_needle_corners(&mut self, surface: &Bvh) -> bool {
+        let counts = self.feature_counts();
+        let mut ring = Vec::new();
+        let mut any = false;
+        for f in 0..self.mesh.num_face_slots() {
+            let m = &*self.mesh;
+            if !m.face_live(f) {
+                continue;
+            }
+            let vs = m.face_vertices(f as u32);
+            let p = vs.map(|v| m.pos[v as usize]);
+            if min_angle(p[0], p[1], p[2]) >= CLEANUP_MOVE_ANGLE {
+                continue;
+            }
+            for v in vs {
+                let m = &*self.mesh;
+                let vi = v as usize;
+                if counts[vi] != 0 || m.locked[vi] {
+                    continue;
+                }
+                m.outgoing(v, &mut ring);
+                let mut c = [0.0; 3];
+                for &g in &ring {
+                    let q = m.pos[m.to(g) as usize];
+                    for k in 0..3 {
+                        c[k] += q[k] / ring.len() as f64;
+                    }
+                }
+                let p0 = m.pos[vi];
+                // With v at `q`: the smallest angle of v's faces and the largest distance of
+                // their centroids from the input; None when one would fold.
+                let worst_at = |q: [f64; 3]| {
+                    let (mut worst, mut off) = (f64::INFINITY, 0.0f64);
+                    for &g in &ring {
+                        if m.is_boundary_halfedge(g) {
+                            continue;
+                        }
+                        let (a, b) = (m.pos[m.to(g) as usize], m.pos[m.to(m.next(g)) as usize]);
+                        let n0 = cross(sub(a, p0), sub(b, p0));
+                        let n1 = cross(sub(a, q), sub(b, q));
+                        if dot(n0, n1) <= 0.0 {
+                            return None;
+                        }
+                        worst = worst.min(min_angle(q, a, b));
+                        let ctr = [0, 1, 2].map(|k| (q[k] + a[k] + b[k]) / 3.0);
+                        if let Some(on) = surface.closest_point(ctr) {
+                            off = off.max(on.distance_squared.sqrt());
+                        }
+                    }
+                    Some((worst, off))
+                };
+                let Some((worst0, off0)) = worst_at(p0) else {
+                    continue;
+                };
+                // A move may not take v's faces farther from the input than they are (or than
+                // CLEANUP_MOVE_DEVIATION·L, when they are closer).
+                let off_limit = off0.max(CLEANUP_MOVE_DEVIATION * self.lo / 0.8);
+                let mut best = (worst0, p0, NONE);
+                // The normal of the input face v lies on, to refuse a jump onto another sheet.
+                let hint = self.hints.get(vi).copied().unwrap_or(NONE);
+                let n_v = if hint == NONE {
+                    [0.0; 3]
+                } else {
+                    let [a, b, cc] = surface.triangle(hint);
+                    cross(sub(b, a), sub(cc, a))
+                };
+                // The centroid and the points a quarter, half and three quarters of the way to it.
+                for t in [1.0, 0.75, 0.5, 0.25] {
+                    let q = [0, 1, 2].map(|k| p0[k] + t * (c[k] - p0[k]));
+                    let Some(on) = surface.closest_point_hinted(q, hint) else {
+                        continue;
+                    };
+                    let [a, b, cc] = surface.triangle(on.face);
+                    if dot(cross(sub(b, a), sub(cc, a)), n_v) < 0.0 {
+                        continue;
+                    }
+                    if let Some((w, off)) = worst_at(on.point)
+                        && w > best.0
+                        && off <= off_limit
+                    {
+                        best = (w, on.point, on.face);
+                    }
+                }
+                if best.2 != NONE {
+                    self.mesh.pos[vi] = best.1;
+                    self.hints[vi] = best.2;
+                    any = true;
+                }
+            }
+        }
+        any
     }
 
     /// Flips every interior non-feature edge whose pair has a corner under [`CLEANUP_FLIP_ANGLE`]
@@ -974,6 +1078,14 @@ const CLEANUP_PASSES: usize = 5;
 
 /// The clean-up flips a pair with a corner under this whenever that raises its minimum angle.
 const CLEANUP_FLIP_ANGLE: f64 = 20.0 * std::f64::consts::PI / 180.0;
+
+/// The clean-up moves the free corners of a face with a corner under this
+/// ([`Remesher::move_needle_corners`]).
+const CLEANUP_MOVE_ANGLE: f64 = 15.0 * std::f64::consts::PI / 180.0;
+
+/// The clean-up's moves keep the centroids of the moved vertex's faces within this many target
+/// lengths of the input, or no farther than they were.
+const CLEANUP_MOVE_DEVIATION: f64 = 0.2;
 
 /// Feature lines and corners closer than this many target lengths merge (collapse into each
 /// other): at the target length they are one crease (or noise), and kept apart they leave a
