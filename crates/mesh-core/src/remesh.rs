@@ -28,7 +28,9 @@
 //!
 //! 5. after the last round, a **clean-up** (`Remesher::clean_up`), up to five passes: every free
 //!    vertex of a face with a corner under 15° moves to the centroid of its neighbours (or a
-//!    quarter, half or three quarters of the way), projected onto the input, when that raises the
+//!    quarter, half or three quarters of the way), projected onto the input, and every feature
+//!    vertex (two feature edges, not a corner) a quarter or half of the way to either feature
+//!    neighbour, projected onto the input's feature lines, when that raises the
 //!    smallest angle of its faces, folds none, does not jump to an input sheet facing the other way
 //!    and keeps its faces' centroids within `max(before, 0.2·L)` of the input; the shortest edge of
 //!    every face with a corner under 10° is collapsed when it is shorter than `4/5·L` and the
@@ -810,7 +812,9 @@ impl<'a> Remesher<'a> {
 
     /// Moves every free vertex of a face with a corner under [`CLEANUP_MOVE_ANGLE`] to the best of
     /// the centroid of its neighbours and the points 3/4, 1/2 and 1/4 of the way there, each
-    /// projected onto the input, when that raises the smallest angle of its faces, folds none of
+    /// projected onto the input, and every feature vertex of such a face (two feature edges, not a
+    /// corner) to the best of the points 1/2 and 1/4 of the way to either feature neighbour, each
+    /// projected onto the input's feature lines, when that raises the smallest angle of its faces, folds none of
     /// them (turns a normal by 90° or more), lands on an input face that does not face against the
     /// one the vertex lies on (another sheet of a thin part), and keeps its faces' centroids within
     /// `max(before, CLEANUP_MOVE_DEVIATION·L)` of the input. Whether any vertex moved.
@@ -831,18 +835,35 @@ impl<'a> Remesher<'a> {
             for v in vs {
                 let m = &*self.mesh;
                 let vi = v as usize;
-                if counts[vi] != 0 || m.locked[vi] {
+                if !(counts[vi] == 0 || counts[vi] == 2) || m.locked[vi] {
                     continue;
                 }
                 m.outgoing(v, &mut ring);
-                let mut c = [0.0; 3];
-                for &g in &ring {
-                    let q = m.pos[m.to(g) as usize];
-                    for k in 0..3 {
-                        c[k] += q[k] / ring.len() as f64;
+                let p0 = m.pos[vi];
+                // Candidates: toward the centroid of the neighbours (a free vertex) or along the
+                // feature line, toward either feature neighbour (a feature vertex).
+                let mut candidates: Vec<[f64; 3]> = Vec::new();
+                if counts[vi] == 0 {
+                    let mut c = [0.0; 3];
+                    for &g in &ring {
+                        let q = m.pos[m.to(g) as usize];
+                        for k in 0..3 {
+                            c[k] += q[k] / ring.len() as f64;
+                        }
+                    }
+                    for t in [1.0, 0.75, 0.5, 0.25] {
+                        candidates.push([0, 1, 2].map(|k| p0[k] + t * (c[k] - p0[k])));
+                    }
+                } else {
+                    for &g in &ring {
+                        if m.feature[(g / 2) as usize] {
+                            let q = m.pos[m.to(g) as usize];
+                            for t in [0.5, 0.25] {
+                                candidates.push([0, 1, 2].map(|k| p0[k] + t * (q[k] - p0[k])));
+                            }
+                        }
                     }
                 }
-                let p0 = m.pos[vi];
                 // With v at `q`: the smallest angle of v's faces and the largest distance of
                 // their centroids from the input; None when one would fold.
                 let worst_at = |q: [f64; 3]| {
@@ -880,10 +901,21 @@ impl<'a> Remesher<'a> {
                     let [a, b, cc] = surface.triangle(hint);
                     cross(sub(b, a), sub(cc, a))
                 };
-                // The centroid and the points a quarter, half and three quarters of the way to it.
-                for t in [1.0, 0.75, 0.5, 0.25] {
-                    let q = [0, 1, 2].map(|k| p0[k] + t * (c[k] - p0[k]));
-                    let Some(on) = surface.closest_point_hinted(q, hint) else {
+                for q in candidates {
+                    // A feature vertex stays on the input's feature lines.
+                    let on = if counts[vi] == 2 {
+                        self.lines.closest_point(q).and_then(|c| {
+                            surface.closest_point_hinted(c.point, hint).map(|s| {
+                                crate::bvh::ClosestPoint {
+                                    point: c.point,
+                                    ..s
+                                }
+                            })
+                        })
+                    } else {
+                        surface.closest_point_hinted(q, hint)
+                    };
+                    let Some(on) = on else {
                         continue;
                     };
                     let [a, b, cc] = surface.triangle(on.face);
