@@ -822,6 +822,7 @@ impl<'a> Remesher<'a> {
         let counts = self.feature_counts();
         let mut ring = Vec::new();
         let mut any = false;
+        let mut visited = vec![false; self.mesh.num_vertices()];
         for f in 0..self.mesh.num_face_slots() {
             let m = &*self.mesh;
             if !m.face_live(f) {
@@ -835,9 +836,10 @@ impl<'a> Remesher<'a> {
             for v in vs {
                 let m = &*self.mesh;
                 let vi = v as usize;
-                if !(counts[vi] == 0 || counts[vi] == 2) || m.locked[vi] {
+                if !(counts[vi] == 0 || counts[vi] == 2) || m.locked[vi] || visited[vi] {
                     continue;
                 }
+                visited[vi] = true;
                 m.outgoing(v, &mut ring);
                 let p0 = m.pos[vi];
                 // Candidates: toward the centroid of the neighbours (a free vertex) or along the
@@ -864,10 +866,9 @@ impl<'a> Remesher<'a> {
                         }
                     }
                 }
-                // With v at `q`: the smallest angle of v's faces and the largest distance of
-                // their centroids from the input; None when one would fold.
+                // With v at `q`: the smallest angle of v's faces; None when one would fold.
                 let worst_at = |q: [f64; 3]| {
-                    let (mut worst, mut off) = (f64::INFINITY, 0.0f64);
+                    let mut worst = f64::INFINITY;
                     for &g in &ring {
                         if m.is_boundary_halfedge(g) {
                             continue;
@@ -879,29 +880,41 @@ impl<'a> Remesher<'a> {
                             return None;
                         }
                         worst = worst.min(min_angle(q, a, b));
+                    }
+                    Some(worst)
+                };
+                // With v at `q`: the largest distance of v's faces' centroids from the input.
+                let hint = self.hints.get(vi).copied().unwrap_or(NONE);
+                let off_at = |q: [f64; 3]| {
+                    let mut off = 0.0f64;
+                    for &g in &ring {
+                        if m.is_boundary_halfedge(g) {
+                            continue;
+                        }
+                        let (a, b) = (m.pos[m.to(g) as usize], m.pos[m.to(m.next(g)) as usize]);
                         let ctr = [0, 1, 2].map(|k| (q[k] + a[k] + b[k]) / 3.0);
-                        if let Some(on) = surface.closest_point(ctr) {
+                        if let Some(on) = surface.closest_point_hinted(ctr, hint) {
                             off = off.max(on.distance_squared.sqrt());
                         }
                     }
-                    Some((worst, off))
+                    off
                 };
-                let Some((worst0, off0)) = worst_at(p0) else {
+                let Some(worst0) = worst_at(p0) else {
                     continue;
                 };
                 // A move may not take v's faces farther from the input than they are (or than
-                // CLEANUP_MOVE_DEVIATION·L, when they are closer).
-                let off_limit = off0.max(CLEANUP_MOVE_DEVIATION * self.lo / 0.8);
-                let mut best = (worst0, p0, NONE);
+                // CLEANUP_MOVE_DEVIATION·L, when they are closer); measured only when a candidate
+                // raises the angle.
                 // The normal of the input face v lies on, to refuse a jump onto another sheet.
-                let hint = self.hints.get(vi).copied().unwrap_or(NONE);
                 let n_v = if hint == NONE {
                     [0.0; 3]
                 } else {
                     let [a, b, cc] = surface.triangle(hint);
                     cross(sub(b, a), sub(cc, a))
                 };
-                for q in candidates {
+                // Candidates that raise the angle, best first (ties: candidate order).
+                let mut better: Vec<(f64, usize, [f64; 3], u32)> = Vec::new();
+                for (i, q) in candidates.into_iter().enumerate() {
                     // A feature vertex stays on the input's feature lines.
                     let on = if counts[vi] == 2 {
                         self.lines.closest_point(q).and_then(|c| {
@@ -922,11 +935,20 @@ impl<'a> Remesher<'a> {
                     if dot(cross(sub(b, a), sub(cc, a)), n_v) < 0.0 {
                         continue;
                     }
-                    if let Some((w, off)) = worst_at(on.point)
-                        && w > best.0
-                        && off <= off_limit
+                    if let Some(w) = worst_at(on.point)
+                        && w > worst0
                     {
-                        best = (w, on.point, on.face);
+                        better.push((w, i, on.point, on.face));
+                    }
+                }
+                better.sort_by(|x, y| y.0.total_cmp(&x.0).then(x.1.cmp(&y.1)));
+                // A move may not take v's faces farther from the input than they are (or than
+                // CLEANUP_MOVE_DEVIATION·L, when they are closer).
+                let mut best = (worst0, p0, NONE);
+                if !better.is_empty() {
+                    let limit = off_at(p0).max(CLEANUP_MOVE_DEVIATION * self.lo / 0.8);
+                    if let Some(&(w, _, q, face)) = better.iter().find(|c| off_at(c.2) <= limit) {
+                        best = (w, q, face);
                     }
                 }
                 if best.2 != NONE {
