@@ -27,7 +27,7 @@
 //!    closest point through a [`Bvh`] over a frozen copy of the input.
 //!
 //! 5. after the last round, a **clean-up** (`Remesher::clean_up`), up to five passes: every free
-//!    vertex of a face with a corner under 15° moves to the centroid of its neighbours (or a
+//!    vertex of a face with a corner under 20° moves to the centroid of its neighbours (or a
 //!    quarter, half or three quarters of the way), projected onto the input, and every feature
 //!    vertex (two feature edges, not a corner) a quarter or half of the way to either feature
 //!    neighbour, projected onto the input's feature lines, when that raises the
@@ -1135,7 +1135,7 @@ const CLEANUP_FLIP_ANGLE: f64 = 20.0 * std::f64::consts::PI / 180.0;
 
 /// The clean-up moves the free corners of a face with a corner under this
 /// ([`Remesher::move_needle_corners`]).
-const CLEANUP_MOVE_ANGLE: f64 = 15.0 * std::f64::consts::PI / 180.0;
+const CLEANUP_MOVE_ANGLE: f64 = 20.0 * std::f64::consts::PI / 180.0;
 
 /// The clean-up's moves keep the centroids of the moved vertex's faces within this many target
 /// lengths of the input, or no farther than they were.
