@@ -458,3 +458,57 @@ fn stress_jittered_and_degenerate_meshes() {
         }
     }
 }
+
+#[test]
+fn short_open_crease_chains_are_dropped_and_others_kept() {
+    // A 20 × 20 grid (edge 0.05) with crease flags set by hand along rows of horizontal edges.
+    let k = 20;
+    let (p, f) = grid(k);
+    let mut m = HalfEdgeMesh::new(&p, &f).expect("grid");
+    let id = |i: usize, j: usize| (j * (k + 1) + i) as u32;
+    let edge = |m: &HalfEdgeMesh, a: u32, b: u32| {
+        let mut ring = Vec::new();
+        m.outgoing(a, &mut ring);
+        let g = ring.iter().find(|&&g| m.to(g) == b).expect("an edge");
+        (g / 2) as usize
+    };
+    let row = |m: &mut HalfEdgeMesh, j: usize, from: usize, to: usize| {
+        for i in from..to {
+            let e = edge(m, id(i, j), id(i + 1, j));
+            m.feature[e] = true;
+        }
+    };
+    let is_feature = |m: &HalfEdgeMesh, a: u32, b: u32| m.feature[edge(m, a, b)];
+    // Boundary edges are features and stay whatever happens.
+    for e in 0..m.num_edges() {
+        m.feature[e] = m.is_boundary_edge(e);
+    }
+    row(&mut m, 3, 2, 4); // isolated, 0.10 long
+    row(&mut m, 6, 2, 14); // isolated, 0.60 long
+    row(&mut m, 10, 0, k); // a line across, between two boundary junctions, …
+    for j in 10..12 {
+        // … with a tail of 0.10 going up from (5, 10) …
+        let e = edge(&m, id(5, j), id(5, j + 1));
+        m.feature[e] = true;
+    }
+    for j in 10..16 {
+        // … and one of 0.30 going up from (12, 10).
+        let e = edge(&m, id(12, j), id(12, j + 1));
+        m.feature[e] = true;
+    }
+    let boundary_before = (0..m.num_edges())
+        .filter(|&e| m.is_boundary_edge(e))
+        .count();
+    // Isolated chains and loops under 0.5, tails under 0.25 go.
+    super::prune_short_feature_chains(&mut m, 0.5);
+    assert!(!is_feature(&m, id(2, 3), id(3, 3)) && !is_feature(&m, id(3, 3), id(4, 3)));
+    assert!((2..14).all(|i| is_feature(&m, id(i, 6), id(i + 1, 6))));
+    assert!(!is_feature(&m, id(5, 10), id(5, 11)) && !is_feature(&m, id(5, 11), id(5, 12)));
+    assert!((10..16).all(|j| is_feature(&m, id(12, j), id(12, j + 1))));
+    // The line the short tail left stays (it is now one chain through (5, 10)).
+    assert!((0..k).all(|i| is_feature(&m, id(i, 10), id(i + 1, 10))));
+    let boundary_after = (0..m.num_edges())
+        .filter(|&e| m.is_boundary_edge(e) && m.feature[e])
+        .count();
+    assert_eq!(boundary_after, boundary_before);
+}
