@@ -1,4 +1,5 @@
-//! What this binary was built with: the crate features `text`, `gpu` and `view` (all default).
+//! What this binary was built with: the crate features `text`, `gpu`, `view` and `mp4` (all
+//! default).
 //!
 //! A quick-start build (the README's first command: `--no-default-features`)
 //! keeps every subcommand and option, so scripts and `--help` read the same; what needs a missing
@@ -14,6 +15,7 @@ pub const ENABLED: &[(&str, bool)] = &[
     ("text", cfg!(feature = "text")),
     ("gpu", cfg!(feature = "gpu")),
     ("view", cfg!(feature = "view")),
+    ("mp4", cfg!(feature = "mp4")),
 ];
 
 /// The names of this binary's features plus `extra` (if any), in [`ENABLED`]'s order.
