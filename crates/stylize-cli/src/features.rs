@@ -62,7 +62,7 @@ pub fn not_built(feature: &str, what: &str) -> anyhow::Error {
         "{what} needs the `{feature}` feature, and this stylize was built without it (a quick-start \
          build, as the README's first command makes). Build the full command line with \
          `cargo install --locked --path crates/stylize-cli`, or run it in place with \
-         `cargo run --release --bin stylize -- …` (default features: text, gpu, view), or add just \
+         `cargo run --release --bin stylize -- …` (default features: text, gpu, view, mp4), or add just \
          this feature to this build with `{} …` (docs/cli.md, \"Builds and features\")",
         cargo_run_adding(feature)
     )

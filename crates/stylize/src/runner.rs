@@ -1469,3 +1469,53 @@ fn write_deformation(
     })
     .with_context(|| format!("cannot write {}", dir.deformation().display()))
 }
+
+#[cfg(all(test, feature = "mp4"))]
+mod mp4_tests {
+    use super::*;
+
+    #[test]
+    fn turntable_mp4_failure_is_a_warning_that_removes_an_earlier_file() {
+        let tmp = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+        let dir = RunDir::new(tmp.path());
+        std::fs::write(dir.file("turntable.mp4"), b"an earlier attempt's")
+            .unwrap_or_else(|e| panic!("{e}"));
+        // No frames: the encoder refuses, the run goes on.
+        let nothing = raster_diff::Images {
+            count: 0,
+            height: 8,
+            width: 8,
+            channels: 3,
+            rgb: Vec::new(),
+        };
+        let mut warnings = Vec::new();
+        let json = write_turntable_mp4(&dir, &nothing, &mut warnings);
+        assert!(json["file"].is_null(), "{json}");
+        assert!(json["not_written"].as_str().is_some(), "{json}");
+        assert_eq!(warnings.len(), 1, "{warnings:?}");
+        assert!(
+            warnings[0].starts_with("turntable.mp4 not written (")
+                && warnings[0].contains("turntable.gif has the same frames"),
+            "{warnings:?}"
+        );
+        assert!(!dir.file("turntable.mp4").exists());
+        // Frames: written, and described.
+        let frames = raster_diff::Images {
+            count: 2,
+            height: 8,
+            width: 8,
+            channels: 3,
+            rgb: vec![0.5; 2 * 8 * 8 * 3],
+        };
+        let mut warnings = Vec::new();
+        let json = write_turntable_mp4(&dir, &frames, &mut warnings);
+        assert!(warnings.is_empty(), "{warnings:?}");
+        assert_eq!(json["file"], "turntable.mp4");
+        // 8×8 frames make a 16×16 video (OpenH264's smallest; turntable_mp4::video_size).
+        assert_eq!(
+            (json["frames"].as_u64(), json["width"].as_u64()),
+            (Some(2), Some(16))
+        );
+        assert!(dir.file("turntable.mp4").is_file());
+    }
+}

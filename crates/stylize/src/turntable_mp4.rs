@@ -9,8 +9,9 @@
 //! back with the matrix the file was made with.
 //!
 //! **Size.** 4:2:0 needs even sides: an odd width or height is padded by one column or row
-//! repeating the last one (the video is then one pixel wider or taller than the frames). OpenH264
-//! encodes at most 3840×2160 (or 2160×3840); larger frames are an error.
+//! repeating the last one (the video is then one pixel wider or taller than the frames); a side
+//! under [`MIN_SIDE`] pixels, OpenH264's smallest, is padded the same way up to it ([`video_size`]).
+//! OpenH264 encodes at most 3840×2160 (or 2160×3840); larger frames are an error.
 //!
 //! **Encoding.** OpenH264 (Cisco's encoder, compiled from the C++ source the `openh264` crate
 //! bundles), the profile OpenH264 chooses (Constrained Baseline at these sizes), one thread (the
@@ -47,6 +48,16 @@ use std::path::Path;
 use crate::error::{Context, IoContext, Result, invalid};
 use raster_diff::Images;
 use raster_diff::image::Encoding;
+
+/// The smallest side OpenH264 encodes (its `EncodeFrame` refuses narrower or lower pictures).
+pub const MIN_SIDE: usize = 16;
+
+/// The video's width and height for frames of `width × height`: each side rounded up to even, and
+/// to at least [`MIN_SIDE`] (the frame sits at the top left, its last column and row repeated).
+pub fn video_size(width: usize, height: usize) -> (usize, usize) {
+    let side = |n: usize| n.next_multiple_of(2).max(MIN_SIDE);
+    (side(width), side(height))
+}
 
 /// The largest side OpenH264 encodes (3840×2160 or 2160×3840).
 const MAX_LONG_SIDE: usize = 3840;
@@ -119,6 +130,22 @@ pub fn ycbcr_to_rgb(ycbcr: [u8; 3]) -> [u8; 3] {
 /// the mean of each 2×2 block's real values, rounded. Odd sides are padded to even by repeating the
 /// last column or row. `rgb` must hold `width × height × 3` bytes.
 pub fn rgb_to_yuv420(rgb: &[u8], width: usize, height: usize) -> Result<Yuv420> {
+    rgb_to_yuv420_padded(
+        rgb,
+        width,
+        height,
+        (width.next_multiple_of(2), height.next_multiple_of(2)),
+    )
+}
+
+/// [`rgb_to_yuv420`] padded to `(w, h)` (even, at least the frame's), repeating the last column
+/// and row.
+fn rgb_to_yuv420_padded(
+    rgb: &[u8],
+    width: usize,
+    height: usize,
+    (w, h): (usize, usize),
+) -> Result<Yuv420> {
     if width == 0 || height == 0 || rgb.len() != width * height * 3 {
         invalid!(
             "a {width}×{height} RGB frame needs {} bytes, got {}",
@@ -126,7 +153,9 @@ pub fn rgb_to_yuv420(rgb: &[u8], width: usize, height: usize) -> Result<Yuv420> 
             rgb.len()
         );
     }
-    let (w, h) = (width.next_multiple_of(2), height.next_multiple_of(2));
+    if w % 2 != 0 || h % 2 != 0 || w < width || h < height {
+        invalid!("cannot pad a {width}×{height} frame to {w}×{h}");
+    }
     let pixel = |x: usize, y: usize| -> [u8; 3] {
         let i = (y.min(height - 1) * width + x.min(width - 1)) * 3;
         [rgb[i], rgb[i + 1], rgb[i + 2]]
@@ -163,7 +192,7 @@ pub fn rgb_to_yuv420(rgb: &[u8], width: usize, height: usize) -> Result<Yuv420> 
 pub struct Mp4Summary {
     /// Frames (samples) in the video.
     pub frames: usize,
-    /// The video's width and height (the frames', rounded up to even).
+    /// The video's width and height ([`video_size`] of the frames').
     pub width: usize,
     /// See `width`.
     pub height: usize,
@@ -220,10 +249,7 @@ pub fn encode_mp4<W: Write>(
     if delay_cs == 0 {
         invalid!("an MP4 frame must last at least 1/100 s");
     }
-    let (w, h) = (
-        frames.width.next_multiple_of(2),
-        frames.height.next_multiple_of(2),
-    );
+    let (w, h) = video_size(frames.width, frames.height);
     if w.max(h) > MAX_LONG_SIDE || w.min(h) > MAX_SHORT_SIDE {
         invalid!(
             "{}×{} frames are too large for the H.264 encoder (3840×2160 or 2160×3840 at most)",
@@ -255,7 +281,7 @@ pub fn encode_mp4<W: Write>(
     let mut sync: Vec<u32> = Vec::new();
     for i in 0..frames.count {
         let rgb = raster_diff::image::view_bytes(frames, i, encoding).context("MP4 frames")?;
-        let yuv = rgb_to_yuv420(&rgb, frames.width, frames.height)?;
+        let yuv = rgb_to_yuv420_padded(&rgb, frames.width, frames.height, (w, h))?;
         let source = openh264::formats::YUVSlices::new(
             (&yuv.y, &yuv.u, &yuv.v),
             (yuv.width, yuv.height),
@@ -889,6 +915,15 @@ mod tests {
         assert!(encode_mp4(Vec::new(), &empty, 8, Encoding::Direct).is_err());
         let frames = tetrahedron_frames(1, 8);
         assert!(encode_mp4(Vec::new(), &frames, 0, Encoding::Direct).is_err());
+        // Below OpenH264's 16 pixels: padded up to them, not refused.
+        assert_eq!(video_size(8, 3), (16, 16));
+        assert_eq!(video_size(17, 40), (18, 40));
+        let mut bytes = Vec::new();
+        let s = encode_mp4(&mut bytes, &frames, 8, Encoding::Direct)
+            .unwrap_or_else(|e| panic!("{e:#}"));
+        assert_eq!((s.width, s.height), (16, 16));
+        let video = decode_mp4(&bytes).unwrap_or_else(|e| panic!("{e:#}"));
+        assert_eq!((video.width, video.height, video.frames.len()), (16, 16, 1));
         let huge = Images {
             count: 1,
             height: 4000,

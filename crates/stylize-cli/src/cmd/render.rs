@@ -8,7 +8,7 @@
 //! `--srgb` applies the sRGB transfer curve first. `turntable.gif` loops over the same frames
 //! (`stylize::run_pictures::encode_gif`: exact greys, colour frames quantized); `--no-gif` skips it.
 //! `turntable.mp4` holds the same frames as H.264 (`stylize::turntable_mp4`: BT.709 limited range,
-//! 4:2:0, an odd `--size` padded to even; the library's feature `mp4`); `--no-mp4` skips it. A
+//! 4:2:0, an odd `--size` padded to even, one under 16 to 16; the library's feature `mp4`); `--no-mp4` skips it. A
 //! build without the encoder says so and writes the rest; an encoding failure is reported after
 //! every other output is written (the command then fails).
 
