@@ -835,10 +835,10 @@ fn write_turntable_mp4(
                     "turntable.mp4 not written ({why}); turntable.gif has the same frames"
                 ));
             }
-            if path.is_file() {
-                if let Err(e) = std::fs::remove_file(&path) {
-                    warnings.push(format!("cannot remove the earlier {}: {e}", path.display()));
-                }
+            if path.is_file()
+                && let Err(e) = std::fs::remove_file(&path)
+            {
+                warnings.push(format!("cannot remove the earlier {}: {e}", path.display()));
             }
             serde_json::json!({ "file": null, "not_written": why })
         }
