@@ -75,13 +75,14 @@ mod tests {
     #[test]
     fn cargo_run_adding_keeps_this_builds_features_and_adds_one() {
         let command = cargo_run_adding("view");
-        if cfg!(all(feature = "text", feature = "gpu")) {
+        if cfg!(all(feature = "text", feature = "gpu", feature = "mp4")) {
             // The default build (CI's workspace tests): adding `view` is every feature.
             assert_eq!(command, "cargo run --release --bin stylize --");
         } else if cfg!(not(any(
             feature = "text",
             feature = "gpu",
-            feature = "view"
+            feature = "view",
+            feature = "mp4"
         ))) {
             // The quick-start build (CI's `--no-default-features` test).
             assert_eq!(
@@ -100,12 +101,18 @@ mod tests {
     #[test]
     fn summary_names_this_builds_features() {
         let s = summary();
-        if cfg!(all(feature = "text", feature = "gpu", feature = "view")) {
-            assert_eq!(s, "text, gpu, view");
+        if cfg!(all(
+            feature = "text",
+            feature = "gpu",
+            feature = "view",
+            feature = "mp4"
+        )) {
+            assert_eq!(s, "text, gpu, view, mp4");
         } else if cfg!(not(any(
             feature = "text",
             feature = "gpu",
-            feature = "view"
+            feature = "view",
+            feature = "mp4"
         ))) {
             assert_eq!(s, "none");
         }
