@@ -174,6 +174,15 @@ fn the_model_free_demo_runs_and_points_at_this_binary() {
             e.contains("turntable.mp4  (the same turntable as H.264 video)"),
             "{e}"
         );
+        // It decodes to the GIF's 36 frames of run.turntable_size (256) pixels, 8/100 s each.
+        #[cfg(feature = "mp4")]
+        {
+            let bytes = ok(std::fs::read(out_dir.join("turntable.mp4")));
+            let video = ok(stylize::turntable_mp4::decode_mp4(&bytes));
+            assert_eq!((video.width, video.height), (256, 256));
+            assert_eq!(video.frames.len(), 36);
+            assert_eq!(video.durations, [8; 36]);
+        }
     } else {
         assert!(!out_dir.join("turntable.mp4").exists());
         assert!(mp4["file"].is_null(), "{mp4}");
