@@ -439,7 +439,9 @@ class GIS_OT_stylize(bpy.types.Operator):
         return self._finish(context)
 
     def invoke(self, context, _event):
-        if bpy.app.background or context.window is None:
+        # No window (background mode: `blender -b`, the bpy module) means no timer events: run to
+        # the end in execute. The modal path needs only a window (its tests fake one).
+        if context.window is None:
             return self.execute(context)
         try:
             self._job = start_job(context, context.active_object)
