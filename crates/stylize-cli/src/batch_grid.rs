@@ -248,16 +248,12 @@ pub enum Tile {
     Empty(&'static str),
 }
 
-/// The square of the result's first view in a `before_after.png` (bottom-left; side = half the
-/// height).
-pub fn result_square(before_after: &Images) -> anyhow::Result<(usize, usize, usize)> {
-    let side = before_after.height / 2;
-    if side == 0 || !before_after.height.is_multiple_of(2) || before_after.width < side {
-        bail!(
-            "a before/after picture of {}×{} pixels is not two rows of square tiles",
-            before_after.width,
-            before_after.height
-        );
+/// The square `(x0, y0, side)` of the result's first view in a `before_after.png` of `width` ×
+/// `height` pixels (bottom-left; side = half the height).
+pub fn result_square(width: usize, height: usize) -> anyhow::Result<(usize, usize, usize)> {
+    let side = height / 2;
+    if side == 0 || !height.is_multiple_of(2) || width < side {
+        bail!("a before/after picture of {width}×{height} pixels is not two rows of square tiles");
     }
     Ok((0, side, side))
 }
@@ -284,10 +280,11 @@ pub fn row_tile(row: &Row, known: Option<&RowStatus>) -> Tile {
     if !same_objective(row, &dir) {
         return Tile::Empty("OTHER TASK");
     }
-    let tile = sheet::read_png(&dir.file("before_after.png")).and_then(|picture| {
-        let square = result_square(&picture)?;
-        sheet::resample(&picture, 0, square, TILE)
-    });
+    let tile = sheet::read_png_region(&dir.file("before_after.png"), |w, h| {
+        let (x0, y0, side) = result_square(w, h)?;
+        Ok((x0, y0, side, side))
+    })
+    .and_then(|square| sheet::resample(&square, 0, (0, 0, square.width), TILE));
     match tile {
         Ok(t) => Tile::Result(t),
         Err(_) => Tile::Empty("NO RENDER"),

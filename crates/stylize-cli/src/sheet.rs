@@ -9,7 +9,7 @@
 //!   without a glyph is drawn as a blank; [`fit_text`] shortens a text to a width with `…`;
 //! - [`resample`] crops a square of a picture and box-filters it to a tile's size (each tile pixel
 //!   is the mean of the source pixels its footprint starts in, at least one), so a run's render
-//!   becomes a tile without rendering again; [`read_png`] reads such a picture.
+//!   becomes a tile without rendering again; [`read_png_region`] reads the part of a picture needed.
 
 use std::path::Path;
 
@@ -321,46 +321,67 @@ pub fn resample(
     })
 }
 
-/// The largest picture [`read_png`] reads, in pixels (a 16384² sheet; larger is refused before
-/// any pixel buffer is made).
+/// The largest picture [`read_png_region`] reads, in pixels (a 16384² sheet; larger is refused
+/// before any pixel buffer is made). A run's `before_after.png` is at most 64 × 1024 by 2 × 1024.
 pub const MAX_PNG_PIXELS: u64 = 16384 * 16384;
 
-/// Reads an 8-bit (or 16-bit, reduced to 8) grey, grey+alpha, RGB or RGBA PNG (palette images
-/// expanded) as one RGB view with values `byte / 255`; alpha is dropped.
-pub fn read_png(path: &Path) -> anyhow::Result<Images> {
+/// Reads the rectangle `region(width, height) = (x0, y0, w, h)` of a non-interlaced 8-bit (or
+/// 16-bit, reduced to 8) grey, grey+alpha, RGB, RGBA or palette PNG as one RGB view with values
+/// `byte / 255` (alpha dropped). The picture is decoded row by row and only the rectangle is kept,
+/// so memory is one row plus the rectangle however wide the picture.
+pub fn read_png_region(
+    path: &Path,
+    region: impl FnOnce(usize, usize) -> anyhow::Result<(usize, usize, usize, usize)>,
+) -> anyhow::Result<Images> {
     let file =
         std::fs::File::open(path).with_context(|| format!("cannot open {}", path.display()))?;
     let mut decoder = png::Decoder::new(std::io::BufReader::new(file));
     decoder.set_transformations(png::Transformations::EXPAND | png::Transformations::STRIP_16);
-    let mut reader = decoder
-        .read_info()
-        .with_context(|| format!("{} is not a readable PNG", path.display()))?;
-    let (w, h) = {
+    let unreadable = || format!("{} is not a readable PNG", path.display());
+    let mut reader = decoder.read_info().with_context(unreadable)?;
+    let (width, height, interlaced) = {
         let info = reader.info();
-        (info.width, info.height)
+        (info.width, info.height, info.interlaced)
     };
-    if u64::from(w) * u64::from(h) > MAX_PNG_PIXELS {
+    if u64::from(width) * u64::from(height) > MAX_PNG_PIXELS {
         bail!(
-            "{} is {w}×{h} pixels, more than the {MAX_PNG_PIXELS} read here",
+            "{} is {width}×{height} pixels, more than the {MAX_PNG_PIXELS} read here",
             path.display()
         );
     }
-    let mut buf = vec![0; reader.output_buffer_size()];
-    let frame = reader
-        .next_frame(&mut buf)
-        .with_context(|| format!("{} is not a readable PNG", path.display()))?;
-    let channels = match frame.color_type {
+    if interlaced {
+        bail!("{}: an interlaced PNG (not read here)", path.display());
+    }
+    let (width, height) = (width as usize, height as usize);
+    let (x0, y0, w, h) = region(width, height)?;
+    if x0 + w > width || y0 + h > height {
+        bail!(
+            "{}: the {w}×{h} rectangle at ({x0}, {y0}) does not lie inside its {width}×{height} \
+             pixels",
+            path.display()
+        );
+    }
+    let channels = match reader.output_color_type().0 {
         png::ColorType::Grayscale => 1,
         png::ColorType::GrayscaleAlpha => 2,
         png::ColorType::Rgb => 3,
         png::ColorType::Rgba => 4,
         png::ColorType::Indexed => bail!("{}: an unexpanded palette image", path.display()),
     };
-    let (w, h) = (frame.width as usize, frame.height as usize);
     let mut rgb = Vec::with_capacity(w * h * 3);
-    for y in 0..h {
-        let row = &buf[y * frame.line_size..y * frame.line_size + w * channels];
-        for px in row.chunks_exact(channels) {
+    for y in 0..y0 + h {
+        let row = reader
+            .next_row()
+            .with_context(unreadable)?
+            .with_context(|| format!("{}: fewer rows than its header says", path.display()))?;
+        if y < y0 {
+            continue;
+        }
+        let data = row.data();
+        let wanted = data
+            .get(x0 * channels..(x0 + w) * channels)
+            .with_context(|| format!("{}: a row shorter than its header says", path.display()))?;
+        for px in wanted.chunks_exact(channels) {
             let v = |k: usize| f32::from(px[k]) / 255.0;
             if channels >= 3 {
                 rgb.extend([v(0), v(1), v(2)]);
@@ -430,5 +451,39 @@ mod tests {
         }
         assert_eq!(up.rgb[(3 * 4 + 3) * 3], 15.0);
         assert!(resample(&img, 0, (1, 0, 4), 2).is_err());
+    }
+
+    #[test]
+    fn read_png_region_keeps_the_rectangle_asked_for() {
+        let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+        let path = dir.path().join("p.png");
+        // 5×3 RGB picture, red = x·50, green = y·100, blue = 7.
+        let mut canvas = Canvas::new(5, 3);
+        for y in 0..3 {
+            for x in 0..5 {
+                canvas.set(
+                    x,
+                    y,
+                    [
+                        x as f32 * 50.0 / 255.0,
+                        y as f32 * 100.0 / 255.0,
+                        7.0 / 255.0,
+                    ],
+                );
+            }
+        }
+        canvas.write_png(&path).unwrap_or_else(|e| panic!("{e:#}"));
+        let part = read_png_region(&path, |w, h| {
+            assert_eq!((w, h), (5, 3));
+            Ok((1, 1, 3, 2))
+        })
+        .unwrap_or_else(|e| panic!("{e:#}"));
+        assert_eq!((part.width, part.height), (3, 2));
+        let bytes: Vec<u8> = part.rgb.iter().map(|v| (v * 255.0).round() as u8).collect();
+        assert_eq!(&bytes[..6], &[50, 100, 7, 100, 100, 7]);
+        assert_eq!(&bytes[15..18], &[150, 200, 7]);
+        assert!(read_png_region(&path, |_, _| Ok((3, 0, 3, 1))).is_err());
+        std::fs::write(&path, b"not a png").unwrap_or_else(|e| panic!("{e}"));
+        assert!(read_png_region(&path, |w, h| Ok((0, 0, w, h))).is_err());
     }
 }

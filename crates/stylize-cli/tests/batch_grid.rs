@@ -276,4 +276,10 @@ fn after_a_sharded_run_grid_only_builds_the_grid_from_the_run_directories() {
         stylize_text(&["batch", s(&manifest), "--grid-only", "--grid", s(&inside)]);
     assert!(!success && err.contains("row 2's run directory"), "{err}");
     assert_eq!(ok(std::fs::read(&inside)), picture);
+    // A complete run whose picture is gone (or damaged) is a NO RENDER tile, not an error.
+    ok(std::fs::write(&inside, b"not a png"));
+    let (success, _, err) =
+        stylize_text(&["batch", s(&manifest), "--grid-only", "--grid", s(&path)]);
+    assert!(success, "{err}");
+    check_empty_tile(&Picture::read(&path), &manifest, 2, "NO RENDER");
 }
