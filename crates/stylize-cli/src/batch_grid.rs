@@ -9,7 +9,8 @@
 //! be less than half filled (every mesh with its own prompt, say), a *list* instead: the rows in
 //! manifest order, ⌈√n⌉ tiles per line.
 //!
-//! **A cell** is a [`TILE`]-pixel square above a white band of [`LABEL_HEIGHT`] pixels with two
+//! **A cell** ([`GUTTER`] white pixels between neighbours) is a [`TILE`]-pixel square above a
+//! white band of [`LABEL_HEIGHT`] pixels with two
 //! lines in black, each centred and shortened with `…` to the tile's width ([`crate::sheet`]'s
 //! font at ×[`TEXT_SCALE`]): the mesh's name (file stem; the parent folder too when two meshes share
 //! a stem) and the prompt/style (`exemplar:FILE` by file name).
@@ -46,6 +47,8 @@ pub const LABEL_PAD: usize = 4;
 pub const LABEL_HEIGHT: usize = 3 * LABEL_PAD + 2 * sheet::GLYPH_ROWS * TEXT_SCALE;
 /// Height of a cell: the tile and its label band.
 pub const CELL_HEIGHT: usize = TILE + LABEL_HEIGHT;
+/// White space between neighbouring cells (none around the sheet).
+pub const GUTTER: usize = 8;
 /// Fill of a tile without a result.
 pub const EMPTY_GREY: [f32; 3] = [0.85, 0.85, 0.85];
 /// Ink of the status on an empty tile.
@@ -204,13 +207,14 @@ impl Layout {
 
     /// The sheet's size in pixels.
     pub fn size(&self) -> (usize, usize) {
-        (self.columns * TILE, self.lines * CELL_HEIGHT)
+        let span = |n: usize, cell: usize| (n * (cell + GUTTER)).saturating_sub(GUTTER);
+        (span(self.columns, TILE), span(self.lines, CELL_HEIGHT))
     }
 }
 
 /// The top-left corner of cell `(line, column)`'s tile.
 pub fn tile_origin((line, column): (usize, usize)) -> (usize, usize) {
-    (column * TILE, line * CELL_HEIGHT)
+    (column * (TILE + GUTTER), line * (CELL_HEIGHT + GUTTER))
 }
 
 /// The two label lines of a row's cell (shortened to the tile's width).
@@ -458,8 +462,9 @@ mod tests {
         let lines = label_lines("a-very-long-mesh-name-indeed", &row("m.obj", "cube"));
         assert!(lines[0].ends_with('…'));
         for (text, (x, y)) in lines.iter().zip(label_origins((1, 2), &lines)) {
-            assert!(x >= 2 * TILE && x + sheet::text_width(text, TEXT_SCALE) <= 3 * TILE);
-            assert!(y >= CELL_HEIGHT + TILE && y + 7 * TEXT_SCALE <= 2 * CELL_HEIGHT);
+            let (x0, y0) = tile_origin((1, 2));
+            assert!(x >= x0 && x + sheet::text_width(text, TEXT_SCALE) <= x0 + TILE);
+            assert!(y >= y0 + TILE && y + 7 * TEXT_SCALE <= y0 + CELL_HEIGHT);
         }
         for s in [
             "FAILED",

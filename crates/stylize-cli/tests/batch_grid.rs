@@ -12,8 +12,8 @@ use raster_diff::Images;
 use raster_diff::image::{Encoding, to_byte};
 use stylize_cli::batch::read_manifest;
 use stylize_cli::batch_grid::{
-    CELL_HEIGHT, EMPTY_GREY, Layout, STATUS_INK, TEXT_SCALE, TILE, label_lines, label_origins,
-    status_origin, tile_origin,
+    CELL_HEIGHT, EMPTY_GREY, GUTTER, Layout, STATUS_INK, TEXT_SCALE, TILE, label_lines,
+    label_origins, status_origin, tile_origin,
 };
 use stylize_cli::sheet::{label_mask, resample};
 
@@ -206,7 +206,20 @@ fn a_batch_writes_the_labelled_grid_of_its_rows_with_its_failed_row_marked() {
     let path = dir.join("batch_grid.png");
     assert!(err.contains(&format!("grid: {}", path.display())), "{err}");
     let grid = Picture::read(&path);
-    assert_eq!((grid.width, grid.height), (2 * TILE, 2 * CELL_HEIGHT));
+    assert_eq!(
+        (grid.width, grid.height),
+        (2 * TILE + GUTTER, 2 * CELL_HEIGHT + GUTTER)
+    );
+    // The gutters between cells are white.
+    for y in 0..grid.height {
+        for x in 0..grid.width {
+            if (TILE..TILE + GUTTER).contains(&x)
+                || (CELL_HEIGHT..CELL_HEIGHT + GUTTER).contains(&y)
+            {
+                assert_eq!(grid.at(x, y), [255; 3], "gutter at ({x}, {y})");
+            }
+        }
+    }
     // Lines = meshes, columns = styles.
     assert_eq!(
         (0..4).map(|i| cell(&manifest, i)).collect::<Vec<_>>(),
@@ -241,7 +254,10 @@ fn after_a_sharded_run_grid_only_builds_the_grid_from_the_run_directories() {
     assert!(success, "{err}");
     assert!(err.contains("2 with a result, 2 without"), "{err}");
     let grid = Picture::read(&path);
-    assert_eq!((grid.width, grid.height), (2 * TILE, 2 * CELL_HEIGHT));
+    assert_eq!(
+        (grid.width, grid.height),
+        (2 * TILE + GUTTER, 2 * CELL_HEIGHT + GUTTER)
+    );
     check_result_tile(&grid, &manifest, 0, &dir.join("runs/m-cube"));
     check_result_tile(&grid, &manifest, 2, &dir.join("runs/n-cube"));
     check_empty_tile(&grid, &manifest, 1, "NOT RUN");
