@@ -82,7 +82,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     if args.grid_only {
         return match &grid_path {
-            Some(p) => write_grid(p, &rows, &[], matches!(settings.log_mode(), LogMode::Jsonl)),
+            Some(p) => write_grid(p, &rows, &[]),
             None => Ok(()),
         };
     }
@@ -129,7 +129,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     } else if let Some(p) = grid_path.as_ref().filter(|_| shard.count == 1) {
         let known: Vec<(usize, RowStatus)> =
             results.iter().map(|(i, _, s, _)| (*i, s.clone())).collect();
-        write_grid(p, &rows, &known, jsonl)
+        write_grid(p, &rows, &known)
     } else if grid_path.is_some() {
         say(&format!(
             "grid: not written by a shard; after the last shard, build it with: stylize batch {} \
@@ -184,14 +184,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Writes the grid of every row ([`crate::batch_grid`]) and says so on stderr, and with `jsonl` as
-/// the JSON line `{"event": "grid", "path": …, "tiles": n, "results": r, "empty": e}` on stdout.
-fn write_grid(
-    path: &Path,
-    rows: &[Row],
-    known: &[(usize, RowStatus)],
-    jsonl: bool,
-) -> anyhow::Result<()> {
+/// Writes the grid of every row ([`crate::batch_grid`]) and says so on stderr.
+fn write_grid(path: &Path, rows: &[Row], known: &[(usize, RowStatus)]) -> anyhow::Result<()> {
     if rows.is_empty() {
         say("grid: none (the manifest has no rows)");
         return Ok(());
@@ -204,18 +198,6 @@ fn write_grid(
         counts.results,
         counts.empty
     ));
-    if jsonl {
-        let line = serde_json::json!({
-            "event": "grid",
-            "path": path.display().to_string(),
-            "tiles": counts.results + counts.empty,
-            "results": counts.results,
-            "empty": counts.empty,
-        });
-        if crate::outln!("{line}").is_err() {
-            crate::signals::output_closed();
-        }
-    }
     Ok(())
 }
 
