@@ -3,18 +3,22 @@
 //! `before_after.png` (its result square box-filtered to the tile, and the same mean colour), each
 //! label's ink by position, and the empty tiles' statuses.
 //!
-//! Cost: 5 model-free runs of 3 iterations with 128-pixel pictures (a few seconds in a debug build).
+//! Cost: 6 model-free runs of at most 3 iterations with 128-pixel pictures (a few seconds in a debug build).
 
 use std::path::Path;
 
 use mesh_core::TriMesh;
 use raster_diff::Images;
 use raster_diff::image::{Encoding, to_byte};
+use stylize::runner::RunRequest;
+use stylize::style::Style;
 use stylize_cli::batch::read_manifest;
 use stylize_cli::batch_grid::{
     CELL_HEIGHT, EMPTY_GREY, GUTTER, Layout, STATUS_INK, TEXT_SCALE, TILE, label_lines,
     label_origins, status_origin, tile_origin,
 };
+use stylize_cli::config::Config;
+use stylize_cli::runner::{LogMode, execute};
 use stylize_cli::sheet::{label_mask, resample};
 
 mod common;
@@ -277,6 +281,28 @@ fn after_a_sharded_run_grid_only_builds_the_grid_from_the_run_directories() {
     check_empty_tile(&grid, &manifest, 0, "OTHER TASK");
     check_labels(&grid, &manifest, 0, ["m", "exemplar:n.obj"]);
     check_result_tile(&grid, &manifest, 2, &dir.join("runs/n-cube"));
+    // A run stopped after its checkpoint (row 1, m × octahedron, halted at iteration 2): PARTIAL.
+    let mut config = Config::default();
+    config.style.iterations = 3;
+    config.run.checkpoint_every = 2;
+    config.run.preview_every = 0;
+    ok(execute(
+        &RunRequest {
+            mesh: dir.join("m.obj"),
+            out: dir.join("runs/m-octa"),
+            config,
+            force: false,
+            resume: false,
+            halt_after: Some(2),
+        },
+        LogMode::Quiet,
+        Style::Octahedron,
+    ));
+    assert!(dir.join("runs/m-octa/checkpoint.json").is_file());
+    let (success, _, err) =
+        stylize_text(&["batch", s(&manifest), "--grid-only", "--grid", s(&path)]);
+    assert!(success, "{err}");
+    check_empty_tile(&Picture::read(&path), &manifest, 1, "PARTIAL");
     // --grid-only runs nothing: it cannot be sharded or forced.
     let (success, _, err) = stylize_text(&["batch", s(&manifest), "--grid-only", "--shard", "0/2"]);
     assert!(!success && err.contains("--shard"), "{err}");
