@@ -10,9 +10,11 @@ Environment: GIS_EXTENSION_ZIP (default target/blender/geometry_in_style-*.zip),
 
 from __future__ import annotations
 
+import atexit
 import glob
 import os
 import re
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -24,8 +26,10 @@ import numpy as np
 import pytest
 
 REPO = Path(__file__).resolve().parents[2]
-# Blender's user folders (extensions, config) in a throw-away place, before bpy is imported.
+# Blender's user folders (extensions, config) in a throw-away place, before bpy is imported (removed
+# at exit: each holds the installed extension, about 21 MB).
 os.environ["BLENDER_USER_RESOURCES"] = tempfile.mkdtemp(prefix="gis-blender-user-")
+atexit.register(shutil.rmtree, os.environ["BLENDER_USER_RESOURCES"], True)
 
 import bpy  # noqa: E402
 from mathutils import Matrix  # noqa: E402
@@ -55,13 +59,13 @@ def _stylize() -> Path:
 
 
 @pytest.fixture(scope="module")
-def ext():
+def ext(tmp_path_factory):
     result = bpy.ops.extensions.package_install_files(filepath=str(_zip()), repo="user_default", enable_on_install=True)
     assert result == {"FINISHED"}
     mod = sys.modules[MODULE]
     prefs = bpy.context.preferences.addons[MODULE].preferences
     prefs.stylize_path = str(_stylize())
-    prefs.runs_dir = tempfile.mkdtemp(prefix="gis-runs-")
+    prefs.runs_dir = str(tmp_path_factory.mktemp("gis-runs"))  # pytest keeps the last 3
     return mod
 
 
