@@ -13,7 +13,8 @@
 //! white band of [`LABEL_HEIGHT`] pixels with two
 //! lines in black, each centred and shortened with `…` to the tile's width ([`crate::sheet`]'s
 //! font at ×[`TEXT_SCALE`]): the mesh's name (file stem; the parent folder too when two meshes share
-//! a stem) and the prompt/style (`exemplar:FILE` by file name).
+//! a stem) and the prompt/style (`exemplar:FILE` by file name), with [`Layout::suffixes`] telling
+//! apart rows of the same mesh and prompt/style (` seed 7`, ` #2`).
 //!
 //! **The tile** of a row whose run is complete and of the row's prompt/style is the result's first
 //! view in the run's `before_after.png` (its bottom-left square: the bottom row is the result,
@@ -136,6 +137,10 @@ pub struct Layout {
     pub table: bool,
     /// Each row's mesh label.
     pub mesh_labels: Vec<String>,
+    /// What tells apart rows of the same mesh and prompt/style, after the prompt/style on the
+    /// label: ` seed N` when they all have a seed and no two the same, ` #k` (the k-th such row)
+    /// otherwise; empty for a row whose pair is unique.
+    pub suffixes: Vec<String>,
 }
 
 impl Layout {
@@ -183,6 +188,28 @@ impl Layout {
             };
             cell_of_row.push((m, j));
         }
+        let suffixes: Vec<String> = rows
+            .iter()
+            .enumerate()
+            .map(|(i, r)| {
+                let same: Vec<&Row> = rows
+                    .iter()
+                    .filter(|o| key(o) == key(r) && style_label(o) == style_label(r))
+                    .collect();
+                if same.len() < 2 {
+                    return String::new();
+                }
+                let seeds_differ = same.iter().all(|o| o.seed.is_some())
+                    && same
+                        .iter()
+                        .enumerate()
+                        .all(|(a, o)| same[..a].iter().all(|p| p.seed != o.seed));
+                match r.seed {
+                    Some(seed) if seeds_differ => format!(" seed {seed}"),
+                    _ => format!(" #{}", columns[cell_of_row[i].1].1 + 1),
+                }
+            })
+            .collect();
         let cells = meshes.len() * columns.len();
         if rows.is_empty() || 2 * rows.len() >= cells {
             return Self {
@@ -191,6 +218,7 @@ impl Layout {
                 cell_of_row,
                 table: true,
                 mesh_labels,
+                suffixes,
             };
         }
         let per_line = (1..=rows.len()).find(|c| c * c >= rows.len()).unwrap_or(1);
@@ -202,6 +230,7 @@ impl Layout {
                 .collect(),
             table: false,
             mesh_labels,
+            suffixes,
         }
     }
 
@@ -217,10 +246,21 @@ pub fn tile_origin((line, column): (usize, usize)) -> (usize, usize) {
     (column * (TILE + GUTTER), line * (CELL_HEIGHT + GUTTER))
 }
 
-/// The two label lines of a row's cell (shortened to the tile's width).
-pub fn label_lines(mesh_label: &str, row: &Row) -> [String; 2] {
-    let fit = |t: &str| sheet::fit_text(t, TILE - 2 * LABEL_PAD, TEXT_SCALE);
-    [fit(mesh_label), fit(&style_label(row))]
+/// The two label lines of a row's cell, shortened to the tile's width: the mesh label, and the
+/// prompt/style followed by `suffix` ([`Layout::suffixes`], kept whole: the prompt/style is
+/// shortened).
+pub fn label_lines(mesh_label: &str, row: &Row, suffix: &str) -> [String; 2] {
+    let width = TILE - 2 * LABEL_PAD;
+    let fit = |t: &str, w: usize| sheet::fit_text(t, w, TEXT_SCALE);
+    // Joining two texts adds one font pixel of space between them.
+    let room = match suffix {
+        "" => width,
+        _ => width.saturating_sub(sheet::text_width(suffix, TEXT_SCALE) + TEXT_SCALE),
+    };
+    [
+        fit(mesh_label, width),
+        fit(&(fit(&style_label(row), room) + suffix), width),
+    ]
 }
 
 /// The top-left corners of the label lines' masks in cell `cell`.
@@ -362,7 +402,7 @@ pub fn sheet_of(rows: &[Row], tiles: &[Tile]) -> anyhow::Result<Images> {
                 canvas.draw_text(status, TEXT_SCALE, x, y, STATUS_INK);
             }
         }
-        let lines = label_lines(&layout.mesh_labels[i], row);
+        let lines = label_lines(&layout.mesh_labels[i], row, &layout.suffixes[i]);
         for (text, (x, y)) in lines.iter().zip(label_origins(cell, &lines)) {
             canvas.draw_text(text, TEXT_SCALE, x, y, [0.0; 3]);
         }
@@ -443,6 +483,26 @@ mod tests {
             l.mesh_labels,
             ["a/bunny", "b/bunny", "a/bunny", "b/bunny", "a/bunny"]
         );
+        // Two cube rows of a/bunny (no seeds): told apart by their number.
+        assert_eq!(l.suffixes, [" #1", "", "", "", " #2"]);
+        let mut seeded = rows.to_vec();
+        seeded[0].seed = Some(1);
+        seeded[4].seed = Some(7);
+        assert_eq!(
+            Layout::of(&seeded).suffixes,
+            [" seed 1", "", "", "", " seed 7"]
+        );
+        // The same seed twice (other overrides, say): numbers again.
+        seeded[4].seed = Some(1);
+        assert_eq!(Layout::of(&seeded).suffixes, [" #1", "", "", "", " #2"]);
+        let long = Row {
+            prompt: Some("a bunny made of lego bricks, studio lighting".into()),
+            style: None,
+            ..row("m.obj", "")
+        };
+        let lines = label_lines("m", &long, " seed 12");
+        assert!(lines[1].ends_with("… seed 12"), "{}", lines[1]);
+        assert!(sheet::text_width(&lines[1], TEXT_SCALE) <= TILE - 2 * LABEL_PAD);
         assert_eq!(
             style_label(&row("cow.off", "exemplar:/x/shapes/e.obj")),
             "exemplar:e.obj"
@@ -459,7 +519,7 @@ mod tests {
 
     #[test]
     fn labels_fit_their_band_and_statuses_their_tile() {
-        let lines = label_lines("a-very-long-mesh-name-indeed", &row("m.obj", "cube"));
+        let lines = label_lines("a-very-long-mesh-name-indeed", &row("m.obj", "cube"), "");
         assert!(lines[0].ends_with('…'));
         for (text, (x, y)) in lines.iter().zip(label_origins((1, 2), &lines)) {
             let (x0, y0) = tile_origin((1, 2));

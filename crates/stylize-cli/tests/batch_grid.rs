@@ -155,7 +155,7 @@ fn check_labels(grid: &Picture, manifest: &Path, i: usize, want: [&str; 2]) {
     let rows = ok(read_manifest(manifest));
     let layout = Layout::of(&rows);
     let c = layout.cell_of_row[i];
-    let lines = label_lines(&layout.mesh_labels[i], &rows[i]);
+    let lines = label_lines(&layout.mesh_labels[i], &rows[i], &layout.suffixes[i]);
     assert_eq!(lines, want.map(String::from));
     let origins = label_origins(c, &lines);
     let (x0, y0) = tile_origin(c);
