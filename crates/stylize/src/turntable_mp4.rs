@@ -886,6 +886,32 @@ mod tests {
         );
     }
 
+    /// The fidelity table of docs/benchmarks.md ("turntable.mp4"): worst mean absolute difference
+    /// against the GIF and bytes, 6 frames at 48², 128², 256². A measurement, not a check:
+    /// `cargo test -p stylize --lib turntable_mp4::tests::fidelity_survey -- --ignored --nocapture`.
+    #[test]
+    #[ignore]
+    fn fidelity_survey() {
+        for size in [48, 128, 256] {
+            let frames = tetrahedron_frames(6, size);
+            let gif = gif_frames(&frames);
+            let mut bytes = Vec::new();
+            encode_mp4(&mut bytes, &frames, 8, Encoding::Direct)
+                .unwrap_or_else(|e| panic!("{e:#}"));
+            let video = decode_mp4(&bytes).unwrap_or_else(|e| panic!("{e:#}"));
+            let worst = video
+                .frames
+                .iter()
+                .zip(&gif)
+                .map(|(m, g)| mean_abs_difference(m, size, g, size, size, size))
+                .fold(0.0, f64::max);
+            println!(
+                "{size}²: worst mean |mp4 − gif| {worst:.2} levels, {} bytes",
+                bytes.len()
+            );
+        }
+    }
+
     #[test]
     fn odd_frames_are_padded_to_even_and_decode_to_the_frame_inside() {
         // 25×25 frames (the render's square tiles at an odd --size) → a 26×26 video.
