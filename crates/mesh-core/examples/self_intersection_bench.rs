@@ -2,7 +2,7 @@
 //! pymeshlab (`scripts/bench_self_intersections.py`, docs/benchmarks.md).
 //!
 //! `cargo run --release -p mesh-core --features io --example self_intersection_bench -- OUT_DIR
-//! [MESH…] [--reps N]`
+//! [MESH…] [--reps N] [--only NAME]`
 //!
 //! Writes into `OUT_DIR`, for each mesh: `NAME.obj` (coordinates rounded to f32, which MeshLab
 //! stores, so both tools see the same numbers) and `NAME.faces.txt` (our intersecting faces, one
@@ -12,7 +12,7 @@
 //! count; each repeated until ≥ 0.3 s of CPU and ≥ N times), and the check's wall ms. Meshes: the fixtures eight (634 faces), bunny, fandisk and
 //! cow, the bunny midpoint-subdivided ×1, ×2, ×3 (up to 235k faces), the cow ×2 (46,434
 //! vertices: the viewer's latency mesh, `stylize-cli/examples/view_latency.rs`) and a torus of 200k faces,
-//! then any MESH given (e.g. stylized results).
+//! then any MESH given (e.g. stylized results). `--only NAME` runs one of them (for profiling).
 
 #![allow(clippy::unwrap_used)]
 
@@ -81,6 +81,11 @@ fn main() {
         reps = args[i + 1].parse().unwrap();
         args.drain(i..i + 2);
     }
+    let mut only: Option<String> = None;
+    if let Some(i) = args.iter().position(|a| a == "--only") {
+        only = Some(args[i + 1].clone());
+        args.drain(i..i + 2);
+    }
     let out = PathBuf::from(args.first().expect("OUT_DIR"));
     std::fs::create_dir_all(&out).unwrap();
     let fixtures = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/meshes");
@@ -113,6 +118,9 @@ fn main() {
         "mesh\tfaces\tpairs\tfaces_involved\tcandidates\tbuild_cpu_ms\tcheck_cpu_ms\trefit_check_cpu_ms\tcheck_wall_ms"
     );
     for (name, mut mesh) in meshes {
+        if only.as_ref().is_some_and(|o| *o != name) {
+            continue;
+        }
         for p in &mut mesh.positions {
             *p = p.map(|c| f64::from(c as f32));
         }

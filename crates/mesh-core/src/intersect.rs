@@ -151,6 +151,9 @@ pub struct SelfIntersectionChecker {
     bvh: Bvh,
     face_component: Vec<u32>,
     component_faces: Vec<usize>,
+    /// The current positions (the fans' certificates read them).
+    positions: Vec<[f64; 3]>,
+    fans: Fans,
 }
 
 impl SelfIntersectionChecker {
@@ -185,6 +188,8 @@ impl SelfIntersectionChecker {
             bvh,
             face_component,
             component_faces,
+            positions: positions.to_vec(),
+            fans: Fans::new(positions.len(), faces),
         })
     }
 
@@ -196,7 +201,10 @@ impl SelfIntersectionChecker {
     /// Moves the vertices (refits the tree; same vertex count). Refuses a different vertex count
     /// or a non-finite vertex, leaving the checker unchanged.
     pub fn update(&mut self, positions: &[[f64; 3]]) -> Result<(), IntersectError> {
-        Ok(self.bvh.refit(positions)?)
+        self.bvh.refit(positions)?;
+        self.positions.clear();
+        self.positions.extend_from_slice(positions);
+        Ok(())
     }
 
     /// [`update`](Self::update) then [`check`](Self::check).
@@ -217,10 +225,22 @@ impl SelfIntersectionChecker {
         let degenerate: Vec<u32> = (0..faces.len() as u32)
             .filter(|&f| tris[f as usize].drop.is_none())
             .collect();
+        // Per face, a bit for each corner whose fan is certified (`Fans`): a pair sharing such a
+        // corner cannot intersect.
+        let certified = self.fans.certify(&self.positions);
+        let corner_mask: Vec<u8> = faces
+            .iter()
+            .map(|f| (0..3).fold(0u8, |m, i| m | (u8::from(certified[f[i] as usize]) << i)))
+            .collect();
         let mut pairs = Vec::new();
         let mut candidates = 0usize;
         self.bvh.for_each_overlapping_pair(|a, b| {
             candidates += 1;
+            let (fa, fb) = (faces[a as usize], faces[b as usize]);
+            let mask = corner_mask[a as usize];
+            if mask != 0 && (0..3).any(|i| mask & (1 << i) != 0 && fb.contains(&fa[i])) {
+                return;
+            }
             if faces_intersect(
                 faces[a as usize],
                 &tris[a as usize],
@@ -266,6 +286,177 @@ impl SelfIntersectionChecker {
             candidates,
         }
     }
+}
+
+/// The fan of faces around each vertex, ordered along the vertex's link, for a certificate that
+/// decides every pair of faces sharing that vertex at once.
+///
+/// A vertex `v` whose faces `(v, r₀, r₁), (v, r₁, r₂), …` form one consistently oriented chain —
+/// closed (`k ≥ 3` faces, back to `r₀`: an interior manifold vertex) or open (a boundary vertex) —
+/// has a fan. At given positions the fan is **certified** when, projected along one coordinate
+/// axis (dropping the axis where the fan's summed normal is largest), every face of the fan is a
+/// triangle of one and the same orientation (exact `orient2d`) and the directions `rᵢ − v` turn
+/// once around `v` at most: the sweep from `r₁` on never passes the direction of `r₀` again
+/// before a closed fan's last face returns to it (exact `orient2d` signs; a zero counts as
+/// passing). Then the projected faces are disjoint angular sectors of a star around `v` —
+/// consecutive ones share a ray, others only `v` — and since the projection is injective on
+/// each face, two faces of the fan meet only at `v` (sharing one vertex) or only along their
+/// shared edge (sharing an edge, so no fold): **no pair of faces sharing `v` intersects** under
+/// the module's definitions. A fan that fails the test, or a vertex without a fan (non-manifold,
+/// inconsistently oriented, a face using it twice, more than [`Fans::MAX_FAN`] faces), leaves
+/// its pairs to the per-pair test. Duplicated faces never form a fan, so they are still found.
+#[derive(Clone, Debug)]
+struct Fans {
+    /// Per vertex, `link[offsets[v]..offsets[v + 1]]`: the link `r₀, r₁, …` (open fans repeat
+    /// nothing: `k` faces, `k + 1` entries; closed fans: `k` faces, `k` entries).
+    offsets: Vec<u32>,
+    link: Vec<u32>,
+    /// Per vertex: 0 no fan, 1 closed, 2 open.
+    kind: Vec<u8>,
+}
+
+impl Fans {
+    /// Vertices with more faces than this get no fan (the chain is built by a linear search).
+    const MAX_FAN: usize = 64;
+
+    fn new(num_vertices: usize, faces: &[[u32; 3]]) -> Fans {
+        // Vertex → (a, b) for each face (v, a, b) around it (corners cycled so that v is first).
+        let mut count = vec![0u32; num_vertices + 1];
+        for f in faces {
+            for &v in f {
+                count[v as usize + 1] += 1;
+            }
+        }
+        for v in 0..num_vertices {
+            count[v + 1] += count[v];
+        }
+        let mut fill = count.clone();
+        let mut edges = vec![(0u32, 0u32); count[num_vertices] as usize];
+        for f in faces {
+            for i in 0..3 {
+                let v = f[i] as usize;
+                edges[fill[v] as usize] = (f[(i + 1) % 3], f[(i + 2) % 3]);
+                fill[v] += 1;
+            }
+        }
+        let mut offsets = Vec::with_capacity(num_vertices + 1);
+        let mut link = Vec::with_capacity(edges.len() + num_vertices);
+        let mut kind = vec![0u8; num_vertices];
+        offsets.push(0u32);
+        let mut used = Vec::new();
+        for v in 0..num_vertices {
+            let es = &edges[count[v] as usize..count[v + 1] as usize];
+            let start = link.len();
+            if let Some(k) = Self::chain(v as u32, es, &mut link, &mut used) {
+                kind[v] = k;
+            } else {
+                link.truncate(start);
+            }
+            offsets.push(link.len() as u32);
+        }
+        Fans {
+            offsets,
+            link,
+            kind,
+        }
+    }
+
+    /// Appends `v`'s ordered link to `link`; `Some(1)` closed, `Some(2)` open, `None` no fan.
+    fn chain(v: u32, es: &[(u32, u32)], link: &mut Vec<u32>, used: &mut Vec<bool>) -> Option<u8> {
+        let k = es.len();
+        if k == 0 || k > Self::MAX_FAN {
+            return None;
+        }
+        if es.iter().any(|&(a, b)| a == v || b == v || a == b) {
+            return None;
+        }
+        for (i, &(a, b)) in es.iter().enumerate() {
+            if es[i + 1..].iter().any(|&(c, d)| c == a || d == b) {
+                return None;
+            }
+        }
+        // Open: start at the edge whose start is no edge's end; closed: anywhere.
+        let first = es
+            .iter()
+            .position(|&(a, _)| !es.iter().any(|&(_, d)| d == a));
+        let open = first.is_some();
+        let mut cur = first.unwrap_or(0);
+        used.clear();
+        used.resize(k, false);
+        link.push(es[cur].0);
+        for n in 0..k {
+            used[cur] = true;
+            let b = es[cur].1;
+            if n + 1 == k {
+                if open {
+                    link.push(b);
+                    return Some(2);
+                }
+                return (b == link[link.len() - k] && k >= 3).then_some(1);
+            }
+            link.push(b);
+            cur = es.iter().position(|&(a, _)| a == b)?;
+            if used[cur] {
+                return None;
+            }
+        }
+        None
+    }
+
+    /// Per vertex: whether its fan is certified at `positions` (see [`Fans`]).
+    fn certify(&self, positions: &[[f64; 3]]) -> Vec<bool> {
+        (0..self.kind.len())
+            .map(|v| {
+                let k = self.kind[v];
+                k != 0 && {
+                    let l = &self.link[self.offsets[v] as usize..self.offsets[v + 1] as usize];
+                    fan_is_star(positions, positions[v], l, k == 1)
+                }
+            })
+            .collect()
+    }
+}
+
+/// The certificate of [`Fans`] for the fan of the vertex at `pv` with link `l` (closed: the faces
+/// are `(v, lᵢ, lᵢ₊₁ mod k)`; open: `(v, lᵢ, lᵢ₊₁)`).
+fn fan_is_star(positions: &[[f64; 3]], pv: [f64; 3], l: &[u32], closed: bool) -> bool {
+    let faces = if closed { l.len() } else { l.len() - 1 };
+    let at = |i: usize| positions[l[i % l.len()] as usize];
+    let mut n = [0.0f64; 3];
+    for i in 0..faces {
+        let c = crate::geometry::cross(
+            crate::geometry::sub(at(i), pv),
+            crate::geometry::sub(at(i + 1), pv),
+        );
+        for k in 0..3 {
+            n[k] += c[k];
+        }
+    }
+    let axis = if n[0].abs() >= n[1].abs() && n[0].abs() >= n[2].abs() {
+        0
+    } else if n[1].abs() >= n[2].abs() {
+        1
+    } else {
+        2
+    };
+    let want = if n[axis] > 0.0 {
+        Sign::Positive
+    } else if n[axis] < 0.0 {
+        Sign::Negative
+    } else {
+        return false;
+    };
+    if (0..faces).any(|i| orient2d_projected(pv, at(i), at(i + 1), axis) != want) {
+        return false;
+    }
+    // The sweep passes the direction of r₀ during face i (i ≥ 1) when r₀ is strictly after rᵢ
+    // and not strictly before rᵢ₊₁ (both turns are less than a half turn).
+    let r0 = at(0);
+    let last = if closed { faces - 1 } else { faces };
+    !(1..last).any(|i| {
+        orient2d_projected(pv, at(i), r0, axis) == want
+            && orient2d_projected(pv, r0, at(i + 1), axis) != want.flip()
+    })
 }
 
 /// A face's corners and the axis its exact 2-D projection drops (`None`: degenerate).
