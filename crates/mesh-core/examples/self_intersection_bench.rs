@@ -115,7 +115,7 @@ fn main() {
         meshes.push((name, read(&p)));
     }
     println!(
-        "mesh\tfaces\tpairs\tfaces_involved\tcandidates\tbuild_cpu_ms\tcheck_cpu_ms\trefit_check_cpu_ms\tcheck_wall_ms"
+        "mesh\tfaces\tpairs\tfaces_involved\tcandidates\tbuild_cpu_ms\tcheck_cpu_ms\trefit_check_cpu_ms\tcheck_wall_ms\ttraversal_cpu_ms"
     );
     for (name, mut mesh) in meshes {
         if only.as_ref().is_some_and(|o| *o != name) {
@@ -136,12 +136,18 @@ fn main() {
         let (refit, _) = timed(reps, || {
             checker.check_moved(&mesh.positions).unwrap();
         });
+        let bvh = mesh_core::bvh::Bvh::new(&mesh.positions, &mesh.faces).unwrap();
+        let (traversal, _) = timed(reps, || {
+            let mut n = 0usize;
+            bvh.for_each_overlapping_pair(|_, _| n += 1);
+            std::hint::black_box(n);
+        });
         let mut f = std::fs::File::create(out.join(format!("{name}.faces.txt"))).unwrap();
         for face in &r.faces {
             writeln!(f, "{face}").unwrap();
         }
         println!(
-            "{name}\t{}\t{}\t{}\t{}\t{build:.1}\t{check:.1}\t{refit:.1}\t{check_wall:.1}",
+            "{name}\t{}\t{}\t{}\t{}\t{build:.1}\t{check:.1}\t{refit:.1}\t{check_wall:.1}\t{traversal:.1}",
             mesh.faces.len(),
             r.pairs.len(),
             r.faces.len(),

@@ -600,68 +600,124 @@ impl Bvh {
     /// is never paired with itself; faces sharing a vertex are included — the caller decides what
     /// adjacency means). The order of the calls follows the tree.
     pub fn for_each_overlapping_pair(&self, mut pair: impl FnMut(u32, u32)) {
+        let boxes = &self.boxes;
+        self.for_each_candidate_pair(|f, g| {
+            if boxes[f as usize].overlaps(&boxes[g as usize]) {
+                pair(f, g);
+            }
+        });
+    }
+
+    /// [`for_each_overlapping_pair`](Self::for_each_overlapping_pair) without its final `f64` box
+    /// test: every overlapping pair once, plus the rare pairs whose boxes are apart by less than
+    /// their `f32` rounding (a relative 2⁻²⁴) — for callers that test each pair exactly anyway.
+    ///
+    /// The traversal works on a compact copy of the tree: boxes in `f32`, each rounded outward
+    /// (so no overlapping pair is missed), the faces' boxes in leaf order, one array per
+    /// coordinate, and every subtree of at most `PAIR_LEAF` (32) faces treated as one leaf: a
+    /// face is tested against all the faces of a leaf at once, without branches, into a bit
+    /// mask. A node pair is pushed only after its boxes were found to overlap, and each face of
+    /// one leaf is tested against the other leaf's box first.
+    pub fn for_each_candidate_pair(&self, mut pair: impl FnMut(u32, u32)) {
+        let order = &self.order;
+        self.for_each_candidate_slots(|x, y| {
+            let (f, g) = (order[x], order[y]);
+            pair(f.min(g), f.max(g));
+        });
+    }
+
+    /// The faces in the order the tree's leaves hold them (`slot → face`): what
+    /// [`for_each_candidate_slots`](Self::for_each_candidate_slots) indexes.
+    pub(crate) fn leaf_order(&self) -> &[u32] {
+        &self.order
+    }
+
+    /// [`for_each_candidate_pair`](Self::for_each_candidate_pair) as positions `(x, y)` in
+    /// [`leaf_order`](Self::leaf_order) (`x ≠ y`, either order): callers that keep per-face data
+    /// in that order read it sequentially.
+    pub(crate) fn for_each_candidate_slots(&self, mut emit: impl FnMut(usize, usize)) {
         if self.nodes.is_empty() {
             return;
         }
-        let mut stack: Vec<(u32, u32)> = vec![(0, 0)];
+        let nodes = self.pair_nodes();
+        let leaf = LeafBoxes::new(self.order.iter().map(|&f| &self.boxes[f as usize]));
+        // Node pairs (i, j) to visit: i == j for all pairs within one subtree, i != j for the
+        // pairs across two subtrees whose boxes overlap.
+        let mut stack: Vec<(u32, u32)> = Vec::with_capacity(256);
+        stack.push((0, 0));
         while let Some((i, j)) = stack.pop() {
-            let a = &self.nodes[i as usize];
+            let a = &nodes[i as usize];
             if i == j {
-                if a.count > 0 {
-                    let fs = &self.order[a.start as usize..(a.start + a.count) as usize];
-                    for (k, &f) in fs.iter().enumerate() {
-                        let bf = self.face_bounds(f);
-                        for &g in &fs[k + 1..] {
-                            if bf.overlaps(&self.face_bounds(g)) {
-                                pair(f.min(g), f.max(g));
-                            }
+                if a.is_leaf() {
+                    let r = a.faces();
+                    for x in r.clone() {
+                        let bx = leaf.get(x);
+                        let mut mask = leaf.overlap_mask(&bx, x + 1..r.end);
+                        while mask != 0 {
+                            emit(x, x + 1 + mask.trailing_zeros() as usize);
+                            mask &= mask - 1;
                         }
                     }
                 } else {
-                    let (l, r) = (i + 1, a.start);
+                    let (l, r) = (i + 1, a.right);
                     stack.push((l, l));
                     stack.push((r, r));
-                    stack.push((l, r));
+                    if nodes[l as usize].bounds.overlaps(&nodes[r as usize].bounds) {
+                        stack.push((l, r));
+                    }
                 }
                 continue;
             }
-            let b = &self.nodes[j as usize];
-            if !a.bounds.overlaps(&b.bounds) {
+            let b = &nodes[j as usize];
+            if a.is_leaf() && b.is_leaf() {
+                let rb = b.faces();
+                for x in a.faces() {
+                    let bx = leaf.get(x);
+                    if !bx.overlaps(&b.bounds) {
+                        continue;
+                    }
+                    let mut mask = leaf.overlap_mask(&bx, rb.clone());
+                    while mask != 0 {
+                        emit(x, rb.start + mask.trailing_zeros() as usize);
+                        mask &= mask - 1;
+                    }
+                }
                 continue;
             }
-            match (a.count > 0, b.count > 0) {
-                (true, true) => {
-                    let fa = &self.order[a.start as usize..(a.start + a.count) as usize];
-                    let fb = &self.order[b.start as usize..(b.start + b.count) as usize];
-                    for &f in fa {
-                        let bf = self.face_bounds(f);
-                        for &g in fb {
-                            if bf.overlaps(&self.face_bounds(g)) {
-                                pair(f.min(g), f.max(g));
-                            }
-                        }
-                    }
-                }
-                (false, true) => {
-                    stack.push((i + 1, j));
-                    stack.push((a.start, j));
-                }
-                (true, false) => {
-                    stack.push((i, j + 1));
-                    stack.push((i, b.start));
-                }
-                (false, false) => {
-                    // Split the larger box.
-                    if volume(&a.bounds) >= volume(&b.bounds) {
-                        stack.push((i + 1, j));
-                        stack.push((a.start, j));
-                    } else {
-                        stack.push((i, j + 1));
-                        stack.push((i, b.start));
-                    }
+            // Split the interior node (the larger one when both are).
+            let split_a = b.is_leaf() || (!a.is_leaf() && a.bounds.size() >= b.bounds.size());
+            let (split, other) = if split_a { (i, j) } else { (j, i) };
+            let ob = &nodes[other as usize].bounds;
+            for c in [split + 1, nodes[split as usize].right] {
+                if nodes[c as usize].bounds.overlaps(ob) {
+                    stack.push((c, other));
                 }
             }
         }
+    }
+
+    /// The compact tree of [`for_each_overlapping_pair`](Self::for_each_overlapping_pair).
+    fn pair_nodes(&self) -> Vec<PairNode> {
+        let mut out: Vec<PairNode> = self
+            .nodes
+            .iter()
+            .map(|n| PairNode {
+                bounds: Box32::outward(&n.bounds),
+                right: if n.count > 0 { 0 } else { n.start },
+                first: n.start,
+                count: n.count,
+            })
+            .collect();
+        // Children come after their parent: fill the subtrees' face ranges backwards.
+        for i in (0..out.len()).rev() {
+            if self.nodes[i].count == 0 {
+                let (l, r) = (&out[i + 1], &out[out[i].right as usize]);
+                let (first, count) = (l.first, l.count + r.count);
+                out[i].first = first;
+                out[i].count = count;
+            }
+        }
+        out
     }
 
     /// [`for_each_overlapping_pair`](Self::for_each_overlapping_pair) collected and sorted.
@@ -673,10 +729,132 @@ impl Bvh {
     }
 }
 
-fn volume(b: &Aabb) -> f64 {
-    let e = sub(b.hi, b.lo);
-    // Sum of extents: a size measure that stays useful for flat boxes.
-    e[0] + e[1] + e[2]
+/// Subtrees of at most this many faces are one leaf of the pair traversal (at most 32: the
+/// overlap masks are `u32`). Measured on 93k–235k faces: 8 → 32 took the traversal from 24 to 17
+/// ms on the 200k-face torus (docs/benchmarks.md).
+const PAIR_LEAF: u32 = 32;
+const _: () = assert!(PAIR_LEAF <= 32);
+
+/// A node of the pair traversal's compact tree.
+#[derive(Clone, Copy, Debug)]
+struct PairNode {
+    bounds: Box32,
+    /// The right child (the left one is the next node); unused for leaves.
+    right: u32,
+    /// The subtree's faces: `order[first..first + count]`.
+    first: u32,
+    count: u32,
+}
+
+impl PairNode {
+    #[inline]
+    fn is_leaf(&self) -> bool {
+        self.count <= PAIR_LEAF
+    }
+
+    #[inline]
+    fn faces(&self) -> std::ops::Range<usize> {
+        self.first as usize..(self.first + self.count) as usize
+    }
+}
+
+/// The faces' boxes of the pair traversal in leaf order, one array per coordinate.
+struct LeafBoxes {
+    lo: [Vec<f32>; 3],
+    hi: [Vec<f32>; 3],
+}
+
+impl LeafBoxes {
+    fn new<'a>(boxes: impl ExactSizeIterator<Item = &'a Aabb>) -> LeafBoxes {
+        let n = boxes.len();
+        let mut lo = [(); 3].map(|_| Vec::with_capacity(n));
+        let mut hi = [(); 3].map(|_| Vec::with_capacity(n));
+        for b in boxes {
+            let b = Box32::outward(b);
+            for k in 0..3 {
+                lo[k].push(b.lo[k]);
+                hi[k].push(b.hi[k]);
+            }
+        }
+        LeafBoxes { lo, hi }
+    }
+
+    #[inline]
+    fn get(&self, x: usize) -> Box32 {
+        Box32 {
+            lo: [self.lo[0][x], self.lo[1][x], self.lo[2][x]],
+            hi: [self.hi[0][x], self.hi[1][x], self.hi[2][x]],
+        }
+    }
+
+    /// Bit `t` set when the box of face `range.start + t` overlaps `b` (at most 32 faces;
+    /// branch-free).
+    #[inline]
+    fn overlap_mask(&self, b: &Box32, range: std::ops::Range<usize>) -> u32 {
+        let mut mask = 0u32;
+        let (lx, ly, lz) = (
+            &self.lo[0][range.clone()],
+            &self.lo[1][range.clone()],
+            &self.lo[2][range.clone()],
+        );
+        let (hx, hy, hz) = (
+            &self.hi[0][range.clone()],
+            &self.hi[1][range.clone()],
+            &self.hi[2][range],
+        );
+        for t in 0..lx.len() {
+            let o = (b.lo[0] <= hx[t])
+                & (lx[t] <= b.hi[0])
+                & (b.lo[1] <= hy[t])
+                & (ly[t] <= b.hi[1])
+                & (b.lo[2] <= hz[t])
+                & (lz[t] <= b.hi[2]);
+            mask |= u32::from(o) << t;
+        }
+        mask
+    }
+}
+
+/// A box in `f32` (the pair traversal's compact copy).
+#[derive(Clone, Copy, Debug)]
+struct Box32 {
+    lo: [f32; 3],
+    hi: [f32; 3],
+}
+
+impl Box32 {
+    /// The smallest `f32` box containing `b` (corners rounded outward).
+    #[inline]
+    fn outward(b: &Aabb) -> Box32 {
+        let down = |x: f64| {
+            let y = x as f32;
+            if f64::from(y) > x { y.next_down() } else { y }
+        };
+        let up = |x: f64| {
+            let y = x as f32;
+            if f64::from(y) < x { y.next_up() } else { y }
+        };
+        Box32 {
+            lo: b.lo.map(down),
+            hi: b.hi.map(up),
+        }
+    }
+
+    #[inline]
+    fn overlaps(&self, o: &Box32) -> bool {
+        (self.lo[0] <= o.hi[0])
+            & (o.lo[0] <= self.hi[0])
+            & (self.lo[1] <= o.hi[1])
+            & (o.lo[1] <= self.hi[1])
+            & (self.lo[2] <= o.hi[2])
+            & (o.lo[2] <= self.hi[2])
+    }
+
+    /// Sum of extents: a size measure that stays useful for flat boxes.
+    #[inline]
+    fn size(&self) -> f32 {
+        (self.hi[0] - self.lo[0]) + (self.hi[1] - self.lo[1]) + (self.hi[2] - self.lo[2])
+    }
 }
 
 /// The closest point of the segment `a b` to `p` and its parameter `s` (point = a + s·(b − a)).

@@ -219,12 +219,6 @@ impl SelfIntersectionChecker {
     /// The self-intersections at the current positions.
     pub fn check(&self) -> SelfIntersections {
         let faces = self.bvh.faces();
-        let tris: Vec<Tri> = (0..faces.len() as u32)
-            .map(|f| Tri::new(self.bvh.triangle(f)))
-            .collect();
-        let degenerate: Vec<u32> = (0..faces.len() as u32)
-            .filter(|&f| tris[f as usize].drop.is_none())
-            .collect();
         // Per face, a bit for each corner whose fan is certified (`Fans`): a pair sharing such a
         // corner cannot intersect.
         let certified = self.fans.certify(&self.positions);
@@ -232,21 +226,37 @@ impl SelfIntersectionChecker {
             .iter()
             .map(|f| (0..3).fold(0u8, |m, i| m | (u8::from(certified[f[i] as usize]) << i)))
             .collect();
+        // The faces and their masks in the tree's leaf order, which the traversal walks.
+        let order = self.bvh.leaf_order();
+        let slots: Vec<[u32; 4]> = order
+            .iter()
+            .map(|&f| {
+                let v = faces[f as usize];
+                [v[0], v[1], v[2], u32::from(corner_mask[f as usize])]
+            })
+            .collect();
+        // A face with a certified corner is a proper triangle (its fan's projection keeps it
+        // one); the others are tested exactly.
+        let degenerate: Vec<u32> = (0..faces.len() as u32)
+            .filter(|&f| {
+                corner_mask[f as usize] == 0 && Tri::new(self.bvh.triangle(f)).drop.is_none()
+            })
+            .collect();
         let mut pairs = Vec::new();
         let mut candidates = 0usize;
-        self.bvh.for_each_overlapping_pair(|a, b| {
+        self.bvh.for_each_candidate_slots(|x, y| {
             candidates += 1;
-            let (fa, fb) = (faces[a as usize], faces[b as usize]);
-            let mask = corner_mask[a as usize];
-            if mask != 0 && (0..3).any(|i| mask & (1 << i) != 0 && fb.contains(&fa[i])) {
+            let (sa, sb) = (slots[x], slots[y]);
+            let mask = sa[3];
+            if mask != 0 && (0..3).any(|i| mask & (1 << i) != 0 && sb[..3].contains(&sa[i])) {
                 return;
             }
-            if faces_intersect(
-                faces[a as usize],
-                &tris[a as usize],
-                faces[b as usize],
-                &tris[b as usize],
-            ) {
+            let (a, b) = (order[x].min(order[y]), order[x].max(order[y]));
+            let (fa, fb) = (faces[a as usize], faces[b as usize]);
+            let (pa, pb) = (self.bvh.triangle(a), self.bvh.triangle(b));
+            if !quickly_apart(fa, &pa, fb, &pb)
+                && faces_intersect(fa, &Tri::new(pa), fb, &Tri::new(pb))
+            {
                 pairs.push((a, b));
             }
         });
@@ -509,6 +519,52 @@ pub(crate) fn faces_intersect(fa: [u32; 3], ta: &Tri, fb: [u32; 3], tb: &Tri) ->
             edge_fold(ta.p[i0], ta.p[i1], a, b, ta)
         }
         _ => true,
+    }
+}
+
+/// The `f64` filters of [`faces_intersect`] alone, on the corners (before the exact projection
+/// axes of [`Tri::new`] are computed): `true` only when the faces certainly do not intersect under
+/// the module's definitions (faces sharing all three vertices: never).
+fn quickly_apart(fa: [u32; 3], pa: &[[f64; 3]; 3], fb: [u32; 3], pb: &[[f64; 3]; 3]) -> bool {
+    let repeats = |f: [u32; 3]| f[0] == f[1] || f[1] == f[2] || f[2] == f[0];
+    if repeats(fa) || repeats(fb) {
+        // Degenerate (never paired): left to faces_intersect, which says so.
+        return false;
+    }
+    let mut shared = [(0usize, 0usize); 3];
+    let mut n = 0;
+    for (i, &v) in fa.iter().enumerate() {
+        if let Some(j) = fb.iter().position(|&w| w == v) {
+            shared[n] = (i, j);
+            n += 1;
+        }
+    }
+    match n {
+        0 => {
+            let d = centroid_direction(pa, pb);
+            let mid = [0, 1, 2].map(|k| {
+                0.5 * ((pa[0][k] + pa[1][k] + pa[2][k]) / 3.0
+                    + (pb[0][k] + pb[1][k] + pb[2][k]) / 3.0)
+            });
+            certainly_separated(mid, d, pa, pb)
+        }
+        1 => {
+            let (i, j) = shared[0];
+            let v = pa[i];
+            let (a1, b1) = (pa[(i + 1) % 3], pa[(i + 2) % 3]);
+            let (a2, b2) = (pb[(j + 1) % 3], pb[(j + 2) % 3]);
+            certainly_separated(
+                v,
+                centroid_direction(&[a1, b1], &[a2, b2]),
+                &[a1, b1],
+                &[a2, b2],
+            )
+        }
+        2 => {
+            let ((i0, j0), (i1, j1)) = (shared[0], shared[1]);
+            clearly_opposite_sides(pa[i0], pa[i1], pa[3 - i0 - i1], pb[3 - j0 - j1])
+        }
+        _ => false,
     }
 }
 

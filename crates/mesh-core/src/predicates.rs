@@ -102,10 +102,15 @@ const CCW_HUGE: f64 = f64::from_bits((1023 + 500) << 52);
 /// Covers the underflow of the last product of each 3×3 term (≤ 2^-1075 each).
 const UNDERFLOW_SLACK: f64 = f64::from_bits(16); // 2^-1070 (a subnormal)
 
+/// Every `|x|` is 0 or in `[tiny, huge]` (branch-free, so it inlines and vectorizes).
 #[inline]
-fn in_range(d: f64, tiny: f64, huge: f64) -> bool {
-    let m = d.abs();
-    m == 0.0 || (m >= tiny && m <= huge)
+fn all_in_range<const N: usize>(xs: [f64; N], tiny: f64, huge: f64) -> bool {
+    let mut ok = true;
+    for x in xs {
+        let m = x.abs();
+        ok &= (m == 0.0) | ((m >= tiny) & (m <= huge));
+    }
+    ok
 }
 
 /// [`orient3d_unchecked`] after refusing non-finite input.
@@ -141,10 +146,11 @@ pub fn orient3d_filter(a: [f64; 3], b: [f64; 3], c: [f64; 3], d: [f64; 3]) -> Op
     let adz = a[2] - d[2];
     let bdz = b[2] - d[2];
     let cdz = c[2] - d[2];
-    if ![adx, bdx, cdx, ady, bdy, cdy, adz, bdz, cdz]
-        .iter()
-        .all(|&x| in_range(x, O3D_TINY, O3D_HUGE))
-    {
+    if !all_in_range(
+        [adx, bdx, cdx, ady, bdy, cdy, adz, bdz, cdz],
+        O3D_TINY,
+        O3D_HUGE,
+    ) {
         return None;
     }
     let bdxcdy = bdx * cdy;
@@ -225,10 +231,7 @@ pub fn orient2d_filter(a: [f64; 2], b: [f64; 2], c: [f64; 2]) -> Option<Sign> {
     let bcx = b[0] - c[0];
     let acy = a[1] - c[1];
     let bcy = b[1] - c[1];
-    if ![acx, bcx, acy, bcy]
-        .iter()
-        .all(|&x| in_range(x, CCW_TINY, CCW_HUGE))
-    {
+    if !all_in_range([acx, bcx, acy, bcy], CCW_TINY, CCW_HUGE) {
         return None;
     }
     let detleft = acx * bcy;
