@@ -9,7 +9,9 @@
 //! index per line), and prints one tab-separated line per mesh: name, faces, pairs, faces
 //! involved, candidates, then per call: BVH build, one full check, refit + check (the viewer's
 //! per-move cost) in **CPU ms of the thread** (the machine is shared: descheduled time does not
-//! count; each repeated until ≥ 0.3 s of CPU and ≥ N times), and the check's wall ms. Meshes: the fixtures eight (634 faces), bunny, fandisk and
+//! count; each repeated until ≥ 0.3 s of CPU and ≥ N times), the check's wall ms, the BVH's
+//! self-overlap traversal alone (CPU ms) and the check on 2 threads (`set_threads(2)`, wall ms:
+//! the viewer's setting). Meshes: the fixtures eight (634 faces), bunny, fandisk and
 //! cow, the bunny midpoint-subdivided ×1, ×2, ×3 (up to 235k faces), the cow ×2 (46,434
 //! vertices: the viewer's latency mesh, `stylize-cli/examples/view_latency.rs`) and a torus of 200k faces,
 //! then any MESH given (e.g. stylized results). `--only NAME` runs one of them (for profiling).
@@ -115,7 +117,7 @@ fn main() {
         meshes.push((name, read(&p)));
     }
     println!(
-        "mesh\tfaces\tpairs\tfaces_involved\tcandidates\tbuild_cpu_ms\tcheck_cpu_ms\trefit_check_cpu_ms\tcheck_wall_ms\ttraversal_cpu_ms"
+        "mesh\tfaces\tpairs\tfaces_involved\tcandidates\tbuild_cpu_ms\tcheck_cpu_ms\trefit_check_cpu_ms\tcheck_wall_ms\ttraversal_cpu_ms\tcheck_2_threads_wall_ms"
     );
     for (name, mut mesh) in meshes {
         if only.as_ref().is_some_and(|o| *o != name) {
@@ -136,6 +138,11 @@ fn main() {
         let (refit, _) = timed(reps, || {
             checker.check_moved(&mesh.positions).unwrap();
         });
+        checker.set_threads(2);
+        let (_, check2_wall) = timed(reps, || {
+            checker.check();
+        });
+        checker.set_threads(1);
         let bvh = mesh_core::bvh::Bvh::new(&mesh.positions, &mesh.faces).unwrap();
         let (traversal, _) = timed(reps, || {
             let mut n = 0usize;
@@ -147,7 +154,7 @@ fn main() {
             writeln!(f, "{face}").unwrap();
         }
         println!(
-            "{name}\t{}\t{}\t{}\t{}\t{build:.1}\t{check:.1}\t{refit:.1}\t{check_wall:.1}\t{traversal:.1}",
+            "{name}\t{}\t{}\t{}\t{}\t{build:.1}\t{check:.1}\t{refit:.1}\t{check_wall:.1}\t{traversal:.1}\t{check2_wall:.1}",
             mesh.faces.len(),
             r.pairs.len(),
             r.faces.len(),

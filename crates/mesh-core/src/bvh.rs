@@ -635,65 +635,22 @@ impl Bvh {
     /// [`for_each_candidate_pair`](Self::for_each_candidate_pair) as positions `(x, y)` in
     /// [`leaf_order`](Self::leaf_order) (`x ≠ y`, either order): callers that keep per-face data
     /// in that order read it sequentially.
-    pub(crate) fn for_each_candidate_slots(&self, mut emit: impl FnMut(usize, usize)) {
+    pub(crate) fn for_each_candidate_slots(&self, emit: impl FnMut(usize, usize)) {
+        if let Some(tree) = self.pair_tree() {
+            tree.traverse(&[(0, 0)], emit);
+        }
+    }
+
+    /// The compact tree the pair traversal walks (`None` for an empty tree), for callers that
+    /// split the traversal into tasks ([`PairTree::tasks`]).
+    pub(crate) fn pair_tree(&self) -> Option<PairTree> {
         if self.nodes.is_empty() {
-            return;
+            return None;
         }
-        let nodes = self.pair_nodes();
-        let leaf = LeafBoxes::new(self.order.iter().map(|&f| &self.boxes[f as usize]));
-        // Node pairs (i, j) to visit: i == j for all pairs within one subtree, i != j for the
-        // pairs across two subtrees whose boxes overlap.
-        let mut stack: Vec<(u32, u32)> = Vec::with_capacity(256);
-        stack.push((0, 0));
-        while let Some((i, j)) = stack.pop() {
-            let a = &nodes[i as usize];
-            if i == j {
-                if a.is_leaf() {
-                    let r = a.faces();
-                    for x in r.clone() {
-                        let bx = leaf.get(x);
-                        let mut mask = leaf.overlap_mask(&bx, x + 1..r.end);
-                        while mask != 0 {
-                            emit(x, x + 1 + mask.trailing_zeros() as usize);
-                            mask &= mask - 1;
-                        }
-                    }
-                } else {
-                    let (l, r) = (i + 1, a.right);
-                    stack.push((l, l));
-                    stack.push((r, r));
-                    if nodes[l as usize].bounds.overlaps(&nodes[r as usize].bounds) {
-                        stack.push((l, r));
-                    }
-                }
-                continue;
-            }
-            let b = &nodes[j as usize];
-            if a.is_leaf() && b.is_leaf() {
-                let rb = b.faces();
-                for x in a.faces() {
-                    let bx = leaf.get(x);
-                    if !bx.overlaps(&b.bounds) {
-                        continue;
-                    }
-                    let mut mask = leaf.overlap_mask(&bx, rb.clone());
-                    while mask != 0 {
-                        emit(x, rb.start + mask.trailing_zeros() as usize);
-                        mask &= mask - 1;
-                    }
-                }
-                continue;
-            }
-            // Split the interior node (the larger one when both are).
-            let split_a = b.is_leaf() || (!a.is_leaf() && a.bounds.size() >= b.bounds.size());
-            let (split, other) = if split_a { (i, j) } else { (j, i) };
-            let ob = &nodes[other as usize].bounds;
-            for c in [split + 1, nodes[split as usize].right] {
-                if nodes[c as usize].bounds.overlaps(ob) {
-                    stack.push((c, other));
-                }
-            }
-        }
+        Some(PairTree {
+            nodes: self.pair_nodes(),
+            leaf: LeafBoxes::new(self.order.iter().map(|&f| &self.boxes[f as usize])),
+        })
     }
 
     /// The compact tree of [`for_each_overlapping_pair`](Self::for_each_overlapping_pair).
@@ -755,6 +712,107 @@ impl PairNode {
     #[inline]
     fn faces(&self) -> std::ops::Range<usize> {
         self.first as usize..(self.first + self.count) as usize
+    }
+}
+
+/// The pair traversal's compact tree: its nodes and the faces' boxes in leaf order.
+pub(crate) struct PairTree {
+    nodes: Vec<PairNode>,
+    leaf: LeafBoxes,
+}
+
+impl PairTree {
+    /// The traversal's work as at least `n` independent tasks (node pairs, `(i, i)` for all pairs
+    /// within subtree `i`), each with its number of faces as a weight: the root task split into
+    /// its children's (the largest first) until there are `n` or no task can be split. Traversing
+    /// every task once visits every candidate pair once.
+    pub(crate) fn tasks(&self, n: usize) -> Vec<((u32, u32), usize)> {
+        let weight = |(i, j): (u32, u32)| {
+            let c = |k: u32| self.nodes[k as usize].count as usize;
+            if i == j { c(i) } else { (c(i) + c(j)) / 2 }
+        };
+        let mut tasks = vec![((0u32, 0u32), weight((0, 0)))];
+        while tasks.len() < n {
+            let Some(k) = (0..tasks.len())
+                .filter(|&k| {
+                    let (i, j) = tasks[k].0;
+                    i == j && !self.nodes[i as usize].is_leaf()
+                })
+                .max_by_key(|&k| tasks[k].1)
+            else {
+                break;
+            };
+            let (i, _) = tasks.swap_remove(k).0;
+            let (l, r) = (i + 1, self.nodes[i as usize].right);
+            tasks.push(((l, l), weight((l, l))));
+            tasks.push(((r, r), weight((r, r))));
+            if self.nodes[l as usize]
+                .bounds
+                .overlaps(&self.nodes[r as usize].bounds)
+            {
+                tasks.push(((l, r), weight((l, r))));
+            }
+        }
+        tasks
+    }
+
+    /// Calls `emit(x, y)` (positions in leaf order, `x ≠ y`) for every candidate pair under the
+    /// node pairs `seeds` (see [`Bvh::for_each_candidate_pair`]).
+    pub(crate) fn traverse(&self, seeds: &[(u32, u32)], mut emit: impl FnMut(usize, usize)) {
+        let (nodes, leaf) = (&self.nodes, &self.leaf);
+        // Node pairs (i, j) to visit: i == j for all pairs within one subtree, i != j for the
+        // pairs across two subtrees whose boxes overlap.
+        let mut stack: Vec<(u32, u32)> = Vec::with_capacity(256);
+        stack.extend_from_slice(seeds);
+        while let Some((i, j)) = stack.pop() {
+            let a = &nodes[i as usize];
+            if i == j {
+                if a.is_leaf() {
+                    let r = a.faces();
+                    for x in r.clone() {
+                        let bx = leaf.get(x);
+                        let mut mask = leaf.overlap_mask(&bx, x + 1..r.end);
+                        while mask != 0 {
+                            emit(x, x + 1 + mask.trailing_zeros() as usize);
+                            mask &= mask - 1;
+                        }
+                    }
+                } else {
+                    let (l, r) = (i + 1, a.right);
+                    stack.push((l, l));
+                    stack.push((r, r));
+                    if nodes[l as usize].bounds.overlaps(&nodes[r as usize].bounds) {
+                        stack.push((l, r));
+                    }
+                }
+                continue;
+            }
+            let b = &nodes[j as usize];
+            if a.is_leaf() && b.is_leaf() {
+                let rb = b.faces();
+                for x in a.faces() {
+                    let bx = leaf.get(x);
+                    if !bx.overlaps(&b.bounds) {
+                        continue;
+                    }
+                    let mut mask = leaf.overlap_mask(&bx, rb.clone());
+                    while mask != 0 {
+                        emit(x, rb.start + mask.trailing_zeros() as usize);
+                        mask &= mask - 1;
+                    }
+                }
+                continue;
+            }
+            // Split the interior node (the larger one when both are).
+            let split_a = b.is_leaf() || (!a.is_leaf() && a.bounds.size() >= b.bounds.size());
+            let (split, other) = if split_a { (i, j) } else { (j, i) };
+            let ob = &nodes[other as usize].bounds;
+            for c in [split + 1, nodes[split as usize].right] {
+                if nodes[c as usize].bounds.overlaps(ob) {
+                    stack.push((c, other));
+                }
+            }
+        }
     }
 }
 

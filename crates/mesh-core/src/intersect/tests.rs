@@ -731,3 +731,20 @@ fn random_fans_match_the_brute_force_oracle() {
         "{certified} {not} {with_pairs}"
     );
 }
+
+#[test]
+fn threads_give_the_same_answer() {
+    // A torus with a band pushed through the opposite side (pairs), checked on 1, 2 and 3
+    // threads: same pairs, same candidates.
+    let (mut p, f) = torus(60, 24);
+    for q in p.iter_mut().take(24 * 6) {
+        q[0] = -q[0] * 1.2;
+    }
+    let mut checker = SelfIntersectionChecker::new(&p, &f).expect("ok");
+    let one = checker.check();
+    assert!(!one.pairs.is_empty());
+    for t in [2, 3] {
+        checker.set_threads(t);
+        assert_eq!(checker.check(), one, "{t} threads");
+    }
+}
