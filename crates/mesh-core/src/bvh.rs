@@ -259,11 +259,35 @@ impl Bvh {
                     c
                 })
                 .collect();
-            let mut order = std::mem::take(&mut bvh.order);
-            bvh.build(&mut order, 0, &centroids);
-            bvh.order = order;
+            // The faces carry their centroids through the partitions (no indirection per
+            // comparison); the boxes are filled bottom-up afterwards.
+            let mut items: Vec<(u32, [f64; 3])> = (0..faces.len() as u32)
+                .map(|f| (f, centroids[f as usize]))
+                .collect();
+            bvh.build(&mut items, 0);
+            bvh.order = items.iter().map(|&(f, _)| f).collect();
+            bvh.fill_bounds();
         }
         Ok(bvh)
+    }
+
+    /// Every node's box from its faces' (leaves) or children's (interior nodes), bottom-up.
+    fn fill_bounds(&mut self) {
+        for i in (0..self.nodes.len()).rev() {
+            let n = self.nodes[i];
+            let bounds = if n.count > 0 {
+                let mut b = Aabb::EMPTY;
+                for &f in &self.order[n.start as usize..(n.start + n.count) as usize] {
+                    b = b.union(&self.boxes[f as usize]);
+                }
+                b
+            } else {
+                self.nodes[i + 1]
+                    .bounds
+                    .union(&self.nodes[n.start as usize].bounds)
+            };
+            self.nodes[i].bounds = bounds;
+        }
     }
 
     #[inline]
@@ -271,22 +295,21 @@ impl Bvh {
         self.boxes[f as usize]
     }
 
-    /// Builds the subtree over `order[..]` (which starts at `offset` in the full order).
-    fn build(&mut self, order: &mut [u32], offset: usize, centroids: &[[f64; 3]]) {
-        let mut bounds = Aabb::EMPTY;
-        let mut cbounds = Aabb::EMPTY;
-        for &f in order.iter() {
-            bounds = bounds.union(&self.face_bounds(f));
-            cbounds.grow(centroids[f as usize]);
-        }
+    /// Builds the subtree over `items[..]` (faces with their centroids; the slice starts at
+    /// `offset` in the full order). Node boxes are left empty for [`Bvh::fill_bounds`].
+    fn build(&mut self, items: &mut [(u32, [f64; 3])], offset: usize) {
         let me = self.nodes.len();
         self.nodes.push(Node {
-            bounds,
+            bounds: Aabb::EMPTY,
             start: offset as u32,
-            count: order.len() as u32,
+            count: items.len() as u32,
         });
-        if order.len() <= LEAF_SIZE {
+        if items.len() <= LEAF_SIZE {
             return;
+        }
+        let mut cbounds = Aabb::EMPTY;
+        for (_, c) in items.iter() {
+            cbounds.grow(*c);
         }
         let ext = sub(cbounds.hi, cbounds.lo);
         let axis = if ext[0] >= ext[1] && ext[0] >= ext[2] {
@@ -296,16 +319,14 @@ impl Bvh {
         } else {
             2
         };
-        let mid = order.len() / 2;
-        order.select_nth_unstable_by(mid, |&a, &b| {
-            centroids[a as usize][axis]
-                .total_cmp(&centroids[b as usize][axis])
-                .then(a.cmp(&b))
+        let mid = items.len() / 2;
+        items.select_nth_unstable_by(mid, |a, b| {
+            a.1[axis].total_cmp(&b.1[axis]).then(a.0.cmp(&b.0))
         });
-        let (left, right) = order.split_at_mut(mid);
-        self.build(left, offset, centroids);
+        let (left, right) = items.split_at_mut(mid);
+        self.build(left, offset);
         let right_index = self.nodes.len() as u32;
-        self.build(right, offset + mid, centroids);
+        self.build(right, offset + mid);
         self.nodes[me].start = right_index;
         self.nodes[me].count = 0;
     }
@@ -377,21 +398,7 @@ impl Bvh {
             ];
             *b = Aabb::of_points(t);
         }
-        for i in (0..self.nodes.len()).rev() {
-            let n = self.nodes[i];
-            let bounds = if n.count > 0 {
-                let mut b = Aabb::EMPTY;
-                for &f in &self.order[n.start as usize..(n.start + n.count) as usize] {
-                    b = b.union(&self.boxes[f as usize]);
-                }
-                b
-            } else {
-                self.nodes[i + 1]
-                    .bounds
-                    .union(&self.nodes[n.start as usize].bounds)
-            };
-            self.nodes[i].bounds = bounds;
-        }
+        self.fill_bounds();
         Ok(())
     }
 
@@ -653,6 +660,21 @@ impl Bvh {
         })
     }
 
+    /// Rewrites the boxes of `tree` (made by [`pair_tree`](Self::pair_tree) of this tree, before
+    /// or after refits) for the current positions, in place: no allocation.
+    pub(crate) fn refresh_pair_tree(&self, tree: &mut PairTree) {
+        for (t, n) in tree.nodes.iter_mut().zip(&self.nodes) {
+            t.bounds = Box32::outward(&n.bounds);
+        }
+        for (x, &f) in self.order.iter().enumerate() {
+            let b = Box32::outward(&self.boxes[f as usize]);
+            for k in 0..3 {
+                tree.leaf.lo[k][x] = b.lo[k];
+                tree.leaf.hi[k][x] = b.hi[k];
+            }
+        }
+    }
+
     /// The compact tree of [`for_each_overlapping_pair`](Self::for_each_overlapping_pair).
     fn pair_nodes(&self) -> Vec<PairNode> {
         let mut out: Vec<PairNode> = self
@@ -716,6 +738,7 @@ impl PairNode {
 }
 
 /// The pair traversal's compact tree: its nodes and the faces' boxes in leaf order.
+#[derive(Clone, Debug)]
 pub(crate) struct PairTree {
     nodes: Vec<PairNode>,
     leaf: LeafBoxes,
@@ -817,6 +840,7 @@ impl PairTree {
 }
 
 /// The faces' boxes of the pair traversal in leaf order, one array per coordinate.
+#[derive(Clone, Debug)]
 struct LeafBoxes {
     lo: [Vec<f32>; 3],
     hi: [Vec<f32>; 3],

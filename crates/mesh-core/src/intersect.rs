@@ -156,6 +156,8 @@ pub struct SelfIntersectionChecker {
     fans: Fans,
     /// Threads of [`check`](Self::check) (1: the calling thread only).
     threads: usize,
+    /// The BVH's compact copy for the pair traversal, refreshed in place at each update.
+    pair_tree: Option<crate::bvh::PairTree>,
 }
 
 impl SelfIntersectionChecker {
@@ -187,12 +189,13 @@ impl SelfIntersectionChecker {
             component_faces[c as usize] += 1;
         }
         Ok(SelfIntersectionChecker {
-            bvh,
             face_component,
             component_faces,
             positions: positions.to_vec(),
             fans: Fans::new(positions.len(), faces),
             threads: 1,
+            pair_tree: bvh.pair_tree(),
+            bvh,
         })
     }
 
@@ -212,6 +215,9 @@ impl SelfIntersectionChecker {
     /// or a non-finite vertex, leaving the checker unchanged.
     pub fn update(&mut self, positions: &[[f64; 3]]) -> Result<(), IntersectError> {
         self.bvh.refit(positions)?;
+        if let Some(tree) = &mut self.pair_tree {
+            self.bvh.refresh_pair_tree(tree);
+        }
         self.positions.clear();
         self.positions.extend_from_slice(positions);
         Ok(())
@@ -275,9 +281,9 @@ impl SelfIntersectionChecker {
             });
             (pairs, candidates)
         };
-        let (mut pairs, candidates) = match self.bvh.pair_tree() {
+        let (mut pairs, candidates) = match &self.pair_tree {
             None => (Vec::new(), 0),
-            Some(tree) if self.threads <= 1 => run(&tree, &[(0, 0)]),
+            Some(tree) if self.threads <= 1 => run(tree, &[(0, 0)]),
             Some(tree) => {
                 // Tasks by weight, largest first, each to the least loaded thread.
                 let mut tasks = tree.tasks(8 * self.threads);
@@ -288,7 +294,6 @@ impl SelfIntersectionChecker {
                     groups[g].0 += w;
                     groups[g].1.push(task);
                 }
-                let tree = &tree;
                 let run = &run;
                 std::thread::scope(|scope| {
                     let handles: Vec<_> = groups
