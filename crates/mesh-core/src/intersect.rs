@@ -43,8 +43,11 @@
 //!
 //! # Cost and limits
 //!
-//! The check costs one BVH refit (`O(F)`) plus the self-overlap traversal and one exact test per
-//! candidate. The candidate set is every pair of faces whose bounding boxes overlap: on a clean
+//! The check costs one BVH refit (`O(F)`), a certificate per vertex fan (`O(V)`: a vertex whose
+//! faces project to a simple star around it has no intersecting pair among them, so every
+//! candidate sharing such a vertex is skipped untested), the self-overlap traversal, and one exact
+//! test per remaining candidate ([`SelfIntersectionChecker::set_threads`] splits the traversal
+//! over threads; the answer does not change). The candidate set is every pair of faces whose bounding boxes overlap: on a clean
 //! mesh about `O(F)` (each face's neighbours), in the worst case — every box overlapping every
 //! other, e.g. a mesh crumpled into a ball — `F(F − 1)/2`. Each test is `O(1)`: at most about 30
 //! filtered predicates, and the exact fallback's integers have at most about 6,300 bits, so there
@@ -106,7 +109,9 @@ pub struct SelfIntersections {
     pub per_component: Vec<ComponentIntersections>,
     /// Faces of the mesh checked.
     pub num_faces: usize,
-    /// Candidate pairs the BVH produced (overlapping boxes) — the work done.
+    /// Candidate pairs the BVH produced (overlapping boxes, compared in `f32` rounded outward, so
+    /// a pair whose boxes are apart by less than that rounding may count too) — the work done;
+    /// those sharing a certified vertex are skipped without a test (see `docs/self_intersections.md`).
     pub candidates: usize,
 }
 
