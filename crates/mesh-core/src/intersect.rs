@@ -301,14 +301,23 @@ impl SelfIntersectionChecker {
                 }
                 let run = &run;
                 std::thread::scope(|scope| {
-                    let handles: Vec<_> = groups
+                    // The first group runs here; a thread the system refuses to start runs its
+                    // group here too (same answer, later).
+                    let handles: Vec<_> = groups[1..]
                         .iter()
-                        .map(|(_, seeds)| scope.spawn(move || run(tree, seeds)))
+                        .map(|(_, seeds)| {
+                            std::thread::Builder::new()
+                                .spawn_scoped(scope, move || run(tree, seeds))
+                                .map_err(|_| seeds)
+                        })
                         .collect();
-                    let mut all = (Vec::new(), 0usize);
+                    let mut all = run(tree, &groups[0].1);
                     for h in handles {
-                        // A panic in a task is a bug: propagate it.
-                        let (p, c) = h.join().unwrap_or_else(|e| std::panic::resume_unwind(e));
+                        let (p, c) = match h {
+                            // A panic in a task is a bug: propagate it.
+                            Ok(h) => h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)),
+                            Err(seeds) => run(tree, seeds),
+                        };
                         all.0.extend(p);
                         all.1 += c;
                     }
