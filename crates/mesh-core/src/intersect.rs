@@ -279,7 +279,7 @@ impl SelfIntersectionChecker {
                 let (fa, fb) = (faces[a as usize], faces[b as usize]);
                 let (pa, pb) = (self.bvh.triangle(a), self.bvh.triangle(b));
                 if !quickly_apart(fa, &pa, fb, &pb)
-                    && faces_intersect(fa, &Tri::new(pa), fb, &Tri::new(pb))
+                    && faces_intersect_filtered::<false>(fa, &Tri::new(pa), fb, &Tri::new(pb))
                 {
                     pairs.push((a, b));
                 }
@@ -558,7 +558,19 @@ impl Tri {
 }
 
 /// Whether two faces (indices and their [`Tri`]s) intersect under the module's definitions.
+#[cfg(test)]
 pub(crate) fn faces_intersect(fa: [u32; 3], ta: &Tri, fb: [u32; 3], tb: &Tri) -> bool {
+    faces_intersect_filtered::<true>(fa, ta, fb, tb)
+}
+
+/// [`faces_intersect`]; `FILTERS = false` skips the `f64` filters of [`quickly_apart`] (for a
+/// caller that just ran them and got no answer), otherwise the same.
+pub(crate) fn faces_intersect_filtered<const FILTERS: bool>(
+    fa: [u32; 3],
+    ta: &Tri,
+    fb: [u32; 3],
+    tb: &Tri,
+) -> bool {
     let (Some(_), Some(_)) = (ta.drop, tb.drop) else {
         return false;
     };
@@ -572,16 +584,16 @@ pub(crate) fn faces_intersect(fa: [u32; 3], ta: &Tri, fb: [u32; 3], tb: &Tri) ->
         }
     }
     match n {
-        0 => triangles_intersect(ta, tb),
+        0 => triangles_intersect_filtered::<FILTERS>(ta, tb),
         1 => {
             let (i, j) = shared[0];
-            vertex_adjacent_intersect(&rotate(ta, i), &rotate(tb, j))
+            vertex_adjacent_intersect::<FILTERS>(&rotate(ta, i), &rotate(tb, j))
         }
         2 => {
             let ((i0, j0), (i1, j1)) = (shared[0], shared[1]);
             let a = ta.p[3 - i0 - i1];
             let b = tb.p[3 - j0 - j1];
-            edge_fold(ta.p[i0], ta.p[i1], a, b, ta)
+            edge_fold_filtered::<FILTERS>(ta.p[i0], ta.p[i1], a, b, ta)
         }
         _ => true,
     }
@@ -647,8 +659,19 @@ fn o3(a: [f64; 3], b: [f64; 3], c: [f64; 3], d: [f64; 3]) -> Sign {
 }
 
 /// Faces `(u, v, a)` and `(v, u, b)` sharing edge `uv`: a fold (coplanar, same side).
+#[cfg(test)]
 fn edge_fold(u: [f64; 3], v: [f64; 3], a: [f64; 3], b: [f64; 3], ta: &Tri) -> bool {
-    if clearly_opposite_sides(u, v, a, b) {
+    edge_fold_filtered::<true>(u, v, a, b, ta)
+}
+
+fn edge_fold_filtered<const FILTERS: bool>(
+    u: [f64; 3],
+    v: [f64; 3],
+    a: [f64; 3],
+    b: [f64; 3],
+    ta: &Tri,
+) -> bool {
+    if FILTERS && clearly_opposite_sides(u, v, a, b) {
         return false;
     }
     if o3(u, v, a, b) != Sign::Zero {
@@ -728,15 +751,17 @@ fn centroid_direction(a: &[[f64; 3]], b: &[[f64; 3]]) -> [f64; 3] {
 }
 
 /// `(v, a₁, b₁)` and `(v, a₂, b₂)` sharing corner `v`: do they meet other than at `v`?
-fn vertex_adjacent_intersect(ta: &Tri, tb: &Tri) -> bool {
+fn vertex_adjacent_intersect<const FILTERS: bool>(ta: &Tri, tb: &Tri) -> bool {
     let [v, a1, b1] = ta.p;
     let [_, a2, b2] = tb.p;
-    if certainly_separated(
-        v,
-        centroid_direction(&[a1, b1], &[a2, b2]),
-        &[a1, b1],
-        &[a2, b2],
-    ) {
+    if FILTERS
+        && certainly_separated(
+            v,
+            centroid_direction(&[a1, b1], &[a2, b2]),
+            &[a1, b1],
+            &[a2, b2],
+        )
+    {
         return false;
     }
     // The shared corner is on both planes; when the other two corners of one face are strictly
@@ -787,14 +812,21 @@ fn strictly_one_side(s: &[Sign; 3]) -> bool {
 }
 
 /// Two non-degenerate closed triangles share a point.
+#[cfg(test)]
 pub(crate) fn triangles_intersect(ta: &Tri, tb: &Tri) -> bool {
-    let d = centroid_direction(&ta.p, &tb.p);
-    let mid = [0, 1, 2].map(|k| {
-        0.5 * ((ta.p[0][k] + ta.p[1][k] + ta.p[2][k]) / 3.0
-            + (tb.p[0][k] + tb.p[1][k] + tb.p[2][k]) / 3.0)
-    });
-    if certainly_separated(mid, d, &ta.p, &tb.p) {
-        return false;
+    triangles_intersect_filtered::<true>(ta, tb)
+}
+
+fn triangles_intersect_filtered<const FILTERS: bool>(ta: &Tri, tb: &Tri) -> bool {
+    if FILTERS {
+        let d = centroid_direction(&ta.p, &tb.p);
+        let mid = [0, 1, 2].map(|k| {
+            0.5 * ((ta.p[0][k] + ta.p[1][k] + ta.p[2][k]) / 3.0
+                + (tb.p[0][k] + tb.p[1][k] + tb.p[2][k]) / 3.0)
+        });
+        if certainly_separated(mid, d, &ta.p, &tb.p) {
+            return false;
+        }
     }
     let sb = plane_sides(ta, tb);
     if strictly_one_side(&sb) {
