@@ -268,6 +268,16 @@ impl SelfIntersectionChecker {
         let run = |tree: &crate::bvh::PairTree, seeds: &[(u32, u32)]| {
             let mut pairs = Vec::new();
             let mut candidates = 0usize;
+            // The tested faces' projection axes, in a small direct-mapped cache (a face of a
+            // crumpled mesh is tested against many others; the tested pairs come in leaf order).
+            let mut cache = vec![(u32::MAX, Tri::new([[0.0; 3]; 3])); TRI_CACHE];
+            let mut tri = |f: u32, p: [[f64; 3]; 3]| {
+                let e = &mut cache[f as usize % TRI_CACHE];
+                if e.0 != f {
+                    *e = (f, Tri::new(p));
+                }
+                e.1
+            };
             tree.traverse(seeds, |x, y| {
                 candidates += 1;
                 let (sa, sb) = (slots[x], slots[y]);
@@ -278,9 +288,11 @@ impl SelfIntersectionChecker {
                 let (a, b) = (order[x].min(order[y]), order[x].max(order[y]));
                 let (fa, fb) = (faces[a as usize], faces[b as usize]);
                 let (pa, pb) = (self.bvh.triangle(a), self.bvh.triangle(b));
-                if !quickly_apart(fa, &pa, fb, &pb)
-                    && faces_intersect_filtered::<false>(fa, &Tri::new(pa), fb, &Tri::new(pb))
-                {
+                if quickly_apart(fa, &pa, fb, &pb) {
+                    return;
+                }
+                let (ta, tb) = (tri(a, pa), tri(b, pb));
+                if faces_intersect_filtered::<false>(fa, &ta, fb, &tb) {
                     pairs.push((a, b));
                 }
             });
@@ -533,6 +545,9 @@ fn fan_is_star(positions: &[[f64; 3]], pv: [f64; 3], l: &[u32], closed: bool) ->
             && orient2d_projected(pv, r0, at(i + 1), axis) != want.flip()
     })
 }
+
+/// Entries of the check's cache of [`Tri`]s (per thread).
+const TRI_CACHE: usize = 1024;
 
 /// A face's corners and the axis its exact 2-D projection drops (`None`: degenerate).
 #[derive(Clone, Copy, Debug)]
