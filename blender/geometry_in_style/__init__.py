@@ -399,6 +399,14 @@ def start_job(context, obj) -> Job:
 # Operators
 
 
+def _modal_possible(context) -> bool:
+    """Whether timer events will reach a modal operator: a window and Blender's event loop. In
+    background mode there is none (``blender -b`` has no window; the ``bpy`` module has one, but
+    neither ``event_timer_add`` timers nor ``bpy.app.timers`` ever fire), so Stylize runs to the end
+    in ``execute`` instead."""
+    return not bpy.app.background and context.window is not None
+
+
 class GIS_OT_stylize(bpy.types.Operator):
     """Stylize the active mesh object with the stylize CLI (resumes its interrupted run)"""
 
@@ -439,7 +447,7 @@ class GIS_OT_stylize(bpy.types.Operator):
         return self._finish(context)
 
     def invoke(self, context, _event):
-        if bpy.app.background or context.window is None:
+        if not _modal_possible(context):
             return self.execute(context)
         try:
             self._job = start_job(context, context.active_object)

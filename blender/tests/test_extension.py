@@ -10,9 +10,11 @@ Environment: GIS_EXTENSION_ZIP (default target/blender/geometry_in_style-*.zip),
 
 from __future__ import annotations
 
+import atexit
 import glob
 import os
 import re
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -24,8 +26,10 @@ import numpy as np
 import pytest
 
 REPO = Path(__file__).resolve().parents[2]
-# Blender's user folders (extensions, config) in a throw-away place, before bpy is imported.
+# Blender's user folders (extensions, config) in a throw-away place, before bpy is imported (removed
+# at exit: each holds the installed extension, about 21 MB).
 os.environ["BLENDER_USER_RESOURCES"] = tempfile.mkdtemp(prefix="gis-blender-user-")
+atexit.register(shutil.rmtree, os.environ["BLENDER_USER_RESOURCES"], True)
 
 import bpy  # noqa: E402
 from mathutils import Matrix  # noqa: E402
@@ -55,13 +59,13 @@ def _stylize() -> Path:
 
 
 @pytest.fixture(scope="module")
-def ext():
+def ext(tmp_path_factory):
     result = bpy.ops.extensions.package_install_files(filepath=str(_zip()), repo="user_default", enable_on_install=True)
     assert result == {"FINISHED"}
     mod = sys.modules[MODULE]
     prefs = bpy.context.preferences.addons[MODULE].preferences
     prefs.stylize_path = str(_stylize())
-    prefs.runs_dir = tempfile.mkdtemp(prefix="gis-runs-")
+    prefs.runs_dir = str(tmp_path_factory.mktemp("gis-runs"))  # pytest keeps the last 3
     return mod
 
 
@@ -386,3 +390,195 @@ def test_remeshed_run_comes_back_as_a_new_object(ext) -> None:
     got = shape_key(new)
     expected = to_object_frame(cli, run_dir, rest)
     assert close(got, expected, rest) < 1e-6
+
+
+# ---------------------------------------------------------------------------------------------
+# The modal path (invoke → modal): the bpy module runs in background mode with no event loop (it has
+# one window, but timers never fire and there is no status bar), so invoke runs to the end in
+# execute there (checked below). The test stands in for the event loop: `_modal_possible` says yes,
+# and the operator gets what it uses of a window — a window, a window manager (timers, the modal
+# handler, the progress cursor) and a workspace (status text) — as recording fakes over the real
+# context; the test sends the events itself: TIMER as the 0.2 s timer would, Esc as a key press.
+# The operator's own code (invoke, modal, _finish, _cleanup) runs unchanged; Blender's event
+# dispatch is what this does not test.
+
+
+class FakeEvent:
+    def __init__(self, type_: str, value: str = "NOTHING"):
+        self.type = type_
+        self.value = value
+
+
+class FakeWindowManager:
+    def __init__(self):
+        self.timers: list = []
+        self.handlers: list = []
+        self.progress: list = []
+        self.progress_open = False
+
+    def event_timer_add(self, step, window=None):
+        assert window is not None, "the timer belongs to the window"
+        timer = ("timer", step)
+        self.timers.append(timer)
+        return timer
+
+    def event_timer_remove(self, timer):
+        self.timers.remove(timer)
+
+    def modal_handler_add(self, op):
+        self.handlers.append(op)
+        return True
+
+    def progress_begin(self, lo, hi):
+        assert (lo, hi) == (0, 100)
+        self.progress_open = True
+
+    def progress_update(self, value):
+        assert self.progress_open
+        self.progress.append(value)
+
+    def progress_end(self):
+        self.progress_open = False
+
+
+class FakeWorkspace:
+    def __init__(self):
+        self.status: list = []
+
+    def status_text_set(self, text):
+        self.status.append(text)
+
+
+class WindowContext:
+    """``bpy.context`` with a (fake) window, window manager and workspace; everything else real."""
+
+    def __init__(self):
+        self.window = object()
+        self.window_manager = FakeWindowManager()
+        self.workspace = FakeWorkspace()
+
+    def __getattr__(self, name):
+        return getattr(bpy.context, name)
+
+
+def modal_operator(ext):
+    """An object running GIS_OT_stylize's own methods (Blender makes operator instances only when
+    it runs an operator), recording its reports."""
+    cls = ext.GIS_OT_stylize
+
+    class Operator:
+        _timer = None
+        _job = None
+        invoke = cls.invoke
+        modal = cls.modal
+        execute = cls.execute
+        _finish = cls._finish
+        _cleanup = cls._cleanup
+
+        def __init__(self):
+            self.reports: list = []
+
+        def report(self, kind, message):
+            self.reports.append((set(kind), message))
+
+    return Operator()
+
+
+def drive(op, ctx, until=lambda: False, timeout=300.0):
+    """Sends TIMER events every 20 ms until modal() ends the operator (returns its result) or
+    ``until()`` holds (returns None)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        result = op.modal(ctx, FakeEvent("TIMER"))
+        if result != {"PASS_THROUGH"}:
+            return result
+        if until():
+            return None
+        time.sleep(0.02)
+    pytest.fail("the modal operator did not end in time")
+
+
+STATUS = re.compile(r"Stylize (\S+): iteration (\d+)/(\d+) \((\d+)%\) — Esc cancels")
+
+
+def test_modal_progress_esc_cancels_stylize_again_resumes_and_finishes(ext, monkeypatch) -> None:
+    # In the bpy module there is a window but no event loop: not modal.
+    assert bpy.app.background and bpy.context.window is not None
+    assert not ext._modal_possible(bpy.context)
+    monkeypatch.setattr(ext, "_modal_possible", lambda _context: True)
+    obj = quad_sphere("Modal")
+    rest = rest_verts(obj)
+    obj.gis.style = "OCTAHEDRON"
+    obj.gis.iterations = 1500
+    ctx, op = WindowContext(), modal_operator(ext)
+    wm, ws = ctx.window_manager, ctx.workspace
+    assert op.invoke(ctx, FakeEvent("LEFTMOUSE", "PRESS")) == {"RUNNING_MODAL"}
+    assert wm.handlers == [op] and len(wm.timers) == 1 and wm.progress_open
+    # Other events pass through and change nothing.
+    assert op.modal(ctx, FakeEvent("MOUSEMOVE")) == {"PASS_THROUGH"} and ws.status == []
+
+    # Progress: the status text and the progress cursor follow the CLI's jsonl iterations.
+    def seen():
+        return sorted({int(m.group(2)) for t in ws.status if t and (m := STATUS.fullmatch(t))})
+
+    assert drive(op, ctx, until=lambda: len(seen()) >= 3 and seen()[-1] >= 20) is None
+    for text in ws.status:
+        m = STATUS.fullmatch(text)
+        assert m, text
+        assert m.group(1) == "Modal" and m.group(3) == "1500"
+        assert int(m.group(4)) == round(100 * int(m.group(2)) / 1500)
+    assert wm.progress == sorted(wm.progress) and wm.progress[-1] == int(100 * seen()[-1] / 1500)
+    assert seen()[-1] < 1500, "the run ended before Esc"
+
+    # Esc: SIGTERM, the CLI checkpoints; the operator ends CANCELLED with a warning, cleaned up.
+    assert op.modal(ctx, FakeEvent("ESC", "PRESS")) == {"PASS_THROUGH"}
+    assert drive(op, ctx) == {"CANCELLED"}
+    assert op.reports == [({"WARNING"}, "Stylize cancelled (checkpoint written: Stylize again resumes)")]
+    assert wm.timers == [] and not wm.progress_open and ws.status[-1] is None
+    run_dir = obj[ext.RUN_DIR_KEY]
+    assert ext.core.run_state(run_dir) == "interrupted"
+    assert obj.data.shape_keys is None, "no result from a cancelled run"
+    assert "cancelled" in obj.gis.status
+
+    # Stylize again, modal: resumes the same run and finishes with the shape key.
+    ctx2, op2 = WindowContext(), modal_operator(ext)
+    assert op2.invoke(ctx2, FakeEvent("LEFTMOUSE", "PRESS")) == {"RUNNING_MODAL"}
+    assert drive(op2, ctx2) == {"FINISHED"}
+    assert ctx2.window_manager.timers == [] and not ctx2.window_manager.progress_open
+    assert ctx2.workspace.status[-1] is None
+    assert obj[ext.RUN_DIR_KEY] == run_dir and ext.core.run_state(run_dir) == "complete"
+    m = re.fullmatch(r"done \(resumed at iteration (\d+)\)", obj.gis.status)
+    assert m and int(m.group(1)) >= 20, obj.gis.status
+    (kind, message), = op2.reports
+    assert kind == {"INFO"} and message.startswith("Stylized Modal: shape key 'Stylized'"), message
+    cli, _ = read_obj(Path(run_dir) / "mesh.obj")
+    assert close(shape_key(obj), to_object_frame(cli, Path(run_dir), rest), rest) < 1e-6
+
+
+def test_modal_errors_become_reports(ext, monkeypatch) -> None:
+    monkeypatch.setattr(ext, "_modal_possible", lambda _context: True)
+    # A CLI that fails after starting: a vertex at NaN (Blender keeps it; the CLI refuses the mesh).
+    obj = quad_sphere("ModalBad")
+    obj.data.vertices[0].co = (float("nan"), 0.0, 0.0)
+    obj.gis.style = "CUBE"
+    obj.gis.iterations = 5
+    ctx, op = WindowContext(), modal_operator(ext)
+    assert op.invoke(ctx, FakeEvent("LEFTMOUSE", "PRESS")) == {"RUNNING_MODAL"}
+    assert drive(op, ctx) == {"CANCELLED"}
+    (kind, message), = op.reports
+    assert kind == {"ERROR"} and message.startswith("stylize run failed (exit 1): error"), message
+    assert obj.gis.status == message
+    assert ctx.window_manager.timers == [] and not ctx.window_manager.progress_open
+    assert obj.data.shape_keys is None
+    # A failure to start (no binary): an error report from invoke, no modal handler, no timer.
+    prefs = bpy.context.preferences.addons[MODULE].preferences
+    saved_path = prefs.stylize_path
+    try:
+        prefs.stylize_path = "/nonexistent/stylize"
+        ctx, op = WindowContext(), modal_operator(ext)
+        assert op.invoke(ctx, FakeEvent("LEFTMOUSE", "PRESS")) == {"CANCELLED"}
+        (kind, message), = op.reports
+        assert kind == {"ERROR"} and "does not exist: /nonexistent/stylize" in message
+        assert ctx.window_manager.handlers == [] and ctx.window_manager.timers == []
+    finally:
+        prefs.stylize_path = saved_path

@@ -258,11 +258,25 @@ trial() { # trial NAME PROMISE RESULT(0/1) WHAT-HAPPENED
   if [ "$3" -eq 0 ]; then record "$1" "$2" "ok: $4"; else record "$1" "$2" "FAILED: $4"; failures=$((failures + 1)); fi
 }
 
-# --- 1. an array of shards equals a sequential batch ---------------------------------------------
+# --- 1. an array of shards equals a sequential batch; the grid of its rows after it ---------------
 j=$(submit arr --array=0-1) || fail "sbatch"
+# The grid as docs/cluster.md builds it: a job that waits for the whole array (afterany).
+g=$(sbatch --parsable --dependency=afterany:"$j" --chdir="$work/data" --output="$work/logs/grid_%j.out" \
+  --cpus-per-task=1 --mem=100M --wrap "'$stylize' batch '$(manifest arr)' --grid-only") || fail "sbatch grid"
 wait_gone "$j" 120 || fail "array $j did not finish"
+wait_gone "$g" 60 || fail "grid job $g did not finish"
 why=$(rows_equal_reference arr); ok=$?
 trial "array 0-1 (2 shards)" "= sequential batch, byte for byte" "$ok" "${why:-4 rows identical}; $(states "$j")"
+why=""
+if [ "$(logs_say "$j" 'grid: not written by a shard')" -ne 2 ]; then
+  why="the shards did not both say they leave the grid"
+elif [ ! -f "$work/data/arr_grid.png" ]; then
+  why="no arr_grid.png: $(tail -n 3 "$work/logs/grid_$g.out" 2>/dev/null)"
+elif ! cmp -s "$work/data/ref_grid.png" "$work/data/arr_grid.png"; then
+  why="arr_grid.png differs from the sequential batch's ref_grid.png"
+fi
+trial "grid job after the array" "--grid-only = the sequential batch's grid" "$([ -z "$why" ]; echo $?)" \
+  "${why:-shards left it; arr_grid.png identical to ref_grid.png}; $(states "$g")"
 
 # --- 2. scontrol requeue while running -----------------------------------------------------------
 j=$(submit rq --array=0-1) || fail "sbatch"

@@ -313,7 +313,7 @@ pub fn read_manifest(path: &Path) -> anyhow::Result<Vec<Row>> {
 }
 
 /// `path` with `.` removed, `a/..` folded and trailing separators dropped (no file system access).
-fn normalize_lexically(path: &Path) -> PathBuf {
+pub(crate) fn normalize_lexically(path: &Path) -> PathBuf {
     use std::path::Component;
     let mut out = PathBuf::new();
     for c in path.components() {

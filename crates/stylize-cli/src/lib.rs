@@ -12,6 +12,7 @@
 pub mod output;
 
 pub mod batch;
+pub mod batch_grid;
 pub mod cmd;
 pub mod config;
 pub mod features;
@@ -22,5 +23,6 @@ pub mod progress;
 pub mod reference_config;
 pub mod runner;
 pub mod sanity;
+pub mod sheet;
 pub mod signals;
 pub mod view;

@@ -1,10 +1,13 @@
-//! `stylize batch`: every row of a manifest (TOML or JSONL), sharded across a job array.
+//! `stylize batch`: every row of a manifest (TOML or JSONL), sharded across a job array, and the
+//! grid of its rows ([`crate::batch_grid`]).
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::bail;
 
-use crate::batch::{BatchOptions, RowResult, RowStatus, Shard, read_manifest, run_batch_reporting};
+use crate::batch::{
+    BatchOptions, Row, RowResult, RowStatus, Shard, read_manifest, run_batch_reporting,
+};
 use crate::cmd::run::resolve_config;
 use crate::cmd::shared::{LogFormat, RunSettings, count_noun};
 use crate::runner::LogMode;
@@ -25,6 +28,14 @@ pub struct Args {
     /// (removes only the run directories' own files).
     #[arg(long)]
     pub force: bool,
+    /// Where the grid of the rows goes (a PNG: one labelled tile per row, meshes × prompts/styles).
+    /// Default: `MANIFEST_STEM_grid.png` beside the manifest.
+    #[arg(long, value_name = "FILE")]
+    pub grid: Option<PathBuf>,
+    /// Run no row: only build the grid from the run directories as they stand (after the last
+    /// shard of a sharded batch).
+    #[arg(long, conflicts_with_all = ["shard", "force"])]
+    pub grid_only: bool,
     // Model, configuration and progress options, shared with `stylize run` (the per-row summary is
     // printed even with --quiet).
     #[command(flatten)]
@@ -49,8 +60,33 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         None,
     )?);
     let config = crate::cmd::shared::with_view_flags(config, settings.view_flags())?;
-    let shard = Shard::resolve(args.shard.as_deref(), |k| std::env::var(k).ok())?;
     let rows = read_manifest(&args.manifest)?;
+    // Before any row runs: a --grid that would replace a file of the batch is an error; the
+    // default path inside a row's run directory (a manifest kept there) only means no grid.
+    let grid_path = match &args.grid {
+        Some(p) => {
+            crate::batch_grid::check_path(p, &rows)?;
+            Some(p.clone())
+        }
+        None => {
+            let p = crate::batch_grid::default_path(&args.manifest);
+            match crate::batch_grid::check_path(&p, &rows) {
+                Ok(()) => Some(p),
+                Err(e) if !args.grid_only => {
+                    say(&format!("grid: none ({e:#}; pass --grid FILE)"));
+                    None
+                }
+                Err(e) => return Err(e.context("pass --grid FILE")),
+            }
+        }
+    };
+    if args.grid_only {
+        return match &grid_path {
+            Some(p) => write_grid(p, &rows, &[]),
+            None => Ok(()),
+        };
+    }
+    let shard = Shard::resolve(args.shard.as_deref(), |k| std::env::var(k).ok())?;
     let log = settings.log_mode();
     let mut inputs = vec![("manifest".to_string(), args.manifest.clone())];
     if let Some(c) = &settings.config {
@@ -87,6 +123,34 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         count("interrupted"),
     );
     say(&summary);
+    // The grid: by the batch that ran every row; a shard's end is not the batch's.
+    let grid = if interrupted.is_some() {
+        Ok(())
+    } else if let Some(p) = grid_path.as_ref().filter(|_| shard.count == 1) {
+        let known: Vec<(usize, RowStatus)> =
+            results.iter().map(|(i, _, s, _)| (*i, s.clone())).collect();
+        write_grid(p, &rows, &known)
+    } else if grid_path.is_some() {
+        say(&format!(
+            "grid: not written by a shard; after the last shard, build it with: stylize batch {} \
+             --grid-only{}",
+            shell_quote(&args.manifest.display().to_string()),
+            args.grid
+                .as_ref()
+                .map(|g| format!(" --grid {}", shell_quote(&g.display().to_string())))
+                .unwrap_or_default()
+        ));
+        Ok(())
+    } else {
+        Ok(())
+    };
+    let grid_failed = match grid {
+        Err(e) => {
+            say(&format!("grid: not written: {e:#}"));
+            true
+        }
+        Ok(()) => false,
+    };
     if let Some(i) = interrupted {
         let command: Vec<String> = std::env::args().map(|a| shell_quote(&a)).collect();
         say(&format!(
@@ -103,6 +167,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             count_noun(results.len(), "row", "rows")
         );
     }
+    if grid_failed {
+        bail!("the grid could not be written (above)");
+    }
     if in_use > 0 {
         return Err(Exit {
             code: EXIT_IN_USE,
@@ -114,6 +181,23 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         .into());
     }
+    Ok(())
+}
+
+/// Writes the grid of every row ([`crate::batch_grid`]) and says so on stderr.
+fn write_grid(path: &Path, rows: &[Row], known: &[(usize, RowStatus)]) -> anyhow::Result<()> {
+    if rows.is_empty() {
+        say("grid: none (the manifest has no rows)");
+        return Ok(());
+    }
+    let counts = crate::batch_grid::write_grid(path, rows, known)?;
+    say(&format!(
+        "grid: {} ({}: {} with a result, {} without)",
+        path.display(),
+        count_noun(counts.results + counts.empty, "tile", "tiles"),
+        counts.results,
+        counts.empty
+    ));
     Ok(())
 }
 
