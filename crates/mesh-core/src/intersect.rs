@@ -634,11 +634,7 @@ fn quickly_apart(fa: [u32; 3], pa: &[[f64; 3]; 3], fb: [u32; 3], pb: &[[f64; 3];
     match n {
         0 => {
             let d = centroid_direction(pa, pb);
-            let mid = [0, 1, 2].map(|k| {
-                0.5 * ((pa[0][k] + pa[1][k] + pa[2][k]) / 3.0
-                    + (pb[0][k] + pb[1][k] + pb[2][k]) / 3.0)
-            });
-            certainly_separated(mid, d, pa, pb)
+            certainly_separated(centroids_midpoint(pa, pb), d, pa, pb)
         }
         1 => {
             let (i, j) = shared[0];
@@ -757,12 +753,31 @@ fn certainly_separated(origin: [f64; 3], d: [f64; 3], pos: &[[f64; 3]], neg: &[[
     pos.iter().all(|&p| side(p, 1.0)) && neg.iter().all(|&p| side(p, -1.0))
 }
 
-/// The direction from the centroid of `b` to that of `a` (three times it; only the direction
+/// The direction from the centroid of `b` to that of `a` (`N` times it; only the direction
 /// matters) — the separating-plane normal [`certainly_separated`] tries.
 #[inline]
-fn centroid_direction(a: &[[f64; 3]], b: &[[f64; 3]]) -> [f64; 3] {
-    let sum = |t: &[[f64; 3]], k: usize| t.iter().map(|p| p[k]).sum::<f64>() / t.len() as f64;
-    [0, 1, 2].map(|k| sum(a, k) - sum(b, k))
+fn centroid_direction<const N: usize>(a: &[[f64; 3]; N], b: &[[f64; 3]; N]) -> [f64; 3] {
+    let mut d = [0.0; 3];
+    for (k, dk) in d.iter_mut().enumerate() {
+        let (mut sa, mut sb) = (0.0, 0.0);
+        for i in 0..N {
+            sa += a[i][k];
+            sb += b[i][k];
+        }
+        *dk = sa - sb;
+    }
+    d
+}
+
+/// The midpoint of the two triangles' centroids (the separating plane's origin for faces without
+/// a shared vertex; any point would be right, this one separates best).
+#[inline]
+fn centroids_midpoint(a: &[[f64; 3]; 3], b: &[[f64; 3]; 3]) -> [f64; 3] {
+    let mut m = [0.0; 3];
+    for (k, mk) in m.iter_mut().enumerate() {
+        *mk = 0.5 * ((a[0][k] + a[1][k] + a[2][k]) / 3.0 + (b[0][k] + b[1][k] + b[2][k]) / 3.0);
+    }
+    m
 }
 
 /// `(v, a₁, b₁)` and `(v, a₂, b₂)` sharing corner `v`: do they meet other than at `v`?
@@ -835,11 +850,7 @@ pub(crate) fn triangles_intersect(ta: &Tri, tb: &Tri) -> bool {
 fn triangles_intersect_filtered<const FILTERS: bool>(ta: &Tri, tb: &Tri) -> bool {
     if FILTERS {
         let d = centroid_direction(&ta.p, &tb.p);
-        let mid = [0, 1, 2].map(|k| {
-            0.5 * ((ta.p[0][k] + ta.p[1][k] + ta.p[2][k]) / 3.0
-                + (tb.p[0][k] + tb.p[1][k] + tb.p[2][k]) / 3.0)
-        });
-        if certainly_separated(mid, d, &ta.p, &tb.p) {
+        if certainly_separated(centroids_midpoint(&ta.p, &tb.p), d, &ta.p, &tb.p) {
             return false;
         }
     }
