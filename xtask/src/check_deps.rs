@@ -116,7 +116,8 @@ const RULES: &[(&str, &[&str])] = &[
 /// (crate, its feature selection, forbidden dependencies): the builds without the heavy features
 /// must really leave them out (docs/cli.md, "Builds and features").
 const FEATURE_RULES: &[(&str, &[&str], &[&str])] = &[
-    // The README's quick-start build: no ONNX Runtime, tokenizer, wgpu stack or HTTP server.
+    // The README's quick-start build: no ONNX Runtime, tokenizer, wgpu stack, HTTP server or H.264
+    // encoder.
     (
         "stylize-cli",
         &["--no-default-features"],
@@ -129,12 +130,23 @@ const FEATURE_RULES: &[(&str, &[&str], &[&str])] = &[
             "naga",
             "axum",
             "tokio",
+            // the H.264 encoder (C++ compiled from source) and the MP4 box codec: feature `mp4`
+            "openh264-sys2",
+            "mp4-atom",
         ],
     ),
     (
         "stylize",
         &["--no-default-features"],
-        &["diffusion-onnx", "ort", "tokenizers", "wgpu", "naga"],
+        &[
+            "diffusion-onnx",
+            "ort",
+            "tokenizers",
+            "wgpu",
+            "naga",
+            "openh264-sys2",
+            "mp4-atom",
+        ],
     ),
 ];
 

@@ -16,6 +16,7 @@
 //!                      (stylize::snapshots; rewritten atomically while the run goes)
 //!   turntable.png      contact sheet of an orbit around the result, filling its tiles
 //!   turntable.gif      the same orbit animated (run.turntable_gif_frames frames, looping)
+//!   turntable.mp4      the same frames as H.264 video (stylize feature mp4; a failure is a warning)
 //!   before_after.png   source (top) and result (bottom), same views and crop (stylize::run_pictures)
 //!   run.json           summary; written last — its presence marks the run complete
 //! ```
@@ -67,6 +68,7 @@ pub const RUN_FILES: &[&str] = &[
     "deformation.npz",
     "turntable.png",
     "turntable.gif",
+    "turntable.mp4",
     "before_after.png",
     "snapshots.npz",
     "run.json",

@@ -1,4 +1,5 @@
-//! What this binary was built with: the crate features `text`, `gpu` and `view` (all default).
+//! What this binary was built with: the crate features `text`, `gpu`, `view` and `mp4` (all
+//! default).
 //!
 //! A quick-start build (the README's first command: `--no-default-features`)
 //! keeps every subcommand and option, so scripts and `--help` read the same; what needs a missing
@@ -14,6 +15,7 @@ pub const ENABLED: &[(&str, bool)] = &[
     ("text", cfg!(feature = "text")),
     ("gpu", cfg!(feature = "gpu")),
     ("view", cfg!(feature = "view")),
+    ("mp4", cfg!(feature = "mp4")),
 ];
 
 /// The names of this binary's features plus `extra` (if any), in [`ENABLED`]'s order.
@@ -60,7 +62,7 @@ pub fn not_built(feature: &str, what: &str) -> anyhow::Error {
         "{what} needs the `{feature}` feature, and this stylize was built without it (a quick-start \
          build, as the README's first command makes). Build the full command line with \
          `cargo install --locked --path crates/stylize-cli`, or run it in place with \
-         `cargo run --release --bin stylize -- …` (default features: text, gpu, view), or add just \
+         `cargo run --release --bin stylize -- …` (default features: text, gpu, view, mp4), or add just \
          this feature to this build with `{} …` (docs/cli.md, \"Builds and features\")",
         cargo_run_adding(feature)
     )
@@ -73,13 +75,14 @@ mod tests {
     #[test]
     fn cargo_run_adding_keeps_this_builds_features_and_adds_one() {
         let command = cargo_run_adding("view");
-        if cfg!(all(feature = "text", feature = "gpu")) {
+        if cfg!(all(feature = "text", feature = "gpu", feature = "mp4")) {
             // The default build (CI's workspace tests): adding `view` is every feature.
             assert_eq!(command, "cargo run --release --bin stylize --");
         } else if cfg!(not(any(
             feature = "text",
             feature = "gpu",
-            feature = "view"
+            feature = "view",
+            feature = "mp4"
         ))) {
             // The quick-start build (CI's `--no-default-features` test).
             assert_eq!(
@@ -98,12 +101,18 @@ mod tests {
     #[test]
     fn summary_names_this_builds_features() {
         let s = summary();
-        if cfg!(all(feature = "text", feature = "gpu", feature = "view")) {
-            assert_eq!(s, "text, gpu, view");
+        if cfg!(all(
+            feature = "text",
+            feature = "gpu",
+            feature = "view",
+            feature = "mp4"
+        )) {
+            assert_eq!(s, "text, gpu, view, mp4");
         } else if cfg!(not(any(
             feature = "text",
             feature = "gpu",
-            feature = "view"
+            feature = "view",
+            feature = "mp4"
         ))) {
             assert_eq!(s, "none");
         }

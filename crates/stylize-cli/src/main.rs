@@ -66,7 +66,7 @@ fn private_runtime_dir() -> Option<tempfile::TempDir> {
 }
 
 /// Parses the arguments; `--version` also names the features this binary was built with
-/// (`stylize 0.1.0 (features: text, gpu, view)`).
+/// (`stylize 0.1.0 (features: text, gpu, view, mp4)`).
 fn parse_cli() -> Cli {
     use clap::{CommandFactory, FromArgMatches};
     // Leaked once: clap keeps a `'static` version string.

@@ -10,6 +10,7 @@ const TO_OPEN: &[(&str, &str)] = &[
     ("turntable.png", "views of the result"),
     ("before_after.png", "source and result, same views"),
     ("turntable.gif", "animated turntable"),
+    ("turntable.mp4", "the same turntable as H.264 video"),
     ("mesh.obj", "the stylized mesh (also mesh.ply, mesh.glb)"),
     (
         "deformation.npz",
@@ -51,6 +52,12 @@ pub fn lines(dir: &Path, program: &str) -> Vec<String> {
         if path.is_file() {
             out.push(format!("  {}  ({what})", path.display()));
         }
+    }
+    if !cfg!(feature = "mp4") && dir.join("turntable.gif").is_file() {
+        out.push(format!(
+            "  (no turntable.mp4: this binary has no H.264 encoder; `{} …` builds one with it)",
+            crate::features::cargo_run_adding("mp4")
+        ));
     }
     let dir = shell_quote(&dir.display().to_string());
     if cfg!(feature = "view") {

@@ -1,4 +1,4 @@
-//! The binary's build features (`text`, `gpu`, `view`; docs/cli.md, "Builds and features"):
+//! The binary's build features (`text`, `gpu`, `view`, `mp4`; docs/cli.md, "Builds and features"):
 //! `--version` names them, and in a build without one (the README's quick-start build, CI's
 //! `cargo test -p stylize-cli --no-default-features --test features`) whatever
 //! needs it fails at once, with the command that builds the full binary, before it touches the
@@ -22,6 +22,7 @@ fn version_names_the_features_of_this_build() {
         ("text", cfg!(feature = "text")),
         ("gpu", cfg!(feature = "gpu")),
         ("view", cfg!(feature = "view")),
+        ("mp4", cfg!(feature = "mp4")),
     ]
     .iter()
     .filter_map(|&(n, on)| on.then_some(n))
@@ -158,6 +159,44 @@ fn the_model_free_demo_runs_and_points_at_this_binary() {
     assert!(out.status.success(), "{e}");
     for f in ["mesh.obj", "mesh.glb", "before_after.png", "turntable.png"] {
         assert!(out_dir.join(f).is_file(), "{f} missing: {e}");
+    }
+    // The H.264 turntable: written with `mp4`, else named as missing (run.json, closing lines),
+    // never a warning or a failure.
+    let summary: serde_json::Value = ok(serde_json::from_str(&ok(std::fs::read_to_string(
+        out_dir.join("run.json"),
+    ))));
+    let mp4 = &summary["turntable_mp4"];
+    if cfg!(feature = "mp4") {
+        assert!(out_dir.join("turntable.mp4").is_file(), "{e}");
+        assert_eq!(mp4["file"], "turntable.mp4", "{mp4}");
+        assert_eq!(mp4["frames"], 36, "{mp4}");
+        assert!(
+            e.contains("turntable.mp4  (the same turntable as H.264 video)"),
+            "{e}"
+        );
+        // It decodes to the GIF's 36 frames of run.turntable_size (256) pixels, 8/100 s each.
+        #[cfg(feature = "mp4")]
+        {
+            let bytes = ok(std::fs::read(out_dir.join("turntable.mp4")));
+            let video = ok(stylize::turntable_mp4::decode_mp4(&bytes));
+            assert_eq!((video.width, video.height), (256, 256));
+            assert_eq!(video.frames.len(), 36);
+            assert_eq!(video.durations, [8; 36]);
+        }
+    } else {
+        assert!(!out_dir.join("turntable.mp4").exists());
+        assert!(mp4["file"].is_null(), "{mp4}");
+        assert!(
+            mp4["not_written"]
+                .as_str()
+                .is_some_and(|w| w.contains("`mp4` feature")),
+            "{mp4}"
+        );
+        assert!(
+            e.contains("no turntable.mp4: this binary has no H.264 encoder"),
+            "{e}"
+        );
+        assert!(!e.contains("turntable.mp4 not written"), "{e}");
     }
     let view_line = e
         .lines()

@@ -9,7 +9,8 @@
 //! - [`remeshing`]: `[mesh] remesh`: whether and how a run's input is remeshed first;
 //! - [`runner`]: one run from mesh file to complete run directory, with a [`runner::Progress`]
 //!   the run, for replay; [`run_pictures`]: the before/after sheet, the turntable (PNG, GIF) and
-//!   the orbit, tint and grid helpers the previews share;
+//!   the orbit, tint and grid helpers the previews share; `turntable_mp4` (feature `mp4`): the
+//!   turntable as an H.264 MP4;
 //! - [`models`]: DeepFloyd IF guidance from a model directory (feature `text`; without it its
 //!   loading functions return [`Error::NotBuilt`]); [`eval`]: metrics
 //!   of finished runs (CLIP similarity with `text`); [`intersections`]: a result's
@@ -22,9 +23,10 @@
 //! The command line (`stylize-cli`) adds argument parsing, config files, progress display and
 //! batches; this crate depends on nothing of that kind (`cargo xtask check-deps`).
 //!
-//! Features (both default): `text`, the text-guided path through ONNX Runtime (`models`, CLIP in
+//! Features (all default): `text`, the text-guided path through ONNX Runtime (`models`, CLIP in
 //! [`eval`]; without it [`models`] only says so); `gpu`, raster-diff's wgpu backend (without it
-//! [`config::Backend::Auto`] renders on the CPU and `Gpu` is an error). Without them the crate
+//! [`config::Backend::Auto`] renders on the CPU and `Gpu` is an error); `mp4`, `turntable.mp4`
+//! through OpenH264 compiled from source (without it runs write no MP4 and say so in `run.json`). Without them the crate
 //! builds in a fraction of the time (no ONNX Runtime, tokenizers or wgpu) and keeps the
 //! model-free styles, apply, render and the geometric metrics.
 
@@ -46,5 +48,7 @@ pub mod saved;
 pub mod snapshots;
 pub mod style;
 pub mod task;
+#[cfg(feature = "mp4")]
+pub mod turntable_mp4;
 
 pub use error::{Error, Result};

@@ -498,6 +498,9 @@ pub struct Prepared {
     pub camera_choice: Option<String>,
     /// The scale of `mesh_heat.glb` (its largest displacement, [`crate::heat`]) once written.
     pub heat_max_displacement: Option<f64>,
+    /// `run.json`'s `turntable_mp4`: what `turntable.mp4` holds once written, or why it was not
+    /// (`None` when no turntable animation was asked for, `run.turntable_gif_frames = 0`).
+    pub turntable_mp4: Option<serde_json::Value>,
 }
 
 /// Stage 1: validates the configuration, prepares the mesh, computes the identity of a task of
@@ -551,6 +554,7 @@ pub fn prepare(request: &RunRequest, kind: &dyn TaskKind) -> Result<Prepared> {
         config_toml,
         setup_seconds: setup.elapsed().as_secs_f64(),
         heat_max_displacement: None,
+        turntable_mp4: None,
     })
 }
 
@@ -771,6 +775,7 @@ pub fn write_outputs(
             &frames,
             crate::run_pictures::GIF_FRAME_DELAY_CS,
         )?;
+        prepared.turntable_mp4 = Some(write_turntable_mp4(dir, &frames, &mut prepared.warnings));
     }
     crate::run_pictures::write_before_after(
         &dir.file("before_after.png"),
@@ -782,6 +787,62 @@ pub fn write_outputs(
         config.camera.sampler.fov_y_deg,
     )?;
     Ok(deformed)
+}
+
+/// Writes `turntable.mp4` from the GIF's frames (feature `mp4`, [`crate::turntable_mp4`]) and
+/// returns `run.json`'s `turntable_mp4`. A failure never fails the finished run: it becomes a
+/// warning (a build without the encoder only `run.json`'s `not_written`), the GIF stays, and an MP4
+/// an earlier attempt left is removed (it would not show this result).
+fn write_turntable_mp4(
+    dir: &RunDir,
+    frames: &raster_diff::Images,
+    warnings: &mut Vec<String>,
+) -> serde_json::Value {
+    let path = dir.file("turntable.mp4");
+    #[cfg(feature = "mp4")]
+    let written = crate::turntable_mp4::write_turntable_mp4(
+        &path,
+        frames,
+        crate::run_pictures::GIF_FRAME_DELAY_CS,
+    )
+    .map(|s| {
+        serde_json::json!({
+            "file": "turntable.mp4",
+            "frames": s.frames,
+            "width": s.width,
+            "height": s.height,
+            "frame_seconds": f64::from(crate::run_pictures::GIF_FRAME_DELAY_CS) / 100.0,
+            "codec": "H.264 (OpenH264), 4:2:0, BT.709 limited range",
+            "bytes": s.bytes,
+        })
+    });
+    #[cfg(not(feature = "mp4"))]
+    let written: Result<serde_json::Value> = {
+        let _ = frames;
+        Err(Error::NotBuilt {
+            feature: "mp4",
+            what: "turntable.mp4".into(),
+        })
+    };
+    match written {
+        Ok(summary) => summary,
+        Err(e) => {
+            let why = e.full_message();
+            // A build without the encoder is no problem of this run: run.json and the CLI's
+            // closing lines say so, the warnings do not.
+            if !matches!(e.kind(), Error::NotBuilt { .. }) {
+                warnings.push(format!(
+                    "turntable.mp4 not written ({why}); turntable.gif has the same frames"
+                ));
+            }
+            if path.is_file()
+                && let Err(e) = std::fs::remove_file(&path)
+            {
+                warnings.push(format!("cannot remove the earlier {}: {e}", path.display()));
+            }
+            serde_json::json!({ "file": null, "not_written": why })
+        }
+    }
 }
 
 /// Writes `mesh.obj/.ply/.glb` and `mesh_heat.glb` of `written` (the result in the output frame)
@@ -1323,6 +1384,7 @@ fn write_summary(
             "colormap": "viridis, 5 stops, piecewise linear in sRGB; COLOR_0 linear RGB",
             "max_displacement": max,
         })),
+        "turntable_mp4": prepared.turntable_mp4,
         "region": prepared.region.as_ref().map(|r| serde_json::json!({
             "specs": config.region.specs,
             "feather": config.region.feather,
@@ -1406,4 +1468,54 @@ fn write_deformation(
         saved.write(tmp).map_err(Error::from)
     })
     .with_context(|| format!("cannot write {}", dir.deformation().display()))
+}
+
+#[cfg(all(test, feature = "mp4"))]
+mod mp4_tests {
+    use super::*;
+
+    #[test]
+    fn turntable_mp4_failure_is_a_warning_that_removes_an_earlier_file() {
+        let tmp = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+        let dir = RunDir::new(tmp.path());
+        std::fs::write(dir.file("turntable.mp4"), b"an earlier attempt's")
+            .unwrap_or_else(|e| panic!("{e}"));
+        // No frames: the encoder refuses, the run goes on.
+        let nothing = raster_diff::Images {
+            count: 0,
+            height: 8,
+            width: 8,
+            channels: 3,
+            rgb: Vec::new(),
+        };
+        let mut warnings = Vec::new();
+        let json = write_turntable_mp4(&dir, &nothing, &mut warnings);
+        assert!(json["file"].is_null(), "{json}");
+        assert!(json["not_written"].as_str().is_some(), "{json}");
+        assert_eq!(warnings.len(), 1, "{warnings:?}");
+        assert!(
+            warnings[0].starts_with("turntable.mp4 not written (")
+                && warnings[0].contains("turntable.gif has the same frames"),
+            "{warnings:?}"
+        );
+        assert!(!dir.file("turntable.mp4").exists());
+        // Frames: written, and described.
+        let frames = raster_diff::Images {
+            count: 2,
+            height: 8,
+            width: 8,
+            channels: 3,
+            rgb: vec![0.5; 2 * 8 * 8 * 3],
+        };
+        let mut warnings = Vec::new();
+        let json = write_turntable_mp4(&dir, &frames, &mut warnings);
+        assert!(warnings.is_empty(), "{warnings:?}");
+        assert_eq!(json["file"], "turntable.mp4");
+        // 8×8 frames make a 16×16 video (OpenH264's smallest; turntable_mp4::video_size).
+        assert_eq!(
+            (json["frames"].as_u64(), json["width"].as_u64()),
+            (Some(2), Some(16))
+        );
+        assert!(dir.file("turntable.mp4").is_file());
+    }
 }

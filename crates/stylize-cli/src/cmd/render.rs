@@ -1,4 +1,5 @@
-//! `stylize render`: turntable frames, a contact sheet and an animated `turntable.gif` of a mesh.
+//! `stylize render`: turntable frames, a contact sheet, an animated `turntable.gif` and an H.264
+//! `turntable.mp4` of a mesh.
 //!
 //! The mesh is read with `mesh_core::io::read_mesh`, normalized to the side-2 cube (spec §1.1) and
 //! rendered with the project's renderer (`raster_diff`, the shading the guidance sees) from
@@ -6,6 +7,10 @@
 //! camera). Pixel values are written as they are, byte = round(255·v) (see `raster_diff::image`);
 //! `--srgb` applies the sRGB transfer curve first. `turntable.gif` loops over the same frames
 //! (`stylize::run_pictures::encode_gif`: exact greys, colour frames quantized); `--no-gif` skips it.
+//! `turntable.mp4` holds the same frames as H.264 (`stylize::turntable_mp4`: BT.709 limited range,
+//! 4:2:0, an odd `--size` padded to even, one under 16 to 16; the library's feature `mp4`); `--no-mp4` skips it. A
+//! build without the encoder says so and writes the rest; an encoding failure is reported after
+//! every other output is written (the command then fails).
 
 use std::path::{Path, PathBuf};
 
@@ -20,6 +25,9 @@ const BATCH_PIXELS: usize = 8 * 1024 * 1024;
 const MAX_FRAMES: usize = 360;
 /// The largest `--size`.
 const MAX_SIZE: usize = 8192;
+/// The largest `--size` the H.264 encoder takes (OpenH264: 3840×2160 at most, so square frames
+/// of at most 2160, after rounding up to even).
+const MAX_MP4_SIZE: usize = 2160;
 /// The most pixels of all frames together (kept for the contact sheet and the GIF, 12 bytes
 /// each): 2²⁷, e.g. 8 frames of 4096², 36 of 1930², 360 of 610².
 const MAX_TOTAL_PIXELS: usize = 1 << 27;
@@ -59,8 +67,11 @@ pub struct Args {
     /// Do not write the animated `turntable.gif`.
     #[arg(long)]
     pub no_gif: bool,
-    /// Overwrite existing frames, contact sheet and GIF (and remove the frames, or the GIF with
-    /// `--no-gif`, that an earlier render left beyond this one's).
+    /// Do not write the H.264 video `turntable.mp4`.
+    #[arg(long)]
+    pub no_mp4: bool,
+    /// Overwrite existing frames, contact sheet, GIF and MP4 (and remove the frames, or the GIF
+    /// with `--no-gif`, the MP4 with `--no-mp4`, that an earlier render left beyond this one's).
     #[arg(long)]
     pub force: bool,
 }
@@ -127,6 +138,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         anyhow::ensure!(c >= 1, "--columns must be at least 1");
     }
     anyhow::ensure!(
+        args.no_mp4 || !MP4_BUILT || args.size <= MAX_MP4_SIZE,
+        "--size {} is larger than the {MAX_MP4_SIZE} the H.264 encoder takes for turntable.mp4: \
+         a smaller --size, or --no-mp4",
+        args.size
+    );
+    anyhow::ensure!(
         args.distance.is_finite() && args.distance > 0.0,
         "--distance must be positive, got {}",
         args.distance
@@ -143,10 +160,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let dir = &args.output;
     let sheet_path = dir.join("contact_sheet.png");
     let gif_path = dir.join("turntable.gif");
+    let mp4_path = dir.join("turntable.mp4");
+    let write_mp4 = !args.no_mp4 && MP4_BUILT;
     let outputs: Vec<PathBuf> = (0..args.turntable)
         .map(|k| frame_path(dir, k))
         .chain([sheet_path.clone()])
         .chain((!args.no_gif).then(|| gif_path.clone()))
+        .chain(write_mp4.then(|| mp4_path.clone()))
         .collect();
     rundir::refuse_overwriting_inputs(
         &outputs,
@@ -213,11 +233,26 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         })
         .with_context(|| format!("cannot write {}", gif_path.display()))?;
     }
+    let mp4 = if write_mp4 {
+        Some(write_turntable_mp4(&mp4_path, &all, encoding))
+    } else {
+        if !args.no_mp4 {
+            errln!(
+                "turntable.mp4 not written: this stylize was built without the H.264 encoder \
+                 (feature mp4; {} builds it)",
+                crate::features::cargo_run_adding("mp4")
+            );
+        }
+        None
+    };
     if args.force {
         // What an earlier render left beyond this one's outputs would pass for part of them.
         let mut stale = stale_frames(dir, args.turntable);
         if args.no_gif && gif_path.is_file() {
             stale.push(gif_path.clone());
+        }
+        if !write_mp4 && mp4_path.is_file() {
+            stale.push(mp4_path.clone());
         }
         for p in &stale {
             std::fs::remove_file(p).with_context(|| format!("cannot remove {}", p.display()))?;
@@ -230,17 +265,53 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             );
         }
     }
+    let mut written = vec!["contact_sheet.png"];
+    if !args.no_gif {
+        written.push("turntable.gif");
+    }
+    if matches!(mp4, Some(Ok(()))) {
+        written.push("turntable.mp4");
+    }
     errln!(
-        "wrote {} frames, contact_sheet.png{} to {}",
+        "wrote {} frames, {} to {}",
         args.turntable,
-        if args.no_gif {
-            ""
-        } else {
-            " and turntable.gif"
-        },
+        written.join(", "),
         dir.display()
     );
-    Ok(())
+    match mp4 {
+        Some(Err(e)) => Err(e.context(format!(
+            "the frames, contact sheet{} were written, but not {}",
+            if args.no_gif { "" } else { " and GIF" },
+            mp4_path.display()
+        ))),
+        _ => Ok(()),
+    }
+}
+
+/// Whether this build has the H.264 encoder (`stylize`'s feature `mp4`, through this crate's).
+const MP4_BUILT: bool = cfg!(feature = "mp4");
+
+/// Writes `turntable.mp4` of the frames; an existing file is replaced only when the new one is
+/// complete, and a failure leaves no partial file.
+#[cfg(feature = "mp4")]
+fn write_turntable_mp4(path: &Path, frames: &Images, encoding: Encoding) -> anyhow::Result<()> {
+    rundir::durable::replace_with(path, |tmp| {
+        let file =
+            std::fs::File::create(tmp).map_err(|e| stylize::Error::io("cannot create", tmp, e))?;
+        stylize::turntable_mp4::encode_mp4(
+            std::io::BufWriter::new(file),
+            frames,
+            stylize::run_pictures::GIF_FRAME_DELAY_CS,
+            encoding,
+        )
+        .map(|_| ())
+    })
+    .with_context(|| format!("cannot write {}", path.display()))
+}
+
+#[cfg(not(feature = "mp4"))]
+fn write_turntable_mp4(_: &Path, _: &Images, _: Encoding) -> anyhow::Result<()> {
+    Err(crate::features::not_built("mp4", "turntable.mp4"))
 }
 
 #[cfg(test)]
@@ -260,6 +331,7 @@ mod tests {
             srgb: false,
             cpu: true,
             no_gif: false,
+            no_mp4: false,
             force,
         }
     }
@@ -307,6 +379,14 @@ mod tests {
             frames += 1;
         }
         assert_eq!(frames, 3);
+        // So does the MP4: 3 pictures of 24×24, 8/100 s each.
+        #[cfg(feature = "mp4")]
+        {
+            let mp4 = std::fs::read(out.join("turntable.mp4")).expect("turntable.mp4");
+            let video = stylize::turntable_mp4::decode_mp4(&mp4).expect("the MP4 decodes");
+            assert_eq!((video.width, video.height, video.frames.len()), (24, 24, 3));
+            assert_eq!(video.durations, [8, 8, 8]);
+        }
         // A GIF left from an earlier render blocks a render without --force, like the frames.
         std::fs::remove_file(out.join("contact_sheet.png")).expect("rm");
         for k in 0..3 {
@@ -329,6 +409,7 @@ mod tests {
         let mut a = args(mesh, out.clone(), true);
         a.turntable = 2;
         a.no_gif = true;
+        a.no_mp4 = true;
         run(a).expect("forced render");
         let mut names: Vec<String> = std::fs::read_dir(&out)
             .expect("dir")
@@ -365,6 +446,13 @@ mod tests {
             edit(&mut a);
             let e = format!("{:#}", run(a).expect_err("rejected"));
             assert!(e.contains(needle), "{needle}: {e}");
+        }
+        if MP4_BUILT {
+            // Frames the H.264 encoder cannot take are refused before rendering, naming the way out.
+            let mut a = base();
+            a.size = 2162;
+            let e = format!("{:#}", run(a).expect_err("rejected"));
+            assert!(e.contains("--no-mp4"), "{e}");
         }
         assert!(!out.exists());
         assert_eq!(frame_number("frame_012.png"), Some(12));
