@@ -2,17 +2,19 @@
 //! pymeshlab (`scripts/bench_self_intersections.py`, docs/benchmarks.md).
 //!
 //! `cargo run --release -p mesh-core --features io --example self_intersection_bench -- OUT_DIR
-//! [MESH…] [--reps N]`
+//! [MESH…] [--reps N] [--only NAME]`
 //!
 //! Writes into `OUT_DIR`, for each mesh: `NAME.obj` (coordinates rounded to f32, which MeshLab
 //! stores, so both tools see the same numbers) and `NAME.faces.txt` (our intersecting faces, one
 //! index per line), and prints one tab-separated line per mesh: name, faces, pairs, faces
 //! involved, candidates, then per call: BVH build, one full check, refit + check (the viewer's
 //! per-move cost) in **CPU ms of the thread** (the machine is shared: descheduled time does not
-//! count; each repeated until ≥ 0.3 s of CPU and ≥ N times), and the check's wall ms. Meshes: the fixtures eight (634 faces), bunny, fandisk and
+//! count; each repeated until ≥ 0.3 s of CPU and ≥ N times), the check's wall ms, the BVH's
+//! self-overlap traversal alone (CPU ms) and the check on 2 threads (`set_threads(2)`, wall ms:
+//! the viewer's setting). Meshes: the fixtures eight (634 faces), bunny, fandisk and
 //! cow, the bunny midpoint-subdivided ×1, ×2, ×3 (up to 235k faces), the cow ×2 (46,434
 //! vertices: the viewer's latency mesh, `stylize-cli/examples/view_latency.rs`) and a torus of 200k faces,
-//! then any MESH given (e.g. stylized results).
+//! then any MESH given (e.g. stylized results). `--only NAME` runs one of them (for profiling).
 
 #![allow(clippy::unwrap_used)]
 
@@ -81,6 +83,11 @@ fn main() {
         reps = args[i + 1].parse().unwrap();
         args.drain(i..i + 2);
     }
+    let mut only: Option<String> = None;
+    if let Some(i) = args.iter().position(|a| a == "--only") {
+        only = Some(args[i + 1].clone());
+        args.drain(i..i + 2);
+    }
     let out = PathBuf::from(args.first().expect("OUT_DIR"));
     std::fs::create_dir_all(&out).unwrap();
     let fixtures = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/meshes");
@@ -110,9 +117,12 @@ fn main() {
         meshes.push((name, read(&p)));
     }
     println!(
-        "mesh\tfaces\tpairs\tfaces_involved\tcandidates\tbuild_cpu_ms\tcheck_cpu_ms\trefit_check_cpu_ms\tcheck_wall_ms"
+        "mesh\tfaces\tpairs\tfaces_involved\tcandidates\tbuild_cpu_ms\tcheck_cpu_ms\trefit_check_cpu_ms\tcheck_wall_ms\ttraversal_cpu_ms\tcheck_2_threads_wall_ms"
     );
     for (name, mut mesh) in meshes {
+        if only.as_ref().is_some_and(|o| *o != name) {
+            continue;
+        }
         for p in &mut mesh.positions {
             *p = p.map(|c| f64::from(c as f32));
         }
@@ -128,12 +138,23 @@ fn main() {
         let (refit, _) = timed(reps, || {
             checker.check_moved(&mesh.positions).unwrap();
         });
+        checker.set_threads(2);
+        let (_, check2_wall) = timed(reps, || {
+            checker.check();
+        });
+        checker.set_threads(1);
+        let bvh = mesh_core::bvh::Bvh::new(&mesh.positions, &mesh.faces).unwrap();
+        let (traversal, _) = timed(reps, || {
+            let mut n = 0usize;
+            bvh.for_each_overlapping_pair(|_, _| n += 1);
+            std::hint::black_box(n);
+        });
         let mut f = std::fs::File::create(out.join(format!("{name}.faces.txt"))).unwrap();
         for face in &r.faces {
             writeln!(f, "{face}").unwrap();
         }
         println!(
-            "{name}\t{}\t{}\t{}\t{}\t{build:.1}\t{check:.1}\t{refit:.1}\t{check_wall:.1}",
+            "{name}\t{}\t{}\t{}\t{}\t{build:.1}\t{check:.1}\t{refit:.1}\t{check_wall:.1}\t{traversal:.1}\t{check2_wall:.1}",
             mesh.faces.len(),
             r.pairs.len(),
             r.faces.len(),

@@ -259,11 +259,35 @@ impl Bvh {
                     c
                 })
                 .collect();
-            let mut order = std::mem::take(&mut bvh.order);
-            bvh.build(&mut order, 0, &centroids);
-            bvh.order = order;
+            // The faces carry their centroids through the partitions (no indirection per
+            // comparison); the boxes are filled bottom-up afterwards.
+            let mut items: Vec<(u32, [f64; 3])> = (0..faces.len() as u32)
+                .map(|f| (f, centroids[f as usize]))
+                .collect();
+            bvh.build(&mut items, 0);
+            bvh.order = items.iter().map(|&(f, _)| f).collect();
+            bvh.fill_bounds();
         }
         Ok(bvh)
+    }
+
+    /// Every node's box from its faces' (leaves) or children's (interior nodes), bottom-up.
+    fn fill_bounds(&mut self) {
+        for i in (0..self.nodes.len()).rev() {
+            let n = self.nodes[i];
+            let bounds = if n.count > 0 {
+                let mut b = Aabb::EMPTY;
+                for &f in &self.order[n.start as usize..(n.start + n.count) as usize] {
+                    b = b.union(&self.boxes[f as usize]);
+                }
+                b
+            } else {
+                self.nodes[i + 1]
+                    .bounds
+                    .union(&self.nodes[n.start as usize].bounds)
+            };
+            self.nodes[i].bounds = bounds;
+        }
     }
 
     #[inline]
@@ -271,22 +295,21 @@ impl Bvh {
         self.boxes[f as usize]
     }
 
-    /// Builds the subtree over `order[..]` (which starts at `offset` in the full order).
-    fn build(&mut self, order: &mut [u32], offset: usize, centroids: &[[f64; 3]]) {
-        let mut bounds = Aabb::EMPTY;
-        let mut cbounds = Aabb::EMPTY;
-        for &f in order.iter() {
-            bounds = bounds.union(&self.face_bounds(f));
-            cbounds.grow(centroids[f as usize]);
-        }
+    /// Builds the subtree over `items[..]` (faces with their centroids; the slice starts at
+    /// `offset` in the full order). Node boxes are left empty for [`Bvh::fill_bounds`].
+    fn build(&mut self, items: &mut [(u32, [f64; 3])], offset: usize) {
         let me = self.nodes.len();
         self.nodes.push(Node {
-            bounds,
+            bounds: Aabb::EMPTY,
             start: offset as u32,
-            count: order.len() as u32,
+            count: items.len() as u32,
         });
-        if order.len() <= LEAF_SIZE {
+        if items.len() <= LEAF_SIZE {
             return;
+        }
+        let mut cbounds = Aabb::EMPTY;
+        for (_, c) in items.iter() {
+            cbounds.grow(*c);
         }
         let ext = sub(cbounds.hi, cbounds.lo);
         let axis = if ext[0] >= ext[1] && ext[0] >= ext[2] {
@@ -296,16 +319,14 @@ impl Bvh {
         } else {
             2
         };
-        let mid = order.len() / 2;
-        order.select_nth_unstable_by(mid, |&a, &b| {
-            centroids[a as usize][axis]
-                .total_cmp(&centroids[b as usize][axis])
-                .then(a.cmp(&b))
+        let mid = items.len() / 2;
+        items.select_nth_unstable_by(mid, |a, b| {
+            a.1[axis].total_cmp(&b.1[axis]).then(a.0.cmp(&b.0))
         });
-        let (left, right) = order.split_at_mut(mid);
-        self.build(left, offset, centroids);
+        let (left, right) = items.split_at_mut(mid);
+        self.build(left, offset);
         let right_index = self.nodes.len() as u32;
-        self.build(right, offset + mid, centroids);
+        self.build(right, offset + mid);
         self.nodes[me].start = right_index;
         self.nodes[me].count = 0;
     }
@@ -377,21 +398,7 @@ impl Bvh {
             ];
             *b = Aabb::of_points(t);
         }
-        for i in (0..self.nodes.len()).rev() {
-            let n = self.nodes[i];
-            let bounds = if n.count > 0 {
-                let mut b = Aabb::EMPTY;
-                for &f in &self.order[n.start as usize..(n.start + n.count) as usize] {
-                    b = b.union(&self.boxes[f as usize]);
-                }
-                b
-            } else {
-                self.nodes[i + 1]
-                    .bounds
-                    .union(&self.nodes[n.start as usize].bounds)
-            };
-            self.nodes[i].bounds = bounds;
-        }
+        self.fill_bounds();
         Ok(())
     }
 
@@ -600,68 +607,96 @@ impl Bvh {
     /// is never paired with itself; faces sharing a vertex are included — the caller decides what
     /// adjacency means). The order of the calls follows the tree.
     pub fn for_each_overlapping_pair(&self, mut pair: impl FnMut(u32, u32)) {
+        let boxes = &self.boxes;
+        self.for_each_candidate_pair(|f, g| {
+            if boxes[f as usize].overlaps(&boxes[g as usize]) {
+                pair(f, g);
+            }
+        });
+    }
+
+    /// [`for_each_overlapping_pair`](Self::for_each_overlapping_pair) without its final `f64` box
+    /// test: every overlapping pair once, plus the rare pairs whose boxes are apart by less than
+    /// their `f32` rounding (a relative 2⁻²⁴) — for callers that test each pair exactly anyway.
+    ///
+    /// The traversal works on a compact copy of the tree: boxes in `f32`, each rounded outward
+    /// (so no overlapping pair is missed), the faces' boxes in leaf order, one array per
+    /// coordinate, and every subtree of at most `PAIR_LEAF` (32) faces treated as one leaf: a
+    /// face is tested against all the faces of a leaf at once, without branches, into a bit
+    /// mask. A node pair is pushed only after its boxes were found to overlap, and each face of
+    /// one leaf is tested against the other leaf's box first.
+    pub fn for_each_candidate_pair(&self, mut pair: impl FnMut(u32, u32)) {
+        let order = &self.order;
+        self.for_each_candidate_slots(|x, y| {
+            let (f, g) = (order[x], order[y]);
+            pair(f.min(g), f.max(g));
+        });
+    }
+
+    /// The faces in the order the tree's leaves hold them (`slot → face`): what
+    /// [`for_each_candidate_slots`](Self::for_each_candidate_slots) indexes.
+    pub(crate) fn leaf_order(&self) -> &[u32] {
+        &self.order
+    }
+
+    /// [`for_each_candidate_pair`](Self::for_each_candidate_pair) as positions `(x, y)` in
+    /// [`leaf_order`](Self::leaf_order) (`x ≠ y`, either order): callers that keep per-face data
+    /// in that order read it sequentially.
+    pub(crate) fn for_each_candidate_slots(&self, emit: impl FnMut(usize, usize)) {
+        if let Some(tree) = self.pair_tree() {
+            tree.traverse(&[(0, 0)], emit);
+        }
+    }
+
+    /// The compact tree the pair traversal walks (`None` for an empty tree), for callers that
+    /// split the traversal into tasks ([`PairTree::tasks`]).
+    pub(crate) fn pair_tree(&self) -> Option<PairTree> {
         if self.nodes.is_empty() {
-            return;
+            return None;
         }
-        let mut stack: Vec<(u32, u32)> = vec![(0, 0)];
-        while let Some((i, j)) = stack.pop() {
-            let a = &self.nodes[i as usize];
-            if i == j {
-                if a.count > 0 {
-                    let fs = &self.order[a.start as usize..(a.start + a.count) as usize];
-                    for (k, &f) in fs.iter().enumerate() {
-                        let bf = self.face_bounds(f);
-                        for &g in &fs[k + 1..] {
-                            if bf.overlaps(&self.face_bounds(g)) {
-                                pair(f.min(g), f.max(g));
-                            }
-                        }
-                    }
-                } else {
-                    let (l, r) = (i + 1, a.start);
-                    stack.push((l, l));
-                    stack.push((r, r));
-                    stack.push((l, r));
-                }
-                continue;
-            }
-            let b = &self.nodes[j as usize];
-            if !a.bounds.overlaps(&b.bounds) {
-                continue;
-            }
-            match (a.count > 0, b.count > 0) {
-                (true, true) => {
-                    let fa = &self.order[a.start as usize..(a.start + a.count) as usize];
-                    let fb = &self.order[b.start as usize..(b.start + b.count) as usize];
-                    for &f in fa {
-                        let bf = self.face_bounds(f);
-                        for &g in fb {
-                            if bf.overlaps(&self.face_bounds(g)) {
-                                pair(f.min(g), f.max(g));
-                            }
-                        }
-                    }
-                }
-                (false, true) => {
-                    stack.push((i + 1, j));
-                    stack.push((a.start, j));
-                }
-                (true, false) => {
-                    stack.push((i, j + 1));
-                    stack.push((i, b.start));
-                }
-                (false, false) => {
-                    // Split the larger box.
-                    if volume(&a.bounds) >= volume(&b.bounds) {
-                        stack.push((i + 1, j));
-                        stack.push((a.start, j));
-                    } else {
-                        stack.push((i, j + 1));
-                        stack.push((i, b.start));
-                    }
-                }
+        Some(PairTree {
+            nodes: self.pair_nodes(),
+            leaf: LeafBoxes::new(self.order.iter().map(|&f| &self.boxes[f as usize])),
+        })
+    }
+
+    /// Rewrites the boxes of `tree` (made by [`pair_tree`](Self::pair_tree) of this tree, before
+    /// or after refits) for the current positions, in place: no allocation.
+    pub(crate) fn refresh_pair_tree(&self, tree: &mut PairTree) {
+        for (t, n) in tree.nodes.iter_mut().zip(&self.nodes) {
+            t.bounds = Box32::outward(&n.bounds);
+        }
+        for (x, &f) in self.order.iter().enumerate() {
+            let b = Box32::outward(&self.boxes[f as usize]);
+            for k in 0..3 {
+                tree.leaf.lo[k][x] = b.lo[k];
+                tree.leaf.hi[k][x] = b.hi[k];
             }
         }
+    }
+
+    /// The compact tree of [`for_each_overlapping_pair`](Self::for_each_overlapping_pair).
+    fn pair_nodes(&self) -> Vec<PairNode> {
+        let mut out: Vec<PairNode> = self
+            .nodes
+            .iter()
+            .map(|n| PairNode {
+                bounds: Box32::outward(&n.bounds),
+                right: if n.count > 0 { 0 } else { n.start },
+                first: n.start,
+                count: n.count,
+            })
+            .collect();
+        // Children come after their parent: fill the subtrees' face ranges backwards.
+        for i in (0..out.len()).rev() {
+            if self.nodes[i].count == 0 {
+                let (l, r) = (&out[i + 1], &out[out[i].right as usize]);
+                let (first, count) = (l.first, l.count + r.count);
+                out[i].first = first;
+                out[i].count = count;
+            }
+        }
+        out
     }
 
     /// [`for_each_overlapping_pair`](Self::for_each_overlapping_pair) collected and sorted.
@@ -673,10 +708,235 @@ impl Bvh {
     }
 }
 
-fn volume(b: &Aabb) -> f64 {
-    let e = sub(b.hi, b.lo);
-    // Sum of extents: a size measure that stays useful for flat boxes.
-    e[0] + e[1] + e[2]
+/// Subtrees of at most this many faces are one leaf of the pair traversal (at most 32: the
+/// overlap masks are `u32`). Measured on 93k–235k faces: 8 → 32 took the traversal from 24 to 17
+/// ms on the 200k-face torus (docs/benchmarks.md).
+const PAIR_LEAF: u32 = 32;
+const _: () = assert!(PAIR_LEAF <= 32);
+
+/// A node of the pair traversal's compact tree.
+#[derive(Clone, Copy, Debug)]
+struct PairNode {
+    bounds: Box32,
+    /// The right child (the left one is the next node); unused for leaves.
+    right: u32,
+    /// The subtree's faces: `order[first..first + count]`.
+    first: u32,
+    count: u32,
+}
+
+impl PairNode {
+    #[inline]
+    fn is_leaf(&self) -> bool {
+        self.count <= PAIR_LEAF
+    }
+
+    #[inline]
+    fn faces(&self) -> std::ops::Range<usize> {
+        self.first as usize..(self.first + self.count) as usize
+    }
+}
+
+/// The pair traversal's compact tree: its nodes and the faces' boxes in leaf order.
+#[derive(Clone, Debug)]
+pub(crate) struct PairTree {
+    nodes: Vec<PairNode>,
+    leaf: LeafBoxes,
+}
+
+impl PairTree {
+    /// The traversal's work as at least `n` independent tasks (node pairs, `(i, i)` for all pairs
+    /// within subtree `i`), each with its number of faces as a weight: the root task split into
+    /// its children's (the largest first) until there are `n` or no task can be split. Traversing
+    /// every task once visits every candidate pair once.
+    pub(crate) fn tasks(&self, n: usize) -> Vec<((u32, u32), usize)> {
+        let weight = |(i, j): (u32, u32)| {
+            let c = |k: u32| self.nodes[k as usize].count as usize;
+            if i == j { c(i) } else { (c(i) + c(j)) / 2 }
+        };
+        let mut tasks = vec![((0u32, 0u32), weight((0, 0)))];
+        while tasks.len() < n {
+            let Some(k) = (0..tasks.len())
+                .filter(|&k| {
+                    let (i, j) = tasks[k].0;
+                    i == j && !self.nodes[i as usize].is_leaf()
+                })
+                .max_by_key(|&k| tasks[k].1)
+            else {
+                break;
+            };
+            let (i, _) = tasks.swap_remove(k).0;
+            let (l, r) = (i + 1, self.nodes[i as usize].right);
+            tasks.push(((l, l), weight((l, l))));
+            tasks.push(((r, r), weight((r, r))));
+            if self.nodes[l as usize]
+                .bounds
+                .overlaps(&self.nodes[r as usize].bounds)
+            {
+                tasks.push(((l, r), weight((l, r))));
+            }
+        }
+        tasks
+    }
+
+    /// Calls `emit(x, y)` (positions in leaf order, `x ≠ y`) for every candidate pair under the
+    /// node pairs `seeds` (see [`Bvh::for_each_candidate_pair`]).
+    pub(crate) fn traverse(&self, seeds: &[(u32, u32)], mut emit: impl FnMut(usize, usize)) {
+        let (nodes, leaf) = (&self.nodes, &self.leaf);
+        // Node pairs (i, j) to visit: i == j for all pairs within one subtree, i != j for the
+        // pairs across two subtrees whose boxes overlap.
+        let mut stack: Vec<(u32, u32)> = Vec::with_capacity(256);
+        stack.extend_from_slice(seeds);
+        while let Some((i, j)) = stack.pop() {
+            let a = &nodes[i as usize];
+            if i == j {
+                if a.is_leaf() {
+                    let r = a.faces();
+                    for x in r.clone() {
+                        let bx = leaf.get(x);
+                        let mut mask = leaf.overlap_mask(&bx, x + 1..r.end);
+                        while mask != 0 {
+                            emit(x, x + 1 + mask.trailing_zeros() as usize);
+                            mask &= mask - 1;
+                        }
+                    }
+                } else {
+                    let (l, r) = (i + 1, a.right);
+                    stack.push((l, l));
+                    stack.push((r, r));
+                    if nodes[l as usize].bounds.overlaps(&nodes[r as usize].bounds) {
+                        stack.push((l, r));
+                    }
+                }
+                continue;
+            }
+            let b = &nodes[j as usize];
+            if a.is_leaf() && b.is_leaf() {
+                let rb = b.faces();
+                for x in a.faces() {
+                    let bx = leaf.get(x);
+                    if !bx.overlaps(&b.bounds) {
+                        continue;
+                    }
+                    let mut mask = leaf.overlap_mask(&bx, rb.clone());
+                    while mask != 0 {
+                        emit(x, rb.start + mask.trailing_zeros() as usize);
+                        mask &= mask - 1;
+                    }
+                }
+                continue;
+            }
+            // Split the interior node (the larger one when both are).
+            let split_a = b.is_leaf() || (!a.is_leaf() && a.bounds.size() >= b.bounds.size());
+            let (split, other) = if split_a { (i, j) } else { (j, i) };
+            let ob = &nodes[other as usize].bounds;
+            for c in [split + 1, nodes[split as usize].right] {
+                if nodes[c as usize].bounds.overlaps(ob) {
+                    stack.push((c, other));
+                }
+            }
+        }
+    }
+}
+
+/// The faces' boxes of the pair traversal in leaf order, one array per coordinate.
+#[derive(Clone, Debug)]
+struct LeafBoxes {
+    lo: [Vec<f32>; 3],
+    hi: [Vec<f32>; 3],
+}
+
+impl LeafBoxes {
+    fn new<'a>(boxes: impl ExactSizeIterator<Item = &'a Aabb>) -> LeafBoxes {
+        let n = boxes.len();
+        let mut lo = [(); 3].map(|_| Vec::with_capacity(n));
+        let mut hi = [(); 3].map(|_| Vec::with_capacity(n));
+        for b in boxes {
+            let b = Box32::outward(b);
+            for k in 0..3 {
+                lo[k].push(b.lo[k]);
+                hi[k].push(b.hi[k]);
+            }
+        }
+        LeafBoxes { lo, hi }
+    }
+
+    #[inline]
+    fn get(&self, x: usize) -> Box32 {
+        Box32 {
+            lo: [self.lo[0][x], self.lo[1][x], self.lo[2][x]],
+            hi: [self.hi[0][x], self.hi[1][x], self.hi[2][x]],
+        }
+    }
+
+    /// Bit `t` set when the box of face `range.start + t` overlaps `b` (at most 32 faces;
+    /// branch-free).
+    #[inline]
+    fn overlap_mask(&self, b: &Box32, range: std::ops::Range<usize>) -> u32 {
+        let mut mask = 0u32;
+        let (lx, ly, lz) = (
+            &self.lo[0][range.clone()],
+            &self.lo[1][range.clone()],
+            &self.lo[2][range.clone()],
+        );
+        let (hx, hy, hz) = (
+            &self.hi[0][range.clone()],
+            &self.hi[1][range.clone()],
+            &self.hi[2][range],
+        );
+        for t in 0..lx.len() {
+            let o = (b.lo[0] <= hx[t])
+                & (lx[t] <= b.hi[0])
+                & (b.lo[1] <= hy[t])
+                & (ly[t] <= b.hi[1])
+                & (b.lo[2] <= hz[t])
+                & (lz[t] <= b.hi[2]);
+            mask |= u32::from(o) << t;
+        }
+        mask
+    }
+}
+
+/// A box in `f32` (the pair traversal's compact copy).
+#[derive(Clone, Copy, Debug)]
+struct Box32 {
+    lo: [f32; 3],
+    hi: [f32; 3],
+}
+
+impl Box32 {
+    /// The smallest `f32` box containing `b` (corners rounded outward).
+    #[inline]
+    fn outward(b: &Aabb) -> Box32 {
+        let down = |x: f64| {
+            let y = x as f32;
+            if f64::from(y) > x { y.next_down() } else { y }
+        };
+        let up = |x: f64| {
+            let y = x as f32;
+            if f64::from(y) < x { y.next_up() } else { y }
+        };
+        Box32 {
+            lo: b.lo.map(down),
+            hi: b.hi.map(up),
+        }
+    }
+
+    #[inline]
+    fn overlaps(&self, o: &Box32) -> bool {
+        (self.lo[0] <= o.hi[0])
+            & (o.lo[0] <= self.hi[0])
+            & (self.lo[1] <= o.hi[1])
+            & (o.lo[1] <= self.hi[1])
+            & (self.lo[2] <= o.hi[2])
+            & (o.lo[2] <= self.hi[2])
+    }
+
+    /// Sum of extents: a size measure that stays useful for flat boxes.
+    #[inline]
+    fn size(&self) -> f32 {
+        (self.hi[0] - self.lo[0]) + (self.hi[1] - self.lo[1]) + (self.hi[2] - self.lo[2])
+    }
 }
 
 /// The closest point of the segment `a b` to `p` and its parameter `s` (point = a + s·(b − a)).

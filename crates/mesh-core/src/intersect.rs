@@ -43,8 +43,11 @@
 //!
 //! # Cost and limits
 //!
-//! The check costs one BVH refit (`O(F)`) plus the self-overlap traversal and one exact test per
-//! candidate. The candidate set is every pair of faces whose bounding boxes overlap: on a clean
+//! The check costs one BVH refit (`O(F)`), a certificate per vertex fan (`O(V)`: a vertex whose
+//! faces project to a simple star around it has no intersecting pair among them, so every
+//! candidate sharing such a vertex is skipped untested), the self-overlap traversal, and one exact
+//! test per remaining candidate ([`SelfIntersectionChecker::set_threads`] splits the traversal
+//! over threads; the answer does not change). The candidate set is every pair of faces whose bounding boxes overlap: on a clean
 //! mesh about `O(F)` (each face's neighbours), in the worst case — every box overlapping every
 //! other, e.g. a mesh crumpled into a ball — `F(F − 1)/2`. Each test is `O(1)`: at most about 30
 //! filtered predicates, and the exact fallback's integers have at most about 6,300 bits, so there
@@ -106,7 +109,9 @@ pub struct SelfIntersections {
     pub per_component: Vec<ComponentIntersections>,
     /// Faces of the mesh checked.
     pub num_faces: usize,
-    /// Candidate pairs the BVH produced (overlapping boxes) — the work done.
+    /// Candidate pairs the BVH produced (overlapping boxes, compared in `f32` rounded outward, so
+    /// a pair whose boxes are apart by less than that rounding may count too) — the work done;
+    /// those sharing a certified vertex are skipped without a test (see `docs/self_intersections.md`).
     pub candidates: usize,
 }
 
@@ -151,6 +156,13 @@ pub struct SelfIntersectionChecker {
     bvh: Bvh,
     face_component: Vec<u32>,
     component_faces: Vec<usize>,
+    /// The current positions (the fans' certificates read them).
+    positions: Vec<[f64; 3]>,
+    fans: Fans,
+    /// Threads of [`check`](Self::check) (1: the calling thread only).
+    threads: usize,
+    /// The BVH's compact copy for the pair traversal, refreshed in place at each update.
+    pair_tree: Option<crate::bvh::PairTree>,
 }
 
 impl SelfIntersectionChecker {
@@ -182,10 +194,21 @@ impl SelfIntersectionChecker {
             component_faces[c as usize] += 1;
         }
         Ok(SelfIntersectionChecker {
-            bvh,
             face_component,
             component_faces,
+            positions: positions.to_vec(),
+            fans: Fans::new(positions.len(), faces),
+            threads: 1,
+            pair_tree: bvh.pair_tree(),
+            bvh,
         })
+    }
+
+    /// Runs [`check`](Self::check) on `threads` threads (scoped, started per check; 0 counts as
+    /// 1, the default): the traversal is split into tasks of about equal numbers of faces. A
+    /// speed setting only: the answer is the same for any number.
+    pub fn set_threads(&mut self, threads: usize) {
+        self.threads = threads.max(1);
     }
 
     /// Number of faces.
@@ -196,7 +219,13 @@ impl SelfIntersectionChecker {
     /// Moves the vertices (refits the tree; same vertex count). Refuses a different vertex count
     /// or a non-finite vertex, leaving the checker unchanged.
     pub fn update(&mut self, positions: &[[f64; 3]]) -> Result<(), IntersectError> {
-        Ok(self.bvh.refit(positions)?)
+        self.bvh.refit(positions)?;
+        if let Some(tree) = &mut self.pair_tree {
+            self.bvh.refresh_pair_tree(tree);
+        }
+        self.positions.clear();
+        self.positions.extend_from_slice(positions);
+        Ok(())
     }
 
     /// [`update`](Self::update) then [`check`](Self::check).
@@ -211,25 +240,103 @@ impl SelfIntersectionChecker {
     /// The self-intersections at the current positions.
     pub fn check(&self) -> SelfIntersections {
         let faces = self.bvh.faces();
-        let tris: Vec<Tri> = (0..faces.len() as u32)
-            .map(|f| Tri::new(self.bvh.triangle(f)))
+        // Per face, a bit for each corner whose fan is certified (`Fans`): a pair sharing such a
+        // corner cannot intersect.
+        let certified = self.fans.certify(&self.positions);
+        let corner_mask: Vec<u8> = faces
+            .iter()
+            .map(|f| (0..3).fold(0u8, |m, i| m | (u8::from(certified[f[i] as usize]) << i)))
             .collect();
+        // The faces and their masks in the tree's leaf order, which the traversal walks.
+        let order = self.bvh.leaf_order();
+        let slots: Vec<[u32; 4]> = order
+            .iter()
+            .map(|&f| {
+                let v = faces[f as usize];
+                [v[0], v[1], v[2], u32::from(corner_mask[f as usize])]
+            })
+            .collect();
+        // A face with a certified corner is a proper triangle (its fan's projection keeps it
+        // one); the others are tested exactly.
         let degenerate: Vec<u32> = (0..faces.len() as u32)
-            .filter(|&f| tris[f as usize].drop.is_none())
+            .filter(|&f| {
+                corner_mask[f as usize] == 0 && Tri::new(self.bvh.triangle(f)).drop.is_none()
+            })
             .collect();
-        let mut pairs = Vec::new();
-        let mut candidates = 0usize;
-        self.bvh.for_each_overlapping_pair(|a, b| {
-            candidates += 1;
-            if faces_intersect(
-                faces[a as usize],
-                &tris[a as usize],
-                faces[b as usize],
-                &tris[b as usize],
-            ) {
-                pairs.push((a, b));
+        // The traversal, each candidate sharing no certified vertex tested exactly; split into
+        // tasks over `threads` threads when asked (the candidates and pairs are the same).
+        let run = |tree: &crate::bvh::PairTree, seeds: &[(u32, u32)]| {
+            let mut pairs = Vec::new();
+            let mut candidates = 0usize;
+            // The tested faces' projection axes, in a small direct-mapped cache (a face of a
+            // crumpled mesh is tested against many others; the tested pairs come in leaf order).
+            let mut cache = vec![(u32::MAX, Tri::new([[0.0; 3]; 3])); TRI_CACHE];
+            let mut tri = |f: u32, p: [[f64; 3]; 3]| {
+                let e = &mut cache[f as usize % TRI_CACHE];
+                if e.0 != f {
+                    *e = (f, Tri::new(p));
+                }
+                e.1
+            };
+            tree.traverse(seeds, |x, y| {
+                candidates += 1;
+                let (sa, sb) = (slots[x], slots[y]);
+                let mask = sa[3];
+                if mask != 0 && (0..3).any(|i| mask & (1 << i) != 0 && sb[..3].contains(&sa[i])) {
+                    return;
+                }
+                let (a, b) = (order[x].min(order[y]), order[x].max(order[y]));
+                let (fa, fb) = (faces[a as usize], faces[b as usize]);
+                let (pa, pb) = (self.bvh.triangle(a), self.bvh.triangle(b));
+                if quickly_apart(fa, &pa, fb, &pb) {
+                    return;
+                }
+                let (ta, tb) = (tri(a, pa), tri(b, pb));
+                if faces_intersect_filtered::<false>(fa, &ta, fb, &tb) {
+                    pairs.push((a, b));
+                }
+            });
+            (pairs, candidates)
+        };
+        let (mut pairs, candidates) = match &self.pair_tree {
+            None => (Vec::new(), 0),
+            Some(tree) if self.threads <= 1 => run(tree, &[(0, 0)]),
+            Some(tree) => {
+                // Tasks by weight, largest first, each to the least loaded thread.
+                let mut tasks = tree.tasks(8 * self.threads);
+                tasks.sort_by_key(|t| std::cmp::Reverse(t.1));
+                let mut groups: Vec<(usize, Vec<(u32, u32)>)> = vec![(0, Vec::new()); self.threads];
+                for (task, w) in tasks {
+                    let g = (0..groups.len()).min_by_key(|&g| groups[g].0).unwrap_or(0);
+                    groups[g].0 += w;
+                    groups[g].1.push(task);
+                }
+                let run = &run;
+                std::thread::scope(|scope| {
+                    // The first group runs here; a thread the system refuses to start runs its
+                    // group here too (same answer, later).
+                    let handles: Vec<_> = groups[1..]
+                        .iter()
+                        .map(|(_, seeds)| {
+                            std::thread::Builder::new()
+                                .spawn_scoped(scope, move || run(tree, seeds))
+                                .map_err(|_| seeds)
+                        })
+                        .collect();
+                    let mut all = run(tree, &groups[0].1);
+                    for h in handles {
+                        let (p, c) = match h {
+                            // A panic in a task is a bug: propagate it.
+                            Ok(h) => h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)),
+                            Err(seeds) => run(tree, seeds),
+                        };
+                        all.0.extend(p);
+                        all.1 += c;
+                    }
+                    all
+                })
             }
-        });
+        };
         pairs.sort_unstable();
         let mut involved: Vec<u32> = pairs.iter().flat_map(|&(a, b)| [a, b]).collect();
         involved.sort_unstable();
@@ -268,6 +375,180 @@ impl SelfIntersectionChecker {
     }
 }
 
+/// The fan of faces around each vertex, ordered along the vertex's link, for a certificate that
+/// decides every pair of faces sharing that vertex at once.
+///
+/// A vertex `v` whose faces `(v, r₀, r₁), (v, r₁, r₂), …` form one consistently oriented chain —
+/// closed (`k ≥ 3` faces, back to `r₀`: an interior manifold vertex) or open (a boundary vertex) —
+/// has a fan. At given positions the fan is **certified** when, projected along one coordinate
+/// axis (dropping the axis where the fan's summed normal is largest), every face of the fan is a
+/// triangle of one and the same orientation (exact `orient2d`) and the directions `rᵢ − v` turn
+/// once around `v` at most: the sweep from `r₁` on never passes the direction of `r₀` again
+/// before a closed fan's last face returns to it (exact `orient2d` signs; a zero counts as
+/// passing). Then the projected faces are disjoint angular sectors of a star around `v` —
+/// consecutive ones share a ray, others only `v` — and since the projection is injective on
+/// each face, two faces of the fan meet only at `v` (sharing one vertex) or only along their
+/// shared edge (sharing an edge, so no fold): **no pair of faces sharing `v` intersects** under
+/// the module's definitions. A fan that fails the test, or a vertex without a fan (non-manifold,
+/// inconsistently oriented, a face using it twice, more than [`Fans::MAX_FAN`] faces), leaves
+/// its pairs to the per-pair test. Duplicated faces never form a fan, so they are still found.
+#[derive(Clone, Debug)]
+struct Fans {
+    /// Per vertex, `link[offsets[v]..offsets[v + 1]]`: the link `r₀, r₁, …` (open fans repeat
+    /// nothing: `k` faces, `k + 1` entries; closed fans: `k` faces, `k` entries).
+    offsets: Vec<u32>,
+    link: Vec<u32>,
+    /// Per vertex: 0 no fan, 1 closed, 2 open.
+    kind: Vec<u8>,
+}
+
+impl Fans {
+    /// Vertices with more faces than this get no fan (the chain is built by a linear search).
+    const MAX_FAN: usize = 64;
+
+    fn new(num_vertices: usize, faces: &[[u32; 3]]) -> Fans {
+        // Vertex → (a, b) for each face (v, a, b) around it (corners cycled so that v is first).
+        let mut count = vec![0u32; num_vertices + 1];
+        for f in faces {
+            for &v in f {
+                count[v as usize + 1] += 1;
+            }
+        }
+        for v in 0..num_vertices {
+            count[v + 1] += count[v];
+        }
+        let mut fill = count.clone();
+        let mut edges = vec![(0u32, 0u32); count[num_vertices] as usize];
+        for f in faces {
+            for i in 0..3 {
+                let v = f[i] as usize;
+                edges[fill[v] as usize] = (f[(i + 1) % 3], f[(i + 2) % 3]);
+                fill[v] += 1;
+            }
+        }
+        let mut offsets = Vec::with_capacity(num_vertices + 1);
+        let mut link = Vec::with_capacity(edges.len() + num_vertices);
+        let mut kind = vec![0u8; num_vertices];
+        offsets.push(0u32);
+        let mut used = Vec::new();
+        for v in 0..num_vertices {
+            let es = &edges[count[v] as usize..count[v + 1] as usize];
+            let start = link.len();
+            if let Some(k) = Self::chain(v as u32, es, &mut link, &mut used) {
+                kind[v] = k;
+            } else {
+                link.truncate(start);
+            }
+            offsets.push(link.len() as u32);
+        }
+        Fans {
+            offsets,
+            link,
+            kind,
+        }
+    }
+
+    /// Appends `v`'s ordered link to `link`; `Some(1)` closed, `Some(2)` open, `None` no fan.
+    fn chain(v: u32, es: &[(u32, u32)], link: &mut Vec<u32>, used: &mut Vec<bool>) -> Option<u8> {
+        let k = es.len();
+        if k == 0 || k > Self::MAX_FAN {
+            return None;
+        }
+        if es.iter().any(|&(a, b)| a == v || b == v || a == b) {
+            return None;
+        }
+        for (i, &(a, b)) in es.iter().enumerate() {
+            if es[i + 1..].iter().any(|&(c, d)| c == a || d == b) {
+                return None;
+            }
+        }
+        // Open: start at the edge whose start is no edge's end; closed: anywhere.
+        let first = es
+            .iter()
+            .position(|&(a, _)| !es.iter().any(|&(_, d)| d == a));
+        let open = first.is_some();
+        let mut cur = first.unwrap_or(0);
+        used.clear();
+        used.resize(k, false);
+        link.push(es[cur].0);
+        for n in 0..k {
+            used[cur] = true;
+            let b = es[cur].1;
+            if n + 1 == k {
+                if open {
+                    link.push(b);
+                    return Some(2);
+                }
+                return (b == link[link.len() - k] && k >= 3).then_some(1);
+            }
+            link.push(b);
+            cur = es.iter().position(|&(a, _)| a == b)?;
+            if used[cur] {
+                return None;
+            }
+        }
+        None
+    }
+
+    /// Per vertex: whether its fan is certified at `positions` (see [`Fans`]).
+    fn certify(&self, positions: &[[f64; 3]]) -> Vec<bool> {
+        (0..self.kind.len())
+            .map(|v| {
+                let k = self.kind[v];
+                k != 0 && {
+                    let l = &self.link[self.offsets[v] as usize..self.offsets[v + 1] as usize];
+                    fan_is_star(positions, positions[v], l, k == 1)
+                }
+            })
+            .collect()
+    }
+}
+
+/// The certificate of [`Fans`] for the fan of the vertex at `pv` with link `l` (closed: the faces
+/// are `(v, lᵢ, lᵢ₊₁ mod k)`; open: `(v, lᵢ, lᵢ₊₁)`).
+fn fan_is_star(positions: &[[f64; 3]], pv: [f64; 3], l: &[u32], closed: bool) -> bool {
+    let faces = if closed { l.len() } else { l.len() - 1 };
+    let at = |i: usize| positions[l[i % l.len()] as usize];
+    let mut n = [0.0f64; 3];
+    for i in 0..faces {
+        let c = crate::geometry::cross(
+            crate::geometry::sub(at(i), pv),
+            crate::geometry::sub(at(i + 1), pv),
+        );
+        for k in 0..3 {
+            n[k] += c[k];
+        }
+    }
+    let axis = if n[0].abs() >= n[1].abs() && n[0].abs() >= n[2].abs() {
+        0
+    } else if n[1].abs() >= n[2].abs() {
+        1
+    } else {
+        2
+    };
+    let want = if n[axis] > 0.0 {
+        Sign::Positive
+    } else if n[axis] < 0.0 {
+        Sign::Negative
+    } else {
+        return false;
+    };
+    if (0..faces).any(|i| orient2d_projected(pv, at(i), at(i + 1), axis) != want) {
+        return false;
+    }
+    // The sweep passes the direction of r₀ during face i (i ≥ 1) when r₀ is strictly after rᵢ
+    // and not strictly before rᵢ₊₁ (both turns are less than a half turn).
+    let r0 = at(0);
+    let last = if closed { faces - 1 } else { faces };
+    !(1..last).any(|i| {
+        orient2d_projected(pv, at(i), r0, axis) == want
+            && orient2d_projected(pv, r0, at(i + 1), axis) != want.flip()
+    })
+}
+
+/// Entries of the check's cache of [`Tri`]s (per thread).
+const TRI_CACHE: usize = 1024;
+
 /// A face's corners and the axis its exact 2-D projection drops (`None`: degenerate).
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Tri {
@@ -292,7 +573,19 @@ impl Tri {
 }
 
 /// Whether two faces (indices and their [`Tri`]s) intersect under the module's definitions.
+#[cfg(test)]
 pub(crate) fn faces_intersect(fa: [u32; 3], ta: &Tri, fb: [u32; 3], tb: &Tri) -> bool {
+    faces_intersect_filtered::<true>(fa, ta, fb, tb)
+}
+
+/// [`faces_intersect`]; `FILTERS = false` skips the `f64` filters of [`quickly_apart`] (for a
+/// caller that just ran them and got no answer), otherwise the same.
+pub(crate) fn faces_intersect_filtered<const FILTERS: bool>(
+    fa: [u32; 3],
+    ta: &Tri,
+    fb: [u32; 3],
+    tb: &Tri,
+) -> bool {
     let (Some(_), Some(_)) = (ta.drop, tb.drop) else {
         return false;
     };
@@ -306,18 +599,60 @@ pub(crate) fn faces_intersect(fa: [u32; 3], ta: &Tri, fb: [u32; 3], tb: &Tri) ->
         }
     }
     match n {
-        0 => triangles_intersect(ta, tb),
+        0 => triangles_intersect_filtered::<FILTERS>(ta, tb),
         1 => {
             let (i, j) = shared[0];
-            vertex_adjacent_intersect(&rotate(ta, i), &rotate(tb, j))
+            vertex_adjacent_intersect::<FILTERS>(&rotate(ta, i), &rotate(tb, j))
         }
         2 => {
             let ((i0, j0), (i1, j1)) = (shared[0], shared[1]);
             let a = ta.p[3 - i0 - i1];
             let b = tb.p[3 - j0 - j1];
-            edge_fold(ta.p[i0], ta.p[i1], a, b, ta)
+            edge_fold_filtered::<FILTERS>(ta.p[i0], ta.p[i1], a, b, ta)
         }
         _ => true,
+    }
+}
+
+/// The `f64` filters of [`faces_intersect`] alone, on the corners (before the exact projection
+/// axes of [`Tri::new`] are computed): `true` only when the faces certainly do not intersect under
+/// the module's definitions (faces sharing all three vertices: never).
+fn quickly_apart(fa: [u32; 3], pa: &[[f64; 3]; 3], fb: [u32; 3], pb: &[[f64; 3]; 3]) -> bool {
+    let repeats = |f: [u32; 3]| f[0] == f[1] || f[1] == f[2] || f[2] == f[0];
+    if repeats(fa) || repeats(fb) {
+        // Degenerate (never paired): left to faces_intersect, which says so.
+        return false;
+    }
+    let mut shared = [(0usize, 0usize); 3];
+    let mut n = 0;
+    for (i, &v) in fa.iter().enumerate() {
+        if let Some(j) = fb.iter().position(|&w| w == v) {
+            shared[n] = (i, j);
+            n += 1;
+        }
+    }
+    match n {
+        0 => {
+            let d = centroid_direction(pa, pb);
+            certainly_separated(centroids_midpoint(pa, pb), d, pa, pb)
+        }
+        1 => {
+            let (i, j) = shared[0];
+            let v = pa[i];
+            let (a1, b1) = (pa[(i + 1) % 3], pa[(i + 2) % 3]);
+            let (a2, b2) = (pb[(j + 1) % 3], pb[(j + 2) % 3]);
+            certainly_separated(
+                v,
+                centroid_direction(&[a1, b1], &[a2, b2]),
+                &[a1, b1],
+                &[a2, b2],
+            )
+        }
+        2 => {
+            let ((i0, j0), (i1, j1)) = (shared[0], shared[1]);
+            clearly_opposite_sides(pa[i0], pa[i1], pa[3 - i0 - i1], pb[3 - j0 - j1])
+        }
+        _ => false,
     }
 }
 
@@ -335,8 +670,19 @@ fn o3(a: [f64; 3], b: [f64; 3], c: [f64; 3], d: [f64; 3]) -> Sign {
 }
 
 /// Faces `(u, v, a)` and `(v, u, b)` sharing edge `uv`: a fold (coplanar, same side).
+#[cfg(test)]
 fn edge_fold(u: [f64; 3], v: [f64; 3], a: [f64; 3], b: [f64; 3], ta: &Tri) -> bool {
-    if clearly_opposite_sides(u, v, a, b) {
+    edge_fold_filtered::<true>(u, v, a, b, ta)
+}
+
+fn edge_fold_filtered<const FILTERS: bool>(
+    u: [f64; 3],
+    v: [f64; 3],
+    a: [f64; 3],
+    b: [f64; 3],
+    ta: &Tri,
+) -> bool {
+    if FILTERS && clearly_opposite_sides(u, v, a, b) {
         return false;
     }
     if o3(u, v, a, b) != Sign::Zero {
@@ -407,24 +753,45 @@ fn certainly_separated(origin: [f64; 3], d: [f64; 3], pos: &[[f64; 3]], neg: &[[
     pos.iter().all(|&p| side(p, 1.0)) && neg.iter().all(|&p| side(p, -1.0))
 }
 
-/// The direction from the centroid of `b` to that of `a` (three times it; only the direction
+/// The direction from the centroid of `b` to that of `a` (`N` times it; only the direction
 /// matters) — the separating-plane normal [`certainly_separated`] tries.
 #[inline]
-fn centroid_direction(a: &[[f64; 3]], b: &[[f64; 3]]) -> [f64; 3] {
-    let sum = |t: &[[f64; 3]], k: usize| t.iter().map(|p| p[k]).sum::<f64>() / t.len() as f64;
-    [0, 1, 2].map(|k| sum(a, k) - sum(b, k))
+fn centroid_direction<const N: usize>(a: &[[f64; 3]; N], b: &[[f64; 3]; N]) -> [f64; 3] {
+    let mut d = [0.0; 3];
+    for (k, dk) in d.iter_mut().enumerate() {
+        let (mut sa, mut sb) = (0.0, 0.0);
+        for i in 0..N {
+            sa += a[i][k];
+            sb += b[i][k];
+        }
+        *dk = sa - sb;
+    }
+    d
+}
+
+/// The midpoint of the two triangles' centroids (the separating plane's origin for faces without
+/// a shared vertex; any point would be right, this one separates best).
+#[inline]
+fn centroids_midpoint(a: &[[f64; 3]; 3], b: &[[f64; 3]; 3]) -> [f64; 3] {
+    let mut m = [0.0; 3];
+    for (k, mk) in m.iter_mut().enumerate() {
+        *mk = 0.5 * ((a[0][k] + a[1][k] + a[2][k]) / 3.0 + (b[0][k] + b[1][k] + b[2][k]) / 3.0);
+    }
+    m
 }
 
 /// `(v, a₁, b₁)` and `(v, a₂, b₂)` sharing corner `v`: do they meet other than at `v`?
-fn vertex_adjacent_intersect(ta: &Tri, tb: &Tri) -> bool {
+fn vertex_adjacent_intersect<const FILTERS: bool>(ta: &Tri, tb: &Tri) -> bool {
     let [v, a1, b1] = ta.p;
     let [_, a2, b2] = tb.p;
-    if certainly_separated(
-        v,
-        centroid_direction(&[a1, b1], &[a2, b2]),
-        &[a1, b1],
-        &[a2, b2],
-    ) {
+    if FILTERS
+        && certainly_separated(
+            v,
+            centroid_direction(&[a1, b1], &[a2, b2]),
+            &[a1, b1],
+            &[a2, b2],
+        )
+    {
         return false;
     }
     // The shared corner is on both planes; when the other two corners of one face are strictly
@@ -475,14 +842,17 @@ fn strictly_one_side(s: &[Sign; 3]) -> bool {
 }
 
 /// Two non-degenerate closed triangles share a point.
+#[cfg(test)]
 pub(crate) fn triangles_intersect(ta: &Tri, tb: &Tri) -> bool {
-    let d = centroid_direction(&ta.p, &tb.p);
-    let mid = [0, 1, 2].map(|k| {
-        0.5 * ((ta.p[0][k] + ta.p[1][k] + ta.p[2][k]) / 3.0
-            + (tb.p[0][k] + tb.p[1][k] + tb.p[2][k]) / 3.0)
-    });
-    if certainly_separated(mid, d, &ta.p, &tb.p) {
-        return false;
+    triangles_intersect_filtered::<true>(ta, tb)
+}
+
+fn triangles_intersect_filtered<const FILTERS: bool>(ta: &Tri, tb: &Tri) -> bool {
+    if FILTERS {
+        let d = centroid_direction(&ta.p, &tb.p);
+        if certainly_separated(centroids_midpoint(&ta.p, &tb.p), d, &ta.p, &tb.p) {
+            return false;
+        }
     }
     let sb = plane_sides(ta, tb);
     if strictly_one_side(&sb) {

@@ -18,8 +18,14 @@
 //! where it adds at most `2⁻¹⁰⁷⁵` per term (covered by an absolute slack of `2⁻¹⁰⁷⁰`). A zero
 //! permanent means every term has an exactly zero factor, so the determinant is exactly zero.
 //!
-//! Otherwise — near-degenerate input, or coordinates outside those ranges — the determinant is
-//! evaluated **exactly**: every finite `f64` is `m·2ᵉ` with an integer `m < 2⁵³` and
+//! Otherwise, when the coordinate differences are exact in `f64` (as they are for nearby points)
+//! and within `[2⁻²⁵⁰, 2²⁵⁰]` (or 0), an **expansion stage** decides without allocating:
+//! [`orient3d_expansion`] splits each of the determinant's six products of three differences
+//! exactly into four `f64`s (Dekker's `two_product`) and takes the sign of the exact sum of those
+//! 24 terms (Shewchuk's nonoverlapping expansions); [`orient2d_expansion`] likewise.
+//!
+//! Otherwise — near-degenerate input with inexact differences, or coordinates outside those
+//! ranges — the determinant is evaluated **exactly**: every finite `f64` is `m·2ᵉ` with an integer `m < 2⁵³` and
 //! `−1074 ≤ e ≤ 971`, so all inputs of one call are integers after scaling by `2^(−e_min)`
 //! (`e_min` the smallest exponent of a lowest set bit among them). The differences, products and
 //! sums are then computed in arbitrary-precision integers (at most about 6,300 bits for the 3×3,
@@ -102,10 +108,15 @@ const CCW_HUGE: f64 = f64::from_bits((1023 + 500) << 52);
 /// Covers the underflow of the last product of each 3×3 term (≤ 2^-1075 each).
 const UNDERFLOW_SLACK: f64 = f64::from_bits(16); // 2^-1070 (a subnormal)
 
+/// Every `|x|` is 0 or in `[tiny, huge]` (branch-free, so it inlines and vectorizes).
 #[inline]
-fn in_range(d: f64, tiny: f64, huge: f64) -> bool {
-    let m = d.abs();
-    m == 0.0 || (m >= tiny && m <= huge)
+fn all_in_range<const N: usize>(xs: [f64; N], tiny: f64, huge: f64) -> bool {
+    let mut ok = true;
+    for x in xs {
+        let m = x.abs();
+        ok &= (m == 0.0) | ((m >= tiny) & (m <= huge));
+    }
+    ok
 }
 
 /// [`orient3d_unchecked`] after refusing non-finite input.
@@ -124,8 +135,132 @@ pub fn orient3d(
 pub fn orient3d_unchecked(a: [f64; 3], b: [f64; 3], c: [f64; 3], d: [f64; 3]) -> Sign {
     match orient3d_filter(a, b, c, d) {
         Some(s) => s,
-        None => orient3d_exact(a, b, c, d),
+        None => orient3d_expansion(a, b, c, d).unwrap_or_else(|| orient3d_exact(a, b, c, d)),
     }
+}
+
+/// 2⁻²⁵⁰ and 2²⁵⁰: the differences the expansion stages accept.
+const EXPANSION_TINY: f64 = f64::from_bits((1023 - 250) << 52);
+const EXPANSION_HUGE: f64 = f64::from_bits((1023 + 250) << 52);
+
+/// `a − b` when it is exact in `f64` and 0 or of magnitude in `[2⁻²⁵⁰, 2²⁵⁰]` (Shewchuk's
+/// `Two_Diff` with a zero tail).
+#[inline]
+fn exact_difference(a: f64, b: f64) -> Option<f64> {
+    let x = a - b;
+    let b_virtual = a - x;
+    let a_virtual = x + b_virtual;
+    let tail = (a - a_virtual) + (b_virtual - b);
+    let m = x.abs();
+    (tail == 0.0 && (m == 0.0 || (EXPANSION_TINY..=EXPANSION_HUGE).contains(&m))).then_some(x)
+}
+
+/// `(x, y)` with `x = fl(a + b)` and `x + y = a + b` exactly (Knuth's `Two_Sum`).
+#[inline]
+fn two_sum(a: f64, b: f64) -> (f64, f64) {
+    let x = a + b;
+    let b_virtual = x - a;
+    let a_virtual = x - b_virtual;
+    (x, (a - a_virtual) + (b - b_virtual))
+}
+
+/// `(x, y)` with `x = fl(a·b)` and `x + y = a·b` exactly (Dekker's product with Veltkamp's
+/// split; no FMA needed).
+#[inline]
+fn two_product(a: f64, b: f64) -> (f64, f64) {
+    const SPLITTER: f64 = 134_217_729.0; // 2²⁷ + 1
+    let split = |v: f64| {
+        let c = SPLITTER * v;
+        let big = c - v;
+        let hi = c - big;
+        (hi, v - hi)
+    };
+    let x = a * b;
+    let (ahi, alo) = split(a);
+    let (bhi, blo) = split(b);
+    let err = ((x - ahi * bhi) - alo * bhi) - ahi * blo;
+    (x, alo * blo - err)
+}
+
+/// The sign of the exact sum of `terms` (a nonoverlapping expansion grown one term at a time,
+/// zeros eliminated — Shewchuk's `Grow_Expansion`; its largest component has the sum's sign).
+#[inline]
+fn sign_of_exact_sum<const N: usize>(terms: [f64; N]) -> Sign {
+    let mut h = [0.0f64; N];
+    let mut n = 0;
+    for b in terms {
+        let mut q = b;
+        let mut m = 0;
+        for i in 0..n {
+            let (s, e) = two_sum(q, h[i]);
+            q = s;
+            if e != 0.0 {
+                h[m] = e;
+                m += 1;
+            }
+        }
+        if q != 0.0 {
+            h[m] = q;
+            m += 1;
+        }
+        n = m;
+    }
+    if n == 0 {
+        Sign::Zero
+    } else {
+        Sign::of_f64(h[n - 1])
+    }
+}
+
+/// The exact stage between the filter and the big integers: `Some(sign)` when the nine
+/// coordinate differences are exact in `f64` (as they are for nearby points) and each is 0 or
+/// of magnitude in `[2⁻²⁵⁰, 2²⁵⁰]`; then the determinant is a sum of six products of three
+/// `f64`s, each split exactly into four `f64`s (`two_product`), and the sign of the exact sum of
+/// those 24 terms is returned. Every value involved is a multiple of `2⁻⁹⁰⁶` below `2⁷⁸⁰`, so
+/// nothing underflows or overflows and every step is exact. `None`: leave it to
+/// [`orient3d_exact`].
+pub fn orient3d_expansion(a: [f64; 3], b: [f64; 3], c: [f64; 3], d: [f64; 3]) -> Option<Sign> {
+    let adx = exact_difference(a[0], d[0])?;
+    let bdx = exact_difference(b[0], d[0])?;
+    let cdx = exact_difference(c[0], d[0])?;
+    let ady = exact_difference(a[1], d[1])?;
+    let bdy = exact_difference(b[1], d[1])?;
+    let cdy = exact_difference(c[1], d[1])?;
+    let adz = exact_difference(a[2], d[2])?;
+    let bdz = exact_difference(b[2], d[2])?;
+    let cdz = exact_difference(c[2], d[2])?;
+    // det[a − d, b − d, c − d] (minus ours) as ± x·y·z.
+    let triple = |x: f64, y: f64, z: f64| {
+        let (p, e) = two_product(x, y);
+        let (p1, e1) = two_product(p, z);
+        let (p2, e2) = two_product(e, z);
+        [p1, e1, p2, e2]
+    };
+    let t = [
+        triple(adz, bdx, cdy),
+        triple(adz, cdx, bdy).map(|x| -x),
+        triple(bdz, cdx, ady),
+        triple(bdz, adx, cdy).map(|x| -x),
+        triple(cdz, adx, bdy),
+        triple(cdz, bdx, ady).map(|x| -x),
+    ];
+    let mut terms = [0.0; 24];
+    for (k, q) in t.iter().flatten().enumerate() {
+        terms[k] = *q;
+    }
+    Some(sign_of_exact_sum(terms).flip())
+}
+
+/// The 2×2 expansion stage (as [`orient3d_expansion`]: exact differences in `[2⁻²⁵⁰, 2²⁵⁰]` or
+/// 0, then the exact sum of two exact products); `None`: leave it to [`orient2d_exact`].
+pub fn orient2d_expansion(a: [f64; 2], b: [f64; 2], c: [f64; 2]) -> Option<Sign> {
+    let acx = exact_difference(a[0], c[0])?;
+    let bcx = exact_difference(b[0], c[0])?;
+    let acy = exact_difference(a[1], c[1])?;
+    let bcy = exact_difference(b[1], c[1])?;
+    let (l, le) = two_product(acx, bcy);
+    let (r, re) = two_product(acy, bcx);
+    Some(sign_of_exact_sum([l, le, -r, -re]))
 }
 
 /// The fast path alone: `Some(sign)` when the `f64` evaluation is provably right, else `None`.
@@ -141,10 +276,11 @@ pub fn orient3d_filter(a: [f64; 3], b: [f64; 3], c: [f64; 3], d: [f64; 3]) -> Op
     let adz = a[2] - d[2];
     let bdz = b[2] - d[2];
     let cdz = c[2] - d[2];
-    if ![adx, bdx, cdx, ady, bdy, cdy, adz, bdz, cdz]
-        .iter()
-        .all(|&x| in_range(x, O3D_TINY, O3D_HUGE))
-    {
+    if !all_in_range(
+        [adx, bdx, cdx, ady, bdy, cdy, adz, bdz, cdz],
+        O3D_TINY,
+        O3D_HUGE,
+    ) {
         return None;
     }
     let bdxcdy = bdx * cdy;
@@ -201,7 +337,7 @@ pub fn orient2d(a: [f64; 2], b: [f64; 2], c: [f64; 2]) -> Result<Sign, NonFinite
 pub fn orient2d_unchecked(a: [f64; 2], b: [f64; 2], c: [f64; 2]) -> Sign {
     match orient2d_filter(a, b, c) {
         Some(s) => s,
-        None => orient2d_exact(a, b, c),
+        None => orient2d_expansion(a, b, c).unwrap_or_else(|| orient2d_exact(a, b, c)),
     }
 }
 
@@ -225,10 +361,7 @@ pub fn orient2d_filter(a: [f64; 2], b: [f64; 2], c: [f64; 2]) -> Option<Sign> {
     let bcx = b[0] - c[0];
     let acy = a[1] - c[1];
     let bcy = b[1] - c[1];
-    if ![acx, bcx, acy, bcy]
-        .iter()
-        .all(|&x| in_range(x, CCW_TINY, CCW_HUGE))
-    {
+    if !all_in_range([acx, bcx, acy, bcy], CCW_TINY, CCW_HUGE) {
         return None;
     }
     let detleft = acx * bcy;

@@ -99,6 +99,12 @@ impl SourceIntersections {
         })
     }
 
+    /// Checks on `threads` threads ([`SelfIntersectionChecker::set_threads`]; a speed setting:
+    /// the figures do not depend on it).
+    pub fn set_threads(&mut self, threads: usize) {
+        self.checker.set_threads(threads);
+    }
+
     /// The source's own self-intersections.
     pub fn source(&self) -> &SelfIntersections {
         &self.source

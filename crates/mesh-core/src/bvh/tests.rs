@@ -358,3 +358,54 @@ fn tree_is_deterministic_and_shallow() {
     assert!(t.shape().1 <= 9);
     assert_eq!(t.overlapping_pairs().len(), 1000 * 999 / 2);
 }
+
+#[test]
+fn candidate_pairs_hold_every_overlapping_pair_once_and_only_rounding_extras() {
+    // Random soups of 500 and 2,000 faces (leaves of the pair traversal up to 32 faces, so both
+    // leaf and interior splits are exercised).
+    for (seed, nf) in [(3u64, 500usize), (8, 2000)] {
+        let (pos, faces) = random_mesh(seed, nf);
+        let bvh = Bvh::new(&pos, &faces).expect("ok");
+        let mut got = Vec::new();
+        bvh.for_each_candidate_pair(|a, b| got.push([a, b]));
+        let n = got.len();
+        got.sort_unstable();
+        got.dedup();
+        assert_eq!(got.len(), n, "a pair was reported twice");
+        assert!(got.iter().all(|p| p[0] < p[1]));
+        let want = brute_pairs(&pos, &faces);
+        let mut extra = got.clone();
+        extra.retain(|p| want.binary_search(p).is_err());
+        assert_eq!(
+            got.len() - extra.len(),
+            want.len(),
+            "an overlapping pair is missing"
+        );
+        // Extras: boxes apart by less than the f32 rounding.
+        for p in &extra {
+            let (a, b) = (bvh.face_bounds(p[0]), bvh.face_bounds(p[1]));
+            let gap = (0..3)
+                .map(|k| (a.lo[k] - b.hi[k]).max(b.lo[k] - a.hi[k]))
+                .fold(f64::NEG_INFINITY, f64::max);
+            assert!(gap > 0.0 && gap < 1e-6, "{p:?}: gap {gap}");
+        }
+    }
+    // Two faces whose boxes are one f64 ulp apart at x = 1: a candidate (the f32 boxes touch),
+    // never an overlapping pair.
+    let x = 1.0f64;
+    let y = f64::from_bits(x.to_bits() + 1);
+    let pos = vec![
+        [0.0, 0.0, 0.0],
+        [x, 0.0, 0.0],
+        [0.0, 1.0, 0.0],
+        [y, 0.0, 0.0],
+        [2.0, 0.0, 0.0],
+        [2.0, 1.0, 0.0],
+    ];
+    let faces = vec![[0, 1, 2], [3, 4, 5]];
+    let bvh = Bvh::new(&pos, &faces).expect("ok");
+    let mut cands = Vec::new();
+    bvh.for_each_candidate_pair(|a, b| cands.push([a, b]));
+    assert_eq!(cands, vec![[0, 1]]);
+    assert!(bvh.overlapping_pairs().is_empty());
+}

@@ -598,3 +598,153 @@ fn shared_edge_filter_only_decides_opposite_sides() {
     }
     assert!(decided > n * 9 / 10, "{decided} of {n}");
 }
+
+/// A fan of `k` faces around vertex 0 at the origin: link vertex `i` at angle `turns·2π·i/k`
+/// (exactly: cos/sin rounded, then scaled), radius `r[i]`, height `z[i]`; closed or open.
+fn fan(angles: &[f64], r: &[f64], z: &[f64], closed: bool) -> (Vec<P>, Vec<[u32; 3]>) {
+    let mut positions = vec![[0.0; 3]];
+    for i in 0..angles.len() {
+        positions.push([r[i] * angles[i].cos(), r[i] * angles[i].sin(), z[i]]);
+    }
+    let k = angles.len() as u32;
+    let faces = (0..if closed { k } else { k - 1 })
+        .map(|i| [0, 1 + i, 1 + (i + 1) % k])
+        .collect();
+    (positions, faces)
+}
+
+#[test]
+fn fans_are_built_only_for_simple_consistent_chains() {
+    // A closed fan of 6 (octahedron-like vertex), an open one, and the refused kinds.
+    let closed: Vec<[u32; 3]> = (0..6).map(|i| [0, 1 + i, 1 + (i + 1) % 6]).collect();
+    let f = Fans::new(7, &closed);
+    assert_eq!(f.kind[0], 1);
+    assert_eq!(
+        &f.link[f.offsets[0] as usize..f.offsets[1] as usize],
+        &[1, 2, 3, 4, 5, 6]
+    );
+    // Each link vertex has an open fan of two faces.
+    assert_eq!(f.kind[1], 2);
+    let open: Vec<[u32; 3]> = (0..5).map(|i| [0, 1 + i, 2 + i]).collect();
+    let f = Fans::new(7, &open);
+    assert_eq!(f.kind[0], 2);
+    assert_eq!(
+        &f.link[f.offsets[0] as usize..f.offsets[1] as usize],
+        &[1, 2, 3, 4, 5, 6]
+    );
+    // One face flipped: inconsistent orientation.
+    let mut flipped = closed.clone();
+    flipped[2] = [0, 4, 3];
+    assert_eq!(Fans::new(7, &flipped).kind[0], 0);
+    // A duplicated face, either orientation.
+    let mut dup = closed.clone();
+    dup.push(closed[0]);
+    assert_eq!(Fans::new(7, &dup).kind[0], 0);
+    let two = vec![[0, 1, 2], [0, 2, 1]];
+    assert_eq!(Fans::new(3, &two).kind[0], 0);
+    // Two fans through one vertex (a bow tie), and a face using the vertex twice.
+    let bowtie = vec![
+        [0, 1, 2],
+        [0, 2, 3],
+        [0, 3, 1],
+        [0, 4, 5],
+        [0, 5, 6],
+        [0, 6, 4],
+    ];
+    assert_eq!(Fans::new(7, &bowtie).kind[0], 0);
+    assert_eq!(Fans::new(3, &[[0, 0, 1], [0, 1, 2]]).kind[0], 0);
+}
+
+#[test]
+fn fans_winding_twice_are_not_certified_and_their_pairs_are_found() {
+    // A spiral staircase around the vertex: 7 link vertices, each face turning 2·(2π/7), so the
+    // closed fan winds twice around it and must cross itself to close. And an open fan turning
+    // 1.3 times (a helicoid step: certified or not, the pairs are the oracle's). Neither may be certified; the pairs must equal the brute-force oracle's.
+    for (k, turns, closed) in [(7usize, 2.0, true), (9, 1.3, false), (5, 2.0, true)] {
+        let angles: Vec<f64> = (0..k)
+            .map(|i| turns * std::f64::consts::TAU * i as f64 / k as f64)
+            .collect();
+        let z: Vec<f64> = (0..k).map(|i| 0.25 * (i as f64 - k as f64 / 2.0)).collect();
+        let (p, f) = fan(&angles, &vec![1.0; k], &z, closed);
+        let checker = SelfIntersectionChecker::new(&p, &f).expect("ok");
+        assert_ne!(checker.fans.kind[0], 0, "a simple chain");
+        assert!(!checker.fans.certify(&p)[0], "k = {k}, turns = {turns}");
+        let r = checker.check();
+        assert_eq!(r.pairs, oracle(&p, &f));
+        // Closed, the staircase must come back down through itself; open, it need not.
+        assert!(
+            !closed || !r.pairs.is_empty(),
+            "k = {k}: the staircase crosses itself"
+        );
+        // Flattened (all heights 0) the faces overlap in the plane: still found.
+        let (p, f) = fan(&angles, &vec![1.0; k], &vec![0.0; k], closed);
+        let r = self_intersections(&p, &f).expect("ok");
+        assert_eq!(r.pairs, oracle(&p, &f));
+        assert!(!r.pairs.is_empty());
+    }
+}
+
+#[test]
+fn random_fans_match_the_brute_force_oracle() {
+    // Fans around one vertex with random (sorted or not) angles, radii and heights on coarse
+    // grids (coplanar, collinear and folded configurations), closed and open, each also at
+    // 2^±332: whenever a fan is certified, the oracle must find no pair sharing its vertex.
+    let mut rng = Rng::new(13);
+    let (mut certified, mut not, mut with_pairs) = (0, 0, 0);
+    for round in 0..600 {
+        let k = 3 + round % 8;
+        let grid = [4, 16, 1000][round % 3];
+        let mut angles: Vec<f64> = (0..k)
+            .map(|_| rng.int(grid) as f64 / grid as f64 * std::f64::consts::PI)
+            .collect();
+        if round % 4 != 0 {
+            angles.sort_by(f64::total_cmp);
+        }
+        let r: Vec<f64> = (0..k).map(|_| 1.0 + rng.int(2) as f64 * 0.25).collect();
+        let zscale = [0.0, 0.125, 1.0][round % 3];
+        let z: Vec<f64> = (0..k)
+            .map(|_| rng.int(grid) as f64 / grid as f64 * zscale)
+            .collect();
+        let (p, f) = fan(&angles, &r, &z, round % 2 == 0);
+        let checker = SelfIntersectionChecker::new(&p, &f).expect("ok");
+        let cert = checker.fans.kind[0] != 0 && checker.fans.certify(&p)[0];
+        let res = checker.check();
+        let expected = oracle(&p, &f);
+        assert_eq!(res.pairs, expected, "round {round}");
+        if cert {
+            certified += 1;
+            assert!(
+                expected.is_empty(),
+                "round {round}: certified fan with pairs"
+            );
+        } else {
+            not += 1;
+        }
+        with_pairs += usize::from(!expected.is_empty());
+        for e in [-332, 332] {
+            let q = scale_all(&p, 2f64.powi(e));
+            assert_eq!(self_intersections(&q, &f).expect("ok").pairs, expected);
+        }
+    }
+    assert!(
+        certified > 100 && not > 100 && with_pairs > 50,
+        "{certified} {not} {with_pairs}"
+    );
+}
+
+#[test]
+fn threads_give_the_same_answer() {
+    // A torus with a band pushed through the opposite side (pairs), checked on 1, 2 and 3
+    // threads: same pairs, same candidates.
+    let (mut p, f) = torus(60, 24);
+    for q in p.iter_mut().take(24 * 6) {
+        q[0] = -q[0] * 1.2;
+    }
+    let mut checker = SelfIntersectionChecker::new(&p, &f).expect("ok");
+    let one = checker.check();
+    assert!(!one.pairs.is_empty());
+    for t in [2, 3] {
+        checker.set_threads(t);
+        assert_eq!(checker.check(), one, "{t} threads");
+    }
+}

@@ -578,8 +578,16 @@ fn load_run(npz: &Path, stamp: (SystemTime, u64)) -> anyhow::Result<LoadedRun> {
     let to_input = saved
         .input_frame()
         .with_context(|| format!("{}", npz.display()))?;
-    let source = stylize::intersections::SourceIntersections::new(&ready.rest)
+    let mut source = stylize::intersections::SourceIntersections::new(&ready.rest)
         .context("self-intersection check of the saved rest mesh")?;
+    // Every slider move checks the result: on up to 2 threads (the server's 2 cores; the
+    // answer does not depend on it).
+    source.set_threads(
+        std::thread::available_parallelism()
+            .map(|n| n.get())
+            .unwrap_or(1)
+            .min(2),
+    );
     Ok(LoadedRun {
         stamp,
         ready,
