@@ -39,7 +39,8 @@ pub struct SafeLambda {
 
 /// Searches the first crossing in `(0, upper]` (see the module documentation). `is_safe(λ)`
 /// evaluates one λ; an error there ends the search with that error. Refuses an `upper` that is
-/// not finite and positive, and a result unsafe at λ = 0 (the source itself).
+/// not finite and positive, and a result unsafe at λ = 0 (no normal term: under the `gis` rule
+/// not always the source, see the error).
 pub fn search(
     upper: f64,
     mut is_safe: impl FnMut(f64) -> anyhow::Result<bool>,
@@ -55,7 +56,10 @@ pub fn search(
     };
     anyhow::ensure!(
         eval(0.0)?,
-        "max-safe: the result is not safe even at λ = 0 (the source re-applied without rotation)"
+        "max-safe: no λ is safe: even at λ = 0 (no normal term) the result fails the safety \
+         checks; under the `gis` rotation rule, vertices beside obtuse or needle triangles \
+         (negative cotangent weights) rotate without any target normal — remeshing the input \
+         (`--remesh on`) removes such triangles"
     );
     let grid: Vec<f64> = (1..=SCAN_STEPS)
         .map(|i| upper * i as f64 / SCAN_STEPS as f64)

@@ -241,7 +241,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             match crate::max_safe::end_of_run(&args.out) {
                 Ok(Some(line)) => errln!("{line}"),
                 Ok(None) => {}
-                Err(e) => errln!("warning: the strongest-safe-λ check failed: {e:#}"),
+                Err(e) => errln!("warning: strongest safe λ: {e:#}"),
             }
             crate::open_hint::lines(&args.out, &crate::open_hint::program())
                 .iter()
