@@ -589,15 +589,7 @@ pub(crate) fn faces_intersect_filtered<const FILTERS: bool>(
     let (Some(_), Some(_)) = (ta.drop, tb.drop) else {
         return false;
     };
-    // Shared corners as (index in a, index in b); no allocation on this hot path.
-    let mut shared = [(0usize, 0usize); 3];
-    let mut n = 0;
-    for (i, &v) in fa.iter().enumerate() {
-        if let Some(j) = fb.iter().position(|&w| w == v) {
-            shared[n] = (i, j);
-            n += 1;
-        }
-    }
+    let (shared, n) = shared_corners(fa, fb);
     match n {
         0 => triangles_intersect_filtered::<FILTERS>(ta, tb),
         1 => {
@@ -623,14 +615,7 @@ fn quickly_apart(fa: [u32; 3], pa: &[[f64; 3]; 3], fb: [u32; 3], pb: &[[f64; 3];
         // Degenerate (never paired): left to faces_intersect, which says so.
         return false;
     }
-    let mut shared = [(0usize, 0usize); 3];
-    let mut n = 0;
-    for (i, &v) in fa.iter().enumerate() {
-        if let Some(j) = fb.iter().position(|&w| w == v) {
-            shared[n] = (i, j);
-            n += 1;
-        }
-    }
+    let (shared, n) = shared_corners(fa, fb);
     match n {
         0 => {
             let d = centroid_direction(pa, pb);
@@ -657,6 +642,21 @@ fn quickly_apart(fa: [u32; 3], pa: &[[f64; 3]; 3], fb: [u32; 3], pb: &[[f64; 3];
 }
 
 /// The triangle with its corners cycled so that corner `i` comes first.
+/// The corners two faces share, as (index in `fa`, index in `fb`) in `fa`'s order, and how many
+/// (the first `n` entries); no allocation, since this runs for every tested pair.
+#[inline]
+fn shared_corners(fa: [u32; 3], fb: [u32; 3]) -> ([(usize, usize); 3], usize) {
+    let mut shared = [(0usize, 0usize); 3];
+    let mut n = 0;
+    for (i, &v) in fa.iter().enumerate() {
+        if let Some(j) = fb.iter().position(|&w| w == v) {
+            shared[n] = (i, j);
+            n += 1;
+        }
+    }
+    (shared, n)
+}
+
 fn rotate(t: &Tri, i: usize) -> Tri {
     Tri {
         p: [t.p[i], t.p[(i + 1) % 3], t.p[(i + 2) % 3]],

@@ -409,6 +409,59 @@ fn centroid(p: &[[f64; 3]], f: [u32; 3]) -> [f64; 3] {
     ]
 }
 
+/// The two faces of an edge `a→b` that a flip would replace: `c` opposite the edge in the face of
+/// the half-edge `a→b`, `d` in the face of `b→a`, with their positions. After the flip the faces
+/// are `(a, d, c)` and `(d, b, c)`.
+struct FlipQuad {
+    a: u32,
+    b: u32,
+    c: u32,
+    d: u32,
+    pa: [f64; 3],
+    pb: [f64; 3],
+    pc: [f64; 3],
+    pd: [f64; 3],
+}
+
+/// The quad of edge `e` when a flip of it is allowed by the connectivity: a live, interior,
+/// non-feature edge whose opposite corners `c` and `d` differ and are not already joined (the
+/// flip would duplicate that edge). `ring` is scratch space.
+fn flip_quad(m: &HalfEdgeMesh, e: usize, ring: &mut Vec<u32>) -> Option<FlipQuad> {
+    if !m.edge_live(e) || m.feature[e] || m.is_boundary_edge(e) {
+        return None;
+    }
+    let h = 2 * e as u32;
+    let (a, b) = (m.from(h), m.to(h));
+    let c = m.to(m.next(h));
+    let d = m.to(m.next(opp(h)));
+    if c == d {
+        return None;
+    }
+    m.outgoing(c, ring);
+    if ring.iter().any(|&g| m.to(g) == d) {
+        return None;
+    }
+    let p = |v: u32| m.pos[v as usize];
+    Some(FlipQuad {
+        a,
+        b,
+        c,
+        d,
+        pa: p(a),
+        pb: p(b),
+        pc: p(c),
+        pd: p(d),
+    })
+}
+
+/// The sum of the (area-weighted) normals of the faces `(a, b, c)` and `(b, a, d)` of a flip quad
+/// before the flip: the side a flipped pair must keep facing.
+fn pair_normal(pa: [f64; 3], pb: [f64; 3], pc: [f64; 3], pd: [f64; 3]) -> [f64; 3] {
+    let n1 = cross(sub(pb, pa), sub(pc, pa));
+    let n2 = cross(sub(pa, pb), sub(pd, pb));
+    [n1[0] + n2[0], n1[1] + n2[1], n1[2] + n2[2]]
+}
+
 struct Remesher<'a> {
     mesh: &'a mut HalfEdgeMesh,
     /// The input's feature lines as degenerate triangles `[a, b, b]` over the input positions.
@@ -694,21 +747,19 @@ impl<'a> Remesher<'a> {
         let mut ring = Vec::new();
         for e in 0..self.mesh.num_edges() {
             let m = &*self.mesh;
-            if !m.edge_live(e) || m.feature[e] || m.is_boundary_edge(e) {
+            let Some(FlipQuad {
+                a,
+                b,
+                c,
+                d,
+                pa,
+                pb,
+                pc,
+                pd,
+            }) = flip_quad(m, e, &mut ring)
+            else {
                 continue;
-            }
-            let h = 2 * e as u32;
-            let o = opp(h);
-            let (a, b) = (m.from(h), m.to(h));
-            let c = m.to(m.next(h));
-            let d = m.to(m.next(o));
-            if c == d {
-                continue;
-            }
-            m.outgoing(c, &mut ring);
-            if ring.iter().any(|&g| m.to(g) == d) {
-                continue;
-            }
+            };
             let target = |v: u32| if m.is_boundary_vertex(v) { 4i64 } else { 6 };
             let val = |v: u32| m.valence(v) as i64;
             let (va, vb, vc, vd) = (val(a), val(b), val(c), val(d));
@@ -722,12 +773,6 @@ impl<'a> Remesher<'a> {
                 + dev(vb - 1, target(b))
                 + dev(vc + 1, target(c))
                 + dev(vd + 1, target(d));
-            let (pa, pb, pc, pd) = (
-                m.pos[a as usize],
-                m.pos[b as usize],
-                m.pos[c as usize],
-                m.pos[d as usize],
-            );
             let old_min = min_angle(pa, pb, pc).min(min_angle(pb, pa, pd));
             let new_min = min_angle(pa, pd, pc).min(min_angle(pd, pb, pc));
             // Toward valence 6 without lowering the minimum angle below min(before, 30°), or, for
@@ -737,11 +782,7 @@ impl<'a> Remesher<'a> {
             if !wanted {
                 continue;
             }
-            let n_old = {
-                let n1 = cross(sub(pb, pa), sub(pc, pa));
-                let n2 = cross(sub(pa, pb), sub(pd, pb));
-                [n1[0] + n2[0], n1[1] + n2[1], n1[2] + n2[2]]
-            };
+            let n_old = pair_normal(pa, pb, pc, pd);
             let n1 = cross(sub(pd, pa), sub(pc, pa));
             let n2 = cross(sub(pb, pd), sub(pc, pd));
             if dot(n1, n2) <= 0.0 || dot(n1, n_old) <= 0.0 || dot(n2, n_old) <= 0.0 {
@@ -969,23 +1010,21 @@ impl<'a> Remesher<'a> {
         let mut any = false;
         for e in 0..self.mesh.num_edges() {
             let m = &*self.mesh;
-            if !m.edge_live(e) || m.feature[e] || m.is_boundary_edge(e) {
+            let Some(FlipQuad {
+                a,
+                b,
+                pa,
+                pb,
+                pc,
+                pd,
+                ..
+            }) = flip_quad(m, e, &mut ring)
+            else {
+                continue;
+            };
+            if m.valence(a) <= 3 || m.valence(b) <= 3 {
                 continue;
             }
-            let h = 2 * e as u32;
-            let o = opp(h);
-            let (a, b) = (m.from(h), m.to(h));
-            let c = m.to(m.next(h));
-            let d = m.to(m.next(o));
-            if c == d || m.valence(a) <= 3 || m.valence(b) <= 3 {
-                continue;
-            }
-            let (pa, pb, pc, pd) = (
-                m.pos[a as usize],
-                m.pos[b as usize],
-                m.pos[c as usize],
-                m.pos[d as usize],
-            );
             let old_min = min_angle(pa, pb, pc).min(min_angle(pb, pa, pd));
             if old_min >= CLEANUP_FLIP_ANGLE {
                 continue;
@@ -994,15 +1033,7 @@ impl<'a> Remesher<'a> {
             if new_min <= old_min {
                 continue;
             }
-            m.outgoing(c, &mut ring);
-            if ring.iter().any(|&g| m.to(g) == d) {
-                continue;
-            }
-            let n_old = {
-                let n1 = cross(sub(pb, pa), sub(pc, pa));
-                let n2 = cross(sub(pa, pb), sub(pd, pb));
-                [n1[0] + n2[0], n1[1] + n2[1], n1[2] + n2[2]]
-            };
+            let n_old = pair_normal(pa, pb, pc, pd);
             let (Some(n1), Some(n2)) = (
                 normalized(cross(sub(pd, pa), sub(pc, pa))),
                 normalized(cross(sub(pb, pd), sub(pc, pd))),
