@@ -13,6 +13,10 @@ const TO_OPEN: &[(&str, &str)] = &[
     ("turntable.mp4", "the same turntable as H.264 video"),
     ("mesh.obj", "the stylized mesh (also mesh.ply, mesh.glb)"),
     (
+        "mesh_heat.glb",
+        "the result coloured by how far each vertex moved (scale in run.json)",
+    ),
+    (
         "deformation.npz",
         "re-apply at another strength: stylize apply",
     ),

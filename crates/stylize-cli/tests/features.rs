@@ -160,6 +160,12 @@ fn the_model_free_demo_runs_and_points_at_this_binary() {
     for f in ["mesh.obj", "mesh.glb", "before_after.png", "turntable.png"] {
         assert!(out_dir.join(f).is_file(), "{f} missing: {e}");
     }
+    // The closing lines name the heat map beside the mesh it colours.
+    assert!(
+        out_dir.join("mesh_heat.glb").is_file()
+            && e.contains("mesh_heat.glb  (the result coloured"),
+        "{e}"
+    );
     // The H.264 turntable: written with `mp4`, else named as missing (run.json, closing lines),
     // never a warning or a failure.
     let summary: serde_json::Value = ok(serde_json::from_str(&ok(std::fs::read_to_string(
