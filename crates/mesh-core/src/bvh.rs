@@ -7,7 +7,8 @@
 //! of at most [`LEAF_SIZE`] faces. The depth is therefore at most `⌈log₂(F / LEAF_SIZE)⌉ + 1`
 //! (≤ 32 for any `u32` face count). Nodes are stored in pre-order, so every child has a larger
 //! index than its parent and [`Bvh::refit`] recomputes the boxes bottom-up in one backward pass
-//! without touching the tree's shape.
+//! without touching the tree's shape. (The self-intersection checker builds its trees by a Morton
+//! sort instead, `Bvh::for_pairs`: faster to build, used only for the pair traversal.)
 //!
 //! Conventions:
 //! - boxes are closed: two boxes that touch at a face, edge or corner overlap;
@@ -234,37 +235,141 @@ fn triangles(positions: &[[f64; 3]], faces: &[[u32; 3]]) -> Result<Vec<[[f64; 3]
         .collect()
 }
 
+/// The faces ordered by the Morton code of their centroids: each coordinate quantized to 21 bits
+/// over the centroids' bounding cube (the largest extent on every axis), the bits interleaved
+/// `x` lowest; ties by face index.
+fn morton_order(tris: &[[[f64; 3]; 3]]) -> (Vec<u32>, Vec<u64>) {
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    let centroid = |t: &[[f64; 3]; 3]| [0, 1, 2].map(|k| (t[0][k] + t[1][k] + t[2][k]) / 3.0);
+    for t in tris {
+        let c = centroid(t);
+        for k in 0..3 {
+            lo[k] = lo[k].min(c[k]);
+            hi[k] = hi[k].max(c[k]);
+        }
+    }
+    let extent = (0..3).map(|k| hi[k] - lo[k]).fold(0.0f64, f64::max);
+    const CELLS: f64 = ((1u32 << 21) - 1) as f64;
+    let scale = if extent > 0.0 { CELLS / extent } else { 0.0 };
+    // Spreads the low 21 bits of `x` to every third bit.
+    fn spread(x: u64) -> u64 {
+        let mut x = x & 0x1f_ffff;
+        x = (x | (x << 32)) & 0x001f_0000_0000_ffff;
+        x = (x | (x << 16)) & 0x001f_0000_ff00_00ff;
+        x = (x | (x << 8)) & 0x100f_00f0_0f00_f00f;
+        x = (x | (x << 4)) & 0x10c3_0c30_c30c_30c3;
+        x = (x | (x << 2)) & 0x1249_2492_4924_9249;
+        x
+    }
+    let mut keyed: Vec<(u64, u32)> = tris
+        .iter()
+        .enumerate()
+        .map(|(f, t)| {
+            let c = centroid(t);
+            // In [0, CELLS] (the float-to-int cast saturates; finite input).
+            let q = |k: usize| ((c[k] - lo[k]) * scale).clamp(0.0, CELLS) as u64;
+            (
+                spread(q(0)) | (spread(q(1)) << 1) | (spread(q(2)) << 2),
+                f as u32,
+            )
+        })
+        .collect();
+    keyed.sort_unstable();
+    keyed.into_iter().map(|(c, f)| (f, c)).unzip()
+}
+
 impl Bvh {
     /// Builds the tree. Refuses a face index out of range and a non-finite vertex used by a face;
     /// an empty face list gives an empty tree (every query answers nothing).
     pub fn new(positions: &[[f64; 3]], faces: &[[u32; 3]]) -> Result<Bvh, BvhError> {
+        Bvh::with_leaf_size(positions, faces, LEAF_SIZE)
+    }
+
+    /// A tree for the self-overlap traversal only ([`Bvh::pair_tree`]), built faster than
+    /// [`Bvh::new`]'s: the faces sorted once by the Morton code of their centroids (21 bits per
+    /// axis over the centroids' bounding cube, ties by face index), then split recursively into
+    /// halves by count (the left half gets `⌊n/2⌋` faces) down to subtrees of at most
+    /// [`PAIR_LEAF`] faces, the pair traversal's leaves. A pure function of the input. The
+    /// candidate pairs do not depend on the tree (they are the pairs whose outward-rounded `f32`
+    /// boxes overlap), so they are the same as on [`Bvh::new`]'s; only the traversal's speed
+    /// does. Every other query stays exact on this tree (leaves are scanned face by face), only
+    /// slower.
+    pub(crate) fn for_pairs(positions: &[[f64; 3]], faces: &[[u32; 3]]) -> Result<Bvh, BvhError> {
+        let tris = triangles(positions, faces)?;
+        let boxes: Vec<Aabb> = tris.iter().map(|t| Aabb::of_points(t)).collect();
+        let (order, codes) = morton_order(&tris);
+        let mut bvh = Bvh {
+            nodes: Vec::with_capacity(2 * faces.len() / PAIR_LEAF as usize + 1),
+            order,
+            faces: faces.to_vec(),
+            boxes,
+            tris,
+            num_vertices: positions.len(),
+        };
+        if !faces.is_empty() {
+            bvh.build_halves(&codes, 0, faces.len(), PAIR_LEAF as usize);
+            bvh.fill_bounds();
+        }
+        Ok(bvh)
+    }
+
+    /// Pre-order nodes over `order[start..end]` split into halves by count (see
+    /// [`Bvh::for_pairs`]); boxes are left for [`Bvh::fill_bounds`].
+    fn build_halves(&mut self, codes: &[u64], start: usize, end: usize, leaf_size: usize) {
+        let me = self.nodes.len();
+        self.nodes.push(Node {
+            bounds: Aabb::EMPTY,
+            start: start as u32,
+            count: (end - start) as u32,
+        });
+        if end - start <= leaf_size {
+            return;
+        }
+        let (a, b) = (codes[start], codes[end - 1]);
+        let mid = if a == b {
+            start + (end - start) / 2
+        } else {
+            let bit = 63 - (a ^ b).leading_zeros();
+            start + codes[start..end].partition_point(|&c| c & (1 << bit) == 0)
+        };
+        self.build_halves(codes, start, mid, leaf_size);
+        let right_index = self.nodes.len() as u32;
+        self.build_halves(codes, mid, end, leaf_size);
+        self.nodes[me].start = right_index;
+        self.nodes[me].count = 0;
+    }
+
+    fn with_leaf_size(
+        positions: &[[f64; 3]],
+        faces: &[[u32; 3]],
+        leaf_size: usize,
+    ) -> Result<Bvh, BvhError> {
         let tris = triangles(positions, faces)?;
         let mut bvh = Bvh {
-            nodes: Vec::with_capacity(2 * faces.len() / LEAF_SIZE + 1),
-            order: (0..faces.len() as u32).collect(),
+            nodes: Vec::with_capacity(2 * faces.len() / leaf_size + 1),
+            order: Vec::new(),
             faces: faces.to_vec(),
             boxes: tris.iter().map(|t| Aabb::of_points(t)).collect(),
             tris,
             num_vertices: positions.len(),
         };
         if !faces.is_empty() {
-            let centroids: Vec<[f64; 3]> = bvh
+            // The faces carry their centroids through the partitions (no indirection per
+            // comparison); the boxes are filled bottom-up afterwards.
+            let mut items: Vec<(u32, [f64; 3])> = bvh
                 .tris
                 .iter()
-                .map(|t| {
+                .enumerate()
+                .map(|(f, t)| {
                     let mut c = [0.0; 3];
                     for k in 0..3 {
                         c[k] = (t[0][k] + t[1][k] + t[2][k]) / 3.0;
                     }
-                    c
+                    (f as u32, c)
                 })
                 .collect();
-            // The faces carry their centroids through the partitions (no indirection per
-            // comparison); the boxes are filled bottom-up afterwards.
-            let mut items: Vec<(u32, [f64; 3])> = (0..faces.len() as u32)
-                .map(|f| (f, centroids[f as usize]))
-                .collect();
-            bvh.build(&mut items, 0);
+            bvh.build(&mut items, 0, leaf_size);
             bvh.order = items.iter().map(|&(f, _)| f).collect();
             bvh.fill_bounds();
         }
@@ -297,14 +402,14 @@ impl Bvh {
 
     /// Builds the subtree over `items[..]` (faces with their centroids; the slice starts at
     /// `offset` in the full order). Node boxes are left empty for [`Bvh::fill_bounds`].
-    fn build(&mut self, items: &mut [(u32, [f64; 3])], offset: usize) {
+    fn build(&mut self, items: &mut [(u32, [f64; 3])], offset: usize, leaf_size: usize) {
         let me = self.nodes.len();
         self.nodes.push(Node {
             bounds: Aabb::EMPTY,
             start: offset as u32,
             count: items.len() as u32,
         });
-        if items.len() <= LEAF_SIZE {
+        if items.len() <= leaf_size {
             return;
         }
         let mut cbounds = Aabb::EMPTY;
@@ -324,9 +429,9 @@ impl Bvh {
             a.1[axis].total_cmp(&b.1[axis]).then(a.0.cmp(&b.0))
         });
         let (left, right) = items.split_at_mut(mid);
-        self.build(left, offset);
+        self.build(left, offset, leaf_size);
         let right_index = self.nodes.len() as u32;
-        self.build(right, offset + mid);
+        self.build(right, offset + mid, leaf_size);
         self.nodes[me].start = right_index;
         self.nodes[me].count = 0;
     }

@@ -175,21 +175,28 @@ impl SelfIntersectionChecker {
         if faces.is_empty() {
             return Err(IntersectError::Empty);
         }
-        let bvh = Bvh::new(positions, faces)?;
-        let (labels, _) = crate::topology::connected_components(positions.len(), faces);
+        let bvh = Bvh::for_pairs(positions, faces)?;
+        // Two edges per face join its three corners (the third edge adds nothing); the indices
+        // were checked by the tree.
+        let (labels, num_labels) = crate::topology::graph_components(
+            positions.len(),
+            faces.iter().flat_map(|f| [[f[0], f[1]], [f[1], f[2]]]),
+        );
         // Renumber the components that own faces, in order of their smallest vertex label.
-        let mut remap = vec![u32::MAX; labels.len()];
-        let mut used: Vec<u32> = faces.iter().map(|f| labels[f[0] as usize]).collect();
-        used.sort_unstable();
-        used.dedup();
-        for (k, &l) in used.iter().enumerate() {
-            remap[l as usize] = k as u32;
+        let mut remap = vec![u32::MAX; num_labels];
+        for f in faces {
+            remap[labels[f[0] as usize] as usize] = 0;
+        }
+        let mut num_used = 0u32;
+        for r in remap.iter_mut().filter(|r| **r == 0) {
+            *r = num_used;
+            num_used += 1;
         }
         let face_component: Vec<u32> = faces
             .iter()
             .map(|f| remap[labels[f[0] as usize] as usize])
             .collect();
-        let mut component_faces = vec![0usize; used.len()];
+        let mut component_faces = vec![0usize; num_used as usize];
         for &c in &face_component {
             component_faces[c as usize] += 1;
         }

@@ -409,3 +409,45 @@ fn candidate_pairs_hold_every_overlapping_pair_once_and_only_rounding_extras() {
     assert_eq!(cands, vec![[0, 1]]);
     assert!(bvh.overlapping_pairs().is_empty());
 }
+
+#[test]
+fn pair_build_gives_the_same_candidates_as_the_median_build() {
+    let candidates = |bvh: &Bvh| {
+        let mut c = Vec::new();
+        bvh.for_each_candidate_pair(|a, b| c.push([a, b]));
+        let n = c.len();
+        c.sort_unstable();
+        c.dedup();
+        assert_eq!(c.len(), n, "a pair was reported twice");
+        c
+    };
+    let mut cases = vec![
+        random_mesh(3, 500),
+        random_mesh(8, 2000),
+        // Every centroid equal: every Morton code equal, split in halves by count.
+        (vec![[0.0; 3]; 3], vec![[0, 1, 2]; 300]),
+        // One face.
+        (
+            vec![[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+            vec![[0, 1, 2]],
+        ),
+    ];
+    // Two clusters of very different sizes far apart (most Morton bits separate the clusters).
+    let (mut pos, mut faces) = random_mesh(5, 700);
+    let (far, far_faces) = random_mesh(6, 300);
+    let base = pos.len() as u32;
+    pos.extend(far.iter().map(|p| p.map(|c| 1e6 + 1e-3 * c)));
+    faces.extend(far_faces.iter().map(|f| f.map(|v| v + base)));
+    cases.push((pos, faces));
+    for (pos, faces) in cases {
+        let median = Bvh::new(&pos, &faces).expect("ok");
+        let pairs = Bvh::for_pairs(&pos, &faces).expect("ok");
+        let again = Bvh::for_pairs(&pos, &faces).expect("ok");
+        assert_eq!(pairs.order, again.order, "not deterministic");
+        let mut sorted = pairs.order.clone();
+        sorted.sort_unstable();
+        assert!(sorted.iter().copied().eq(0..faces.len() as u32));
+        assert_eq!(candidates(&pairs), candidates(&median));
+        assert_eq!(pairs.overlapping_pairs(), brute_pairs(&pos, &faces));
+    }
+}
