@@ -288,9 +288,10 @@ impl Bvh {
 
     /// A tree for the self-overlap traversal only ([`Bvh::pair_tree`]), built faster than
     /// [`Bvh::new`]'s: the faces sorted once by the Morton code of their centroids (21 bits per
-    /// axis over the centroids' bounding cube, ties by face index), then split recursively into
-    /// halves by count (the left half gets `⌊n/2⌋` faces) down to subtrees of at most
-    /// [`PAIR_LEAF`] faces, the pair traversal's leaves. A pure function of the input. The
+    /// axis over the centroids' bounding cube, ties by face index), then each range split where
+    /// the highest bit on which its first and last codes differ turns from 0 to 1 (in halves by
+    /// count when all its codes are equal), down to ranges of at most [`PAIR_LEAF`] faces, the
+    /// pair traversal's leaves. A pure function of the input. The
     /// candidate pairs do not depend on the tree (they are the pairs whose outward-rounded `f32`
     /// boxes overlap), so they are the same as on [`Bvh::new`]'s; only the traversal's speed
     /// does. Every other query stays exact on this tree (leaves are scanned face by face), only
@@ -308,15 +309,15 @@ impl Bvh {
             num_vertices: positions.len(),
         };
         if !faces.is_empty() {
-            bvh.build_halves(&codes, 0, faces.len(), PAIR_LEAF as usize);
+            bvh.build_by_codes(&codes, 0, faces.len(), PAIR_LEAF as usize);
             bvh.fill_bounds();
         }
         Ok(bvh)
     }
 
-    /// Pre-order nodes over `order[start..end]` split into halves by count (see
-    /// [`Bvh::for_pairs`]); boxes are left for [`Bvh::fill_bounds`].
-    fn build_halves(&mut self, codes: &[u64], start: usize, end: usize, leaf_size: usize) {
+    /// Pre-order nodes over `order[start..end]` (sorted by their Morton `codes`), split as
+    /// [`Bvh::for_pairs`] says; boxes are left for [`Bvh::fill_bounds`].
+    fn build_by_codes(&mut self, codes: &[u64], start: usize, end: usize, leaf_size: usize) {
         let me = self.nodes.len();
         self.nodes.push(Node {
             bounds: Aabb::EMPTY,
@@ -333,9 +334,9 @@ impl Bvh {
             let bit = 63 - (a ^ b).leading_zeros();
             start + codes[start..end].partition_point(|&c| c & (1 << bit) == 0)
         };
-        self.build_halves(codes, start, mid, leaf_size);
+        self.build_by_codes(codes, start, mid, leaf_size);
         let right_index = self.nodes.len() as u32;
-        self.build_halves(codes, mid, end, leaf_size);
+        self.build_by_codes(codes, mid, end, leaf_size);
         self.nodes[me].start = right_index;
         self.nodes[me].count = 0;
     }
