@@ -40,6 +40,8 @@ POLL_SECONDS = 0.2
 # Jobs by object name, and re-application layers by (run dir, file mtime).
 _jobs: Dict[str, "Job"] = {}
 _layers: Dict[str, tuple] = {}
+# run directory -> (the SavedDeformation it was computed for, its rest mesh's intersecting pairs)
+_source_pairs: Dict[str, tuple] = {}
 
 
 def _prefs(context) -> "GIS_Preferences":
@@ -251,6 +253,19 @@ def ready(run_dir: str):
     return saved, layer
 
 
+def source_pairs(run_dir: str, saved):
+    """The saved rest mesh's self-intersecting face pairs (what a result's new pairs are counted
+    against), computed once per loaded deformation."""
+    import darap
+
+    cached = _source_pairs.get(run_dir)
+    if cached is not None and cached[0] is saved:
+        return cached[1]
+    pairs = darap.self_intersections(saved.rest_positions(), saved.faces)
+    _source_pairs[run_dir] = (saved, pairs)
+    return pairs
+
+
 def apply_strength(obj, lam: float):
     """Re-applies the object's run at ``lam`` and rewrites its shape key; returns the positions
     (object frame) and records the λ sanity line and warnings on the object."""
@@ -264,7 +279,7 @@ def apply_strength(obj, lam: float):
     fm = core.frame_map(saved, verts)
     positions = fm.result_to_object(deformation.positions)
     write_shape_key(obj, positions)
-    s = core.sanity(saved.rest_positions(), saved.faces, deformation, lam)
+    s = core.sanity(saved.rest_positions(), saved.faces, deformation, lam, source_pairs(run_dir, saved))
     obj.gis.sanity = s.summary()
     obj.gis.warnings = " | ".join(s.warnings())
     return positions
@@ -274,6 +289,7 @@ def finish_run(obj, run_dir: str):
     """Brings a complete run back: the shape key at the saved λ on ``obj`` (or a new object),
     the run directory recorded. Returns the object that holds the result."""
     _layers.pop(run_dir, None)
+    _source_pairs.pop(run_dir, None)
     saved, _layer = ready(run_dir)
     target, _fm = shape_key_target(obj, saved)
     target[RUN_DIR_KEY] = run_dir
@@ -545,6 +561,7 @@ class GIS_OT_forget(bpy.types.Operator):
     def execute(self, context):
         obj = context.active_object
         _layers.pop(obj[RUN_DIR_KEY], None)
+        _source_pairs.pop(obj[RUN_DIR_KEY], None)
         del obj[RUN_DIR_KEY]
         obj.gis.sanity = obj.gis.warnings = obj.gis.status = ""
         return {"FINISHED"}
@@ -659,6 +676,7 @@ def unregister():
         job.cancel()
     _jobs.clear()
     _layers.clear()
+    _source_pairs.clear()
     del bpy.types.Object.gis
     for c in reversed(classes):
         bpy.utils.unregister_class(c)

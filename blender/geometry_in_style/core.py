@@ -398,6 +398,55 @@ def _signed_volume(p, f):
     return float(np.einsum("ij,ij->i", p[f[:, 0]], np.cross(p[f[:, 1]], p[f[:, 2]])).sum() / 6.0)
 
 
+def _plural(n: int) -> str:
+    return "" if n == 1 else "s"
+
+
+@dataclass
+class Intersections:
+    """Self-intersection figures of a result against its source (``stylize::intersections``'
+    ``IntersectionFigures``, as ``stylize apply`` prints them)."""
+
+    pairs: int
+    faces: int
+    new_pairs: int
+    new_faces: int
+    source_pairs: int
+
+    def summary(self) -> str:
+        return (
+            f"self-intersections: {self.pairs} pair{_plural(self.pairs)} ({self.faces} "
+            f"face{_plural(self.faces)}), {self.new_pairs} new"
+        )
+
+    def warning(self) -> Optional[str]:
+        if self.new_pairs == 0:
+            return None
+        return (
+            f"{self.new_pairs} new self-intersecting face pair{_plural(self.new_pairs)} "
+            f"({self.new_faces} face{_plural(self.new_faces)}) that the source does not have "
+            f"(the source has {self.source_pairs} pair{_plural(self.source_pairs)})"
+        )
+
+
+def intersections(source_pairs, positions, faces) -> Intersections:
+    """The result's exact self-intersections (``darap.self_intersections``, the check of
+    ``stylize apply``) and those of its pairs the source (``source_pairs``, (K, 2)) does not have."""
+    import darap
+    import numpy as np
+
+    pairs = darap.self_intersections(np.asarray(positions, dtype=np.float64), faces)
+    source = {(int(a), int(b)) for a, b in source_pairs}
+    new = [(int(a), int(b)) for a, b in pairs if (int(a), int(b)) not in source]
+    return Intersections(
+        pairs=len(pairs),
+        faces=len(np.unique(pairs)),
+        new_pairs=len(new),
+        new_faces=len({f for p in new for f in p}),
+        source_pairs=len(source),
+    )
+
+
 @dataclass
 class Sanity:
     lam: float
@@ -405,13 +454,17 @@ class Sanity:
     volume_ratio: float
     area_ratio_mean: float
     area_ratio_std: float
+    intersections: Optional[Intersections] = None
 
     def summary(self) -> str:
-        return (
+        line = (
             f"λ = {self.lam:g}: volume ratio {self.volume_ratio:.3f}, face-area ratio "
             f"{self.area_ratio_mean:.3f} ± {self.area_ratio_std:.3f}, "
             f"{100.0 * self.flipped_fraction:.1f}% of vertices flipped (rotation > 90°)"
         )
+        if self.intersections is not None:
+            line += ", " + self.intersections.summary()
+        return line
 
     def warnings(self) -> List[str]:
         import math
@@ -426,12 +479,17 @@ class Sanity:
             out.append(f"faces shrinking: mean face-area ratio {self.area_ratio_mean:.3f}; try a smaller λ")
         if self.flipped_fraction > FLIPPED_WARN_FRACTION:
             out.append(f"{100.0 * self.flipped_fraction:.1f}% of the rotations flipped (> 90°); try a smaller λ")
+        w = self.intersections.warning() if self.intersections is not None else None
+        if w is not None:
+            out.append(f"{w}; try a smaller λ")
         return out
 
 
-def sanity(rest, faces, deformation, lam: float) -> Sanity:
+def sanity(rest, faces, deformation, lam: float, source_pairs=None) -> Sanity:
     """The numbers ``stylize apply`` prints after each output, for a ``darap.Deformation`` of the
-    saved rest mesh ``rest`` (side-2 frame)."""
+    saved rest mesh ``rest`` (side-2 frame); with ``source_pairs`` (the rest mesh's
+    ``darap.self_intersections``) also the result's self-intersections, new ones counted against
+    those."""
     import darap
     import numpy as np
 
@@ -454,4 +512,7 @@ def sanity(rest, faces, deformation, lam: float) -> Sanity:
         volume_ratio=volume,
         area_ratio_mean=float(ratios.mean()) if ratios.size else float("nan"),
         area_ratio_std=float(ratios.std()) if ratios.size else float("nan"),
+        intersections=(
+            intersections(source_pairs, deformation.positions, faces) if source_pairs is not None else None
+        ),
     )

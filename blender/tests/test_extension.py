@@ -185,6 +185,10 @@ def test_stylize_cube_shape_key_equals_cli_mesh_obj_and_slider_equals_apply(ext,
     assert obj.gis.sanity.split(":", 1)[1] in printed60
     for symptom in ("collapsing", "flipped"):
         assert symptom in printed60 and symptom in obj.gis.warnings, (printed60, obj.gis.warnings)
+    # The panel's line counts the result's self-intersections (in-process, darap's exact check)
+    # as the CLI does, and warns about new ones exactly when the CLI does.
+    assert "self-intersections:" in obj.gis.sanity
+    assert ("new self-intersecting" in printed60) == ("new self-intersecting" in obj.gis.warnings)
 
     # Write λ: `stylize apply` at the slider's λ.
     obj.gis.strength = 3.0

@@ -18,6 +18,7 @@ ts = []
 for lam in [3, 4, 5, 6, 7, 8, 9, 10, 11, 12]:
     t = time.perf_counter(); obj.gis.strength = float(lam); ts.append(time.perf_counter() - t)
 print("vertices", len(obj.data.vertices), "slider move median ms %.1f min %.1f max %.1f" % (1e3*statistics.median(ts), 1e3*min(ts), 1e3*max(ts)))
-import cProfile, pstats
-cProfile.run("for lam in [3,4,5,6,7]: obj.gis.strength = float(lam)", "/tmp/blr/prof")
-pstats.Stats("/tmp/blr/prof").sort_stats("cumtime").print_stats(14)
+import cProfile, os, pstats
+prof = os.path.join(tempfile.mkdtemp(), "prof")
+cProfile.run("for lam in [3,4,5,6,7]: obj.gis.strength = float(lam)", prof)
+pstats.Stats(prof).sort_stats("cumtime").print_stats(14)

@@ -657,6 +657,30 @@ fn feather_weights<'py>(
     Ok(PyArray1::from_vec(py, w))
 }
 
+/// Exact self-intersections (`mesh_core::intersect::self_intersections`: what `stylize mesh
+/// check`, `eval` and `apply` count; definitions in docs/self_intersections.md): positions (V, 3)
+/// float64, faces (F, 3) integer. Returns the intersecting face pairs (K, 2) int64, each row
+/// `(a, b)` with a < b, rows sorted. Raises DarapError for no faces, an index out of range or a
+/// non-finite vertex used by a face.
+#[pyfunction]
+fn self_intersections<'py>(
+    py: Python<'py>,
+    positions: &Bound<'py, PyAny>,
+    faces: &Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, PyArray2<i64>>> {
+    let positions = read_rows3(positions, "positions", None)?;
+    let faces = read_faces(faces)?;
+    let found = py
+        .detach(|| mesh_core::intersect::self_intersections(&positions, &faces))
+        .map_err(|e| DarapError::new_err(format!("self-intersection check: {e}")))?;
+    let flat: Vec<i64> = found
+        .pairs
+        .iter()
+        .flat_map(|&(a, b)| [i64::from(a), i64::from(b)])
+        .collect();
+    PyArray1::from_vec(py, flat).reshape([found.pairs.len(), 2])
+}
+
 /// A unit icosphere subdivided `level` times (0..=7): (verts (V, 3) float64, faces (F, 3) int64).
 #[pyfunction]
 fn icosphere<'py>(py: Python<'py>, level: u32) -> PyResult<Bound<'py, PyTuple>> {
@@ -690,6 +714,7 @@ fn _darap(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(normalize_side2_cube, m)?)?;
     m.add_function(wrap_pyfunction!(icosphere, m)?)?;
     m.add_function(wrap_pyfunction!(feather_weights, m)?)?;
+    m.add_function(wrap_pyfunction!(self_intersections, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

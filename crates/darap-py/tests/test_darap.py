@@ -649,3 +649,47 @@ def test_one_layer_is_usable_from_several_threads_at_once(rng: np.random.Generat
     with ThreadPoolExecutor(max_workers=4) as pool:
         lams = list(pool.map(work, range(64)))
     assert {lam for lam in lams if lam >= 0} <= {4.0, 8.0}
+
+
+# ---------------------------------------------------------------------------------------------
+# Self-intersections: the exact check of `stylize mesh check` / `apply`
+
+
+def test_self_intersections_finds_crossing_faces_and_none_on_a_clean_sphere() -> None:
+    # Two triangles that pierce each other (no shared vertex), and a third far away.
+    verts = np.array(
+        [[0, 0, 0], [2, 0, 0], [0, 2, 0],  # in z = 0
+         [0.5, 0.5, -1], [0.5, 0.5, 1], [1.5, 1.5, 1],  # crosses z = 0 inside the first
+         [10, 10, 10], [11, 10, 10], [10, 11, 10]],
+        dtype=np.float64,
+    )
+    faces = np.array([[0, 1, 2], [3, 4, 5], [6, 7, 8]], dtype=np.int64)
+    pairs = darap.self_intersections(verts, faces)
+    assert pairs.dtype == np.int64 and pairs.shape == (1, 2)
+    np.testing.assert_array_equal(pairs, [[0, 1]])
+    # Moved apart: nothing, as an empty (0, 2) array.
+    apart = verts.copy()
+    apart[3:6, 2] += 5.0
+    assert darap.self_intersections(apart, faces).shape == (0, 2)
+    # A clean closed mesh has none; pushing one vertex through the far side makes some, each
+    # pair once, a < b, sorted.
+    sphere, sfaces = darap.icosphere(2)
+    assert darap.self_intersections(sphere, sfaces).shape == (0, 2)
+    dented = sphere.copy()
+    dented[0] = -1.5 * dented[0]
+    pairs = darap.self_intersections(dented, sfaces)
+    assert len(pairs) > 0
+    assert (pairs[:, 0] < pairs[:, 1]).all()
+    assert [tuple(p) for p in pairs] == sorted({tuple(p) for p in pairs})
+
+
+def test_self_intersections_refuses_bad_input() -> None:
+    verts, faces = darap.icosphere(1)
+    bad = verts.copy()
+    bad[3, 1] = np.nan
+    with pytest.raises(darap.DarapError, match="self-intersection check"):
+        darap.self_intersections(bad, faces)
+    with pytest.raises(darap.DarapError, match="self-intersection check"):
+        darap.self_intersections(verts, faces[:0])
+    with pytest.raises(darap.DarapError):
+        darap.self_intersections(verts[:5], faces)

@@ -56,9 +56,13 @@ pub const EMPTY_GREY: [f32; 3] = [0.85, 0.85, 0.85];
 pub const STATUS_INK: [f32; 3] = [0.75, 0.0, 0.0];
 /// Ink of `no row`.
 pub const NO_ROW_INK: [f32; 3] = [0.6, 0.6, 0.6];
-/// The largest sheet written, in pixels (8192 rows of tiles' worth is far beyond a paper figure;
-/// a larger batch is refused with a message rather than allocating gigabytes).
-pub const MAX_SHEET_PIXELS: usize = 1 << 28;
+/// The largest sheet written, in pixels (about 8,000 × 8,000: some 900 tiles, far beyond a paper
+/// figure; the canvas is `f32` RGB, so this bounds it near 800 MB). A larger grid is refused with a
+/// message, before any tile is read, rather than allocating gigabytes.
+pub const MAX_SHEET_PIXELS: usize = 1 << 26;
+/// The most rows a batch draws a grid of without being asked (`--grid`): beyond that a sheet is no
+/// longer a figure anyone reads, and a large cluster batch should not pay for one.
+pub const DEFAULT_GRID_MAX_ROWS: usize = 400;
 
 /// The sheet's default path for a manifest: `MANIFEST_STEM_grid.png` in the manifest's folder.
 pub fn default_path(manifest: &Path) -> PathBuf {
@@ -368,10 +372,9 @@ pub struct GridCounts {
     pub empty: usize,
 }
 
-/// The sheet of `rows` with the tiles `tiles` (one per row, in order).
-pub fn sheet_of(rows: &[Row], tiles: &[Tile]) -> anyhow::Result<Images> {
-    let layout = Layout::of(rows);
-    let (w, h) = layout.size();
+/// Refuses a grid of `rows` larger than [`MAX_SHEET_PIXELS`] (before any tile is read).
+pub fn check_size(rows: &[Row]) -> anyhow::Result<()> {
+    let (w, h) = Layout::of(rows).size();
     if w.saturating_mul(h) > MAX_SHEET_PIXELS {
         bail!(
             "the grid of {} rows would be {w}×{h} pixels, more than the {MAX_SHEET_PIXELS} written \
@@ -379,6 +382,14 @@ pub fn sheet_of(rows: &[Row], tiles: &[Tile]) -> anyhow::Result<Images> {
             rows.len()
         );
     }
+    Ok(())
+}
+
+/// The sheet of `rows` with the tiles `tiles` (one per row, in order).
+pub fn sheet_of(rows: &[Row], tiles: &[Tile]) -> anyhow::Result<Images> {
+    check_size(rows)?;
+    let layout = Layout::of(rows);
+    let (w, h) = layout.size();
     let mut canvas = Canvas::new(w, h);
     if layout.table {
         let filled: Vec<(usize, usize)> = layout.cell_of_row.clone();
@@ -421,6 +432,7 @@ pub fn write_grid(
     if rows.is_empty() {
         bail!("the manifest has no rows");
     }
+    check_size(rows)?;
     let tiles: Vec<Tile> = rows
         .iter()
         .enumerate()

@@ -325,3 +325,62 @@ fn after_a_sharded_run_grid_only_builds_the_grid_from_the_run_directories() {
     assert!(success, "{err}");
     check_empty_tile(&Picture::read(&path), &manifest, 2, "NO RENDER");
 }
+
+#[test]
+fn a_batch_of_more_than_400_rows_draws_no_grid_unless_asked() {
+    let tmp = ok(tempfile::tempdir());
+    let dir = tmp.path();
+    setup(dir);
+    // 401 rows that each fail at once (a refused λ): no run, no tile is ever read.
+    let mut manifest = String::new();
+    for i in 0..401 {
+        manifest.push_str(&format!(
+            "[[run]]\nmesh = \"m.obj\"\nstyle = \"cube\"\nout = \"runs/r{i}\"\n\
+             overrides = [\"darap.lambda=-1\"]\n\n"
+        ));
+    }
+    let path = dir.join("many.toml");
+    ok(std::fs::write(&path, manifest));
+    let mut args = vec!["batch", s(&path)];
+    args.extend_from_slice(SETTINGS);
+    let (success, _, err) = stylize_text(&args);
+    assert!(!success, "every row fails: {err}");
+    assert!(
+        err.contains("grid: none (401 rows, more than the 400"),
+        "{err}"
+    );
+    assert!(!dir.join("many_grid.png").exists());
+}
+
+#[test]
+fn the_default_grid_failing_is_a_warning_and_an_asked_for_grid_failing_an_error() {
+    let tmp = ok(tempfile::tempdir());
+    let dir = tmp.path();
+    setup(dir);
+    let manifest = dir.join("one.toml");
+    ok(std::fs::write(
+        &manifest,
+        "[[run]]\nmesh = \"m.obj\"\nstyle = \"cube\"\nout = \"runs/m-cube\"\n",
+    ));
+    // A folder where the default grid would go: the PNG cannot be written there.
+    ok(std::fs::create_dir(dir.join("one_grid.png")));
+    let mut args = vec!["batch", s(&manifest)];
+    args.extend_from_slice(SETTINGS);
+    let (success, _, err) = stylize_text(&args);
+    assert!(
+        success,
+        "the row is done; the default grid is a by-product: {err}"
+    );
+    assert!(err.contains("warning: grid: not written"), "{err}");
+    // The same grid asked for: the batch fails (its row stays done: skipped as complete).
+    let blocked = dir.join("one_grid.png");
+    let mut args = vec!["batch", s(&manifest), "--grid", s(&blocked)];
+    args.extend_from_slice(SETTINGS);
+    let (success, _, err) = stylize_text(&args);
+    assert!(!success, "{err}");
+    assert!(
+        err.contains("grid: not written") && err.contains("the grid could not be written"),
+        "{err}"
+    );
+    assert!(dir.join("runs/m-cube/mesh.obj").is_file());
+}

@@ -27,6 +27,7 @@ from ._darap import (
     feather_weights,
     icosphere,
     normalize_side2_cube,
+    self_intersections,
 )
 from .saved import SavedDeformation, load_saved
 
@@ -43,6 +44,7 @@ __all__ = [
     "icosphere",
     "load_saved",
     "normalize_side2_cube",
+    "self_intersections",
 ]
 
 

@@ -121,3 +121,10 @@ def feather_weights(free: Mask, faces: Index3, rings: int) -> npt.NDArray[np.flo
     --region-feather`` and ``stylize apply`` use): a vertex at edge-hop distance ``d`` from the
     nearest vertex outside the region (``free`` False) gets ``min(d / (rings + 1), 1)``; outside
     vertices get 0. Returns (V,) float64."""
+
+def self_intersections(positions: Float3, faces: Index3) -> npt.NDArray[np.int64]:
+    """Exact self-intersections (``mesh_core::intersect``, what ``stylize mesh check``, ``eval``
+    and ``apply`` count; definitions in ``docs/self_intersections.md``). Returns the intersecting
+    face pairs (K, 2) int64, each row ``(a, b)`` with ``a < b``, rows sorted. Raises
+    :class:`DarapError` for no faces, an index out of range or a non-finite vertex used by a
+    face."""

@@ -68,6 +68,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             crate::batch_grid::check_path(p, &rows)?;
             Some(p.clone())
         }
+        None if !args.grid_only && rows.len() > crate::batch_grid::DEFAULT_GRID_MAX_ROWS => {
+            say(&format!(
+                "grid: none ({} rows, more than the {} a batch draws unasked; pass --grid FILE, or \
+                 build it later with --grid-only)",
+                rows.len(),
+                crate::batch_grid::DEFAULT_GRID_MAX_ROWS
+            ));
+            None
+        }
         None => {
             let p = crate::batch_grid::default_path(&args.manifest);
             match crate::batch_grid::check_path(&p, &rows) {
@@ -144,10 +153,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     } else {
         Ok(())
     };
+    // A grid asked for (--grid) that cannot be written fails the batch; the default one is a
+    // by-product, and its failure only a warning (every row's result stands).
     let grid_failed = match grid {
-        Err(e) => {
+        Err(e) if args.grid.is_some() => {
             say(&format!("grid: not written: {e:#}"));
             true
+        }
+        Err(e) => {
+            say(&format!("warning: grid: not written: {e:#}"));
+            false
         }
         Ok(()) => false,
     };
