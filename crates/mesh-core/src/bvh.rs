@@ -283,7 +283,35 @@ impl Bvh {
     /// Builds the tree. Refuses a face index out of range and a non-finite vertex used by a face;
     /// an empty face list gives an empty tree (every query answers nothing).
     pub fn new(positions: &[[f64; 3]], faces: &[[u32; 3]]) -> Result<Bvh, BvhError> {
-        Bvh::with_leaf_size(positions, faces, LEAF_SIZE)
+        let tris = triangles(positions, faces)?;
+        let mut bvh = Bvh {
+            nodes: Vec::with_capacity(2 * faces.len() / LEAF_SIZE + 1),
+            order: Vec::new(),
+            faces: faces.to_vec(),
+            boxes: tris.iter().map(|t| Aabb::of_points(t)).collect(),
+            tris,
+            num_vertices: positions.len(),
+        };
+        if !faces.is_empty() {
+            // The faces carry their centroids through the partitions (no indirection per
+            // comparison); the boxes are filled bottom-up afterwards.
+            let mut items: Vec<(u32, [f64; 3])> = bvh
+                .tris
+                .iter()
+                .enumerate()
+                .map(|(f, t)| {
+                    let mut c = [0.0; 3];
+                    for k in 0..3 {
+                        c[k] = (t[0][k] + t[1][k] + t[2][k]) / 3.0;
+                    }
+                    (f as u32, c)
+                })
+                .collect();
+            bvh.build(&mut items, 0);
+            bvh.order = items.iter().map(|&(f, _)| f).collect();
+            bvh.fill_bounds();
+        }
+        Ok(bvh)
     }
 
     /// A tree for the self-overlap traversal only ([`Bvh::pair_tree`]), built faster than
@@ -341,42 +369,6 @@ impl Bvh {
         self.nodes[me].count = 0;
     }
 
-    fn with_leaf_size(
-        positions: &[[f64; 3]],
-        faces: &[[u32; 3]],
-        leaf_size: usize,
-    ) -> Result<Bvh, BvhError> {
-        let tris = triangles(positions, faces)?;
-        let mut bvh = Bvh {
-            nodes: Vec::with_capacity(2 * faces.len() / leaf_size + 1),
-            order: Vec::new(),
-            faces: faces.to_vec(),
-            boxes: tris.iter().map(|t| Aabb::of_points(t)).collect(),
-            tris,
-            num_vertices: positions.len(),
-        };
-        if !faces.is_empty() {
-            // The faces carry their centroids through the partitions (no indirection per
-            // comparison); the boxes are filled bottom-up afterwards.
-            let mut items: Vec<(u32, [f64; 3])> = bvh
-                .tris
-                .iter()
-                .enumerate()
-                .map(|(f, t)| {
-                    let mut c = [0.0; 3];
-                    for k in 0..3 {
-                        c[k] = (t[0][k] + t[1][k] + t[2][k]) / 3.0;
-                    }
-                    (f as u32, c)
-                })
-                .collect();
-            bvh.build(&mut items, 0, leaf_size);
-            bvh.order = items.iter().map(|&(f, _)| f).collect();
-            bvh.fill_bounds();
-        }
-        Ok(bvh)
-    }
-
     /// Every node's box from its faces' (leaves) or children's (interior nodes), bottom-up.
     fn fill_bounds(&mut self) {
         for i in (0..self.nodes.len()).rev() {
@@ -403,14 +395,14 @@ impl Bvh {
 
     /// Builds the subtree over `items[..]` (faces with their centroids; the slice starts at
     /// `offset` in the full order). Node boxes are left empty for [`Bvh::fill_bounds`].
-    fn build(&mut self, items: &mut [(u32, [f64; 3])], offset: usize, leaf_size: usize) {
+    fn build(&mut self, items: &mut [(u32, [f64; 3])], offset: usize) {
         let me = self.nodes.len();
         self.nodes.push(Node {
             bounds: Aabb::EMPTY,
             start: offset as u32,
             count: items.len() as u32,
         });
-        if items.len() <= leaf_size {
+        if items.len() <= LEAF_SIZE {
             return;
         }
         let mut cbounds = Aabb::EMPTY;
@@ -430,9 +422,9 @@ impl Bvh {
             a.1[axis].total_cmp(&b.1[axis]).then(a.0.cmp(&b.0))
         });
         let (left, right) = items.split_at_mut(mid);
-        self.build(left, offset, leaf_size);
+        self.build(left, offset);
         let right_index = self.nodes.len() as u32;
-        self.build(right, offset + mid, leaf_size);
+        self.build(right, offset + mid);
         self.nodes[me].start = right_index;
         self.nodes[me].count = 0;
     }
