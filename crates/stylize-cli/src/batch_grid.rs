@@ -372,27 +372,26 @@ pub struct GridCounts {
     pub empty: usize,
 }
 
-/// Refuses a grid of `rows` larger than [`MAX_SHEET_PIXELS`] (before any tile is read).
-pub fn check_size(rows: &[Row]) -> anyhow::Result<()> {
-    let (w, h) = Layout::of(rows).size();
+/// Refuses a grid of `rows` (laid out as `layout`) larger than [`MAX_SHEET_PIXELS`]; called
+/// before any tile is read.
+fn check_size(layout: &Layout, rows: usize) -> anyhow::Result<()> {
+    let (w, h) = layout.size();
     if w.saturating_mul(h) > MAX_SHEET_PIXELS {
         bail!(
-            "the grid of {} rows would be {w}×{h} pixels, more than the {MAX_SHEET_PIXELS} written \
-             (split the manifest)",
-            rows.len()
+            "the grid of {rows} rows would be {w}×{h} pixels, more than the {MAX_SHEET_PIXELS} \
+             written (split the manifest)"
         );
     }
     Ok(())
 }
 
-/// The sheet of `rows` with the tiles `tiles` (one per row, in order).
-pub fn sheet_of(rows: &[Row], tiles: &[Tile]) -> anyhow::Result<Images> {
-    check_size(rows)?;
-    let layout = Layout::of(rows);
+/// The sheet of `rows`, laid out as `layout` (of a size [`check_size`] accepted), with the tiles
+/// `tiles` (one per row, in order).
+fn sheet_of(rows: &[Row], layout: &Layout, tiles: &[Tile]) -> Images {
     let (w, h) = layout.size();
     let mut canvas = Canvas::new(w, h);
     if layout.table {
-        let filled: Vec<(usize, usize)> = layout.cell_of_row.clone();
+        let filled = &layout.cell_of_row;
         for line in 0..layout.lines {
             for column in 0..layout.columns {
                 if !filled.contains(&(line, column)) {
@@ -418,7 +417,7 @@ pub fn sheet_of(rows: &[Row], tiles: &[Tile]) -> anyhow::Result<Images> {
             canvas.draw_text(text, TEXT_SCALE, x, y, [0.0; 3]);
         }
     }
-    Ok(canvas.into_images())
+    canvas.into_images()
 }
 
 /// Builds and writes (atomically) the sheet of every row of the manifest at `path`; `known` holds
@@ -432,13 +431,14 @@ pub fn write_grid(
     if rows.is_empty() {
         bail!("the manifest has no rows");
     }
-    check_size(rows)?;
+    let layout = Layout::of(rows);
+    check_size(&layout, rows.len())?;
     let tiles: Vec<Tile> = rows
         .iter()
         .enumerate()
         .map(|(i, r)| row_tile(r, known.iter().find(|(k, _)| *k == i).map(|(_, s)| s)))
         .collect();
-    let sheet = sheet_of(rows, &tiles)?;
+    let sheet = sheet_of(rows, &layout, &tiles);
     if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
         std::fs::create_dir_all(parent)
             .map_err(|e| anyhow::anyhow!("cannot create {}: {e}", parent.display()))?;
