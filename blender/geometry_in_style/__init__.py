@@ -254,14 +254,14 @@ def ready(run_dir: str):
 
 
 def source_pairs(run_dir: str, saved):
-    """The saved rest mesh's self-intersecting face pairs (what a result's new pairs are counted
-    against), computed once per loaded deformation."""
+    """The saved rest mesh's self-intersecting face pairs as a ``core.pair_set`` (what a result's
+    new pairs are counted against), computed once per loaded deformation."""
     import darap
 
     cached = _source_pairs.get(run_dir)
     if cached is not None and cached[0] is saved:
         return cached[1]
-    pairs = darap.self_intersections(saved.rest_positions(), saved.faces)
+    pairs = core.pair_set(darap.self_intersections(saved.rest_positions(), saved.faces))
     _source_pairs[run_dir] = (saved, pairs)
     return pairs
 

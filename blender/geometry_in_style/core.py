@@ -429,21 +429,26 @@ class Intersections:
         )
 
 
-def intersections(source_pairs, positions, faces) -> Intersections:
+def pair_set(pairs) -> frozenset:
+    """``darap.self_intersections``' (K, 2) pairs as a set of ``(a, b)`` tuples."""
+    return frozenset(map(tuple, pairs.tolist()))
+
+
+def intersections(source_pairs: frozenset, positions, faces) -> Intersections:
     """The result's exact self-intersections (``darap.self_intersections``, the check of
-    ``stylize apply``) and those of its pairs the source (``source_pairs``, (K, 2)) does not have."""
+    ``stylize apply``) and those of its pairs the source (``source_pairs``, a :func:`pair_set`)
+    does not have."""
     import darap
     import numpy as np
 
     pairs = darap.self_intersections(np.asarray(positions, dtype=np.float64), faces)
-    source = {(int(a), int(b)) for a, b in source_pairs}
-    new = [(int(a), int(b)) for a, b in pairs if (int(a), int(b)) not in source]
+    new = pair_set(pairs) - source_pairs
     return Intersections(
         pairs=len(pairs),
         faces=len(np.unique(pairs)),
         new_pairs=len(new),
         new_faces=len({f for p in new for f in p}),
-        source_pairs=len(source),
+        source_pairs=len(source_pairs),
     )
 
 
@@ -488,7 +493,7 @@ class Sanity:
 def sanity(rest, faces, deformation, lam: float, source_pairs=None) -> Sanity:
     """The numbers ``stylize apply`` prints after each output, for a ``darap.Deformation`` of the
     saved rest mesh ``rest`` (side-2 frame); with ``source_pairs`` (the rest mesh's
-    ``darap.self_intersections``) also the result's self-intersections, new ones counted against
+    ``darap.self_intersections`` as a :func:`pair_set`) also the result's self-intersections, new ones counted against
     those."""
     import darap
     import numpy as np
