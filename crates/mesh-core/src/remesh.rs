@@ -13,11 +13,15 @@
 //!    - fold a face (its normal turns by more than 90°),
 //!    - leave a near-degenerate face (a corner under 5°, unless no worse than the worst face it
 //!      replaces),
+//!    - move the surface by more than [`SURFACE_GUARD`]`·L` (`Remesher::collapse_keeps_surface`:
+//!      the removed vertex's old position too far from the new faces, or a new face's centroid or
+//!      edge midpoint too far from the input),
 //!    - move a corner, move a feature vertex off its feature line (a feature vertex collapses only
 //!      along a feature edge), or collapse across a feature;
 //! 3. **flip** every interior, non-feature edge whose flip lowers `Σ (valence − target)²` over its
 //!    four vertices (target 6 inside, 4 on the boundary), unless the flip lowers the smaller minimum
-//!    angle of the two triangles below `min(before, 30°)`, folds them, or duplicates an edge; a pair with a corner under 10°
+//!    angle of the two triangles below `min(before, 30°)`, folds them, duplicates an edge, or
+//!    moves the surface by more than [`SURFACE_GUARD`]`·L` (`Remesher::flip_keeps_surface`); a pair with a corner under 10°
 //!    (a needle or a zero-area face) is also flipped whenever that raises its minimum angle;
 //! 4. **tangential relaxation**, [`SMOOTHING_STEPS`] times: every free vertex moves to the
 //!    area-weighted centroid of its incident faces' centroids, projected into its tangent plane
@@ -373,7 +377,7 @@ pub fn remesh(
     let kept = check(positions, faces, options)?;
     let surface = Bvh::new(positions, faces)?;
     let mut mesh = HalfEdgeMesh::new(positions, &kept)?;
-    let mut r = Remesher::new(&mut mesh, positions, &kept, options)?;
+    let mut r = Remesher::new(&mut mesh, positions, &kept, options, &surface)?;
     for _ in 0..options.iterations {
         r.split_long_edges()?;
         r.collapse_short_edges();
@@ -478,6 +482,10 @@ struct Remesher<'a> {
     /// Per vertex: the input face it last projected onto (`NONE` before its first projection), the
     /// closest-point search's starting guess.
     hints: Vec<u32>,
+    /// The frozen input surface.
+    surface: &'a Bvh,
+    /// The surface-distance bound of the local operations ([`SURFACE_GUARD`]`·L`).
+    guard: f64,
 }
 
 impl<'a> Remesher<'a> {
@@ -486,6 +494,7 @@ impl<'a> Remesher<'a> {
         positions: &[[f64; 3]],
         faces: &[[u32; 3]],
         o: &RemeshOptions,
+        surface: &'a Bvh,
     ) -> Result<Self, RemeshError> {
         let cos_limit = o.feature_angle_deg.to_radians().cos();
         let normals: Vec<Option<[f64; 3]>> =
@@ -525,6 +534,8 @@ impl<'a> Remesher<'a> {
             buf: Vec::new(),
             buf2: Vec::new(),
             hints: Vec::new(),
+            surface,
+            guard: SURFACE_GUARD * l,
         };
         let counts = r.feature_counts();
         let mut ring = Vec::new();
@@ -737,10 +748,83 @@ impl<'a> Remesher<'a> {
         let ok = common == expected
             && r0.len() + r1.len() - 2 - expected >= 3
             && ring_ok(m, v0, v1, target, &r0, self.hi)
-            && (target == m.pos[v1 as usize] || ring_ok(m, v1, v0, target, &r1, self.hi));
+            && (target == m.pos[v1 as usize] || ring_ok(m, v1, v0, target, &r1, self.hi))
+            && self.collapse_keeps_surface(v0, v1, target, &r0, &r1);
         self.buf = r0;
         self.buf2 = r1;
         ok
+    }
+
+    /// The distance from `p` to the input surface (`∞` when there is none), searched from the
+    /// input face `hint`.
+    fn off_input(&self, p: [f64; 3], hint: u32) -> f64 {
+        self.surface
+            .closest_point_hinted(p, hint)
+            .map_or(f64::INFINITY, |c| c.distance_squared.sqrt())
+    }
+
+    /// The surface-distance guard of a collapse of `v0` into `v1` (rings `r0`, `r1`) with `v1`
+    /// moved to `target`: the new faces around `target` must stay within [`Self::guard`] of the
+    /// input both ways — every input point the collapse takes away (the old positions of `v0`,
+    /// and of `v1` when it moves; vertices lie on the input) within `guard` of the new faces, and
+    /// the new faces' centroids and their edges' midpoints at `target` within `guard` of the input.
+    /// Without it collapses erode sharp tips and cut across parts thinner than `L`.
+    fn collapse_keeps_surface(
+        &self,
+        v0: u32,
+        v1: u32,
+        target: [f64; 3],
+        r0: &[u32],
+        r1: &[u32],
+    ) -> bool {
+        let m = &*self.mesh;
+        let mut fan: Vec<[[f64; 3]; 3]> = Vec::with_capacity(r0.len() + r1.len());
+        for (ring, other) in [(r0, v1), (r1, v0)] {
+            for &g in ring {
+                if m.is_boundary_halfedge(g) {
+                    continue;
+                }
+                let (a, b) = (m.to(g), m.to(m.next(g)));
+                if a == other || b == other {
+                    continue;
+                }
+                fan.push([target, m.pos[a as usize], m.pos[b as usize]]);
+            }
+        }
+        let p1 = m.pos[v1 as usize];
+        let mut gone = vec![m.pos[v0 as usize]];
+        if target != p1 {
+            gone.push(p1);
+        }
+        if gone.iter().any(|&p| fan_distance(p, &fan) > self.guard) {
+            return false;
+        }
+        let hint = self.hints.get(v1 as usize).copied().unwrap_or(NONE);
+        // A sample within the guard of a ring vertex (on the input) needs no query.
+        let near_ring = |s: [f64; 3]| {
+            fan.iter()
+                .any(|t| dist(s, t[1]) <= self.guard || dist(s, t[2]) <= self.guard)
+        };
+        fan.iter().all(|t| {
+            let c = [0, 1, 2].map(|k| (t[0][k] + t[1][k] + t[2][k]) / 3.0);
+            let mid = [0, 1, 2].map(|k| (t[0][k] + t[1][k]) / 2.0);
+            (near_ring(c) || self.off_input(c, hint) <= self.guard)
+                && (near_ring(mid) || self.off_input(mid, hint) <= self.guard)
+        })
+    }
+
+    /// The surface-distance guard of flipping edge `a–b` of the quad `(a, b, c, d)` (positions
+    /// `pa`…`pd`) to `c–d`: the old edge's midpoint (on the input when the old faces are) within
+    /// [`Self::guard`] of the new pair, and the new edge's midpoint within `guard` of the input
+    /// (searched from the input face `a` last projected onto). Without it valence flips cut
+    /// across ridges that are not features.
+    fn flip_keeps_surface(&self, a: u32, q: [[f64; 3]; 4]) -> bool {
+        let [pa, pb, pc, pd] = q;
+        let old_mid = [0, 1, 2].map(|k| (pa[k] + pb[k]) / 2.0);
+        let new_mid = [0, 1, 2].map(|k| (pc[k] + pd[k]) / 2.0);
+        let hint = self.hints.get(a as usize).copied().unwrap_or(NONE);
+        fan_distance(old_mid, &[[pa, pd, pc], [pd, pb, pc]]) <= self.guard
+            && self.off_input(new_mid, hint) <= self.guard
     }
 
     fn flip_edges(&mut self) {
@@ -786,6 +870,9 @@ impl<'a> Remesher<'a> {
             let n1 = cross(sub(pd, pa), sub(pc, pa));
             let n2 = cross(sub(pb, pd), sub(pc, pd));
             if dot(n1, n2) <= 0.0 || dot(n1, n_old) <= 0.0 || dot(n2, n_old) <= 0.0 {
+                continue;
+            }
+            if !self.flip_keeps_surface(a, [pa, pb, pc, pd]) {
                 continue;
             }
             self.mesh.flip(e);
@@ -1043,6 +1130,9 @@ impl<'a> Remesher<'a> {
             if dot(n1, n2) < self.cos_feature || dot(n1, n_old) <= 0.0 || dot(n2, n_old) <= 0.0 {
                 continue;
             }
+            if !self.flip_keeps_surface(a, [pa, pb, pc, pd]) {
+                continue;
+            }
             self.mesh.flip(e);
             any = true;
         }
@@ -1157,6 +1247,23 @@ impl<'a> Remesher<'a> {
         }
     }
 }
+
+/// The distance from `p` to the nearest of the triangles `fan` (`∞` for none).
+fn fan_distance(p: [f64; 3], fan: &[[[f64; 3]; 3]]) -> f64 {
+    fan.iter()
+        .map(|t| {
+            let (q, _) = crate::bvh::closest_on_triangle(p, t);
+            norm(sub(q, p))
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// The surface-distance bound of collapses and flips, in target lengths
+/// (`Remesher::collapse_keeps_surface`, `Remesher::flip_keeps_surface`). pymeshlab's
+/// `maxsurfdist` plays the same part (default 1 % of the diagonal, `2/3·L` at its default target
+/// 1.5 %); a quarter of `L` keeps sharp tips and parts thinner than `L` (measured:
+/// `docs/remeshing.md`).
+const SURFACE_GUARD: f64 = 0.25;
 
 /// Clean-up passes after the last round (`Remesher::clean_up`).
 const CLEANUP_PASSES: usize = 5;

@@ -102,8 +102,8 @@ fn operators_keep_the_structure_consistent() {
         let mut mesh = HalfEdgeMesh::new(&p, &f).expect("builds");
         mesh.check().expect("consistent after build");
         let o = RemeshOptions::new(0.2);
-        let mut r = Remesher::new(&mut mesh, &p, &f, &o).expect("remesher");
         let surface = Bvh::new(&p, &f).expect("bvh");
+        let mut r = Remesher::new(&mut mesh, &p, &f, &o, &surface).expect("remesher");
         for round in 0..3 {
             r.split_long_edges().expect("splits");
             r.mesh
