@@ -512,3 +512,103 @@ fn short_open_crease_chains_are_dropped_and_others_kept() {
         .count();
     assert_eq!(boundary_after, boundary_before);
 }
+
+#[test]
+fn hairpins_of_crease_triangles_are_unmarked_and_others_kept() {
+    // A 6 × 6 grid stretched 3:1 along x: the face (i, j), (i+1, j), (i+1, j+1) has an 18.4°
+    // corner at (i, j).
+    let k = 6;
+    let (mut p, f) = grid(k);
+    for q in &mut p {
+        q[0] *= 3.0;
+    }
+    let mut m = HalfEdgeMesh::new(&p, &f).expect("grid");
+    let id = |i: usize, j: usize| (j * (k + 1) + i) as u32;
+    let edge = |m: &HalfEdgeMesh, a: u32, b: u32| {
+        let mut ring = Vec::new();
+        m.outgoing(a, &mut ring);
+        let g = ring.iter().find(|&&g| m.to(g) == b).expect("an edge");
+        (g / 2) as usize
+    };
+    for e in 0..m.num_edges() {
+        m.feature[e] = false;
+    }
+    let mark = |m: &mut HalfEdgeMesh, a: u32, b: u32| {
+        let e = edge(m, a, b);
+        m.feature[e] = true;
+    };
+    // A crease triangle: all three edges of the face at (1, 1); a hairpin at (1, 1).
+    mark(&mut m, id(1, 1), id(2, 1));
+    mark(&mut m, id(1, 1), id(2, 2));
+    mark(&mut m, id(2, 1), id(2, 2));
+    // The same 18.4° fold at (1, 4) without the third edge: a crease folding back, kept.
+    mark(&mut m, id(1, 4), id(2, 4));
+    mark(&mut m, id(1, 4), id(2, 5));
+    // A crease triangle without a hairpin (its 18.4° corner has a third feature edge): kept.
+    mark(&mut m, id(4, 1), id(5, 1));
+    mark(&mut m, id(4, 1), id(5, 2));
+    mark(&mut m, id(5, 1), id(5, 2));
+    mark(&mut m, id(4, 1), id(3, 1));
+    super::unmark_hairpins(&mut m);
+    let is_feature = |m: &HalfEdgeMesh, a: u32, b: u32| m.feature[edge(m, a, b)];
+    assert!(!is_feature(&m, id(1, 1), id(2, 1)) && !is_feature(&m, id(1, 1), id(2, 2)));
+    assert!(is_feature(&m, id(2, 1), id(2, 2)));
+    assert!(is_feature(&m, id(1, 4), id(2, 4)) && is_feature(&m, id(1, 4), id(2, 5)));
+    for (a, b) in [
+        (id(4, 1), id(5, 1)),
+        (id(4, 1), id(5, 2)),
+        (id(5, 1), id(5, 2)),
+    ] {
+        assert!(is_feature(&m, a, b));
+    }
+}
+
+#[test]
+fn a_corner_next_to_a_feature_edge_joins_the_line() {
+    // A flat 4 × 4 grid (spacing 0.25); the diagonal id(1,1)–id(2,2) is a crease and the corner
+    // id(1,2) is moved to 0.01 from it: the face (id(1,1), id(2,2), id(1,2)) is a cap.
+    let k = 4;
+    let (mut p, f) = grid(k);
+    let id = |i: usize, j: usize| (j * (k + 1) + i) as u32;
+    let s = 0.01 / 2f64.sqrt();
+    p[id(1, 2) as usize] = [0.375 - s, 0.375 + s, 0.0];
+    let edge = |m: &HalfEdgeMesh, a: u32, b: u32| {
+        let mut ring = Vec::new();
+        m.outgoing(a, &mut ring);
+        ring.iter()
+            .find(|&&g| m.to(g) == b)
+            .map(|&g| (g / 2) as usize)
+    };
+    let mut mesh = HalfEdgeMesh::new(&p, &f).expect("grid");
+    let surface = Bvh::new(&p, &f).expect("bvh");
+    // L = 0.25: the corner is 0.04·L from the line.
+    let mut r = Remesher::new(&mut mesh, &p, &f, &RemeshOptions::new(0.25), &surface).expect("r");
+    let (a, b, v) = (id(1, 1), id(2, 2), id(1, 2));
+    let e = edge(r.mesh, a, b).expect("the diagonal");
+    r.mesh.feature[e] = true;
+    r.mesh.locked[v as usize] = true;
+    assert!(r.merge_corners_onto_lines());
+    r.mesh.check().expect("consistent");
+    let m = &*r.mesh;
+    assert_eq!(
+        edge(m, a, b),
+        None,
+        "the crease edge past the corner is gone"
+    );
+    assert!(m.feature[edge(m, a, v).expect("a–v")] && m.feature[edge(m, v, b).expect("v–b")]);
+    let new = edge(m, v, id(2, 1)).expect("the flipped edge");
+    assert!(!m.feature[new]);
+    assert_eq!(m.pos[v as usize], p[v as usize], "the corner stays");
+    // Far from the line (0.2·L), nothing happens.
+    let mut p2 = p.clone();
+    let s2 = 0.05 / 2f64.sqrt();
+    p2[v as usize] = [0.375 - s2, 0.375 + s2, 0.0];
+    let mut mesh2 = HalfEdgeMesh::new(&p2, &f).expect("grid");
+    let surface2 = Bvh::new(&p2, &f).expect("bvh");
+    let mut r2 =
+        Remesher::new(&mut mesh2, &p2, &f, &RemeshOptions::new(0.25), &surface2).expect("r");
+    let e2 = edge(r2.mesh, a, b).expect("the diagonal");
+    r2.mesh.feature[e2] = true;
+    r2.mesh.locked[v as usize] = true;
+    assert!(!r2.merge_corners_onto_lines());
+}
