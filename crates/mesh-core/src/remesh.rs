@@ -645,17 +645,16 @@ impl<'a> Remesher<'a> {
             let chosen = if free(a) && free(b) && self.collapse_ok(h, &counts, mid) {
                 Some((h, mid))
             } else {
-                let ok0 = self.collapse_ok(h, &counts, pb);
-                let ok1 = self.collapse_ok(opp(h), &counts, pa);
-                match (ok0, ok1) {
-                    // Remove the end with the lower valence.
-                    (true, true) if self.mesh.valence(a as u32) <= self.mesh.valence(b as u32) => {
-                        Some((h, pb))
-                    }
-                    (true, true) | (false, true) => Some((opp(h), pa)),
-                    (true, false) => Some((h, pb)),
-                    (false, false) => None,
-                }
+                // Remove the end with the lower valence (`a` on a tie) when both may go; the
+                // other is tried only when the preferred one may not (each try queries the input).
+                let preferred = if self.mesh.valence(a as u32) <= self.mesh.valence(b as u32) {
+                    [(h, pb), (opp(h), pa)]
+                } else {
+                    [(opp(h), pa), (h, pb)]
+                };
+                preferred
+                    .into_iter()
+                    .find(|&(g, target)| self.collapse_ok(g, &counts, target))
             };
             let Some((g, target)) = chosen else {
                 continue;
