@@ -521,6 +521,18 @@ impl Bvh {
         self.closest_inner(p, |_| true, Some(hint))
     }
 
+    /// [`closest_point_filtered`](Self::closest_point_filtered) with a guess, as
+    /// [`closest_point_hinted`](Self::closest_point_hinted) (a hint `accept` rejects is ignored):
+    /// the same answer as without the hint.
+    pub fn closest_point_filtered_hinted(
+        &self,
+        p: [f64; 3],
+        hint: u32,
+        accept: impl Fn(u32) -> bool,
+    ) -> Option<ClosestPoint> {
+        self.closest_inner(p, accept, Some(hint))
+    }
+
     fn closest_inner(
         &self,
         p: [f64; 3],

@@ -28,7 +28,10 @@
 //!    (vertex normal); a feature vertex moves, along its feature line, toward the midpoint of its two
 //!    feature neighbours; then **every moved vertex is projected back onto the input**: a free
 //!    vertex onto the input surface, a feature vertex onto the input's feature lines — both by the
-//!    closest point through a [`Bvh`] over a frozen copy of the input.
+//!    closest point through a [`Bvh`] over a frozen copy of the input; a free vertex whose closest
+//!    point lies on an input face facing against the vertex's normal (the other sheet of a part
+//!    thinner than `L`) takes the closest point on the faces facing its way instead, when that is
+//!    within `L`.
 //!
 //! 5. after the last round, a **clean-up** (`Remesher::clean_up`), up to five passes: every free
 //!    vertex of a face with a corner under 20° moves to the centroid of its neighbours (or a
@@ -494,6 +497,9 @@ struct Remesher<'a> {
     surface: &'a Bvh,
     /// The surface-distance bound of the local operations ([`SURFACE_GUARD`]`·L`).
     guard: f64,
+    /// The side-aware projection takes a point on an input face facing the vertex's way at most
+    /// this far (`L`) over a closer one on a face facing against the vertex's normal.
+    side_reach: f64,
 }
 
 impl<'a> Remesher<'a> {
@@ -546,6 +552,7 @@ impl<'a> Remesher<'a> {
             hints: Vec::new(),
             surface,
             guard: SURFACE_GUARD * l,
+            side_reach: l,
         };
         let counts = r.feature_counts();
         let mut ring = Vec::new();
@@ -1323,7 +1330,25 @@ impl<'a> Remesher<'a> {
             let q = if on_line {
                 self.lines.closest_point(p)
             } else {
-                let c = surface.closest_point_hinted(p, self.hints[vi]);
+                let hint = self.hints[vi];
+                let mut c = surface.closest_point_hinted(p, hint);
+                // Side-aware: when the closest point lies on an input face facing against the
+                // vertex's normal (the other sheet of a part thinner than `L`), the closest point
+                // among the faces facing its way, if that is within `L`.
+                if let Some(plain) = c {
+                    let nf = |f: u32| {
+                        let [a, b, cc] = surface.triangle(f);
+                        cross(sub(b, a), sub(cc, a))
+                    };
+                    let reference = normals[vi];
+                    if dot(nf(plain.face), reference) < 0.0
+                        && let Some(same) = surface
+                            .closest_point_filtered_hinted(p, hint, |f| dot(nf(f), reference) > 0.0)
+                        && same.distance_squared <= self.side_reach * self.side_reach
+                    {
+                        c = Some(same);
+                    }
+                }
                 if let Some(c) = c {
                     self.hints[vi] = c.face;
                 }

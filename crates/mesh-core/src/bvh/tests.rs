@@ -451,3 +451,26 @@ fn pair_build_gives_the_same_candidates_as_the_median_build() {
         assert_eq!(pairs.overlapping_pairs(), brute_pairs(&pos, &faces));
     }
 }
+
+#[test]
+fn filtered_closest_point_with_a_hint_equals_brute_force() {
+    let (pos, faces) = random_mesh(13, 300);
+    let bvh = Bvh::new(&pos, &faces).expect("ok");
+    let mut rng = Rng(17);
+    // Only the odd faces.
+    let odd: Vec<[u32; 3]> = faces.iter().skip(1).step_by(2).copied().collect();
+    for _ in 0..300 {
+        let p = rng.point(1.6);
+        let got = bvh.closest_point_filtered(p, |f| f % 2 == 1).expect("ok");
+        let (k, d2) = brute_closest(&pos, &odd, p);
+        assert_eq!(got.distance_squared, d2);
+        assert_eq!(got.face, 2 * k + 1);
+        // A hint, accepted or not, good or bad, changes nothing.
+        for hint in [0, got.face, (got.face + 7) % faces.len() as u32, u32::MAX] {
+            assert_eq!(
+                bvh.closest_point_filtered_hinted(p, hint, |f| f % 2 == 1),
+                Some(got)
+            );
+        }
+    }
+}

@@ -612,3 +612,32 @@ fn a_corner_next_to_a_feature_edge_joins_the_line() {
     r2.mesh.locked[v as usize] = true;
     assert!(!r2.merge_corners_onto_lines());
 }
+
+#[test]
+fn a_part_thinner_than_the_target_length_does_not_self_intersect() {
+    // A disc-like ellipsoid 0.06 thick remeshed at L = 0.1: the two sheets are closer than L.
+    for (level, l) in [(3, 0.1), (4, 0.08)] {
+        let m = shapes::icosphere(level);
+        let p: Vec<[f64; 3]> = m
+            .positions
+            .iter()
+            .map(|q| [q[0], q[1], 0.03 * q[2]])
+            .collect();
+        let before = crate::intersect::self_intersections(&p, &m.faces).expect("check");
+        assert!(before.pairs.is_empty());
+        for angle in [30.0, 180.0] {
+            let o = RemeshOptions {
+                feature_angle_deg: angle,
+                ..RemeshOptions::new(l)
+            };
+            let out = remesh(&p, &m.faces, &o).expect("remeshes");
+            let after =
+                crate::intersect::self_intersections(&out.positions, &out.faces).expect("check");
+            assert!(
+                after.pairs.is_empty(),
+                "level {level}, L {l}, feature angle {angle}: {} intersecting pairs",
+                after.pairs.len()
+            );
+        }
+    }
+}
