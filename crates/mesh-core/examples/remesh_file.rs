@@ -8,7 +8,9 @@
 //! PERCENT % of its bounding-box diagonal (ITERATIONS 0: no remeshing, IN's own figures), writes
 //! OUT, and prints `before`/`after` quality, the sampled two-sided Hausdorff distance between the
 //! output and IN (or, with REFERENCE, between IN and REFERENCE: how far another tool's output IN
-//! lies from its source) as % of the diagonal, and the seconds the remeshing took.
+//! lies from its source) as % of the diagonal, the self-intersecting face pairs (exact,
+//! `mesh_core::intersect`) of the output and of the input (or REFERENCE), and the seconds the
+//! remeshing took.
 
 use std::time::Instant;
 
@@ -57,16 +59,25 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     let after = mesh_core::remesh::quality(&p, &f)?;
     mesh_core::io::write_mesh(&a[1], &mesh_core::TriMesh::new(p.clone(), f.clone()), None)?;
-    let h = match a.get(5) {
-        Some(reference) => {
-            let r = mesh_core::io::read_mesh(reference)?;
-            mesh_core::remesh::hausdorff(&p, &f, &r.positions, &r.faces)?
+    let reference = match a.get(5) {
+        Some(path) => {
+            let r = mesh_core::io::read_mesh(path)?;
+            (r.positions, r.faces)
         }
-        None => mesh_core::remesh::hausdorff(&p, &f, &m.positions, &m.faces)?,
+        None => (m.positions.clone(), m.faces.clone()),
     };
+    let h = mesh_core::remesh::hausdorff(&p, &f, &reference.0, &reference.1)?;
+    // Self-intersecting face pairs (exact) of the output and of the input it came from.
+    let pairs_out = mesh_core::intersect::self_intersections(&p, &f)?
+        .pairs
+        .len();
+    let pairs_in = mesh_core::intersect::self_intersections(&reference.0, &reference.1)?
+        .pairs
+        .len();
     println!(
         "{{\"before\": {}, \"after\": {}, \"hausdorff_out_to_in_percent_of_diagonal\": {}, \
-         \"hausdorff_in_to_out_percent_of_diagonal\": {}, \"seconds\": {seconds}}}",
+         \"hausdorff_in_to_out_percent_of_diagonal\": {}, \"self_intersecting_pairs_out\": \
+         {pairs_out}, \"self_intersecting_pairs_in\": {pairs_in}, \"seconds\": {seconds}}}",
         q(&before),
         q(&after),
         100.0 * h.a_to_b / before.diagonal,

@@ -396,6 +396,7 @@ pub fn remesh(
     }
     if options.iterations > 0 {
         r.clean_up(&surface);
+        r.repair_new_intersections(positions, &kept, &surface)?;
     }
     let (positions, faces) = r.mesh.compact();
     let source_faces = faces
@@ -1359,6 +1360,353 @@ impl<'a> Remesher<'a> {
     }
 }
 
+/// What [`Remesher::repair_new_intersections`] may do to remove one intersecting pair.
+#[derive(Clone, Copy, Debug)]
+enum Untangle {
+    /// Move a free vertex to this point (on the input).
+    Move(u32, [f64; 3]),
+    /// Flip this edge.
+    Flip(usize),
+    /// Collapse this half-edge into its head, which keeps its position.
+    Collapse(u32),
+    /// The same, also when the removed vertex lies on a feature line or is a corner (the last
+    /// resort where crossing feature lines locked every other repair).
+    CollapseAcrossFeatures(u32),
+}
+
+impl Remesher<'_> {
+    /// The live face slots in the order [`HalfEdgeMesh::compact`] numbers the faces.
+    fn live_face_slots(&self) -> Vec<u32> {
+        (0..self.mesh.num_face_slots())
+            .filter(|&f| self.mesh.face_live(f))
+            .map(|f| f as u32)
+            .collect()
+    }
+
+    /// Intersecting face pairs (`mesh_core::intersect`, exact) among the faces around the
+    /// vertices within [`UNTANGLE_RINGS`] edges of the live vertices of `seeds`.
+    fn local_pairs(&self, seeds: &[u32]) -> Result<usize, RemeshError> {
+        let m = &*self.mesh;
+        let mut ring = Vec::new();
+        let mut verts: Vec<u32> = seeds
+            .iter()
+            .copied()
+            .filter(|&v| m.vertex_live(v as usize))
+            .collect();
+        verts.sort_unstable();
+        verts.dedup();
+        let mut frontier = verts.clone();
+        for _ in 0..UNTANGLE_RINGS {
+            let mut next = Vec::new();
+            for &v in &frontier {
+                m.outgoing(v, &mut ring);
+                next.extend(ring.iter().map(|&g| m.to(g)));
+            }
+            next.sort_unstable();
+            next.dedup();
+            next.retain(|v| verts.binary_search(v).is_err());
+            verts.extend(&next);
+            verts.sort_unstable();
+            frontier = next;
+        }
+        let mut faces: Vec<u32> = Vec::new();
+        for &v in &verts {
+            m.outgoing(v, &mut ring);
+            faces.extend(
+                ring.iter()
+                    .filter(|&&g| !m.is_boundary_halfedge(g))
+                    .map(|&g| m.face_of(g)),
+            );
+        }
+        faces.sort_unstable();
+        faces.dedup();
+        let mut index = std::collections::BTreeMap::new();
+        let mut positions = Vec::new();
+        let local: Vec<[u32; 3]> = faces
+            .iter()
+            .map(|&f| {
+                m.face_vertices(f).map(|v| {
+                    *index.entry(v).or_insert_with(|| {
+                        positions.push(m.pos[v as usize]);
+                        (positions.len() - 1) as u32
+                    })
+                })
+            })
+            .collect();
+        match crate::intersect::self_intersections(&positions, &local) {
+            Ok(s) => Ok(s.pairs.len()),
+            Err(crate::intersect::IntersectError::Mesh(e)) => Err(e.into()),
+            Err(_) => Ok(0),
+        }
+    }
+
+    /// The local repairs of the pair of face slots `fa`, `fb`, in the order they are tried:
+    /// moving each free vertex of the two faces to the centroid of its neighbours (or half-way),
+    /// projected onto the input; flipping each of their edges; collapsing each of their edges
+    /// shorter than `4/3·L` into either end.
+    fn untangle_candidates(&mut self, fa: u32, fb: u32, surface: &Bvh) -> Vec<Untangle> {
+        let counts = self.feature_counts();
+        let mut out = Vec::new();
+        let mut ring = Vec::new();
+        let mut seen = Vec::new();
+        // The pair's vertices first, then their neighbours.
+        let mut near: Vec<u32> = Vec::new();
+        for f in [fa, fb] {
+            near.extend(self.mesh.face_vertices(f));
+        }
+        let first = near.clone();
+        for &v in &first {
+            self.mesh.outgoing(v, &mut ring);
+            near.extend(ring.iter().map(|&g| self.mesh.to(g)));
+        }
+        for v in near {
+            let vi = v as usize;
+            if seen.contains(&v) || self.mesh.locked[vi] {
+                continue;
+            }
+            seen.push(v);
+            if counts[vi] == 2 {
+                // A feature vertex slides along its line: half or a quarter of the way to either
+                // feature neighbour, onto the input's feature lines.
+                self.mesh.outgoing(v, &mut ring);
+                let p = self.mesh.pos[vi];
+                for &g in &ring {
+                    if !self.mesh.feature[(g / 2) as usize] {
+                        continue;
+                    }
+                    let q = self.mesh.pos[self.mesh.to(g) as usize];
+                    for t in [0.5, 0.25] {
+                        let x = [0, 1, 2].map(|k| p[k] + t * (q[k] - p[k]));
+                        if let Some(c) = self.lines.closest_point(x) {
+                            out.push(Untangle::Move(v, c.point));
+                        }
+                    }
+                }
+                continue;
+            }
+            if counts[vi] != 0 || self.mesh.is_boundary_vertex(v) {
+                continue;
+            }
+            {
+                self.mesh.outgoing(v, &mut ring);
+                let n = ring.len() as f64;
+                let mut c = [0.0; 3];
+                for &g in &ring {
+                    let q = self.mesh.pos[self.mesh.to(g) as usize];
+                    for k in 0..3 {
+                        c[k] += q[k] / n;
+                    }
+                }
+                let p = self.mesh.pos[vi];
+                for t in [1.0, 0.5] {
+                    let x = [0, 1, 2].map(|k| p[k] + t * (c[k] - p[k]));
+                    if let Some(q) = surface.closest_point(x) {
+                        out.push(Untangle::Move(v, q.point));
+                    }
+                }
+            }
+        }
+        let mut edges = Vec::new();
+        for f in [fa, fb] {
+            let mut h = self.mesh.face_halfedge(f);
+            for _ in 0..3 {
+                edges.push(h);
+                h = self.mesh.next(h);
+            }
+        }
+        for &h in &edges {
+            out.push(Untangle::Flip((h / 2) as usize));
+        }
+        for &h in &edges {
+            if self.mesh.edge_length((h / 2) as usize) < self.hi {
+                out.push(Untangle::Collapse(h));
+                out.push(Untangle::Collapse(opp(h)));
+            }
+        }
+        for &h in &edges {
+            if self.mesh.edge_length((h / 2) as usize) < self.hi {
+                out.push(Untangle::CollapseAcrossFeatures(h));
+                out.push(Untangle::CollapseAcrossFeatures(opp(h)));
+            }
+        }
+        out
+    }
+
+    /// Applies `op` when it is legal (the rules of the rounds: a flip of a non-feature interior
+    /// edge that folds neither new face and passes the surface-distance guard; a collapse that
+    /// [`Self::collapse_ok`] allows; a move that turns no face's normal by 90° or more). Returns
+    /// the state before, to restore, or `None` when `op` is not legal.
+    fn apply_untangle(&mut self, op: Untangle) -> Option<(HalfEdgeMesh, Vec<u32>)> {
+        let m = &*self.mesh;
+        match op {
+            Untangle::Move(v, q) => {
+                let mut ring = Vec::new();
+                m.outgoing(v, &mut ring);
+                for &g in &ring {
+                    if m.is_boundary_halfedge(g) {
+                        continue;
+                    }
+                    let f = m.face_vertices(m.face_of(g));
+                    let before = tri_cross(&m.pos, f);
+                    let p = f.map(|w| if w == v { q } else { m.pos[w as usize] });
+                    let after = cross(sub(p[1], p[0]), sub(p[2], p[0]));
+                    if dot(before, after) <= 0.0 {
+                        return None;
+                    }
+                }
+                let saved = (m.clone(), self.hints.clone());
+                self.mesh.pos[v as usize] = q;
+                Some(saved)
+            }
+            Untangle::Flip(e) => {
+                let mut ring = Vec::new();
+                let FlipQuad {
+                    a,
+                    b,
+                    pa,
+                    pb,
+                    pc,
+                    pd,
+                    ..
+                } = flip_quad(m, e, &mut ring)?;
+                if m.valence(a) <= 3 || m.valence(b) <= 3 {
+                    return None;
+                }
+                let n_old = pair_normal(pa, pb, pc, pd);
+                let n1 = cross(sub(pd, pa), sub(pc, pa));
+                let n2 = cross(sub(pb, pd), sub(pc, pd));
+                if dot(n1, n2) <= 0.0 || dot(n1, n_old) <= 0.0 || dot(n2, n_old) <= 0.0 {
+                    return None;
+                }
+                if !self.flip_keeps_surface(a, [pa, pb, pc, pd]) {
+                    return None;
+                }
+                let saved = (m.clone(), self.hints.clone());
+                self.mesh.flip(e);
+                Some(saved)
+            }
+            Untangle::Collapse(h) | Untangle::CollapseAcrossFeatures(h) => {
+                if !m.edge_live((h / 2) as usize) {
+                    return None;
+                }
+                let counts = self.feature_counts();
+                let target = m.pos[m.to(h) as usize];
+                let ok = if let Untangle::CollapseAcrossFeatures(_) = op {
+                    // The removed vertex's feature rules are waived (the kept one's stay): its
+                    // lock lifted, no feature edge counted.
+                    let v0 = m.from(h) as usize;
+                    let was_locked = m.locked[v0];
+                    self.mesh.locked[v0] = false;
+                    let ok = self.collapse_ok(h, &vec![0; counts.len()], target);
+                    self.mesh.locked[v0] = was_locked;
+                    ok
+                } else {
+                    self.collapse_ok(h, &counts, target)
+                };
+                if !ok {
+                    return None;
+                }
+                let saved = (self.mesh.clone(), self.hints.clone());
+                let mut counts = counts;
+                self.collapse_and_recount(h, &mut counts);
+                Some(saved)
+            }
+        }
+    }
+
+    /// The final pass that removes self-intersections the remeshing created: finds every
+    /// intersecting face pair of the current mesh (`mesh_core::intersect`, exact predicates); a
+    /// pair is *inherited* when the input itself intersects within `L` of either face's centroid
+    /// (the input is checked only when the output has a pair); every other pair is *new* and is
+    /// repaired locally by the first candidate of [`Self::untangle_candidates`] that is legal
+    /// ([`Self::apply_untangle`]) and lowers the number of intersecting pairs among the faces within
+    /// [`UNTANGLE_RINGS`] edges of the pair, repeated (up to [`UNTANGLE_PASSES`] passes) until
+    /// no new pair is left or no candidate helps.
+    fn repair_new_intersections(
+        &mut self,
+        input_positions: &[[f64; 3]],
+        input_faces: &[[u32; 3]],
+        surface: &Bvh,
+    ) -> Result<(), RemeshError> {
+        let mut inherited_near: Option<Option<Bvh>> = None;
+        for _ in 0..UNTANGLE_PASSES {
+            let (p, f) = self.mesh.compact();
+            let slots = self.live_face_slots();
+            let pairs = match crate::intersect::self_intersections(&p, &f) {
+                Ok(s) => s.pairs,
+                Err(crate::intersect::IntersectError::Mesh(e)) => return Err(e.into()),
+                Err(_) => return Ok(()),
+            };
+            if pairs.is_empty() {
+                return Ok(());
+            }
+            if inherited_near.is_none() {
+                let input = match crate::intersect::self_intersections(input_positions, input_faces)
+                {
+                    Ok(s) => s,
+                    Err(crate::intersect::IntersectError::Mesh(e)) => return Err(e.into()),
+                    Err(_) => return Ok(()),
+                };
+                let involved: Vec<[u32; 3]> = input
+                    .faces
+                    .iter()
+                    .map(|&i| input_faces[i as usize])
+                    .collect();
+                inherited_near = Some(if involved.is_empty() {
+                    None
+                } else {
+                    Some(Bvh::new(input_positions, &involved)?)
+                });
+            }
+            let near = inherited_near.as_ref().and_then(|b| b.as_ref());
+            let reach = self.hi * 0.75; // L
+            let is_new = |i: u32, j: u32| match near {
+                None => true,
+                Some(b) => ![i, j].iter().any(|&k| {
+                    b.closest_point(centroid(&p, f[k as usize]))
+                        .is_some_and(|c| c.distance_squared.sqrt() <= reach)
+                }),
+            };
+            let mut progress = false;
+            let mut any_new = false;
+            for &(i, j) in &pairs {
+                if !is_new(i, j) {
+                    continue;
+                }
+                any_new = true;
+                let (fa, fb) = (slots[i as usize], slots[j as usize]);
+                // An earlier repair in this pass may have removed or changed these faces.
+                if !self.mesh.face_live(fa as usize) || !self.mesh.face_live(fb as usize) {
+                    continue;
+                }
+                let seeds: Vec<u32> = [fa, fb]
+                    .iter()
+                    .flat_map(|&g| self.mesh.face_vertices(g))
+                    .collect();
+                let before = self.local_pairs(&seeds)?;
+                if before == 0 {
+                    continue; // already repaired by a neighbour's repair
+                }
+                for op in self.untangle_candidates(fa, fb, surface) {
+                    let Some((saved_mesh, saved_hints)) = self.apply_untangle(op) else {
+                        continue;
+                    };
+                    if self.local_pairs(&seeds)? < before {
+                        progress = true;
+                        break;
+                    }
+                    *self.mesh = saved_mesh;
+                    self.hints = saved_hints;
+                }
+            }
+            if !any_new || !progress {
+                return Ok(());
+            }
+        }
+        Ok(())
+    }
+}
+
 /// The distance from `p` to the nearest of the triangles `fan` (`∞` for none).
 fn fan_distance(p: [f64; 3], fan: &[[[f64; 3]; 3]]) -> f64 {
     fan.iter()
@@ -1378,6 +1726,14 @@ const SURFACE_GUARD: f64 = 0.25;
 
 /// Clean-up passes after the last round (`Remesher::clean_up`).
 const CLEANUP_PASSES: usize = 5;
+
+/// The repair of self-intersections the remeshing created
+/// (`Remesher::repair_new_intersections`) runs at most this many passes over the pairs.
+const UNTANGLE_PASSES: usize = 10;
+
+/// The repair judges a candidate by the intersecting pairs among the faces around the vertices
+/// within this many edges of the pair's vertices.
+const UNTANGLE_RINGS: usize = 2;
 
 /// The clean-up flips a pair with a corner under this whenever that raises its minimum angle.
 const CLEANUP_FLIP_ANGLE: f64 = 20.0 * std::f64::consts::PI / 180.0;
