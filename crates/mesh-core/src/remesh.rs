@@ -1540,6 +1540,9 @@ impl Remesher<'_> {
         let m = &*self.mesh;
         match op {
             Untangle::Move(v, q) => {
+                // Every face around the moved vertex must face the way the input does under its
+                // centroid (the face it replaces may already be folded, so the face's own old
+                // normal is no reference).
                 let mut ring = Vec::new();
                 m.outgoing(v, &mut ring);
                 for &g in &ring {
@@ -1547,10 +1550,14 @@ impl Remesher<'_> {
                         continue;
                     }
                     let f = m.face_vertices(m.face_of(g));
-                    let before = tri_cross(&m.pos, f);
                     let p = f.map(|w| if w == v { q } else { m.pos[w as usize] });
-                    let after = cross(sub(p[1], p[0]), sub(p[2], p[0]));
-                    if dot(before, after) <= 0.0 {
+                    let n = cross(sub(p[1], p[0]), sub(p[2], p[0]));
+                    let c = [0, 1, 2].map(|k| (p[0][k] + p[1][k] + p[2][k]) / 3.0);
+                    let Some(on) = self.surface.closest_point(c) else {
+                        return None;
+                    };
+                    let [a, b, cc] = self.surface.triangle(on.face);
+                    if dot(n, cross(sub(b, a), sub(cc, a))) <= 0.0 {
                         return None;
                     }
                 }

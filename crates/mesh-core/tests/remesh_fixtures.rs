@@ -8,6 +8,7 @@ use std::time::Instant;
 
 use mesh_core::bvh::Bvh;
 use mesh_core::geometry::bbox_diagonal;
+use mesh_core::intersect::self_intersections;
 use mesh_core::io::read_mesh;
 use mesh_core::remesh::{Quality, RemeshOptions, Remeshed, hausdorff, quality, remesh};
 use mesh_core::topology::{boundary_edges, connected_components, edges, graph_components};
@@ -93,6 +94,19 @@ fn remesh_and_report(
         "{name}"
     );
     assert!(out.source_faces.iter().all(|&s| (s as usize) < f.len()));
+    // The remesher repairs the self-intersections it creates: an input without intersecting
+    // face pairs gives an output without any (exact check).
+    let pairs_in = self_intersections(p, f).expect("check").pairs.len();
+    let pairs_out = self_intersections(&out.positions, &out.faces)
+        .expect("check")
+        .pairs;
+    println!(
+        "{name:>12}: self-intersecting face pairs {pairs_in} -> {}",
+        pairs_out.len()
+    );
+    if pairs_in == 0 {
+        assert!(pairs_out.is_empty(), "{name}: new pairs {pairs_out:?}");
+    }
     (out, l, before, after)
 }
 
