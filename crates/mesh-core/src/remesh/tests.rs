@@ -651,21 +651,23 @@ fn a_part_thinner_than_the_target_length_does_not_self_intersect() {
 fn a_fold_the_remeshing_left_is_repaired() {
     let (p, f) = grid(6);
     let l = 1.0 / 6.0;
-    let surface = Bvh::new(&p, &f).unwrap();
-    let mut mesh = HalfEdgeMesh::new(&p, &f).unwrap();
-    let mut r = Remesher::new(&mut mesh, &p, &f, &RemeshOptions::new(l), &surface).unwrap();
+    let surface = Bvh::new(&p, &f).expect("bvh");
+    let mut mesh = HalfEdgeMesh::new(&p, &f).expect("mesh");
+    let mut r =
+        Remesher::new(&mut mesh, &p, &f, &RemeshOptions::new(l), &surface).expect("remesher");
     let v = 3 * 7 + 3; // (0.5, 0.5), interior
     r.mesh.pos[v] = [0.5 + 1.6 * l, 0.5 + 0.3 * l, 0.0];
     let (fp, ff) = r.mesh.compact();
-    let folded = crate::intersect::self_intersections(&fp, &ff).unwrap();
+    let folded = crate::intersect::self_intersections(&fp, &ff).expect("check");
     assert!(
         !folded.pairs.is_empty(),
         "the hand-made fold must intersect"
     );
-    r.repair_new_intersections(&p, &f, &surface).unwrap();
+    r.repair_new_intersections(&p, &f, &surface)
+        .expect("remesher");
     r.mesh.check().expect("consistent after the repair");
     let (rp, rf) = r.mesh.compact();
-    let after = crate::intersect::self_intersections(&rp, &rf).unwrap();
+    let after = crate::intersect::self_intersections(&rp, &rf).expect("check");
     assert!(after.pairs.is_empty(), "pairs left: {:?}", after.pairs);
     assert!(
         rp.iter().all(|q| q[2].abs() < 1e-12),
