@@ -55,7 +55,7 @@
 //! range); NaN or infinite coordinates of a vertex used by a face, an out-of-range index and a
 //! mesh with no faces are refused with an [`IntersectError`].
 
-use crate::bvh::{Bvh, BvhError};
+use crate::bvh::{BvhError, PairTree};
 use crate::predicates::{Sign, orient2d_projected, orient3d_unchecked};
 
 /// What the self-intersection check refuses.
@@ -153,7 +153,12 @@ pub fn self_intersections(
 /// check the same mesh at many deformations (a λ slider).
 #[derive(Clone, Debug)]
 pub struct SelfIntersectionChecker {
-    bvh: Bvh,
+    /// The pair traversal's tree ([`PairTree::for_mesh`]).
+    tree: PairTree,
+    /// Leaf order → face.
+    order: Vec<u32>,
+    /// The faces in leaf order.
+    slots: Vec<[u32; 3]>,
     face_component: Vec<u32>,
     component_faces: Vec<usize>,
     /// The current positions (the fans' certificates read them).
@@ -161,8 +166,6 @@ pub struct SelfIntersectionChecker {
     fans: Fans,
     /// Threads of [`check`](Self::check) (1: the calling thread only).
     threads: usize,
-    /// The BVH's compact copy for the pair traversal, refreshed in place at each update.
-    pair_tree: Option<crate::bvh::PairTree>,
 }
 
 impl SelfIntersectionChecker {
@@ -175,7 +178,8 @@ impl SelfIntersectionChecker {
         if faces.is_empty() {
             return Err(IntersectError::Empty);
         }
-        let bvh = Bvh::for_pairs(positions, faces)?;
+        let (tree, order) = PairTree::for_mesh(positions, faces)?;
+        let slots: Vec<[u32; 3]> = order.iter().map(|&f| faces[f as usize]).collect();
         // Two edges per face join its three corners (the third edge adds nothing); the indices
         // were checked by the tree.
         let (labels, num_labels) = crate::topology::graph_components(
@@ -201,13 +205,14 @@ impl SelfIntersectionChecker {
             component_faces[c as usize] += 1;
         }
         Ok(SelfIntersectionChecker {
+            tree,
+            order,
+            slots,
             face_component,
             component_faces,
             positions: positions.to_vec(),
             fans: Fans::new(positions.len(), faces),
             threads: 1,
-            pair_tree: bvh.pair_tree(),
-            bvh,
         })
     }
 
@@ -220,18 +225,37 @@ impl SelfIntersectionChecker {
 
     /// Number of faces.
     pub fn num_faces(&self) -> usize {
-        self.bvh.len()
+        self.order.len()
     }
 
     /// Moves the vertices (refits the tree; same vertex count). Refuses a different vertex count
     /// or a non-finite vertex, leaving the checker unchanged.
     pub fn update(&mut self, positions: &[[f64; 3]]) -> Result<(), IntersectError> {
-        self.bvh.refit(positions)?;
-        if let Some(tree) = &mut self.pair_tree {
-            self.bvh.refresh_pair_tree(tree);
+        if positions.len() != self.positions.len() {
+            return Err(BvhError::VertexCount {
+                expected: self.positions.len(),
+                got: positions.len(),
+            }
+            .into());
+        }
+        // The first face (in index order) with a non-finite corner, and its first such corner.
+        let finite = |v: u32| positions[v as usize].iter().all(|c| c.is_finite());
+        let bad_face = (0..self.slots.len())
+            .filter(|&x| !self.slots[x].iter().all(|&v| finite(v)))
+            .min_by_key(|&x| self.order[x]);
+        if let Some(x) = bad_face
+            && let Some(&v) = self.slots[x].iter().find(|&&v| !finite(v))
+        {
+            return Err(BvhError::NonFinite {
+                vertex: v as usize,
+                position: positions[v as usize],
+            }
+            .into());
         }
         self.positions.clear();
         self.positions.extend_from_slice(positions);
+        let (slots, positions) = (&self.slots, &self.positions);
+        self.tree.refit(|x| slots[x].map(|v| positions[v as usize]));
         Ok(())
     }
 
@@ -246,33 +270,25 @@ impl SelfIntersectionChecker {
 
     /// The self-intersections at the current positions.
     pub fn check(&self) -> SelfIntersections {
-        let faces = self.bvh.faces();
-        // Per face, a bit for each corner whose fan is certified (`Fans`): a pair sharing such a
-        // corner cannot intersect.
-        let certified = self.fans.certify(&self.positions);
-        let corner_mask: Vec<u8> = faces
+        let (order, slots, positions) = (&self.order, &self.slots, &self.positions);
+        let corners = |f: [u32; 3]| f.map(|v| positions[v as usize]);
+        // Per face in the tree's leaf order (which the traversal walks), a bit for each corner
+        // whose fan is certified (`Fans`): a pair sharing such a corner cannot intersect.
+        let certified = self.fans.certify(positions);
+        let masks: Vec<u8> = slots
             .iter()
             .map(|f| (0..3).fold(0u8, |m, i| m | (u8::from(certified[f[i] as usize]) << i)))
             .collect();
-        // The faces and their masks in the tree's leaf order, which the traversal walks.
-        let order = self.bvh.leaf_order();
-        let slots: Vec<[u32; 4]> = order
-            .iter()
-            .map(|&f| {
-                let v = faces[f as usize];
-                [v[0], v[1], v[2], u32::from(corner_mask[f as usize])]
-            })
-            .collect();
         // A face with a certified corner is a proper triangle (its fan's projection keeps it
         // one); the others are tested exactly.
-        let degenerate: Vec<u32> = (0..faces.len() as u32)
-            .filter(|&f| {
-                corner_mask[f as usize] == 0 && Tri::new(self.bvh.triangle(f)).drop.is_none()
-            })
+        let mut degenerate: Vec<u32> = (0..slots.len())
+            .filter(|&x| masks[x] == 0 && Tri::new(corners(slots[x])).drop.is_none())
+            .map(|x| order[x])
             .collect();
+        degenerate.sort_unstable();
         // The traversal, each candidate sharing no certified vertex tested exactly; split into
         // tasks over `threads` threads when asked (the candidates and pairs are the same).
-        let run = |tree: &crate::bvh::PairTree, seeds: &[(u32, u32)]| {
+        let run = |tree: &PairTree, seeds: &[(u32, u32)]| {
             let mut pairs = Vec::new();
             let mut candidates = 0usize;
             // The tested faces' projection axes, in a small direct-mapped cache (a face of a
@@ -287,14 +303,18 @@ impl SelfIntersectionChecker {
             };
             tree.traverse(seeds, |x, y| {
                 candidates += 1;
-                let (sa, sb) = (slots[x], slots[y]);
-                let mask = sa[3];
-                if mask != 0 && (0..3).any(|i| mask & (1 << i) != 0 && sb[..3].contains(&sa[i])) {
+                let (sx, sy) = (slots[x], slots[y]);
+                let mask = masks[x];
+                if mask != 0 && (0..3).any(|i| mask & (1 << i) != 0 && sy.contains(&sx[i])) {
                     return;
                 }
-                let (a, b) = (order[x].min(order[y]), order[x].max(order[y]));
-                let (fa, fb) = (faces[a as usize], faces[b as usize]);
-                let (pa, pb) = (self.bvh.triangle(a), self.bvh.triangle(b));
+                let (ox, oy) = (order[x], order[y]);
+                let (a, fa, b, fb) = if ox < oy {
+                    (ox, sx, oy, sy)
+                } else {
+                    (oy, sy, ox, sx)
+                };
+                let (pa, pb) = (corners(fa), corners(fb));
                 if quickly_apart(fa, &pa, fb, &pb) {
                     return;
                 }
@@ -305,10 +325,10 @@ impl SelfIntersectionChecker {
             });
             (pairs, candidates)
         };
-        let (mut pairs, candidates) = match &self.pair_tree {
-            None => (Vec::new(), 0),
-            Some(tree) if self.threads <= 1 => run(tree, &[(0, 0)]),
-            Some(tree) => {
+        let tree = &self.tree;
+        let (mut pairs, candidates) = match self.threads {
+            0 | 1 => run(tree, &[(0, 0)]),
+            _ => {
                 // Tasks by weight, largest first, each to the least loaded thread.
                 let mut tasks = tree.tasks(8 * self.threads);
                 tasks.sort_by_key(|t| std::cmp::Reverse(t.1));
@@ -376,7 +396,7 @@ impl SelfIntersectionChecker {
             faces: involved,
             degenerate,
             per_component,
-            num_faces: faces.len(),
+            num_faces: slots.len(),
             candidates,
         }
     }
