@@ -930,6 +930,22 @@ impl PairTree {
     /// Calls `emit(x, y)` (positions in leaf order, `x ≠ y`) for every candidate pair under the
     /// node pairs `seeds` (see [`Bvh::for_each_candidate_pair`]).
     pub(crate) fn traverse(&self, seeds: &[(u32, u32)], mut emit: impl FnMut(usize, usize)) {
+        self.traverse_masks(seeds, |x, start, mut mask| {
+            while mask != 0 {
+                emit(x, start + mask.trailing_zeros() as usize);
+                mask &= mask - 1;
+            }
+        });
+    }
+
+    /// [`traverse`](Self::traverse) by face and leaf: `emit(x, start, mask)` stands for the
+    /// candidates `(x, start + t)` for each bit `t` set in `mask` (never 0; `start + t ≠ x`), so
+    /// a caller can handle a face against a leaf's faces at once.
+    pub(crate) fn traverse_masks(
+        &self,
+        seeds: &[(u32, u32)],
+        mut emit: impl FnMut(usize, usize, u32),
+    ) {
         let (nodes, leaf) = (&self.nodes, &self.leaf);
         if nodes.is_empty() {
             return;
@@ -945,10 +961,9 @@ impl PairTree {
                     let r = a.faces();
                     for x in r.clone() {
                         let bx = leaf.get(x);
-                        let mut mask = leaf.overlap_mask(&bx, x + 1..r.end);
-                        while mask != 0 {
-                            emit(x, x + 1 + mask.trailing_zeros() as usize);
-                            mask &= mask - 1;
+                        let mask = leaf.overlap_mask(&bx, x + 1..r.end);
+                        if mask != 0 {
+                            emit(x, x + 1, mask);
                         }
                     }
                 } else {
@@ -969,10 +984,9 @@ impl PairTree {
                     if !bx.overlaps(&b.bounds) {
                         continue;
                     }
-                    let mut mask = leaf.overlap_mask(&bx, rb.clone());
-                    while mask != 0 {
-                        emit(x, rb.start + mask.trailing_zeros() as usize);
-                        mask &= mask - 1;
+                    let mask = leaf.overlap_mask(&bx, rb.clone());
+                    if mask != 0 {
+                        emit(x, rb.start, mask);
                     }
                 }
                 continue;

@@ -294,33 +294,23 @@ impl SelfIntersectionChecker {
             // The tested faces' projection axes, in a small direct-mapped cache (a face of a
             // crumpled mesh is tested against many others; the tested pairs come in leaf order).
             let mut cache = vec![(u32::MAX, Tri::new([[0.0; 3]; 3])); TRI_CACHE];
-            let mut tri = |f: u32, p: [[f64; 3]; 3]| {
-                let e = &mut cache[f as usize % TRI_CACHE];
-                if e.0 != f {
-                    *e = (f, Tri::new(p));
-                }
-                e.1
-            };
-            tree.traverse(seeds, |x, y| {
-                candidates += 1;
-                let (sx, sy) = (slots[x], slots[y]);
-                let mask = masks[x];
-                if mask != 0 && (0..3).any(|i| mask & (1 << i) != 0 && sy.contains(&sx[i])) {
-                    return;
-                }
-                let (ox, oy) = (order[x], order[y]);
-                let (a, fa, b, fb) = if ox < oy {
-                    (ox, sx, oy, sy)
-                } else {
-                    (oy, sy, ox, sx)
-                };
-                let (pa, pb) = (corners(fa), corners(fb));
-                if quickly_apart(fa, &pa, fb, &pb) {
-                    return;
-                }
-                let (ta, tb) = (tri(a, pa), tri(b, pb));
-                if faces_intersect_filtered::<false>(fa, &ta, fb, &tb) {
-                    pairs.push((a, b));
+            tree.traverse_masks(seeds, |x, start, mut overlaps| {
+                // A face against a leaf's faces: the count and the certified-corner skip, which
+                // decide most candidates; the rest is tested out of line.
+                candidates += overlaps.count_ones() as usize;
+                let (sx, mask) = (slots[x], masks[x]);
+                while overlaps != 0 {
+                    let y = start + overlaps.trailing_zeros() as usize;
+                    overlaps &= overlaps - 1;
+                    let sy = slots[y];
+                    if mask != 0 && (0..3).any(|i| mask & (1 << i) != 0 && sy.contains(&sx[i])) {
+                        continue;
+                    }
+                    if let Some(pair) =
+                        test_candidate(order, positions, &mut cache, (x, sx), (y, sy))
+                    {
+                        pairs.push(pair);
+                    }
                 }
             });
             (pairs, candidates)
@@ -571,6 +561,40 @@ fn fan_is_star(positions: &[[f64; 3]], pv: [f64; 3], l: &[u32], closed: bool) ->
         orient2d_projected(pv, at(i), r0, axis) == want
             && orient2d_projected(pv, r0, at(i + 1), axis) != want.flip()
     })
+}
+
+/// The exact test of the candidate at leaf positions `x` and `y` (with their faces `sx`, `sy`):
+/// the pair `(a, b)`, `a < b`, when the faces intersect. `cache` holds recently tested faces'
+/// [`Tri`]s (direct-mapped by face index, [`TRI_CACHE`] entries). Kept out of line, so that the
+/// traversal's loop, which calls it for a few per cent of the candidates, stays small.
+#[inline(never)]
+fn test_candidate(
+    order: &[u32],
+    positions: &[[f64; 3]],
+    cache: &mut [(u32, Tri)],
+    (x, sx): (usize, [u32; 3]),
+    (y, sy): (usize, [u32; 3]),
+) -> Option<(u32, u32)> {
+    let corners = |f: [u32; 3]| f.map(|v| positions[v as usize]);
+    let (ox, oy) = (order[x], order[y]);
+    let (a, fa, b, fb) = if ox < oy {
+        (ox, sx, oy, sy)
+    } else {
+        (oy, sy, ox, sx)
+    };
+    let (pa, pb) = (corners(fa), corners(fb));
+    if quickly_apart(fa, &pa, fb, &pb) {
+        return None;
+    }
+    let mut tri = |f: u32, p: [[f64; 3]; 3]| {
+        let e = &mut cache[f as usize % TRI_CACHE];
+        if e.0 != f {
+            *e = (f, Tri::new(p));
+        }
+        e.1
+    };
+    let (ta, tb) = (tri(a, pa), tri(b, pb));
+    faces_intersect_filtered::<false>(fa, &ta, fb, &tb).then_some((a, b))
 }
 
 /// Entries of the check's cache of [`Tri`]s (per thread).
