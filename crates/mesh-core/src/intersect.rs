@@ -299,12 +299,23 @@ impl SelfIntersectionChecker {
                 // decide most candidates; the rest is tested out of line.
                 candidates += overlaps.count_ones() as usize;
                 let (sx, mask) = (slots[x], masks[x]);
+                // The certified corners of `x`, an uncertified one replaced by a certified one
+                // (a repeat changes nothing), so the skip below is branch-free.
+                let certified = if mask == 0 {
+                    None
+                } else {
+                    let first = sx[mask.trailing_zeros() as usize];
+                    Some([0, 1, 2].map(|i| if mask & (1 << i) != 0 { sx[i] } else { first }))
+                };
                 while overlaps != 0 {
                     let y = start + overlaps.trailing_zeros() as usize;
                     overlaps &= overlaps - 1;
                     let sy = slots[y];
-                    if mask != 0 && (0..3).any(|i| mask & (1 << i) != 0 && sy.contains(&sx[i])) {
-                        continue;
+                    if let Some(c) = certified {
+                        let has = |v: u32| (sy[0] == v) | (sy[1] == v) | (sy[2] == v);
+                        if has(c[0]) | has(c[1]) | has(c[2]) {
+                            continue;
+                        }
                     }
                     if let Some(pair) =
                         test_candidate(order, positions, &mut cache, (x, sx), (y, sy))
