@@ -780,8 +780,8 @@ pub(crate) struct PairTree {
 
 impl PairTree {
     /// The pair traversal's tree over a mesh, built straight from the vertices for callers that
-    /// need no other query (the self-intersection checker), with the faces in its leaf order
-    /// (`slot → face`). Refuses a face index out of range and a non-finite vertex used by a face
+    /// need no other query (the self-intersection checker), with its leaf order (`slot → face`)
+    /// and the faces in that order. Refuses a face index out of range and a non-finite vertex used by a face
     /// (the first such face in index order, its first such corner), as [`Bvh::new`] does.
     ///
     /// The faces are sorted by the 30-bit Morton code of their centroids (10 bits per axis over
@@ -798,7 +798,7 @@ impl PairTree {
     pub(crate) fn for_mesh(
         positions: &[[f64; 3]],
         faces: &[[u32; 3]],
-    ) -> Result<(PairTree, Vec<u32>), BvhError> {
+    ) -> Result<(PairTree, Vec<u32>, Vec<[u32; 3]>), BvhError> {
         // The centroids' bounds (as sums of the corners: the factor 1/3 does not change the
         // order), checking every face on the way.
         let mut lo = [f64::INFINITY; 3];
@@ -856,8 +856,9 @@ impl PairTree {
                 hi: [(); 3].map(|_| vec![0.0; faces.len()]),
             },
         };
-        tree.refit(|x| faces[order[x] as usize].map(|i| positions[i as usize]));
-        Ok((tree, order))
+        let leaf_faces: Vec<[u32; 3]> = order.iter().map(|&f| faces[f as usize]).collect();
+        tree.refit(|x| leaf_faces[x].map(|i| positions[i as usize]));
+        Ok((tree, order, leaf_faces))
     }
 
     /// Recomputes every box for moved corners, in place (no allocation): `corners(x)` gives the

@@ -178,8 +178,7 @@ impl SelfIntersectionChecker {
         if faces.is_empty() {
             return Err(IntersectError::Empty);
         }
-        let (tree, order) = PairTree::for_mesh(positions, faces)?;
-        let slots: Vec<[u32; 3]> = order.iter().map(|&f| faces[f as usize]).collect();
+        let (tree, order, slots) = PairTree::for_mesh(positions, faces)?;
         // Two edges per face join its three corners (the third edge adds nothing); the indices
         // were checked by the tree.
         let (labels, num_labels) = crate::topology::graph_components(
@@ -458,11 +457,10 @@ impl Fans {
         let mut link = Vec::with_capacity(edges.len() + num_vertices);
         let mut kind = vec![0u8; num_vertices];
         offsets.push(0u32);
-        let mut used = Vec::new();
         for v in 0..num_vertices {
             let es = &edges[count[v] as usize..count[v + 1] as usize];
             let start = link.len();
-            if let Some(k) = Self::chain(v as u32, es, &mut link, &mut used) {
+            if let Some(k) = Self::chain(v as u32, es, &mut link) {
                 kind[v] = k;
             } else {
                 link.truncate(start);
@@ -477,30 +475,43 @@ impl Fans {
     }
 
     /// Appends `v`'s ordered link to `link`; `Some(1)` closed, `Some(2)` open, `None` no fan.
-    fn chain(v: u32, es: &[(u32, u32)], link: &mut Vec<u32>, used: &mut Vec<bool>) -> Option<u8> {
+    fn chain(v: u32, es: &[(u32, u32)], link: &mut Vec<u32>) -> Option<u8> {
         let k = es.len();
         if k == 0 || k > Self::MAX_FAN {
             return None;
         }
-        if es.iter().any(|&(a, b)| a == v || b == v || a == b) {
-            return None;
-        }
+        // One pass over the pairs of edges: refuse a repeated start or end (so each edge has at
+        // most one successor, whose start is its end, and at most one predecessor), and record
+        // the successors and which edges have a predecessor.
+        const NONE: u8 = u8::MAX;
+        let mut succ = [NONE; Self::MAX_FAN];
+        let mut has_pred = 0u64;
         for (i, &(a, b)) in es.iter().enumerate() {
-            if es[i + 1..].iter().any(|&(c, d)| c == a || d == b) {
+            if a == v || b == v || a == b {
                 return None;
             }
+            for (j, &(c, d)) in es.iter().enumerate().skip(i + 1) {
+                if c == a || d == b {
+                    return None;
+                }
+                if c == b {
+                    succ[i] = j as u8;
+                    has_pred |= 1 << j;
+                }
+                if d == a {
+                    succ[j] = i as u8;
+                    has_pred |= 1 << i;
+                }
+            }
         }
-        // Open: start at the edge whose start is no edge's end; closed: anywhere.
-        let first = es
-            .iter()
-            .position(|&(a, _)| !es.iter().any(|&(_, d)| d == a));
+        // Open: start at the (first) edge without a predecessor; closed: at the first edge.
+        // Since predecessors are unique, the walk can only come back to where it started.
+        let first = (0..k).find(|&i| has_pred & (1 << i) == 0);
         let open = first.is_some();
-        let mut cur = first.unwrap_or(0);
-        used.clear();
-        used.resize(k, false);
+        let start = first.unwrap_or(0);
+        let mut cur = start;
         link.push(es[cur].0);
         for n in 0..k {
-            used[cur] = true;
             let b = es[cur].1;
             if n + 1 == k {
                 if open {
@@ -510,10 +521,11 @@ impl Fans {
                 return (b == link[link.len() - k] && k >= 3).then_some(1);
             }
             link.push(b);
-            cur = es.iter().position(|&(a, _)| a == b)?;
-            if used[cur] {
+            let next = succ[cur];
+            if next == NONE || usize::from(next) == start {
                 return None;
             }
+            cur = usize::from(next);
         }
         None
     }

@@ -454,8 +454,9 @@ fn pair_build_gives_the_same_candidates_as_the_median_build() {
     };
     for (pos, faces) in cases {
         let median = Bvh::new(&pos, &faces).expect("ok");
-        let (tree, order) = PairTree::for_mesh(&pos, &faces).expect("ok");
-        let (_, again) = PairTree::for_mesh(&pos, &faces).expect("ok");
+        let (tree, order, leaf_faces) = PairTree::for_mesh(&pos, &faces).expect("ok");
+        let (_, again, _) = PairTree::for_mesh(&pos, &faces).expect("ok");
+        assert!((0..faces.len()).all(|x| leaf_faces[x] == faces[order[x] as usize]));
         assert_eq!(order, again, "not deterministic");
         let mut sorted = order.clone();
         sorted.sort_unstable();
@@ -491,7 +492,7 @@ fn pair_build_refuses_bad_input_as_the_median_build() {
         let want = Bvh::new(&pos, &faces).map(|_| ()).expect_err("refused");
         assert_eq!(err.to_string(), want.to_string());
     }
-    let (tree, order) = PairTree::for_mesh(&pos, &[]).expect("empty is fine");
+    let (tree, order, _) = PairTree::for_mesh(&pos, &[]).expect("empty is fine");
     assert!(order.is_empty());
     tree.traverse(&[(0, 0)], |_, _| panic!("no faces, no pairs"));
     assert!(tree.tasks(4).is_empty());
