@@ -979,12 +979,13 @@ impl PairTree {
             }
             let b = &nodes[j as usize];
             if a.is_leaf() && b.is_leaf() {
-                let rb = b.faces();
-                for x in a.faces() {
+                let (ra, rb) = (a.faces(), b.faces());
+                // The faces of `a` whose boxes overlap `b`'s, found at once.
+                let mut near = leaf.overlap_mask(&b.bounds, ra.clone());
+                while near != 0 {
+                    let x = ra.start + near.trailing_zeros() as usize;
+                    near &= near - 1;
                     let bx = leaf.get(x);
-                    if !bx.overlaps(&b.bounds) {
-                        continue;
-                    }
                     let mask = leaf.overlap_mask(&bx, rb.clone());
                     if mask != 0 {
                         emit(x, rb.start, mask);
