@@ -771,6 +771,10 @@ impl PairNode {
     }
 }
 
+/// What [`PairTree::for_mesh`] builds: the tree, its leaf order (`slot → face`) and the faces in
+/// that order.
+pub(crate) type PairTreeOfMesh = (PairTree, Vec<u32>, Vec<[u32; 3]>);
+
 /// The pair traversal's compact tree: its nodes and the faces' boxes in leaf order.
 #[derive(Clone, Debug)]
 pub(crate) struct PairTree {
@@ -798,7 +802,7 @@ impl PairTree {
     pub(crate) fn for_mesh(
         positions: &[[f64; 3]],
         faces: &[[u32; 3]],
-    ) -> Result<(PairTree, Vec<u32>, Vec<[u32; 3]>), BvhError> {
+    ) -> Result<PairTreeOfMesh, BvhError> {
         // The centroids' bounds (as sums of the corners: the factor 1/3 does not change the
         // order), checking every face on the way.
         let mut lo = [f64::INFINITY; 3];
