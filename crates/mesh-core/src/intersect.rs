@@ -936,6 +936,9 @@ fn triangles_intersect_filtered<const FILTERS: bool>(ta: &Tri, tb: &Tri) -> bool
     if strictly_one_side(&sa) {
         return false;
     }
+    if !sa.contains(&Sign::Zero) && !sb.contains(&Sign::Zero) {
+        return straddling_overlap(ta, tb, sa, sb);
+    }
     if sb.iter().all(|&s| s == Sign::Zero) {
         let Some(k) = ta.drop else { return false };
         return (0..3).any(|i| segment_triangle_2d(tb.p[i], tb.p[(i + 1) % 3], ta, k))
@@ -948,6 +951,44 @@ fn triangles_intersect_filtered<const FILTERS: bool>(ta: &Tri, tb: &Tri) -> bool
         let j = (i + 1) % 3;
         segment_meets(ta.p[i], ta.p[j], sa[i], sa[j], tb)
     })
+}
+
+/// Two triangles `P = ta`, `Q = tb` that cross each other's planes with no corner on the other's
+/// plane (`sa`: the sides of `P`'s corners of `Q`'s plane, `sb`: of `Q`'s corners of `P`'s; all
+/// non-zero, neither all equal) meet iff the segments they cut on the planes' common line
+/// overlap — two more `orient3d` (the test of Guigue and Devillers, 2003) instead of the edges'
+/// crossings.
+///
+/// With `p₁` the corner of `P` alone on its side of `Q`'s plane, `q₁` that of `Q`, the corners
+/// cycled so (orientation kept) and then `q₂, q₃` swapped if `p₁` is on the negative side of `Q`
+/// and `p₂, p₃` if `q₁` is on the negative side of `P` (so `p₁` is on the side of
+/// `n_Q = (q₂ − q₁) × (q₃ − q₁)` and `q₁` on that of `n_P`): along `d = n_P × n_Q`, `P` cuts
+/// `[j, i]` (`i` on `p₁p₂`, `j` on `p₁p₃`) and `Q` cuts `[k, l]` (`k` on `q₁q₂`, `l` on `q₁q₃`),
+/// and `orient3d(p₁, p₂, q₁, q₂)` is the sign of `k − i` along `d`, `orient3d(p₁, p₃, q₁, q₃)`
+/// that of `l − j`. The closed segments overlap iff `k ≤ i` and `j ≤ l`.
+fn straddling_overlap(ta: &Tri, tb: &Tri, sa: [Sign; 3], sb: [Sign; 3]) -> bool {
+    // The corner whose side differs from the other two's.
+    let lone = |s: [Sign; 3]| {
+        if s[1] == s[2] {
+            0
+        } else if s[0] == s[2] {
+            1
+        } else {
+            2
+        }
+    };
+    let (ip, iq) = (lone(sa), lone(sb));
+    let p1 = ta.p[ip];
+    let (mut p2, mut p3) = (ta.p[(ip + 1) % 3], ta.p[(ip + 2) % 3]);
+    let q1 = tb.p[iq];
+    let (mut q2, mut q3) = (tb.p[(iq + 1) % 3], tb.p[(iq + 2) % 3]);
+    if sa[ip] == Sign::Negative {
+        std::mem::swap(&mut q2, &mut q3);
+    }
+    if sb[iq] == Sign::Negative {
+        std::mem::swap(&mut p2, &mut p3);
+    }
+    o3(p1, p2, q1, q2) != Sign::Positive && o3(p1, p3, q1, q3) != Sign::Negative
 }
 
 /// The closed segment `pq` (with the sides of `t`'s plane its ends are on) meets triangle `t`.

@@ -748,3 +748,69 @@ fn threads_give_the_same_answer() {
         assert_eq!(checker.check(), one, "{t} threads");
     }
 }
+
+/// The edge-crossing test that `straddling_overlap` replaced for the generic straddling case:
+/// every edge of each triangle against the other (the plane sides first).
+fn triangles_intersect_by_edges(ta: &Tri, tb: &Tri) -> bool {
+    let sb = plane_sides(ta, tb);
+    let sa = plane_sides(tb, ta);
+    if strictly_one_side(&sb) || strictly_one_side(&sa) {
+        return false;
+    }
+    if sb.iter().all(|&s| s == Sign::Zero) {
+        let Some(k) = ta.drop else { return false };
+        return (0..3).any(|i| segment_triangle_2d(tb.p[i], tb.p[(i + 1) % 3], ta, k))
+            || point_in_triangle_2d(ta.p[0], tb, k);
+    }
+    (0..3).any(|i| {
+        let j = (i + 1) % 3;
+        segment_meets(tb.p[i], tb.p[j], sb[i], sb[j], ta)
+    }) || (0..3).any(|i| {
+        let j = (i + 1) % 3;
+        segment_meets(ta.p[i], ta.p[j], sa[i], sa[j], tb)
+    })
+}
+
+/// The two-`orient3d` test of straddling triangles against the edge crossings, on random pairs
+/// of both orientations: generic (unit cube), on coarse grids (touching at edges and corners,
+/// corners on the other plane: the other path) and crossing near-parallel; both answers occur.
+#[test]
+fn straddling_test_agrees_with_the_edge_crossings() {
+    let mut rng = Rng::new(17);
+    let (mut straddling, mut hits) = (0, 0);
+    for round in 0..60_000 {
+        let point = |rng: &mut Rng| -> P {
+            match round % 3 {
+                0 => [rng.unit(), rng.unit(), rng.unit()],
+                1 => [0; 3].map(|_| rng.int(3) as f64),
+                _ => [rng.unit(), rng.unit(), 1e-9 * rng.unit()],
+            }
+        };
+        let a = [point(&mut rng), point(&mut rng), point(&mut rng)];
+        let mut b = [point(&mut rng), point(&mut rng), point(&mut rng)];
+        if round % 2 == 1 {
+            b.swap(1, 2);
+        }
+        let (ta, tb) = (Tri::new(a), Tri::new(b));
+        if ta.drop.is_none() || tb.drop.is_none() {
+            continue;
+        }
+        let want = triangles_intersect_by_edges(&ta, &tb);
+        assert_eq!(triangles_intersect(&ta, &tb), want, "{a:?} {b:?}");
+        assert_eq!(triangles_intersect(&tb, &ta), want, "{b:?} {a:?}");
+        let (sb, sa) = (plane_sides(&ta, &tb), plane_sides(&tb, &ta));
+        if !sa.contains(&Sign::Zero)
+            && !sb.contains(&Sign::Zero)
+            && !strictly_one_side(&sa)
+            && !strictly_one_side(&sb)
+        {
+            straddling += 1;
+            hits += usize::from(want);
+        }
+    }
+    println!("{straddling} straddling, {hits} meeting");
+    assert!(
+        straddling > 5_000 && hits > 1_000 && straddling - hits > 1_000,
+        "{straddling} {hits}"
+    );
+}
