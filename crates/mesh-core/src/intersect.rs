@@ -879,12 +879,31 @@ fn vertex_adjacent_intersect<const FILTERS: bool>(ta: &Tri, tb: &Tri) -> bool {
     if sa[1] == sa[2] && sa[1] != Sign::Zero {
         return false;
     }
+    if sa[1] != Sign::Zero && sa[2] != Sign::Zero && sb[1] != Sign::Zero && sb[2] != Sign::Zero {
+        return straddling_at_corner(ta, tb, sb[2]);
+    }
     segment_meets(a1, b1, sa[1], sa[2], tb)
         || segment_meets(a2, b2, sb[1], sb[2], ta)
         || enters_corner(a1, sa[1], tb)
         || enters_corner(b1, sa[2], tb)
         || enters_corner(a2, sb[1], ta)
         || enters_corner(b2, sb[2], ta)
+}
+
+/// `P = (v, a₁, b₁)` and `Q = (v, a₂, b₂)` sharing corner `v`, each with its other two corners
+/// strictly on both sides of the other's plane (`side_b2`: the side of `b₂` of `P`'s plane, the
+/// sign of `n_P·(b₂ − v)`, `n_P = (a₁ − v) × (b₁ − v)`): do they meet other than at `v`? The
+/// planes meet in a line through `v`; `P` cuts it in `[v, i]` (`i` strictly inside `a₁b₁`) and
+/// `Q` in `[v, k]` (`k` strictly inside `a₂b₂`), and the faces meet elsewhere iff both go the
+/// same way from `v` — iff `k` is inside `P`'s corner at `v` rather than in the opposite
+/// direction, i.e. strictly left of the ray `v → a₁` in `P`'s plane. The directed line
+/// `a₂ → b₂` pierces that plane at `k` going towards `b₂`'s side, so
+/// `orient3d(v, a₁, a₂, b₂) = sign(λ)·side_b2` with `λ > 0` iff `k` is left of `v → a₁`
+/// (`(a₁ − v) × (k − v) = λ·n_P`): one `orient3d` instead of the edges' crossings.
+fn straddling_at_corner(ta: &Tri, tb: &Tri, side_b2: Sign) -> bool {
+    let [v, a1, _] = ta.p;
+    let [_, a2, b2] = tb.p;
+    o3(v, a1, a2, b2) == side_b2
 }
 
 /// Whether the segment from `t`'s first corner to `a` (with `a`'s side of `t`'s plane) contains

@@ -814,3 +814,81 @@ fn straddling_test_agrees_with_the_edge_crossings() {
         "{straddling} {hits}"
     );
 }
+
+/// The shared-corner test before `straddling_at_corner`: the edges opposite the corner against
+/// the other face, and the corner's edges entering the other's corner.
+fn vertex_adjacent_by_edges(ta: &Tri, tb: &Tri) -> bool {
+    let [v, a1, b1] = ta.p;
+    let [_, a2, b2] = tb.p;
+    let sb = [Sign::Zero, o3(v, a1, b1, a2), o3(v, a1, b1, b2)];
+    let sa = [Sign::Zero, o3(v, a2, b2, a1), o3(v, a2, b2, b1)];
+    if (sb[1] == sb[2] && sb[1] != Sign::Zero) || (sa[1] == sa[2] && sa[1] != Sign::Zero) {
+        return false;
+    }
+    segment_meets(a1, b1, sa[1], sa[2], tb)
+        || segment_meets(a2, b2, sb[1], sb[2], ta)
+        || enters_corner(a1, sa[1], tb)
+        || enters_corner(b1, sa[2], tb)
+        || enters_corner(a2, sb[1], ta)
+        || enters_corner(b2, sb[2], ta)
+}
+
+/// The one-`orient3d` test of faces sharing a corner and straddling each other's planes against
+/// the edge tests, on random pairs around a shared corner (generic, on coarse grids, nearly
+/// flat), both orientations; both answers occur among the straddling ones.
+#[test]
+fn straddling_at_a_corner_agrees_with_the_edge_tests() {
+    let mut rng = Rng::new(19);
+    let (mut straddling, mut hits) = (0, 0);
+    for round in 0..60_000 {
+        let point = |rng: &mut Rng| -> P {
+            match round % 3 {
+                0 => [rng.unit(), rng.unit(), rng.unit()],
+                1 => [0; 3].map(|_| rng.int(3) as f64),
+                _ => [rng.unit(), rng.unit(), 1e-9 * rng.unit()],
+            }
+        };
+        let v = point(&mut rng);
+        let a = [v, point(&mut rng), point(&mut rng)];
+        let mut b = [v, point(&mut rng), point(&mut rng)];
+        if round % 2 == 1 {
+            b.swap(1, 2);
+        }
+        if round % 4 < 2 {
+            // Mirrored through the corner: crossing planes, pointing away from each other.
+            b = b.map(|p| [0, 1, 2].map(|k| 2.0 * v[k] - p[k]));
+        }
+        let (ta, tb) = (Tri::new(a), Tri::new(b));
+        if ta.drop.is_none() || tb.drop.is_none() {
+            continue;
+        }
+        let want = vertex_adjacent_by_edges(&ta, &tb);
+        assert_eq!(
+            vertex_adjacent_intersect::<true>(&ta, &tb),
+            want,
+            "{a:?} {b:?}"
+        );
+        assert_eq!(
+            vertex_adjacent_intersect::<false>(&tb, &ta),
+            want,
+            "{b:?} {a:?}"
+        );
+        let [p, a1, b1] = a;
+        let [_, a2, b2] = b;
+        let sides = [
+            o3(p, a1, b1, a2),
+            o3(p, a1, b1, b2),
+            o3(p, a2, b2, a1),
+            o3(p, a2, b2, b1),
+        ];
+        if !sides.contains(&Sign::Zero) && sides[0] != sides[1] && sides[2] != sides[3] {
+            straddling += 1;
+            hits += usize::from(want);
+        }
+    }
+    println!("{straddling} straddling, {hits} meeting");
+    assert!(
+        straddling > 5_000 && hits > 1_000 && straddling - hits > 1_000,
+        "{straddling} {hits}"
+    );
+}
