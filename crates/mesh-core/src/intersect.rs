@@ -39,7 +39,12 @@
 //! cases reduce to the same predicates: a shared edge is a fold iff `orient3d(u, v, a, b) = 0` and
 //! `orient2d(u, v, a)`, `orient2d(u, v, b)` agree; a shared vertex `v` of `(v, a₁, b₁)` and
 //! `(v, a₂, b₂)` is exceeded iff an opposite edge `aᵢbᵢ` meets the other triangle or one of the
-//! edges leaving `v` enters the other triangle's corner cone at `v`.
+//! edges leaving `v` enters the other triangle's corner cone at `v`. Two shortcuts decide the
+//! generic crossing configurations with fewer signs, from the same exact predicates: triangles
+//! that straddle each other's planes with no corner on the other plane meet iff the segments
+//! they cut on the planes' common line overlap (two `orient3d`, Guigue and Devillers), and faces
+//! sharing a corner that straddle each other's planes meet elsewhere iff they cut that line on
+//! the same side of the corner (one `orient3d`).
 //!
 //! # Cost and limits
 //!
