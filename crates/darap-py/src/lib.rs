@@ -425,6 +425,36 @@ impl PyDarap {
         })
     }
 
+    /// The strength control (docs/strength.md): the deformation for x at this layer's λ, pushed
+    /// `strength` (≥ 1 is the intended use; any > 0 is accepted) times as far by the
+    /// `procrustes` rule's increment, R_v(s) = P_v(s·λ)·P_v(λ)ᵀ·R_v(λ), then the global step.
+    /// strength = 1 is `forward(x)` exactly. Returns a Deformation whose `backward` raises
+    /// DarapError unless strength = 1 (a re-application control keeps no tape). Raises
+    /// DarapError for a non-finite or non-positive strength (GIL released).
+    fn forward_at_strength(
+        &self,
+        py: Python<'_>,
+        x: &Bound<'_, PyAny>,
+        strength: f64,
+    ) -> PyResult<PyDeformation> {
+        let n = self.read(py, Darap::num_vertices);
+        let targets = read_rows3(x, "x", Some(n))?;
+        let (state, lambda) = self.read(py, |layer| {
+            (
+                layer.forward_at_strength(&targets, strength),
+                layer.options().lambda,
+            )
+        });
+        let state = state.map_err(layer_error)?;
+        let positions = rows3_to_numpy(py, &state.positions)?.unbind();
+        Ok(PyDeformation {
+            state,
+            layer_id: self.id,
+            lambda,
+            positions,
+        })
+    }
+
     /// The vector-Jacobian product ∂ℓ/∂x (V, 3) for ∂ℓ/∂positions (V, 3) at a Deformation of
     /// this layer, with the λ, rule and mask of that forward (GIL released).
     fn backward<'py>(

@@ -693,3 +693,45 @@ def test_self_intersections_refuses_bad_input() -> None:
         darap.self_intersections(verts, faces[:0])
     with pytest.raises(darap.DarapError):
         darap.self_intersections(verts[:5], faces)
+
+
+def test_forward_at_strength_one_is_forward_and_only_it_is_differentiable(rng: np.random.Generator) -> None:
+    verts, faces = darap.icosphere(2)
+    layer = darap.Darap(verts, faces, lam=8.0)
+    x = layer.rest_normals() + 0.6 * rng.standard_normal((len(verts), 3))
+    plain = layer.forward(x)
+    one = layer.forward_at_strength(x, 1.0)
+    np.testing.assert_array_equal(plain.positions, one.positions)
+    g = rng.standard_normal((len(verts), 3))
+    np.testing.assert_array_equal(layer.backward(plain, g), layer.backward(one, g))
+    strong = layer.forward_at_strength(x, 2.0)
+    assert np.abs(strong.positions - plain.positions).max() > 1e-6
+    with pytest.raises(darap.DarapError, match="strength 2"):
+        layer.backward(strong, g)
+    for bad in (0.0, -1.0, float("nan"), float("inf")):
+        with pytest.raises(darap.DarapError, match="strength"):
+            layer.forward_at_strength(x, bad)
+
+
+def test_forward_at_strength_under_procrustes_is_procrustes_at_the_scaled_lambda(rng: np.random.Generator) -> None:
+    verts, faces = darap.icosphere(2)
+    layer = darap.Darap(verts, faces, lam=5.0, rotation_rule="procrustes")
+    x = layer.rest_normals() + 0.6 * rng.standard_normal((len(verts), 3))
+    strong = layer.forward_at_strength(x, 3.0).positions
+    layer.set_lambda(15.0)
+    np.testing.assert_allclose(strong, layer.forward(x).positions, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("strength", [1.0, 2.5])
+def test_saved_apply_with_strength_matches_rust_cli_apply(golden_npz: Path, tmp_path: Path, strength: float) -> None:
+    exe = find_stylize()
+    if exe is None:
+        pytest.skip("no stylize binary in target/ (cargo build --bin stylize) and DARAP_STYLIZE_BIN unset")
+    out = tmp_path / "strong.obj"
+    cmd = [str(exe), "apply", str(golden_npz), "-o", str(out), "--strength", str(strength)]
+    subprocess.run(cmd, check=True, capture_output=True, timeout=300)
+    cli_positions, _ = read_obj(out)
+    positions = darap.load_saved(golden_npz).apply(strength=strength)
+    assert np.abs(positions - cli_positions).max() <= 1e-12
+    with pytest.raises(ValueError, match="strength"):
+        darap.load_saved(golden_npz).apply(strength=0.5)

@@ -259,6 +259,16 @@ pub enum DarapError {
         /// Where.
         index: usize,
     },
+    /// [`Darap::backward`] was given the result of [`Darap::forward_at_strength`] at a strength
+    /// other than 1: a re-application control, which keeps no tape.
+    #[error(
+        "the deformation was re-applied at strength {strength} (forward_at_strength): it has no \
+         tape to differentiate; differentiate a plain forward pass"
+    )]
+    NotDifferentiable {
+        /// The strength of the re-application.
+        strength: f64,
+    },
 }
 
 /// A dARAP layer for one rest mesh: everything λ-independent is precomputed once (cotangent
@@ -314,6 +324,16 @@ pub struct Deformation {
     lambda: f64,
     /// The local step's masses (internal order) when the forward pass was feathered.
     feathered_mass_int: Option<Vec<f64>>,
+    /// `Some(s)` for a [`Darap::forward_at_strength`] result at `s ≠ 1` (no tape).
+    strength: Option<f64>,
+}
+
+impl Deformation {
+    /// The strength `s ≠ 1` of a [`Darap::forward_at_strength`] result; `None` for a forward pass
+    /// (which [`Darap::backward`] can differentiate).
+    pub fn strength(&self) -> Option<f64> {
+        self.strength
+    }
 }
 
 impl Darap {
@@ -555,6 +575,7 @@ impl Darap {
             post,
             lambda: self.options.lambda,
             feathered_mass_int: self.feathered_mass_int.clone(),
+            strength: None,
         })
     }
 
@@ -573,6 +594,96 @@ impl Darap {
                 None => self.pinned_values[k - num_free],
             })
             .collect()
+    }
+
+    /// The **strength control** of `docs/strength.md`: the result of [`Darap::forward`] pushed
+    /// `strength` times as far, in the direction the `procrustes` rule takes as λ grows.
+    ///
+    /// Per vertex `v`, with the layer's own local step `R_v(λ)` (its rule, its λ, its mask or
+    /// region weights) and the `procrustes` rule's rotation `P_v(μ)` at strength μ (same mask
+    /// and weights):
+    ///
+    /// `R_v(s) = P_v(s·λ) · P_v(λ)ᵀ · R_v(λ)`
+    ///
+    /// (rotations act on column vectors, `R·x`), then the global step and the layer's
+    /// post-processing. The increment `P_v(s·λ)·P_v(λ)ᵀ` is the rotation the stable Kabsch rule adds
+    /// between λ and s·λ; it is applied on top of the saved result instead of re-running the
+    /// reference rule at a larger λ, which flips rotations and collapses the mesh a little past the
+    /// optimized λ (measured in `docs/strength.md`).
+    ///
+    /// - `s = 1` returns `forward(x)` itself (bit for bit);
+    /// - on a layer that uses the `procrustes` rule it is `forward(x)` at λ = s·λ;
+    /// - `0 < s < 1` moves back towards the `procrustes` result at a smaller λ, **not** towards the
+    ///   rest mesh (at s → 0 the rotations tend to `P_v(λ)ᵀ·R_v(λ)`): a weaker re-application is
+    ///   [`Darap::forward`] at a smaller λ.
+    ///
+    /// It is a re-application control, not an optimization one: the returned state keeps no tape,
+    /// and [`Darap::try_backward`] refuses it ([`DarapError::NotDifferentiable`]) unless `s = 1`.
+    ///
+    /// # Errors
+    /// As [`Darap::forward`]; [`DarapError::NonFinite`] (`what = "strength"`) for a NaN or
+    /// infinite `strength`, [`DarapError::OutOfRange`] for `strength ≤ 0` or `s·λ` past
+    /// [`f64::MAX`].
+    pub fn forward_at_strength(
+        &self,
+        x: &[[f64; 3]],
+        strength: f64,
+    ) -> Result<Deformation, DarapError> {
+        if !strength.is_finite() {
+            return Err(DarapError::NonFinite {
+                what: "strength",
+                index: 0,
+            });
+        }
+        let lambda = self.options.lambda;
+        if strength <= 0.0 || !(strength * lambda).is_finite() {
+            return Err(DarapError::OutOfRange {
+                what: "strength",
+                index: 0,
+            });
+        }
+        let saved = self.forward(x)?;
+        if strength == 1.0 {
+            return Ok(saved);
+        }
+        let unit: Vec<[f64; 3]> = self.order.iter().map(|&v| normalize_target(x[v])).collect();
+        let mass_int = self.feathered_mass_int.as_ref().unwrap_or(&self.mass_int);
+        let procrustes = |mu: f64| -> Vec<Mat3> {
+            let (columns_int, _) = local::local_step_as::<PaddedColumns>(
+                &self.covariance_int,
+                mass_int,
+                mu,
+                &self.normals_int,
+                &unit,
+                RotationRule::Procrustes,
+                self.free_int.as_deref(),
+            );
+            self.position_of
+                .iter()
+                .map(|&k| from_padded_columns(&columns_int[k]))
+                .collect()
+        };
+        let p_far = procrustes(strength * lambda);
+        let rotations: Vec<Mat3> = if self.options.rotation_rule == RotationRule::Procrustes {
+            p_far
+        } else {
+            let p_saved = procrustes(lambda);
+            saved
+                .rotations
+                .iter()
+                .zip(p_far.iter().zip(&p_saved))
+                .map(|(r, (pf, ps))| mat3::mul(&mat3::mul_nt(pf, ps), r))
+                .collect()
+        };
+        let solved = self.global_step(&rotations);
+        let (positions, post) = post_process(&solved, self.rest_diag, self.options.post_process);
+        Ok(Deformation {
+            positions,
+            rotations,
+            post,
+            strength: Some(strength),
+            ..saved
+        })
     }
 
     /// The global step alone: positions (before post-processing) for given rotations.
@@ -612,6 +723,9 @@ impl Darap {
         state: &Deformation,
         grad_positions: &[[f64; 3]],
     ) -> Result<Vec<[f64; 3]>, DarapError> {
+        if let Some(strength) = state.strength {
+            return Err(DarapError::NotDifferentiable { strength });
+        }
         let n = self.num_vertices();
         if grad_positions.len() != n {
             return Err(DarapError::LengthMismatch {

@@ -619,3 +619,131 @@ fn deformation_scales_with_the_mesh_down_to_a_fiftieth_of_the_normalized_frame()
         );
     }
 }
+
+#[test]
+fn strength_one_is_the_forward_pass_bit_for_bit() {
+    for rule in [RotationRule::Gis, RotationRule::Procrustes] {
+        let mesh = squashed_sphere();
+        let mut layer = Darap::new(&mesh.positions, &mesh.faces, DarapOptions::default()).unwrap();
+        layer.set_rotation_rule(rule);
+        let x = random_targets(layer.rest_normals(), 0.8, 11);
+        let plain = layer.forward(&x).unwrap();
+        let one = layer.forward_at_strength(&x, 1.0).unwrap();
+        assert_eq!(plain.positions, one.positions);
+        assert_eq!(plain.rotations, one.rotations);
+        assert_eq!(one.strength(), None);
+        // … and it stays differentiable.
+        assert_eq!(
+            layer.backward(&plain, &plain.positions),
+            layer.backward(&one, &one.positions)
+        );
+    }
+}
+
+#[test]
+fn strength_under_procrustes_is_procrustes_at_the_scaled_lambda() {
+    let mesh = obtuse_wavy_grid(10);
+    let mut layer = Darap::new(&mesh.positions, &mesh.faces, DarapOptions::default()).unwrap();
+    layer.set_rotation_rule(RotationRule::Procrustes);
+    let x = random_targets(layer.rest_normals(), 0.8, 12);
+    for s in [0.5, 2.0, 3.5] {
+        let strong = layer.forward_at_strength(&x, s).unwrap();
+        layer.set_lambda(s * DarapOptions::default().lambda);
+        let scaled = layer.forward(&x).unwrap();
+        layer.set_lambda(DarapOptions::default().lambda);
+        assert!(
+            max_diff(&strong.positions, &scaled.positions) < 1e-12,
+            "s = {s}"
+        );
+        assert_eq!(strong.strength(), Some(s));
+    }
+}
+
+/// The gis layer's strength result against the rule written out with three plain forward passes
+/// (R(λ) under gis, P(λ) and P(s·λ) under procrustes) and the global step, on a masked mesh: the
+/// masked vertices keep `R = I` at every strength.
+#[test]
+fn strength_under_gis_composes_the_procrustes_increment_with_the_saved_rotations() {
+    let mesh = squashed_sphere();
+    let n = mesh.positions.len();
+    let lambda = 8.0;
+    let mut layer = Darap::new(
+        &mesh.positions,
+        &mesh.faces,
+        DarapOptions {
+            lambda,
+            ..DarapOptions::default()
+        },
+    )
+    .unwrap();
+    let mask: Vec<bool> = (0..n).map(|v| v % 3 != 0).collect();
+    layer.set_mask(Some(mask.clone())).unwrap();
+    let x = random_targets(layer.rest_normals(), 0.8, 13);
+    let s = 2.5;
+    let strong = layer.forward_at_strength(&x, s).unwrap();
+
+    let saved = layer.forward(&x).unwrap().rotations;
+    layer.set_rotation_rule(RotationRule::Procrustes);
+    let p_saved = layer.forward(&x).unwrap().rotations;
+    layer.set_lambda(s * lambda);
+    let p_far = layer.forward(&x).unwrap().rotations;
+    let expected: Vec<Mat3> = (0..n)
+        .map(|v| {
+            mat3::mul(
+                &mat3::mul(&p_far[v], &mat3::transpose(&p_saved[v])),
+                &saved[v],
+            )
+        })
+        .collect();
+    for (v, (a, b)) in strong.rotations.iter().zip(&expected).enumerate() {
+        for i in 0..3 {
+            for j in 0..3 {
+                assert!((a[i][j] - b[i][j]).abs() < 1e-12, "vertex {v}");
+            }
+        }
+        if !mask[v] {
+            assert_eq!(*a, IDENTITY, "masked vertex {v} rotates");
+        }
+    }
+    let (positions, _) = post_process(
+        &layer.global_step(&expected),
+        layer.rest_diag,
+        layer.options().post_process,
+    );
+    assert!(max_diff(&strong.positions, &positions) < 1e-12);
+    // A different strength is a different result.
+    layer.set_lambda(lambda);
+    layer.set_rotation_rule(RotationRule::Gis);
+    let plain = layer.forward(&x).unwrap();
+    assert!(max_diff(&strong.positions, &plain.positions) > 1e-6);
+}
+
+#[test]
+fn strength_bad_values_and_backward_are_typed_errors() {
+    let mesh = icosphere(1);
+    let layer = Darap::new(&mesh.positions, &mesh.faces, DarapOptions::default()).unwrap();
+    let x = random_targets(layer.rest_normals(), 0.5, 14);
+    for s in [f64::NAN, f64::INFINITY] {
+        assert!(matches!(
+            layer.forward_at_strength(&x, s),
+            Err(DarapError::NonFinite {
+                what: "strength",
+                ..
+            })
+        ));
+    }
+    for s in [0.0, -1.0, f64::MAX] {
+        assert!(matches!(
+            layer.forward_at_strength(&x, s),
+            Err(DarapError::OutOfRange {
+                what: "strength",
+                ..
+            })
+        ));
+    }
+    let strong = layer.forward_at_strength(&x, 2.0).unwrap();
+    assert!(matches!(
+        layer.try_backward(&strong, &strong.positions),
+        Err(DarapError::NotDifferentiable { strength }) if strength == 2.0
+    ));
+}

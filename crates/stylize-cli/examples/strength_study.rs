@@ -6,7 +6,10 @@
 //!   s = 1: another local step);
 //! - `geodesic R^s`: the rotations of the saved result (`gis` at λ₀) scaled along their geodesic,
 //!   `R_v^s = exp(s·log R_v)` (same axis, angle × s), then the global step. At s = 1 it is the
-//!   saved result (up to the log/exp round trip, ~1e-15).
+//!   saved result (up to the log/exp round trip, ~1e-15);
+//! - `strength s (procrustes increment)`: `R_v(s) = P_v(s·λ₀)·P_v(λ₀)ᵀ·R_v(λ₀)` with `P` the
+//!   `procrustes` rule's rotations, then the global step — what `apply --strength` ships
+//!   (`darap::Darap::forward_at_strength`), written out from three plain forward passes.
 //!
 //! For each: the volume ratio and the mean face-area ratio (as `stylize eval`), the share of
 //! rotations over 90°, the faces in new self-intersecting pairs (exact, against the rest mesh),
@@ -63,6 +66,14 @@ fn rotation(axis: [f64; 3], theta: f64) -> Mat3 {
 fn power(r: &Mat3, s: f64) -> Mat3 {
     let (axis, theta) = axis_angle(r);
     rotation(axis, s * theta)
+}
+
+fn mul(a: &Mat3, b: &Mat3) -> Mat3 {
+    std::array::from_fn(|i| std::array::from_fn(|j| (0..3).map(|k| a[i][k] * b[k][j]).sum()))
+}
+
+fn transpose(a: &Mat3) -> Mat3 {
+    std::array::from_fn(|i| std::array::from_fn(|j| a[j][i]))
 }
 
 fn unit(v: [f64; 3]) -> [f64; 3] {
@@ -141,12 +152,44 @@ fn main() {
             "| rest mesh | 0 | 1 | 1 | 0 % | 0 | {:.4} | — |",
             stylization(&rest.positions, &rest.faces, &ready.targets)
         );
-        for control in ["gis λ·s", "procrustes λ·s", "geodesic R^s"] {
+        ready.layer.set_rotation_rule(RotationRule::Procrustes);
+        let procrustes_base = ready.at_lambda(lambda0).unwrap().rotations;
+        ready.layer.set_rotation_rule(RotationRule::Gis);
+        for control in [
+            "gis λ·s",
+            "procrustes λ·s",
+            "geodesic R^s",
+            "strength s (procrustes increment)",
+        ] {
             for &s in &strengths {
                 let (positions, rotations): (Vec<[f64; 3]>, Vec<Mat3>) = match control {
                     "geodesic R^s" => {
                         let rot: Vec<Mat3> = base.rotations.iter().map(|r| power(r, s)).collect();
                         (ready.layer.global_step(&rot), rot)
+                    }
+                    "strength s (procrustes increment)" => {
+                        // What `apply --strength s` ships (darap::Darap::forward_at_strength),
+                        // written out here from three plain forward passes.
+                        ready.layer.set_rotation_rule(RotationRule::Procrustes);
+                        let p = ready.at_lambda(s * lambda0).unwrap().rotations;
+                        ready.layer.set_rotation_rule(RotationRule::Gis);
+                        let rot: Vec<Mat3> = base
+                            .rotations
+                            .iter()
+                            .zip(p.iter().zip(&procrustes_base))
+                            .map(|(r, (ps, p1))| mul(&mul(ps, &transpose(p1)), r))
+                            .collect();
+                        let shipped = ready.at_strength(lambda0, s).unwrap();
+                        let worst = shipped
+                            .rotations
+                            .iter()
+                            .zip(&rot)
+                            .flat_map(|(a, b)| {
+                                (0..9).map(move |k| (a[k / 3][k % 3] - b[k / 3][k % 3]).abs())
+                            })
+                            .fold(0.0, f64::max);
+                        assert!(worst < 1e-12, "the shipped control differs by {worst}");
+                        (shipped.positions, shipped.rotations)
                     }
                     _ => {
                         let rule = if control.starts_with("gis") {

@@ -38,6 +38,10 @@ pub const FLIPPED_WARN_FRACTION: f64 = 0.01;
 pub struct LambdaSanity {
     /// The strength.
     pub lambda: f64,
+    /// For a result of the strength control (`apply --strength`): its strength `s` (the result at
+    /// `lambda` pushed `s` times as far; `docs/strength.md`). The lines then name `s`, not λ.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub strength: Option<f64>,
     /// Vertices whose rotation angle exceeds 90° (`tr R_v < 1`).
     pub flipped: usize,
     /// `flipped / vertices`.
@@ -85,6 +89,7 @@ impl LambdaSanity {
         let checked = source.check(&deformation.positions)?;
         Ok(Self {
             lambda,
+            strength: None,
             flipped,
             flipped_fraction: flipped as f64 / deformation.rotations.len().max(1) as f64,
             volume_ratio,
@@ -102,12 +107,35 @@ impl LambdaSanity {
         self.warnings().is_empty()
     }
 
+    /// The same diagnostics, labelled as a result of the strength control at `strength` (the
+    /// result at `self.lambda` pushed `strength` times as far).
+    pub fn with_strength(mut self, strength: f64) -> Self {
+        self.strength = Some(strength);
+        self
+    }
+
+    /// What the lines call the result: `λ = 8`, or `strength 1.5 (λ = 8)`.
+    fn label(&self) -> String {
+        match self.strength {
+            None => format!("λ = {}", self.lambda),
+            Some(s) => format!("strength {s} (λ = {})", self.lambda),
+        }
+    }
+
+    /// The advice that ends a warning.
+    fn advice(&self) -> &'static str {
+        match self.strength {
+            None => "try a smaller λ",
+            Some(_) => "try a smaller strength",
+        }
+    }
+
     /// One line: `λ = 8: volume ratio 0.93, face-area ratio 0.98 ± 0.21, 0.0% of vertices
     /// flipped (rotation > 90°), self-intersections: 0 pairs (0 faces), 0 new`.
     pub fn summary(&self) -> String {
         format!(
-            "λ = {}: volume ratio {:.3}, face-area ratio {:.3} ± {:.3}, {:.1}% of vertices flipped (rotation > 90°), {}",
-            self.lambda,
+            "{}: volume ratio {:.3}, face-area ratio {:.3} ± {:.3}, {:.1}% of vertices flipped (rotation > 90°), {}",
+            self.label(),
             self.volume_ratio,
             self.area_ratio_mean,
             self.area_ratio_std,
@@ -122,31 +150,36 @@ impl LambdaSanity {
         let v = self.volume_ratio;
         if v.is_finite() && v < COLLAPSE_VOLUME_RATIO {
             out.push(format!(
-                "λ = {}: the result is collapsing: volume ratio {v:.3} (below {COLLAPSE_VOLUME_RATIO}); try a smaller λ",
-                self.lambda
+                "{}: the result is collapsing: volume ratio {v:.3} (below {COLLAPSE_VOLUME_RATIO}); {}",
+                self.label(),
+                self.advice()
             ));
         } else if v.is_finite() && v > 1.0 / COLLAPSE_VOLUME_RATIO {
             out.push(format!(
-                "λ = {}: the result is inflating: volume ratio {v:.3} (above {}); try a smaller λ",
-                self.lambda,
-                1.0 / COLLAPSE_VOLUME_RATIO
+                "{}: the result is inflating: volume ratio {v:.3} (above {}); {}",
+                self.label(),
+                1.0 / COLLAPSE_VOLUME_RATIO,
+                self.advice()
             ));
         }
         if self.area_ratio_mean < COLLAPSE_AREA_RATIO {
             out.push(format!(
-                "λ = {}: faces are shrinking: mean face-area ratio {:.3} (below {COLLAPSE_AREA_RATIO}); try a smaller λ",
-                self.lambda, self.area_ratio_mean
+                "{}: faces are shrinking: mean face-area ratio {:.3} (below {COLLAPSE_AREA_RATIO}); {}",
+                self.label(),
+                self.area_ratio_mean,
+                self.advice()
             ));
         }
         if self.flipped_fraction > FLIPPED_WARN_FRACTION {
             out.push(format!(
-                "λ = {}: {:.1}% of the vertices' rotations flipped (> 90°; the reference rule's behaviour at large λ); try a smaller λ",
-                self.lambda,
-                100.0 * self.flipped_fraction
+                "{}: {:.1}% of the vertices' rotations flipped (> 90°; the reference rule's behaviour at large λ); {}",
+                self.label(),
+                100.0 * self.flipped_fraction,
+                self.advice()
             ));
         }
         if let Some(w) = self.intersections.warning() {
-            out.push(format!("λ = {}: {w}; try a smaller λ", self.lambda));
+            out.push(format!("{}: {w}; {}", self.label(), self.advice()));
         }
         out
     }
@@ -159,6 +192,7 @@ mod tests {
     fn sanity(volume_ratio: f64, area: f64, flipped_fraction: f64) -> LambdaSanity {
         LambdaSanity {
             lambda: 3.0,
+            strength: None,
             flipped: 0,
             flipped_fraction,
             volume_ratio,
@@ -168,6 +202,22 @@ mod tests {
             intersecting_faces: Vec::new(),
             new_intersecting_faces: Vec::new(),
         }
+    }
+
+    #[test]
+    fn a_strength_result_names_its_strength_and_asks_for_a_smaller_one() {
+        let plain = sanity(0.3, 1.0, 0.0);
+        assert!(plain.summary().starts_with("λ = 3: volume ratio"));
+        assert!(plain.warnings()[0].ends_with("try a smaller λ"));
+        let strong = plain.with_strength(1.5);
+        assert!(
+            strong
+                .summary()
+                .starts_with("strength 1.5 (λ = 3): volume ratio")
+        );
+        let w = strong.warnings();
+        assert!(w[0].starts_with("strength 1.5 (λ = 3): the result is collapsing"));
+        assert!(w[0].ends_with("try a smaller strength"));
     }
 
     #[test]

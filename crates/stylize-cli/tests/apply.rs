@@ -29,6 +29,7 @@ fn args(out: PathBuf) -> Args {
         saved: golden("bunny_targets.npz"),
         output: out,
         lambda: vec![],
+        strength: vec![],
         rotation_rule: None,
         mask: None,
         region: vec![],

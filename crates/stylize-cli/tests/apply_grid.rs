@@ -38,6 +38,7 @@ fn several_lambdas_write_a_labelled_sheet_of_their_results() {
         saved: golden("bunny_targets.npz"),
         output: out.clone(),
         lambda: lambdas.iter().map(|&l| LambdaArg::Value(l)).collect(),
+        strength: vec![],
         rotation_rule: None,
         mask: None,
         region: vec![],

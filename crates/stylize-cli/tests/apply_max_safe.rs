@@ -258,3 +258,139 @@ fn the_end_of_a_run_reports_new_intersections_and_the_strongest_safe_lambda() {
     assert!(summary.get("self_intersections").is_none(), "{summary}");
     assert!(!stderr.contains("strongest safe"), "{stderr}");
 }
+
+/// `apply --strength`: the strength control (docs/strength.md).
+fn apply_out(args: &[&str]) -> (String, String) {
+    let (ok, stdout, stderr) = stylize(args);
+    assert!(ok, "{args:?}: {stderr}");
+    (stdout, stderr)
+}
+
+#[test]
+fn strength_one_writes_the_result_at_lambda_byte_for_byte() {
+    let dir = tempfile::tempdir().unwrap();
+    let saved =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/golden/bunny_targets.npz");
+    let s = saved.to_str().unwrap();
+    let plain = dir.path().join("plain.obj");
+    let one = dir.path().join("one.obj");
+    apply_out(&["apply", s, "-o", plain.to_str().unwrap()]);
+    let (stdout, _) = apply_out(&["apply", s, "-o", one.to_str().unwrap(), "--strength", "1"]);
+    assert!(stdout.contains("strength 1 (λ = 8): wrote"), "{stdout}");
+    assert_eq!(std::fs::read(&plain).unwrap(), std::fs::read(&one).unwrap());
+}
+
+#[test]
+fn strength_keeps_the_bunny_sane_where_the_larger_lambda_collapses_it() {
+    // 3 × λ₀ both ways: the reference rule at λ = 24 flips most rotations (docs/strength.md: 92 %
+    // at 3 λ₀); the strength control at 3 keeps the rotations and the volume.
+    let dir = tempfile::tempdir().unwrap();
+    let saved =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/golden/bunny_targets.npz");
+    let s = saved.to_str().unwrap();
+    let (_, big_lambda) = apply_out(&[
+        "apply",
+        s,
+        "-o",
+        dir.path().join("l24.obj").to_str().unwrap(),
+        "--lambda",
+        "24",
+    ]);
+    assert!(big_lambda.contains("flipped"), "{big_lambda}");
+    let strong = dir.path().join("s3.obj");
+    let (stdout, stderr) = apply_out(&[
+        "apply",
+        s,
+        "-o",
+        strong.to_str().unwrap(),
+        "--strength",
+        "3",
+    ]);
+    assert!(!stderr.contains("warning"), "{stdout}{stderr}");
+    assert!(
+        stdout.contains("strength 3 (λ = 8): volume ratio"),
+        "{stdout}"
+    );
+    // … and it is another mesh than the saved result.
+    let plain = dir.path().join("plain.obj");
+    apply_out(&["apply", s, "-o", plain.to_str().unwrap()]);
+    assert_ne!(
+        std::fs::read(&plain).unwrap(),
+        std::fs::read(&strong).unwrap()
+    );
+}
+
+/// On the slab of [`max_safe_crossing_twice_slab_through_plate`] under the `procrustes` rule the
+/// strength control at s from λ = 1 is the rule at λ = s: safe at 1, unsafe at 8, safe again at 32.
+/// `--strength max-safe:64` finds the first crossing; the answer is safe and 1 % above it is not.
+#[test]
+fn strength_max_safe_finds_the_first_crossing_of_the_slab() {
+    let dir = tempfile::tempdir().unwrap();
+    let saved = dir.path().join("slab.npz");
+    swinging_slab(&saved);
+    let s = saved.to_str().unwrap();
+    let base = ["--rotation-rule", "procrustes", "--lambda", "1"];
+    let out = dir.path().join("safe.obj");
+    let mut args = vec![
+        "apply",
+        s,
+        "-o",
+        out.to_str().unwrap(),
+        "--strength",
+        "max-safe:64",
+    ];
+    args.extend_from_slice(&base);
+    let (stdout, stderr) = apply_out(&args);
+    let line = stdout
+        .lines()
+        .find(|l| l.starts_with("max-safe: strength "))
+        .unwrap_or_else(|| panic!("{stdout}"));
+    let strength: f64 = line["max-safe: strength ".len()..]
+        .split_whitespace()
+        .next()
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert!((1.0..8.0).contains(&strength), "{stdout}");
+    assert!(stderr.contains("not monotone"), "{stderr}");
+    for (value, safe) in [(strength, true), (strength * 1.01, false)] {
+        let o = dir.path().join(format!("at{value}.obj"));
+        let v = format!("{value}");
+        let mut args = vec!["apply", s, "-o", o.to_str().unwrap(), "--strength", &v];
+        args.extend_from_slice(&base);
+        let (so, se) = apply_out(&args);
+        assert_eq!(!se.contains("warning"), safe, "strength {value}: {so}{se}");
+    }
+}
+
+#[test]
+fn bad_strength_arguments_are_clear_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let saved =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/golden/bunny_targets.npz");
+    let out = dir.path().join("x.obj");
+    for (extra, says) in [
+        (&["--strength", "0.5"][..], "[1, 100]"),
+        (&["--strength", "0"][..], "[1, 100]"),
+        (&["--strength", "NaN"][..], "[1, 100]"),
+        (&["--strength", "1e9"][..], "[1, 100]"),
+        (&["--strength", "max-safe:1"][..], "upper end"),
+        (&["--strength", "max-safe:1e9"][..], "upper end"),
+        (&["--strength", "max-safe,2"][..], "stands alone"),
+        (&["--strength", "2", "--lambda", "5,8"][..], "one λ"),
+        (&["--strength", "2", "--lambda", "max-safe"][..], "one λ"),
+        (&["--strength", "fast"][..], "neither a number"),
+    ] {
+        let mut args = vec![
+            "apply",
+            saved.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        let (ok, _, stderr) = stylize(&args);
+        assert!(!ok, "{extra:?} accepted");
+        assert!(stderr.contains(says), "{extra:?}: {stderr}");
+        assert!(!out.exists(), "{extra:?} wrote a file");
+    }
+}

@@ -1180,3 +1180,69 @@ fn a_flood_of_connections_and_a_slow_client_cost_the_viewer_no_descriptors() {
     );
     assert_eq!(answer.as_deref(), Some("HTTP/1.1 200 OK"), "{err}");
 }
+
+/// `?strength=S`: the strength control (`apply --strength`) on the server: S = 1 is the result at
+/// λ itself (same positions), S = 3 on the golden bunny stays safe where λ = 3·8 flips (docs/strength.md),
+/// the header names the strength, downloads carry it, and bad strengths are a 400.
+#[test]
+fn strength_pushes_the_result_at_lambda_further() {
+    let dir = tempfile::tempdir().unwrap();
+    let app = app(&[complete_run(dir.path(), "run")]);
+    rt().block_on(async {
+        let plain = get(&app, &format!("/{TOKEN}/api/items/0/result?lambda=8")).await;
+        let one = get(
+            &app,
+            &format!("/{TOKEN}/api/items/0/result?lambda=8&strength=1"),
+        )
+        .await;
+        let (head_plain, pos_plain) = unframe(&plain.body);
+        let (head_one, pos_one) = unframe(&one.body);
+        assert_eq!(pos_plain, pos_one);
+        assert!(head_plain["strength"].is_null(), "{head_plain}");
+        assert_eq!(head_one["strength"], 1.0, "{head_one}");
+        let strong = get(
+            &app,
+            &format!("/{TOKEN}/api/items/0/result?lambda=8&strength=3"),
+        )
+        .await;
+        assert_eq!(strong.status, 200, "{}", strong.text());
+        let (head, pos) = unframe(&strong.body);
+        assert_ne!(pos, pos_plain);
+        assert_eq!(head["strength"], 3.0, "{head}");
+        assert!(head["warnings"].as_array().unwrap().is_empty(), "{head}");
+        let big = get(&app, &format!("/{TOKEN}/api/items/0/result?lambda=24")).await;
+        assert!(
+            !unframe(&big.body).0["warnings"]
+                .as_array()
+                .unwrap()
+                .is_empty()
+        );
+        let dl = get(
+            &app,
+            &format!(
+                "/{TOKEN}/api/items/0/download?lambda=8&strength=3&format=obj&frame=normalized"
+            ),
+        )
+        .await;
+        assert_eq!(dl.status, 200, "{}", dl.text());
+        let disposition = dl
+            .headers
+            .get("content-disposition")
+            .unwrap()
+            .to_str()
+            .unwrap()
+            .to_string();
+        assert!(
+            disposition.contains("_lambda8_strength3.obj"),
+            "{disposition}"
+        );
+        for bad in ["0.5", "0", "-1", "NaN", "inf", "101", "x"] {
+            let r = get(
+                &app,
+                &format!("/{TOKEN}/api/items/0/result?lambda=8&strength={bad}"),
+            )
+            .await;
+            assert_eq!(r.status, 400, "strength={bad}: {}", r.text());
+        }
+    });
+}

@@ -627,3 +627,58 @@ fn a_live_run_shows_its_newest_snapshot() {
     // The newest snapshot is flattened along y: less covered than the first.
     assert!(right < 0.9 * left, "before {left:.4}, after {right:.4}");
 }
+
+/// The strength slider (`?strength=S` through its own input handler): the page asks the server
+/// for the result at λ pushed S times as far, reports it (`data-strength`), and the shape differs
+/// from strength 1 in 'after' only.
+#[test]
+fn the_strength_slider_pushes_the_result_further() {
+    let Some(chromium) = chromium() else {
+        no_chromium();
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("bunny_run");
+    std::fs::create_dir_all(&run).unwrap();
+    std::fs::copy(golden_npz(), run.join("deformation.npz")).unwrap();
+    std::fs::write(run.join("run.json"), "{}").unwrap();
+    let (_server, url) = serve(&run);
+    let shots: Vec<Shot> = ["1", "3"]
+        .iter()
+        .map(|s| {
+            let shot = clean_shot(
+                &chromium,
+                &format!("{url}?lambda=8&strength={s}"),
+                &dir.path().join(format!("strength{s}.png")),
+                &dir.path().join(format!("profile{s}")),
+            );
+            let tag = html_tag(&shot.dom);
+            assert!(tag.contains("data-state=\"ready\""), "strength {s}: {tag}");
+            assert!(tag.contains("data-lambda=\"8\""), "strength {s}: {tag}");
+            assert!(
+                tag.contains(&format!("data-strength=\"{s}\"")),
+                "strength {s}: {tag}"
+            );
+            assert_eq!(
+                html_attr(&shot.dom, "data-new-intersecting-faces").as_deref(),
+                Some("0"),
+                "strength {s}: {tag}"
+            );
+            shot
+        })
+        .collect();
+    let half = WIDTH as usize / 2;
+    let before = shots[0].difference(&shots[1], 0, half);
+    let after = shots[0].difference(&shots[1], half, 2 * half);
+    eprintln!(
+        "strength 1 → 3: {before:.4} of the before and {after:.4} of the after pixels differ"
+    );
+    assert!(
+        before < 0.002,
+        "'before' changed with the strength ({before:.4})"
+    );
+    assert!(
+        after > 0.002,
+        "'after' did not change with the strength ({after:.4})"
+    );
+}

@@ -3,8 +3,10 @@
 // re-applied at the slider's λ) share one camera, so orbiting one orbits both.
 //
 // URL parameters: ?item=ID (which item first), ?lambda=L (after loading, set λ to L through the
-// slider's own input handler — the browser test uses it). <html data-state> is "loading" while a
-// request is pending and "ready" when the shown shape matches the slider; data-lambda is the λ shown,
+// slider's own input handler — the browser test uses it), ?strength=S (the same for the strength
+// slider: the result at λ pushed S times as far, `apply --strength`). <html data-state> is "loading"
+// while a request is pending and "ready" when the shown shape matches the sliders; data-lambda is
+// the λ shown, data-strength its strength,
 // data-intersecting-faces / data-new-intersecting-faces its self-intersection counts, data-max-safe
 // the strongest safe λ up to the slider's end once the server has found it.
 import * as THREE from 'three';
@@ -15,6 +17,7 @@ const $ = (id) => document.getElementById(id);
 const params = new URLSearchParams(location.search);
 const ui = {
   item: $('item'), status: $('status'), lambda: $('lambda'), lambdaValue: $('lambda-value'),
+  strength: $('strength'), strengthValue: $('strength-value'),
   reset: $('reset-lambda'), maxSafe: $('max-safe'), safeNote: $('safe-note'), flat: $('flat'), wire: $('wire'), layout: $('layout'), toggle: $('toggle'),
   dlObj: $('dl-obj'), dlPly: $('dl-ply'), dlGlb: $('dl-glb'), images: $('images'),
   metrics: $('metrics'), warnings: $('warnings'), left: $('label-left'), right: $('label-right'),
@@ -241,9 +244,12 @@ function updateLayoutUi() {
   if (!run) { layout = 'toggle'; showing = 'before'; }
 }
 
-function setDownloads(lambda) {
+// `&strength=S` for a strength other than 1 (1: the result at λ itself, the plain request).
+function strengthQuery(strength) { return strength === 1 ? '' : `&strength=${strength}`; }
+
+function setDownloads(lambda, strength) {
   for (const [a, fmt] of [[ui.dlObj, 'obj'], [ui.dlPly, 'ply'], [ui.dlGlb, 'glb']]) {
-    a.href = `api/items/${current.id}/download?lambda=${lambda}&format=${fmt}`;
+    a.href = `api/items/${current.id}/download?lambda=${lambda}&format=${fmt}${strengthQuery(strength)}`;
   }
 }
 
@@ -284,6 +290,7 @@ async function loadItem(id) {
   const run = current.has_deformation;
   for (const el of [ui.lambda, ui.reset, ui.dlObj.parentElement]) el.hidden = !run;
   ui.lambda.parentElement.hidden = !run;
+  ui.strength.parentElement.hidden = !run;
   if (run) {
     resultGeometry = new THREE.BufferGeometry();
     resultGeometry.setAttribute('position', new THREE.BufferAttribute(positions.slice(), 3));
@@ -295,6 +302,8 @@ async function loadItem(id) {
     const saved = current.lambda ?? 8;
     ui.lambda.max = String(Math.min(current.lambda_max, Math.max(20, Math.ceil(2 * saved))));
     ui.lambda.value = String(saved);
+    ui.strength.value = '1';
+    ui.strengthValue.textContent = '1.00';
     layout = ui.layout.value;
     showing = 'after';
   } else {
@@ -324,7 +333,7 @@ async function loadItem(id) {
 // A run without its result yet: before = its first snapshot, after = its newest (when it has
 // snapshots at all; else a message, and the polling below loads it once something appears).
 async function loadLiveRun() {
-  for (const el of [ui.lambda.parentElement, ui.reset, ui.dlObj.parentElement, ui.normals.parentElement]) el.hidden = true;
+  for (const el of [ui.lambda.parentElement, ui.strength.parentElement, ui.reset, ui.dlObj.parentElement, ui.normals.parentElement]) el.hidden = true;
   normalsField = null;
   detach(before);
   detach(after);
@@ -512,9 +521,9 @@ let pending = null;
 let inflight = false;
 let movedAt = 0;
 
-async function applyResult(lambda) {
+async function applyResult(lambda, strength) {
   const t0 = performance.now();
-  const { head, buf, offset } = await fetchFramed(`api/items/${current.id}/result?lambda=${lambda}`);
+  const { head, buf, offset } = await fetchFramed(`api/items/${current.id}/result?lambda=${lambda}${strengthQuery(strength)}`);
   const positions = new Float32Array(buf, offset, 3 * head.vertices);
   const attr = resultGeometry.getAttribute('position');
   attr.array.set(positions);
@@ -528,8 +537,9 @@ async function applyResult(lambda) {
   updateReplayUi();
   updateLayoutUi();
   document.documentElement.dataset.lambda = String(lambda);
+  document.documentElement.dataset.strength = String(strength);
   ui.metrics.textContent =
-    `λ = ${lambda} · volume ratio ${fmt(head.volume_ratio)} · face-area ratio ${fmt(head.area_ratio_mean)} ± ${fmt(head.area_ratio_std)}` +
+    `λ = ${lambda}` + (strength === 1 ? '' : ` · strength ${strength}`) + ` · volume ratio ${fmt(head.volume_ratio)} · face-area ratio ${fmt(head.area_ratio_mean)} ± ${fmt(head.area_ratio_std)}` +
     ` · flipped ${fmt(100 * head.flipped_fraction, 1)}%` +
     ` · self-intersecting faces ${head.intersections ? head.intersections.faces : '—'} (${head.intersections ? head.intersections.new_faces : '—'} new)` +
     ` · ${head.vertices} vertices · updated in ${ms.toFixed(0)} ms`;
@@ -540,7 +550,7 @@ async function applyResult(lambda) {
   render();
   ui.metrics.dataset.ms = ms.toFixed(1);
   ui.warnings.textContent = (head.warnings || []).join(' · ');
-  setDownloads(lambda);
+  setDownloads(lambda, strength);
 }
 
 async function request(job) {
@@ -552,7 +562,7 @@ async function request(job) {
     while (pending !== null) {
       const j = pending;
       pending = null;
-      if (j.kind === 'lambda') await applyResult(j.value);
+      if (j.kind === 'lambda') await applyResult(j.value, j.strength ?? 1);
       else await applySnapshot(j.value);
     }
     setState('ready');
@@ -565,24 +575,38 @@ async function request(job) {
 }
 
 // ---------- controls ----------
-ui.lambda.addEventListener('input', () => {
-  const l = Number(ui.lambda.value);
-  ui.lambdaValue.textContent = l.toFixed(1);
+// A λ request carries the strength slider's value too.
+function requestResult() {
   movedAt = performance.now();
   stopPlaying();
-  request({ kind: 'lambda', value: l });
+  return request({ kind: 'lambda', value: Number(ui.lambda.value), strength: Number(ui.strength.value) });
+}
+ui.lambda.addEventListener('input', () => {
+  ui.lambdaValue.textContent = Number(ui.lambda.value).toFixed(1);
+  requestResult();
 });
+ui.strength.addEventListener('input', () => {
+  ui.strengthValue.textContent = Number(ui.strength.value).toFixed(2);
+  requestResult();
+});
+// The max-safe λ and the run's λ are results at strength 1.
+function resetStrength() {
+  ui.strength.value = '1';
+  ui.strengthValue.textContent = '1.00';
+}
 ui.maxSafe.addEventListener('click', async () => {
   if (!safe) {
     try { await loadMaxSafe(); } catch (e) { ui.safeNote.textContent = e.message; return; }
   }
   if (safe) {
+    resetStrength();
     ui.lambda.value = String(safe.lambda);
     ui.lambda.dispatchEvent(new Event('input'));
   }
 });
 ui.reset.addEventListener('click', () => {
   if (current && current.lambda !== null) {
+    resetStrength();
     ui.lambda.value = String(current.lambda);
     ui.lambda.dispatchEvent(new Event('input'));
   }
@@ -790,6 +814,11 @@ async function main() {
     // Through the slider's own handler, as a user would.
     ui.lambda.value = wanted;
     ui.lambda.dispatchEvent(new Event('input'));
+  }
+  const strength = params.get('strength');
+  if (strength !== null && current.has_deformation) {
+    ui.strength.value = strength;
+    ui.strength.dispatchEvent(new Event('input'));
   }
   const iteration = params.get('iteration');
   if (iteration !== null && replay.available) {

@@ -151,6 +151,19 @@ impl ReadyLayer {
         self.layer.set_lambda(lambda);
         self.layer.forward(&self.targets)
     }
+
+    /// The saved targets at λ = `lambda`, pushed `strength` times as far by the strength control
+    /// ([`Darap::forward_at_strength`]: the `procrustes` rule's increment from λ to
+    /// `strength·λ` on top of the result at λ; `docs/strength.md`). At `strength = 1` it is
+    /// [`Self::at_lambda`]`(lambda)` exactly. The layer keeps `lambda`.
+    pub fn at_strength(
+        &mut self,
+        lambda: f64,
+        strength: f64,
+    ) -> Result<darap::Deformation, DarapError> {
+        self.layer.set_lambda(lambda);
+        self.layer.forward_at_strength(&self.targets, strength)
+    }
 }
 
 /// Value of the extra key `format_version` that we add to files we write.

@@ -68,6 +68,13 @@ class Darap:
         """Deforms the mesh toward raw target normals ``x`` (V, 3) float64/float32; only
         directions matter (``t = x / max(|x|, 1e-12)``). GIL released. Raises
         :class:`DarapError` for non-finite targets."""
+    def forward_at_strength(self, x: Float3, strength: float) -> Deformation:
+        """The strength control (docs/strength.md): :meth:`forward` at this layer's λ pushed
+        ``strength`` times as far by the ``procrustes`` rule's increment,
+        ``R_v(s) = P_v(s·λ)·P_v(λ)ᵀ·R_v(λ)``, then the global step. ``strength = 1`` is
+        :meth:`forward` exactly; ≥ 1 is the intended use. The result's :meth:`backward` raises
+        :class:`DarapError` unless ``strength = 1`` (no tape). Raises :class:`DarapError` for a
+        non-finite or non-positive strength. GIL released."""
     def backward(self, deformation: Deformation, grad_positions: Float3) -> npt.NDArray[np.float64]:
         """The vector-Jacobian product: ∂ℓ/∂x (V, 3) for ∂ℓ/∂positions (V, 3), at a
         deformation computed by this layer's :meth:`forward` (with the λ, rule and mask of that

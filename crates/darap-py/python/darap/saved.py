@@ -180,12 +180,19 @@ class SavedDeformation:
         mask: Optional[np.ndarray] = None,
         region: RegionArg = "saved",
         feather: Optional[int] = None,
+        strength: Optional[float] = None,
     ) -> np.ndarray:
         """The deformed positions (V, 3) float64, as ``stylize apply`` writes them (normalized
         frame, ``recenter_rescale``; a localized run with its saved region unless ``region`` or
-        ``mask`` says otherwise)."""
+        ``mask`` says otherwise). ``strength`` (≥ 1): the result at ``lam`` pushed that many times
+        as far by the strength control, as ``stylize apply --strength`` (docs/strength.md);
+        ``strength=1`` is the plain result."""
         layer = self.layer(lam=lam, rotation_rule=rotation_rule, mask=mask, region=region, feather=feather)
-        return layer.forward(self.targets()).positions
+        if strength is None:
+            return layer.forward(self.targets()).positions
+        if not (np.isfinite(strength) and strength >= 1.0):
+            raise ValueError(f"strength must be a number >= 1 (a weaker result: a smaller lam), got {strength!r}")
+        return layer.forward_at_strength(self.targets(), float(strength)).positions
 
 
     @property

@@ -9,6 +9,14 @@
 //! (default UPPER: the saved λ), searched by [`crate::max_safe`] (a scan, then bisection of the
 //! first crossing to 1 %; it says when safety is not monotone over the scan).
 //!
+//! **`--strength S[,S…]`** (each S ≥ 1) writes the result at λ (the saved one, or one `--lambda`
+//! value) pushed S times as far by the strength control ([`darap::Darap::forward_at_strength`]:
+//! the `procrustes` rule's increment from λ to S·λ on top of the result at λ; S = 1 is that
+//! result exactly). Measured against re-applying the reference rule at S·λ in `docs/strength.md`:
+//! it keeps the volume and does not flip rotations where the larger λ collapses the mesh.
+//! `--strength max-safe[:UPPER]` (UPPER > 1, default 3) searches the strongest safe S in
+//! `[1, UPPER]` as `--lambda max-safe` searches λ. Several strengths write `OUT_strength<S>.ext`.
+//!
 //! Reads the saved `.npz`, builds its dARAP layer ([`SavedDeformation::ready_layer`]: `verts`
 //! normalized to the side-2 cube in f64) with the requested λ (default: the saved
 //! `local_step_procrustes.lamb`), runs local step → global step → `recenter_rescale`, and writes
@@ -42,7 +50,8 @@ use darap::RotationRule;
 use mesh_core::TriMesh;
 use mesh_core::io::Format;
 use stylize::frame::{InputFrame, OutputFrame};
-use stylize::saved::{Region, SavedDeformation, SavedError};
+use stylize::intersections::SourceIntersections;
+use stylize::saved::{ReadyLayer, Region, SavedDeformation, SavedError};
 
 /// Arguments of `stylize apply`.
 #[derive(clap::Args, Debug, Clone)]
@@ -57,6 +66,11 @@ pub struct Args {
     /// self-intersections, flips, collapse), UPPER defaulting to the saved λ.
     #[arg(long, value_delimiter = ',', allow_negative_numbers = true, value_parser = parse_lambda)]
     pub lambda: Vec<LambdaArg>,
+    /// Strength(s) S ≥ 1, comma separated: the result at λ (the saved one, or one `--lambda`
+    /// value) pushed S times as far by the strength control (docs/strength.md; S = 1 is that
+    /// result exactly); or `max-safe[:UPPER]`: the strongest safe S in [1, UPPER] (default 3).
+    #[arg(long, value_delimiter = ',', allow_negative_numbers = true, value_parser = parse_lambda)]
+    pub strength: Vec<LambdaArg>,
     /// Rotation rule: `gis` (the reference's; what saved files and the paper's λ values assume) or
     /// `procrustes` (textbook Kabsch, needs a larger λ). Default: the file's `rotation_rule` key
     /// if present, else `gis`.
@@ -141,9 +155,61 @@ pub fn parse_lambda(s: &str) -> Result<LambdaArg, String> {
 /// The largest UPPER `max-safe` accepts (the viewer's slider stops at 100).
 pub const MAX_SAFE_UPPER_LIMIT: f64 = 1000.0;
 
+/// The largest strength `--strength` accepts (the study of docs/strength.md goes to 3).
+pub const MAX_STRENGTH: f64 = 100.0;
+
+/// `--strength max-safe`'s UPPER when none is given.
+pub const DEFAULT_STRENGTH_UPPER: f64 = 3.0;
+
+/// What one output is: the result at a λ, or the strength control's result at a strength.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Setting {
+    Lambda(f64),
+    Strength { lambda: f64, strength: f64 },
+}
+
+impl Setting {
+    fn label(&self) -> String {
+        match self {
+            Setting::Lambda(l) => format!("λ = {l}"),
+            Setting::Strength { lambda, strength } => format!("strength {strength} (λ = {lambda})"),
+        }
+    }
+
+    fn deform(&self, ready: &mut ReadyLayer) -> anyhow::Result<darap::Deformation> {
+        match *self {
+            Setting::Lambda(l) => ready.at_lambda(l),
+            Setting::Strength { lambda, strength } => ready.at_strength(lambda, strength),
+        }
+        .with_context(|| format!("dARAP forward failed at {}", self.label()))
+    }
+
+    fn assess(
+        &self,
+        ready: &mut ReadyLayer,
+        source: &mut SourceIntersections,
+    ) -> anyhow::Result<(darap::Deformation, crate::sanity::LambdaSanity)> {
+        let d = self.deform(ready)?;
+        let (lambda, strength) = match *self {
+            Setting::Lambda(l) => (l, None),
+            Setting::Strength { lambda, strength } => (lambda, Some(strength)),
+        };
+        let mut s = crate::sanity::LambdaSanity::assess(&ready.rest, source, &d, lambda)?;
+        if let Some(strength) = strength {
+            s = s.with_strength(strength);
+        }
+        Ok((d, s))
+    }
+}
+
 /// The output path for each λ (the path itself when there is one λ): a format written with
 /// normals ([`Format::WITH_NORMALS`]); with several λ the extension is written in lower case.
 pub fn output_paths(output: &Path, lambdas: &[f64]) -> anyhow::Result<Vec<PathBuf>> {
+    output_paths_named(output, lambdas, "lambda")
+}
+
+/// [`output_paths`] with `OUT_<name><value>.ext` for several values.
+fn output_paths_named(output: &Path, lambdas: &[f64], name: &str) -> anyhow::Result<Vec<PathBuf>> {
     let format = Format::from_path(output).filter(|f| Format::WITH_NORMALS.contains(f));
     let Some(format) = format else {
         bail!(
@@ -162,7 +228,7 @@ pub fn output_paths(output: &Path, lambdas: &[f64]) -> anyhow::Result<Vec<PathBu
         .with_context(|| format!("output {} has no usable file name", output.display()))?;
     Ok(lambdas
         .iter()
-        .map(|l| output.with_file_name(format!("{stem}_lambda{l}.{ext}")))
+        .map(|l| output.with_file_name(format!("{stem}_{name}{l}.{ext}")))
         .collect())
 }
 
@@ -292,14 +358,64 @@ pub fn run(args: Args) -> anyhow::Result<()> {
              reference uses 5–10)"
         );
     }
+    let mut strength_upper = None;
+    let mut strengths = Vec::new();
+    if !args.strength.is_empty() {
+        ensure!(
+            max_safe_upper.is_none() && lambdas.len() == 1,
+            "--strength pushes the result at one λ further (the saved λ, or one --lambda value), \
+             not at several λ or at --lambda max-safe"
+        );
+        for a in &args.strength {
+            match a {
+                LambdaArg::Value(s) => strengths.push(*s),
+                LambdaArg::MaxSafe(upper) => {
+                    ensure!(
+                        args.strength.len() == 1,
+                        "--strength max-safe stands alone (not with other strengths)"
+                    );
+                    let upper = upper.unwrap_or(DEFAULT_STRENGTH_UPPER);
+                    ensure!(
+                        upper.is_finite() && upper > 1.0 && upper <= MAX_STRENGTH,
+                        "--strength max-safe:{upper}: the upper end must be a number in (1, {MAX_STRENGTH}]"
+                    );
+                    strength_upper = Some(upper);
+                    strengths.push(upper);
+                }
+            }
+        }
+        for &s in &strengths {
+            ensure!(
+                s.is_finite() && (1.0..=MAX_STRENGTH).contains(&s),
+                "--strength {s}: a strength must be a number in [1, {MAX_STRENGTH}] (1: the result \
+                 at λ itself; for a weaker result, a smaller --lambda)"
+            );
+        }
+    }
+    let mut settings: Vec<Setting> = if strengths.is_empty() {
+        lambdas.iter().map(|&l| Setting::Lambda(l)).collect()
+    } else {
+        strengths
+            .iter()
+            .map(|&strength| Setting::Strength {
+                lambda: lambdas[0],
+                strength,
+            })
+            .collect()
+    };
     let rule = match args.rotation_rule {
         Some(r) => r,
         None => saved.rotation_rule()?.unwrap_or_default(),
     };
 
-    let mut outputs = output_paths(&args.output, &lambdas)?;
-    // Several λ: the labelled comparison sheet too (cmd::apply_grid), checked like the meshes.
-    let grid = if lambdas.len() > 1 {
+    let (values, name) = if strengths.is_empty() {
+        (&lambdas, "lambda")
+    } else {
+        (&strengths, "strength")
+    };
+    let mut outputs = output_paths_named(&args.output, values, name)?;
+    // Several values: the labelled comparison sheet too (cmd::apply_grid), checked like the meshes.
+    let grid = if values.len() > 1 {
         let path = super::apply_grid::grid_path(&args.output)?;
         outputs.push(path.clone());
         Some(path)
@@ -319,8 +435,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     for (i, a) in outputs.iter().enumerate() {
         if outputs[..i].contains(a) {
             bail!(
-                "two strengths λ write the same file {} (repeated --lambda value)",
-                a.display()
+                "two outputs are the same file {} (a repeated --{} value)",
+                a.display(),
+                if strengths.is_empty() {
+                    "lambda"
+                } else {
+                    "strength"
+                }
             );
         }
     }
@@ -353,20 +474,32 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 closed = outln!("{line}").err();
             }
         }
-        lambdas = vec![lambda];
+        settings = vec![Setting::Lambda(lambda)];
+    }
+    if let Some(upper) = strength_upper {
+        let (strength, lines) = max_safe_strength(&mut ready, &mut source, lambdas[0], upper)?;
+        for line in lines {
+            if closed.is_none() {
+                closed = outln!("{line}").err();
+            }
+        }
+        settings = vec![Setting::Strength {
+            lambda: lambdas[0],
+            strength,
+        }];
     }
 
     let mut columns = Vec::new();
-    for (&lambda, out) in lambdas.iter().zip(&outputs) {
-        let deformed = ready
-            .at_lambda(lambda)
-            .with_context(|| format!("dARAP forward failed at λ = {lambda}"))?;
-        let sanity =
-            crate::sanity::LambdaSanity::assess(&ready.rest, &mut source, &deformed, lambda)?;
+    for (setting, out) in settings.iter().zip(&outputs) {
+        let (deformed, sanity) = setting.assess(&mut ready, &mut source)?;
         if grid.is_some() {
             // The sheet's tiles are rendered in the side-2 frame, whatever frame the files use.
+            let label = match setting {
+                Setting::Lambda(l) => super::apply_grid::label_text(*l),
+                Setting::Strength { strength, .. } => format!("s={strength}"),
+            };
             columns.push((
-                lambda,
+                label,
                 super::apply_grid::tiles(&deformed.positions, &saved.faces)?,
             ));
         }
@@ -390,7 +523,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .with_context(|| format!("cannot write {}", out.display()))?;
         if closed.is_none() {
             closed = outln!(
-                "λ = {lambda}: wrote {}\n  {}",
+                "{}: wrote {}\n  {}",
+                setting.label(),
                 out.display(),
                 sanity.summary()
             )
@@ -401,23 +535,106 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     }
     if let Some(path) = &grid {
-        super::apply_grid::write_sheet(path, &columns)?;
+        super::apply_grid::write_sheet_labelled(path, &columns)?;
         if closed.is_none() {
-            closed = outln!("wrote {} (λ = {} by column)", path.display(), {
-                let l: Vec<String> = lambdas.iter().map(f64::to_string).collect();
+            let (what, l): (&str, Vec<String>) = if strengths.is_empty() {
+                ("λ", lambdas.iter().map(f64::to_string).collect())
+            } else {
+                ("strength", strengths.iter().map(f64::to_string).collect())
+            };
+            closed = outln!(
+                "wrote {} ({what} = {} by column)",
+                path.display(),
                 l.join(", ")
-            })
+            )
             .err();
         }
     }
     closed.map_or(Ok(()), |e| Err(e.into()))
 }
 
+/// `--strength max-safe:UPPER`: the strongest safe strength in `[1, UPPER]` at λ = `lambda`,
+/// searched by [`crate::max_safe::search`] over `t = s − 1 ∈ [0, UPPER − 1]` (so the bisection
+/// stops within 1 % of `s − 1`, finer than 1 % of `s`). Refuses when the result at λ itself
+/// (s = 1) is not safe.
+fn max_safe_strength(
+    ready: &mut ReadyLayer,
+    source: &mut SourceIntersections,
+    lambda: f64,
+    upper: f64,
+) -> anyhow::Result<(f64, Vec<String>)> {
+    let mut unsafe_warnings: Vec<(f64, Vec<String>)> = Vec::new();
+    let searched = crate::max_safe::search(upper - 1.0, |t| {
+        let setting = Setting::Strength {
+            lambda,
+            strength: 1.0 + t,
+        };
+        let (_, s) = setting.assess(ready, source)?;
+        let safe = s.is_safe();
+        if !safe {
+            unsafe_warnings.push((1.0 + t, s.warnings()));
+        }
+        Ok(safe)
+    });
+    let found = match searched {
+        Ok(f) => f,
+        Err(e) => {
+            let why: Vec<String> = unsafe_warnings
+                .iter()
+                .filter(|(s, _)| *s == 1.0)
+                .flat_map(|(_, w)| w.iter().cloned())
+                .collect();
+            if why.is_empty() {
+                return Err(e);
+            }
+            bail!(
+                "max-safe: no strength is safe: the result at λ = {lambda} itself (strength 1) \
+                 is not: {}; find a safe λ first (--lambda max-safe)",
+                why.join("; ")
+            );
+        }
+    };
+    let strength = 1.0 + found.lambda;
+    let mut lines = Vec::new();
+    match found.first_unsafe {
+        None => lines.push(format!(
+            "max-safe: every strength scanned up to {upper} is safe ({} evaluations): strength {upper}",
+            found.evaluations
+        )),
+        Some(hi) => {
+            let hi = 1.0 + hi;
+            let why = unsafe_warnings
+                .iter()
+                .find(|(s, _)| *s == hi)
+                .map(|(_, w)| w.join("; "))
+                .unwrap_or_default();
+            lines.push(format!(
+                "max-safe: strength {strength} (the first unsafe strength is {hi}; {} evaluations up to {upper})",
+                found.evaluations
+            ));
+            lines.push(format!("  unsafe at strength {hi}: {why}"));
+        }
+    }
+    if !found.safe_again.is_empty() {
+        let list: Vec<String> = found
+            .safe_again
+            .iter()
+            .take(5)
+            .map(|t| format!("{}", 1.0 + t))
+            .collect();
+        errln!(
+            "warning: max-safe: safety is not monotone over the scan: after the first crossing the result is safe again at strength {} (the answer is the first crossing)",
+            list.join(", ")
+        );
+    }
+    Ok((strength, lines))
+}
+
 /// `--lambda max-safe:UPPER`: searches ([`crate::max_safe::search`]); returns the λ to write and
 /// the lines that report what it found, for stdout (warnings go to stderr here).
 fn max_safe(
-    ready: &mut stylize::saved::ReadyLayer,
-    source: &mut stylize::intersections::SourceIntersections,
+    ready: &mut ReadyLayer,
+    source: &mut SourceIntersections,
     upper: f64,
 ) -> anyhow::Result<(f64, Vec<String>)> {
     let mut lines = Vec::new();

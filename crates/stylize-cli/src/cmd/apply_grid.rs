@@ -69,15 +69,23 @@ pub fn tiles(positions: &[[f64; 3]], faces: &[[u32; 3]]) -> anyhow::Result<Image
 
 /// The sheet of the module docs for `(λ, tiles)` columns.
 pub fn sheet(columns: &[(f64, Images)]) -> Images {
+    let labelled: Vec<(String, &Images)> = columns
+        .iter()
+        .map(|(lambda, tiles)| (label_text(*lambda), tiles))
+        .collect();
+    sheet_labelled(&labelled)
+}
+
+/// The sheet for columns with their own labels (`s=1.5` for `apply --strength`).
+pub fn sheet_labelled(columns: &[(String, &Images)]) -> Images {
     let width = columns.len() * TILE;
     let mut canvas = Canvas::new(width, GRID_VIEWS * TILE + LABEL_HEIGHT);
-    for (j, (lambda, tiles)) in columns.iter().enumerate() {
+    for (j, (text, tiles)) in columns.iter().enumerate() {
         for v in 0..GRID_VIEWS.min(tiles.count) {
             canvas.paste(&crop(tiles, v), 0, j * TILE, v * TILE);
         }
-        let text = label_text(*lambda);
-        let (x0, y0) = label_origin(j, &text);
-        canvas.draw_text(&text, GLYPH_SCALE, x0, y0, [0.0; 3]);
+        let (x0, y0) = label_origin(j, text);
+        canvas.draw_text(text, GLYPH_SCALE, x0, y0, [0.0; 3]);
     }
     canvas.into_images()
 }
@@ -104,6 +112,13 @@ fn crop(tiles: &Images, v: usize) -> Images {
 /// Writes the sheet to `path` (atomically).
 pub fn write_sheet(path: &Path, columns: &[(f64, Images)]) -> anyhow::Result<()> {
     stylize::run_pictures::write_png_atomic(path, &sheet(columns))
+        .with_context(|| format!("cannot write {}", path.display()))
+}
+
+/// [`write_sheet`] for labelled columns ([`sheet_labelled`]).
+pub fn write_sheet_labelled(path: &Path, columns: &[(String, Images)]) -> anyhow::Result<()> {
+    let refs: Vec<(String, &Images)> = columns.iter().map(|(t, i)| (t.clone(), i)).collect();
+    stylize::run_pictures::write_png_atomic(path, &sheet_labelled(&refs))
         .with_context(|| format!("cannot write {}", path.display()))
 }
 

@@ -66,6 +66,18 @@ pub fn validate_lambda(lambda: f64) -> Result<f64, ViewError> {
     Ok(lambda)
 }
 
+/// Checks a strength of the strength control (`?strength=S`): finite, in
+/// `[1, `[`crate::cmd::apply::MAX_STRENGTH`]`]`, as `apply --strength`.
+pub fn validate_strength(strength: f64) -> Result<f64, ViewError> {
+    let max = crate::cmd::apply::MAX_STRENGTH;
+    if !(strength.is_finite() && (1.0..=max).contains(&strength)) {
+        return Err(ViewError::BadRequest(format!(
+            "strength must be a number within [1, {max}], got {strength}"
+        )));
+    }
+    Ok(strength)
+}
+
 /// What the page needs to know about an item (`GET api/items`).
 #[derive(Clone, Debug, Serialize)]
 pub struct ItemInfo {
@@ -335,15 +347,30 @@ impl RunItem {
 
     /// The saved deformation re-applied at `lambda` (validated here).
     pub fn at_lambda(&self, lambda: f64) -> Result<Shape, ViewError> {
+        self.at(lambda, None)
+    }
+
+    /// The saved deformation re-applied at `lambda`, and with `Some(s)` pushed `s` times as far by
+    /// the strength control (`apply --strength`; [`validate_strength`]). Both validated here.
+    pub fn at(&self, lambda: f64, strength: Option<f64>) -> Result<Shape, ViewError> {
         let lambda = validate_lambda(lambda)?;
+        let strength = strength.map(validate_strength).transpose()?;
         self.with_loaded(|l| {
-            let deformation = l.ready.at_lambda(lambda).map_err(|e| {
+            let deformed = match strength {
+                None => l.ready.at_lambda(lambda),
+                Some(s) => l.ready.at_strength(lambda, s),
+            };
+            let deformation = deformed.map_err(|e| {
                 ViewError::Failed(
                     anyhow::Error::from(e).context(format!("dARAP forward failed at λ = {lambda}")),
                 )
             })?;
-            let sanity = LambdaSanity::assess(&l.ready.rest, &mut l.source, &deformation, lambda)
-                .map_err(ViewError::Failed)?;
+            let mut sanity =
+                LambdaSanity::assess(&l.ready.rest, &mut l.source, &deformation, lambda)
+                    .map_err(ViewError::Failed)?;
+            if let Some(s) = strength {
+                sanity = sanity.with_strength(s);
+            }
             Ok(Shape {
                 positions: deformation.positions,
                 faces: l.ready.rest.faces.clone(),
@@ -757,8 +784,14 @@ impl Item {
 
     /// The result at `lambda` (runs only).
     pub fn at_lambda(&self, lambda: f64) -> Result<Shape, ViewError> {
+        self.at(lambda, None)
+    }
+
+    /// The result at `lambda`, pushed `strength` times as far when given (runs only;
+    /// [`RunItem::at`]).
+    pub fn at(&self, lambda: f64, strength: Option<f64>) -> Result<Shape, ViewError> {
         match self {
-            Item::Run(r) => r.at_lambda(lambda),
+            Item::Run(r) => r.at(lambda, strength),
             Item::Mesh(m) => Err(ViewError::BadRequest(format!(
                 "{} is a mesh, not a run: it has no deformation to re-apply",
                 m.name

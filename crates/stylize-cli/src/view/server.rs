@@ -6,11 +6,14 @@
 //! /TOKEN/static/PATH                        the page's scripts, styles and vendored three.js
 //! /TOKEN/api/items                          JSON: one ItemInfo per command-line argument
 //! /TOKEN/api/items/ID/source                framed: header JSON + f32 positions + u32 faces
-//! /TOKEN/api/items/ID/result?lambda=L       framed: header JSON (λ diagnostics) + f32 positions
+//! /TOKEN/api/items/ID/result?lambda=L[&strength=S]
+//!                                           framed: header JSON (λ diagnostics) + f32 positions;
+//!                                           with S, the result at λ pushed S times as far
+//!                                           (`apply --strength`; S in [1, 100])
 //! /TOKEN/api/items/ID/max-safe?upper=L     JSON: the strongest safe λ in (0, L] (`lambda`,
 //!                                           `first_unsafe`, `safe_again`, `evaluations`;
 //!                                           `crate::max_safe`), cached per run and L
-//! /TOKEN/api/items/ID/download?lambda=L&format=obj|ply|glb[&frame=input|normalized]
+//! /TOKEN/api/items/ID/download?lambda=L&format=obj|ply|glb[&frame=input|normalized][&strength=S]
 //!                                                          the mesh at λ as a file, in the run's
 //!                                                          input frame by default
 //! /TOKEN/api/items/ID/files/PATH            a file inside a run directory (images, metrics)
@@ -230,10 +233,13 @@ async fn source(State(viewer): State<Arc<Viewer>>, Path(id): Path<usize>) -> Res
     }
 }
 
-/// `?lambda=L` (required).
+/// `?lambda=L` (required) `[&strength=S]`.
 #[derive(Debug, Deserialize)]
 struct LambdaQuery {
     lambda: f64,
+    /// The strength control's `S` (`apply --strength`); absent: the result at λ.
+    #[serde(default)]
+    strength: Option<f64>,
 }
 
 fn result_header(shape: &Shape) -> serde_json::Value {
@@ -243,6 +249,7 @@ fn result_header(shape: &Shape) -> serde_json::Value {
     });
     if let Some(s) = &shape.sanity {
         head["lambda"] = s.lambda.into();
+        head["strength"] = s.strength.into();
         head["flipped"] = s.flipped.into();
         head["flipped_fraction"] = s.flipped_fraction.into();
         // JSON has no NaN: a source without volume gives null.
@@ -295,7 +302,7 @@ async fn result(
     Path(id): Path<usize>,
     Query(q): Query<LambdaQuery>,
 ) -> Response {
-    match on_item(viewer, id, move |item| item.at_lambda(q.lambda)).await {
+    match on_item(viewer, id, move |item| item.at(q.lambda, q.strength)).await {
         Ok(shape) => framed(frame(
             &result_header(&shape),
             &[&f32_bytes(&shape.positions)],
@@ -304,10 +311,12 @@ async fn result(
     }
 }
 
-/// `?lambda=L&format=obj|ply|glb`.
+/// `?lambda=L&format=obj|ply|glb[&strength=S]`.
 #[derive(Debug, Deserialize)]
 struct DownloadQuery {
     lambda: f64,
+    #[serde(default)]
+    strength: Option<f64>,
     format: String,
     /// `input` (the default when the run records its input frame) or `normalized`.
     #[serde(default)]
@@ -341,7 +350,7 @@ async fn download(
     let format = format.extension();
     let fmt = format;
     let made = on_item(viewer, id, move |item| {
-        let shape = item.in_frame(item.at_lambda(q.lambda)?, frame)?;
+        let shape = item.in_frame(item.at(q.lambda, q.strength)?, frame)?;
         let mesh = mesh_core::TriMesh::new(shape.positions, shape.faces);
         let normals =
             mesh_core::normals::vertex_normals_area_weighted(&mesh.positions, &mesh.faces);
@@ -350,7 +359,14 @@ async fn download(
         mesh_core::io::write_mesh(&path, &mesh, Some(&normals))
             .map_err(|e| ViewError::Failed(e.into()))?;
         let bytes = std::fs::read(&path).map_err(|e| ViewError::Failed(e.into()))?;
-        Ok((format!("{}_lambda{}.{fmt}", item.stem(), q.lambda), bytes))
+        let strength = q
+            .strength
+            .map(|s| format!("_strength{s}"))
+            .unwrap_or_default();
+        Ok((
+            format!("{}_lambda{}{strength}.{fmt}", item.stem(), q.lambda),
+            bytes,
+        ))
     })
     .await;
     match made {
