@@ -5,8 +5,8 @@
 //! [MESH…] [--reps N] [--only NAME]`
 //!
 //! Writes into `OUT_DIR`, for each mesh: `NAME.obj` (coordinates rounded to f32, which MeshLab
-//! stores, so both tools see the same numbers) and `NAME.faces.txt` (our intersecting faces, one
-//! index per line), and prints one tab-separated line per mesh: name, faces, pairs, faces
+//! stores, so both tools see the same numbers), `NAME.faces.txt` (our intersecting faces, one
+//! index per line) and `NAME.pairs.txt` (our intersecting pairs `a b`, one per line, sorted), and prints one tab-separated line per mesh: name, faces, pairs, faces
 //! involved, candidates, then per call: BVH build, one full check, refit + check (the viewer's
 //! per-move cost) in **CPU ms of the thread** (the machine is shared: descheduled time does not
 //! count; each repeated until ≥ 0.3 s of CPU and ≥ N times), the check's wall ms, the BVH's
@@ -152,6 +152,10 @@ fn main() {
         let mut f = std::fs::File::create(out.join(format!("{name}.faces.txt"))).unwrap();
         for face in &r.faces {
             writeln!(f, "{face}").unwrap();
+        }
+        let mut f = std::fs::File::create(out.join(format!("{name}.pairs.txt"))).unwrap();
+        for (a, b) in &r.pairs {
+            writeln!(f, "{a} {b}").unwrap();
         }
         println!(
             "{name}\t{}\t{}\t{}\t{}\t{build:.1}\t{check:.1}\t{refit:.1}\t{check_wall:.1}\t{traversal:.1}\t{check2_wall:.1}",

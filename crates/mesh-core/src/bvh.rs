@@ -7,8 +7,8 @@
 //! of at most [`LEAF_SIZE`] faces. The depth is therefore at most `⌈log₂(F / LEAF_SIZE)⌉ + 1`
 //! (≤ 32 for any `u32` face count). Nodes are stored in pre-order, so every child has a larger
 //! index than its parent and [`Bvh::refit`] recomputes the boxes bottom-up in one backward pass
-//! without touching the tree's shape. (The self-intersection checker builds its trees by a Morton
-//! sort instead, `Bvh::for_pairs`: faster to build, used only for the pair traversal.)
+//! without touching the tree's shape. (The self-intersection checker builds only the pair traversal's
+//! compact tree, by a Morton sort, straight from the vertices: `PairTree::for_mesh`.)
 //!
 //! Conventions:
 //! - boxes are closed: two boxes that touch at a face, edge or corner overlap;
@@ -235,50 +235,6 @@ fn triangles(positions: &[[f64; 3]], faces: &[[u32; 3]]) -> Result<Vec<[[f64; 3]
         .collect()
 }
 
-/// The faces ordered by the Morton code of their centroids: each coordinate quantized to 21 bits
-/// over the centroids' bounding cube (the largest extent on every axis), the bits interleaved
-/// `x` lowest; ties by face index.
-fn morton_order(tris: &[[[f64; 3]; 3]]) -> (Vec<u32>, Vec<u64>) {
-    let mut lo = [f64::INFINITY; 3];
-    let mut hi = [f64::NEG_INFINITY; 3];
-    let centroid = |t: &[[f64; 3]; 3]| [0, 1, 2].map(|k| (t[0][k] + t[1][k] + t[2][k]) / 3.0);
-    for t in tris {
-        let c = centroid(t);
-        for k in 0..3 {
-            lo[k] = lo[k].min(c[k]);
-            hi[k] = hi[k].max(c[k]);
-        }
-    }
-    let extent = (0..3).map(|k| hi[k] - lo[k]).fold(0.0f64, f64::max);
-    const CELLS: f64 = ((1u32 << 21) - 1) as f64;
-    let scale = if extent > 0.0 { CELLS / extent } else { 0.0 };
-    // Spreads the low 21 bits of `x` to every third bit.
-    fn spread(x: u64) -> u64 {
-        let mut x = x & 0x1f_ffff;
-        x = (x | (x << 32)) & 0x001f_0000_0000_ffff;
-        x = (x | (x << 16)) & 0x001f_0000_ff00_00ff;
-        x = (x | (x << 8)) & 0x100f_00f0_0f00_f00f;
-        x = (x | (x << 4)) & 0x10c3_0c30_c30c_30c3;
-        x = (x | (x << 2)) & 0x1249_2492_4924_9249;
-        x
-    }
-    let mut keyed: Vec<(u64, u32)> = tris
-        .iter()
-        .enumerate()
-        .map(|(f, t)| {
-            let c = centroid(t);
-            // In [0, CELLS] (the float-to-int cast saturates; finite input).
-            let q = |k: usize| ((c[k] - lo[k]) * scale).clamp(0.0, CELLS) as u64;
-            (
-                spread(q(0)) | (spread(q(1)) << 1) | (spread(q(2)) << 2),
-                f as u32,
-            )
-        })
-        .collect();
-    keyed.sort_unstable();
-    keyed.into_iter().map(|(c, f)| (f, c)).unzip()
-}
-
 impl Bvh {
     /// Builds the tree. Refuses a face index out of range and a non-finite vertex used by a face;
     /// an empty face list gives an empty tree (every query answers nothing).
@@ -312,61 +268,6 @@ impl Bvh {
             bvh.fill_bounds();
         }
         Ok(bvh)
-    }
-
-    /// A tree for the self-overlap traversal only ([`Bvh::pair_tree`]), built faster than
-    /// [`Bvh::new`]'s: the faces sorted once by the Morton code of their centroids (21 bits per
-    /// axis over the centroids' bounding cube, ties by face index), then each range split where
-    /// the highest bit on which its first and last codes differ turns from 0 to 1 (in halves by
-    /// count when all its codes are equal), down to ranges of at most [`PAIR_LEAF`] faces, the
-    /// pair traversal's leaves. A pure function of the input. The
-    /// candidate pairs do not depend on the tree (they are the pairs whose outward-rounded `f32`
-    /// boxes overlap), so they are the same as on [`Bvh::new`]'s; only the traversal's speed
-    /// does. Every other query stays exact on this tree (leaves are scanned face by face), only
-    /// slower.
-    pub(crate) fn for_pairs(positions: &[[f64; 3]], faces: &[[u32; 3]]) -> Result<Bvh, BvhError> {
-        let tris = triangles(positions, faces)?;
-        let boxes: Vec<Aabb> = tris.iter().map(|t| Aabb::of_points(t)).collect();
-        let (order, codes) = morton_order(&tris);
-        let mut bvh = Bvh {
-            nodes: Vec::with_capacity(2 * faces.len() / PAIR_LEAF as usize + 1),
-            order,
-            faces: faces.to_vec(),
-            boxes,
-            tris,
-            num_vertices: positions.len(),
-        };
-        if !faces.is_empty() {
-            bvh.build_by_codes(&codes, 0, faces.len(), PAIR_LEAF as usize);
-            bvh.fill_bounds();
-        }
-        Ok(bvh)
-    }
-
-    /// Pre-order nodes over `order[start..end]` (sorted by their Morton `codes`), split as
-    /// [`Bvh::for_pairs`] says; boxes are left for [`Bvh::fill_bounds`].
-    fn build_by_codes(&mut self, codes: &[u64], start: usize, end: usize, leaf_size: usize) {
-        let me = self.nodes.len();
-        self.nodes.push(Node {
-            bounds: Aabb::EMPTY,
-            start: start as u32,
-            count: (end - start) as u32,
-        });
-        if end - start <= leaf_size {
-            return;
-        }
-        let (a, b) = (codes[start], codes[end - 1]);
-        let mid = if a == b {
-            start + (end - start) / 2
-        } else {
-            let bit = 63 - (a ^ b).leading_zeros();
-            start + codes[start..end].partition_point(|&c| c & (1 << bit) == 0)
-        };
-        self.build_by_codes(codes, start, mid, leaf_size);
-        let right_index = self.nodes.len() as u32;
-        self.build_by_codes(codes, mid, end, leaf_size);
-        self.nodes[me].start = right_index;
-        self.nodes[me].count = 0;
     }
 
     /// Every node's box from its faces' (leaves) or children's (interior nodes), bottom-up.
@@ -737,24 +638,11 @@ impl Bvh {
     /// one leaf is tested against the other leaf's box first.
     pub fn for_each_candidate_pair(&self, mut pair: impl FnMut(u32, u32)) {
         let order = &self.order;
-        self.for_each_candidate_slots(|x, y| {
-            let (f, g) = (order[x], order[y]);
-            pair(f.min(g), f.max(g));
-        });
-    }
-
-    /// The faces in the order the tree's leaves hold them (`slot → face`): what
-    /// [`for_each_candidate_slots`](Self::for_each_candidate_slots) indexes.
-    pub(crate) fn leaf_order(&self) -> &[u32] {
-        &self.order
-    }
-
-    /// [`for_each_candidate_pair`](Self::for_each_candidate_pair) as positions `(x, y)` in
-    /// [`leaf_order`](Self::leaf_order) (`x ≠ y`, either order): callers that keep per-face data
-    /// in that order read it sequentially.
-    pub(crate) fn for_each_candidate_slots(&self, emit: impl FnMut(usize, usize)) {
         if let Some(tree) = self.pair_tree() {
-            tree.traverse(&[(0, 0)], emit);
+            tree.traverse(&[(0, 0)], |x, y| {
+                let (f, g) = (order[x], order[y]);
+                pair(f.min(g), f.max(g));
+            });
         }
     }
 
@@ -768,21 +656,6 @@ impl Bvh {
             nodes: self.pair_nodes(),
             leaf: LeafBoxes::new(self.order.iter().map(|&f| &self.boxes[f as usize])),
         })
-    }
-
-    /// Rewrites the boxes of `tree` (made by [`pair_tree`](Self::pair_tree) of this tree, before
-    /// or after refits) for the current positions, in place: no allocation.
-    pub(crate) fn refresh_pair_tree(&self, tree: &mut PairTree) {
-        for (t, n) in tree.nodes.iter_mut().zip(&self.nodes) {
-            t.bounds = Box32::outward(&n.bounds);
-        }
-        for (x, &f) in self.order.iter().enumerate() {
-            let b = Box32::outward(&self.boxes[f as usize]);
-            for k in 0..3 {
-                tree.leaf.lo[k][x] = b.lo[k];
-                tree.leaf.hi[k][x] = b.hi[k];
-            }
-        }
     }
 
     /// The compact tree of [`for_each_overlapping_pair`](Self::for_each_overlapping_pair).
@@ -824,6 +697,69 @@ impl Bvh {
 const PAIR_LEAF: u32 = 32;
 const _: () = assert!(PAIR_LEAF <= 32);
 
+/// Bits per axis of [`PairTree::for_mesh`]'s Morton codes.
+const MORTON_BITS: u32 = 10;
+
+/// Sorts `keys` by their bits 32..62 (the Morton code of [`PairTree::for_mesh`]), stably: keys
+/// with equal codes keep their order. Three least-significant-digit passes of 10 bits (a pass
+/// whose digit is the same in every key is skipped).
+fn radix_sort_high_bits(keys: &mut Vec<u64>) {
+    const DIGIT: u32 = 10;
+    const BUCKETS: usize = 1 << DIGIT;
+    let n = keys.len();
+    let mut counts = vec![[0usize; BUCKETS]; 3];
+    for &k in keys.iter() {
+        for (pass, count) in counts.iter_mut().enumerate() {
+            count[((k >> (32 + DIGIT * pass as u32)) as usize) & (BUCKETS - 1)] += 1;
+        }
+    }
+    let mut tmp = vec![0u64; n];
+    for (pass, count) in counts.iter_mut().enumerate() {
+        if count.contains(&n) {
+            continue;
+        }
+        let mut sum = 0;
+        for c in count.iter_mut() {
+            let here = *c;
+            *c = sum;
+            sum += here;
+        }
+        let shift = 32 + DIGIT * pass as u32;
+        for &k in keys.iter() {
+            let d = ((k >> shift) as usize) & (BUCKETS - 1);
+            tmp[count[d]] = k;
+            count[d] += 1;
+        }
+        std::mem::swap(keys, &mut tmp);
+    }
+}
+
+/// Pre-order nodes over the leaf positions `start..end` of `keys` (sorted by their codes, bits
+/// 32 and up), split as [`PairTree::for_mesh`] says; boxes are left for [`PairTree::refit`].
+fn build_by_codes(keys: &[u64], start: usize, end: usize, nodes: &mut Vec<PairNode>) {
+    let me = nodes.len();
+    nodes.push(PairNode {
+        bounds: Box32::EMPTY,
+        right: 0,
+        first: start as u32,
+        count: (end - start) as u32,
+    });
+    if end - start <= PAIR_LEAF as usize {
+        return;
+    }
+    let code = |x: usize| keys[x] >> 32;
+    let (a, b) = (code(start), code(end - 1));
+    let mid = if a == b {
+        start + (end - start) / 2
+    } else {
+        let bit = 63 - (a ^ b).leading_zeros();
+        start + keys[start..end].partition_point(|&k| (k >> 32) & (1 << bit) == 0)
+    };
+    build_by_codes(keys, start, mid, nodes);
+    nodes[me].right = nodes.len() as u32;
+    build_by_codes(keys, mid, end, nodes);
+}
+
 /// A node of the pair traversal's compact tree.
 #[derive(Clone, Copy, Debug)]
 struct PairNode {
@@ -847,6 +783,10 @@ impl PairNode {
     }
 }
 
+/// What [`PairTree::for_mesh`] builds: the tree, its leaf order (`slot → face`) and the faces in
+/// that order.
+pub(crate) type PairTreeOfMesh = (PairTree, Vec<u32>, Vec<[u32; 3]>);
+
 /// The pair traversal's compact tree: its nodes and the faces' boxes in leaf order.
 #[derive(Clone, Debug)]
 pub(crate) struct PairTree {
@@ -855,6 +795,118 @@ pub(crate) struct PairTree {
 }
 
 impl PairTree {
+    /// The pair traversal's tree over a mesh, built straight from the vertices for callers that
+    /// need no other query (the self-intersection checker), with its leaf order (`slot → face`)
+    /// and the faces in that order. Refuses a face index out of range and a non-finite vertex used by a face
+    /// (the first such face in index order, its first such corner), as [`Bvh::new`] does.
+    ///
+    /// The faces are sorted by the 30-bit Morton code of their centroids (10 bits per axis over
+    /// the centroids' bounding cube, the bits interleaved `x` lowest; ties by face index: a
+    /// stable radix sort of the face-ordered codes), then each range is split where the highest
+    /// bit on which its first and last codes differ turns from 0 to 1 (in halves by count when
+    /// all its codes are equal), down to ranges of at most [`PAIR_LEAF`] faces, the leaves. A
+    /// pure function of the input. The faces' `f32` boxes (outward-rounded) are made in leaf
+    /// order from the vertices, and the nodes' boxes are their unions: since rounding outward
+    /// is monotone, the same `f32` boxes as [`Bvh::pair_tree`]'s rounded `f64` unions. The
+    /// candidate pairs do not depend on the tree (they are the pairs whose outward-rounded `f32`
+    /// boxes overlap), so they are the same as on [`Bvh::new`]'s tree; only the traversal's
+    /// speed does. No `f64` triangles or boxes are stored.
+    pub(crate) fn for_mesh(
+        positions: &[[f64; 3]],
+        faces: &[[u32; 3]],
+    ) -> Result<PairTreeOfMesh, BvhError> {
+        // The centroids' bounds (as sums of the corners: the factor 1/3 does not change the
+        // order), checking every face on the way.
+        let mut lo = [f64::INFINITY; 3];
+        let mut hi = [f64::NEG_INFINITY; 3];
+        for (fi, &f) in faces.iter().enumerate() {
+            let t = face_triangle(positions, fi, f)?;
+            for k in 0..3 {
+                let c = t[0][k] + t[1][k] + t[2][k];
+                lo[k] = lo[k].min(c);
+                hi[k] = hi[k].max(c);
+            }
+        }
+        let extent = (0..3).map(|k| hi[k] - lo[k]).fold(0.0f64, f64::max);
+        const CELLS: f64 = ((1u32 << MORTON_BITS) - 1) as f64;
+        // A finite extent (a sum of three finite values may overflow to ∞: then every code is 0,
+        // which only makes the tree split by count).
+        let scale = if extent > 0.0 && extent.is_finite() {
+            CELLS / extent
+        } else {
+            0.0
+        };
+        // Spreads the low 10 bits of `x` to every third bit.
+        fn spread(x: u64) -> u64 {
+            let mut x = x & 0x3ff;
+            x = (x | (x << 16)) & 0x0300_00ff;
+            x = (x | (x << 8)) & 0x0300_f00f;
+            x = (x | (x << 4)) & 0x030c_30c3;
+            x = (x | (x << 2)) & 0x0924_9249;
+            x
+        }
+        // (code << 32) | face, in face order.
+        let mut keys: Vec<u64> = faces
+            .iter()
+            .enumerate()
+            .map(|(f, v)| {
+                let p = v.map(|i| positions[i as usize]);
+                // In [0, CELLS] (the float-to-int cast saturates; NaN, from ∞ − ∞, gives 0).
+                let q = |k: usize| {
+                    ((p[0][k] + p[1][k] + p[2][k] - lo[k]) * scale).clamp(0.0, CELLS) as u64
+                };
+                ((spread(q(0)) | (spread(q(1)) << 1) | (spread(q(2)) << 2)) << 32) | f as u64
+            })
+            .collect();
+        radix_sort_high_bits(&mut keys);
+        let mut nodes = Vec::with_capacity(2 * faces.len() / PAIR_LEAF as usize + 1);
+        if !faces.is_empty() {
+            build_by_codes(&keys, 0, keys.len(), &mut nodes);
+        }
+        let order: Vec<u32> = keys.iter().map(|&k| k as u32).collect();
+        drop(keys);
+        let mut tree = PairTree {
+            nodes,
+            leaf: LeafBoxes {
+                lo: [(); 3].map(|_| vec![0.0; faces.len()]),
+                hi: [(); 3].map(|_| vec![0.0; faces.len()]),
+            },
+        };
+        let leaf_faces: Vec<[u32; 3]> = order.iter().map(|&f| faces[f as usize]).collect();
+        tree.refit(|x| leaf_faces[x].map(|i| positions[i as usize]));
+        Ok((tree, order, leaf_faces))
+    }
+
+    /// Recomputes every box for moved corners, in place (no allocation): `corners(x)` gives the
+    /// corners of the face at leaf position `x` (the tree's shape is kept).
+    pub(crate) fn refit(&mut self, corners: impl Fn(usize) -> [[f64; 3]; 3]) {
+        let n = self.leaf.lo[0].len();
+        for x in 0..n {
+            let t = corners(x);
+            let b = Box32::outward(&Aabb::of_points(&t));
+            for k in 0..3 {
+                self.leaf.lo[k][x] = b.lo[k];
+                self.leaf.hi[k][x] = b.hi[k];
+            }
+        }
+        // Children come after their parent: fill the boxes backwards.
+        for i in (0..self.nodes.len()).rev() {
+            let n = self.nodes[i];
+            let bounds = if n.is_leaf() {
+                let mut b = Box32::EMPTY;
+                for x in n.faces() {
+                    b = b.union(&self.leaf.get(x));
+                }
+                b
+            } else {
+                self.nodes[i + 1]
+                    .bounds
+                    .union(&self.nodes[n.right as usize].bounds)
+            };
+            self.nodes[i].bounds = bounds;
+        }
+    }
+
     /// The traversal's work as at least `n` independent tasks (node pairs, `(i, i)` for all pairs
     /// within subtree `i`), each with its number of faces as a weight: the root task split into
     /// its children's (the largest first) until there are `n` or no task can be split. Traversing
@@ -864,6 +916,9 @@ impl PairTree {
             let c = |k: u32| self.nodes[k as usize].count as usize;
             if i == j { c(i) } else { (c(i) + c(j)) / 2 }
         };
+        if self.nodes.is_empty() {
+            return Vec::new();
+        }
         let mut tasks = vec![((0u32, 0u32), weight((0, 0)))];
         while tasks.len() < n {
             let Some(k) = (0..tasks.len())
@@ -892,7 +947,26 @@ impl PairTree {
     /// Calls `emit(x, y)` (positions in leaf order, `x ≠ y`) for every candidate pair under the
     /// node pairs `seeds` (see [`Bvh::for_each_candidate_pair`]).
     pub(crate) fn traverse(&self, seeds: &[(u32, u32)], mut emit: impl FnMut(usize, usize)) {
+        self.traverse_masks(seeds, |x, start, mut mask| {
+            while mask != 0 {
+                emit(x, start + mask.trailing_zeros() as usize);
+                mask &= mask - 1;
+            }
+        });
+    }
+
+    /// [`traverse`](Self::traverse) by face and leaf: `emit(x, start, mask)` stands for the
+    /// candidates `(x, start + t)` for each bit `t` set in `mask` (never 0; `start + t ≠ x`), so
+    /// a caller can handle a face against a leaf's faces at once.
+    pub(crate) fn traverse_masks(
+        &self,
+        seeds: &[(u32, u32)],
+        mut emit: impl FnMut(usize, usize, u32),
+    ) {
         let (nodes, leaf) = (&self.nodes, &self.leaf);
+        if nodes.is_empty() {
+            return;
+        }
         // Node pairs (i, j) to visit: i == j for all pairs within one subtree, i != j for the
         // pairs across two subtrees whose boxes overlap.
         let mut stack: Vec<(u32, u32)> = Vec::with_capacity(256);
@@ -904,10 +978,9 @@ impl PairTree {
                     let r = a.faces();
                     for x in r.clone() {
                         let bx = leaf.get(x);
-                        let mut mask = leaf.overlap_mask(&bx, x + 1..r.end);
-                        while mask != 0 {
-                            emit(x, x + 1 + mask.trailing_zeros() as usize);
-                            mask &= mask - 1;
+                        let mask = leaf.overlap_mask(&bx, x + 1..r.end);
+                        if mask != 0 {
+                            emit(x, x + 1, mask);
                         }
                     }
                 } else {
@@ -922,16 +995,16 @@ impl PairTree {
             }
             let b = &nodes[j as usize];
             if a.is_leaf() && b.is_leaf() {
-                let rb = b.faces();
-                for x in a.faces() {
+                let (ra, rb) = (a.faces(), b.faces());
+                // The faces of `a` whose boxes overlap `b`'s, found at once.
+                let mut near = leaf.overlap_mask(&b.bounds, ra.clone());
+                while near != 0 {
+                    let x = ra.start + near.trailing_zeros() as usize;
+                    near &= near - 1;
                     let bx = leaf.get(x);
-                    if !bx.overlaps(&b.bounds) {
-                        continue;
-                    }
-                    let mut mask = leaf.overlap_mask(&bx, rb.clone());
-                    while mask != 0 {
-                        emit(x, rb.start + mask.trailing_zeros() as usize);
-                        mask &= mask - 1;
+                    let mask = leaf.overlap_mask(&bx, rb.clone());
+                    if mask != 0 {
+                        emit(x, rb.start, mask);
                     }
                 }
                 continue;
@@ -1015,6 +1088,21 @@ struct Box32 {
 }
 
 impl Box32 {
+    /// The empty box (`lo = +∞`, `hi = −∞`): the identity of [`Box32::union`].
+    const EMPTY: Box32 = Box32 {
+        lo: [f32::INFINITY; 3],
+        hi: [f32::NEG_INFINITY; 3],
+    };
+
+    /// The smallest box containing both.
+    #[inline]
+    fn union(&self, o: &Box32) -> Box32 {
+        Box32 {
+            lo: [0, 1, 2].map(|k| self.lo[k].min(o.lo[k])),
+            hi: [0, 1, 2].map(|k| self.hi[k].max(o.hi[k])),
+        }
+    }
+
     /// The smallest `f32` box containing `b` (corners rounded outward).
     #[inline]
     fn outward(b: &Aabb) -> Box32 {

@@ -39,7 +39,12 @@
 //! cases reduce to the same predicates: a shared edge is a fold iff `orient3d(u, v, a, b) = 0` and
 //! `orient2d(u, v, a)`, `orient2d(u, v, b)` agree; a shared vertex `v` of `(v, a₁, b₁)` and
 //! `(v, a₂, b₂)` is exceeded iff an opposite edge `aᵢbᵢ` meets the other triangle or one of the
-//! edges leaving `v` enters the other triangle's corner cone at `v`.
+//! edges leaving `v` enters the other triangle's corner cone at `v`. Two shortcuts decide the
+//! generic crossing configurations with fewer signs, from the same exact predicates: triangles
+//! that straddle each other's planes with no corner on the other plane meet iff the segments
+//! they cut on the planes' common line overlap (two `orient3d`, Guigue and Devillers), and faces
+//! sharing a corner that straddle each other's planes meet elsewhere iff they cut that line on
+//! the same side of the corner (one `orient3d`).
 //!
 //! # Cost and limits
 //!
@@ -55,7 +60,7 @@
 //! range); NaN or infinite coordinates of a vertex used by a face, an out-of-range index and a
 //! mesh with no faces are refused with an [`IntersectError`].
 
-use crate::bvh::{Bvh, BvhError};
+use crate::bvh::{BvhError, PairTree};
 use crate::predicates::{Sign, orient2d_projected, orient3d_unchecked};
 
 /// What the self-intersection check refuses.
@@ -153,7 +158,12 @@ pub fn self_intersections(
 /// check the same mesh at many deformations (a λ slider).
 #[derive(Clone, Debug)]
 pub struct SelfIntersectionChecker {
-    bvh: Bvh,
+    /// The pair traversal's tree ([`PairTree::for_mesh`]).
+    tree: PairTree,
+    /// Leaf order → face.
+    order: Vec<u32>,
+    /// The faces in leaf order.
+    slots: Vec<[u32; 3]>,
     face_component: Vec<u32>,
     component_faces: Vec<usize>,
     /// The current positions (the fans' certificates read them).
@@ -161,8 +171,6 @@ pub struct SelfIntersectionChecker {
     fans: Fans,
     /// Threads of [`check`](Self::check) (1: the calling thread only).
     threads: usize,
-    /// The BVH's compact copy for the pair traversal, refreshed in place at each update.
-    pair_tree: Option<crate::bvh::PairTree>,
 }
 
 impl SelfIntersectionChecker {
@@ -175,7 +183,7 @@ impl SelfIntersectionChecker {
         if faces.is_empty() {
             return Err(IntersectError::Empty);
         }
-        let bvh = Bvh::for_pairs(positions, faces)?;
+        let (tree, order, slots) = PairTree::for_mesh(positions, faces)?;
         // Two edges per face join its three corners (the third edge adds nothing); the indices
         // were checked by the tree.
         let (labels, num_labels) = crate::topology::graph_components(
@@ -201,13 +209,14 @@ impl SelfIntersectionChecker {
             component_faces[c as usize] += 1;
         }
         Ok(SelfIntersectionChecker {
+            tree,
+            order,
+            slots,
             face_component,
             component_faces,
             positions: positions.to_vec(),
             fans: Fans::new(positions.len(), faces),
             threads: 1,
-            pair_tree: bvh.pair_tree(),
-            bvh,
         })
     }
 
@@ -220,18 +229,37 @@ impl SelfIntersectionChecker {
 
     /// Number of faces.
     pub fn num_faces(&self) -> usize {
-        self.bvh.len()
+        self.order.len()
     }
 
     /// Moves the vertices (refits the tree; same vertex count). Refuses a different vertex count
     /// or a non-finite vertex, leaving the checker unchanged.
     pub fn update(&mut self, positions: &[[f64; 3]]) -> Result<(), IntersectError> {
-        self.bvh.refit(positions)?;
-        if let Some(tree) = &mut self.pair_tree {
-            self.bvh.refresh_pair_tree(tree);
+        if positions.len() != self.positions.len() {
+            return Err(BvhError::VertexCount {
+                expected: self.positions.len(),
+                got: positions.len(),
+            }
+            .into());
+        }
+        // The first face (in index order) with a non-finite corner, and its first such corner.
+        let finite = |v: u32| positions[v as usize].iter().all(|c| c.is_finite());
+        let bad_face = (0..self.slots.len())
+            .filter(|&x| !self.slots[x].iter().all(|&v| finite(v)))
+            .min_by_key(|&x| self.order[x]);
+        if let Some(x) = bad_face
+            && let Some(&v) = self.slots[x].iter().find(|&&v| !finite(v))
+        {
+            return Err(BvhError::NonFinite {
+                vertex: v as usize,
+                position: positions[v as usize],
+            }
+            .into());
         }
         self.positions.clear();
         self.positions.extend_from_slice(positions);
+        let (slots, positions) = (&self.slots, &self.positions);
+        self.tree.refit(|x| slots[x].map(|v| positions[v as usize]));
         Ok(())
     }
 
@@ -246,69 +274,66 @@ impl SelfIntersectionChecker {
 
     /// The self-intersections at the current positions.
     pub fn check(&self) -> SelfIntersections {
-        let faces = self.bvh.faces();
-        // Per face, a bit for each corner whose fan is certified (`Fans`): a pair sharing such a
-        // corner cannot intersect.
-        let certified = self.fans.certify(&self.positions);
-        let corner_mask: Vec<u8> = faces
+        let (order, slots, positions) = (&self.order, &self.slots, &self.positions);
+        let corners = |f: [u32; 3]| f.map(|v| positions[v as usize]);
+        // Per face in the tree's leaf order (which the traversal walks), a bit for each corner
+        // whose fan is certified (`Fans`): a pair sharing such a corner cannot intersect.
+        let certified = self.fans.certify(positions);
+        let masks: Vec<u8> = slots
             .iter()
             .map(|f| (0..3).fold(0u8, |m, i| m | (u8::from(certified[f[i] as usize]) << i)))
             .collect();
-        // The faces and their masks in the tree's leaf order, which the traversal walks.
-        let order = self.bvh.leaf_order();
-        let slots: Vec<[u32; 4]> = order
-            .iter()
-            .map(|&f| {
-                let v = faces[f as usize];
-                [v[0], v[1], v[2], u32::from(corner_mask[f as usize])]
-            })
-            .collect();
         // A face with a certified corner is a proper triangle (its fan's projection keeps it
         // one); the others are tested exactly.
-        let degenerate: Vec<u32> = (0..faces.len() as u32)
-            .filter(|&f| {
-                corner_mask[f as usize] == 0 && Tri::new(self.bvh.triangle(f)).drop.is_none()
-            })
+        let mut degenerate: Vec<u32> = (0..slots.len())
+            .filter(|&x| masks[x] == 0 && Tri::new(corners(slots[x])).drop.is_none())
+            .map(|x| order[x])
             .collect();
+        degenerate.sort_unstable();
         // The traversal, each candidate sharing no certified vertex tested exactly; split into
         // tasks over `threads` threads when asked (the candidates and pairs are the same).
-        let run = |tree: &crate::bvh::PairTree, seeds: &[(u32, u32)]| {
+        let run = |tree: &PairTree, seeds: &[(u32, u32)]| {
             let mut pairs = Vec::new();
             let mut candidates = 0usize;
             // The tested faces' projection axes, in a small direct-mapped cache (a face of a
             // crumpled mesh is tested against many others; the tested pairs come in leaf order).
             let mut cache = vec![(u32::MAX, Tri::new([[0.0; 3]; 3])); TRI_CACHE];
-            let mut tri = |f: u32, p: [[f64; 3]; 3]| {
-                let e = &mut cache[f as usize % TRI_CACHE];
-                if e.0 != f {
-                    *e = (f, Tri::new(p));
-                }
-                e.1
-            };
-            tree.traverse(seeds, |x, y| {
-                candidates += 1;
-                let (sa, sb) = (slots[x], slots[y]);
-                let mask = sa[3];
-                if mask != 0 && (0..3).any(|i| mask & (1 << i) != 0 && sb[..3].contains(&sa[i])) {
-                    return;
-                }
-                let (a, b) = (order[x].min(order[y]), order[x].max(order[y]));
-                let (fa, fb) = (faces[a as usize], faces[b as usize]);
-                let (pa, pb) = (self.bvh.triangle(a), self.bvh.triangle(b));
-                if quickly_apart(fa, &pa, fb, &pb) {
-                    return;
-                }
-                let (ta, tb) = (tri(a, pa), tri(b, pb));
-                if faces_intersect_filtered::<false>(fa, &ta, fb, &tb) {
-                    pairs.push((a, b));
+            tree.traverse_masks(seeds, |x, start, mut overlaps| {
+                // A face against a leaf's faces: the count and the certified-corner skip, which
+                // decide most candidates; the rest is tested out of line.
+                candidates += overlaps.count_ones() as usize;
+                let (sx, mask) = (slots[x], masks[x]);
+                // The certified corners of `x`, an uncertified one replaced by a certified one
+                // (a repeat changes nothing), so the skip below is branch-free.
+                let certified = if mask == 0 {
+                    None
+                } else {
+                    let first = sx[mask.trailing_zeros() as usize];
+                    Some([0, 1, 2].map(|i| if mask & (1 << i) != 0 { sx[i] } else { first }))
+                };
+                while overlaps != 0 {
+                    let y = start + overlaps.trailing_zeros() as usize;
+                    overlaps &= overlaps - 1;
+                    let sy = slots[y];
+                    if let Some(c) = certified {
+                        let has = |v: u32| (sy[0] == v) | (sy[1] == v) | (sy[2] == v);
+                        if has(c[0]) | has(c[1]) | has(c[2]) {
+                            continue;
+                        }
+                    }
+                    if let Some(pair) =
+                        test_candidate(order, positions, &mut cache, (x, sx), (y, sy))
+                    {
+                        pairs.push(pair);
+                    }
                 }
             });
             (pairs, candidates)
         };
-        let (mut pairs, candidates) = match &self.pair_tree {
-            None => (Vec::new(), 0),
-            Some(tree) if self.threads <= 1 => run(tree, &[(0, 0)]),
-            Some(tree) => {
+        let tree = &self.tree;
+        let (mut pairs, candidates) = match self.threads {
+            0 | 1 => run(tree, &[(0, 0)]),
+            _ => {
                 // Tasks by weight, largest first, each to the least loaded thread.
                 let mut tasks = tree.tasks(8 * self.threads);
                 tasks.sort_by_key(|t| std::cmp::Reverse(t.1));
@@ -376,7 +401,7 @@ impl SelfIntersectionChecker {
             faces: involved,
             degenerate,
             per_component,
-            num_faces: faces.len(),
+            num_faces: slots.len(),
             candidates,
         }
     }
@@ -437,11 +462,10 @@ impl Fans {
         let mut link = Vec::with_capacity(edges.len() + num_vertices);
         let mut kind = vec![0u8; num_vertices];
         offsets.push(0u32);
-        let mut used = Vec::new();
         for v in 0..num_vertices {
             let es = &edges[count[v] as usize..count[v + 1] as usize];
             let start = link.len();
-            if let Some(k) = Self::chain(v as u32, es, &mut link, &mut used) {
+            if let Some(k) = Self::chain(v as u32, es, &mut link) {
                 kind[v] = k;
             } else {
                 link.truncate(start);
@@ -456,30 +480,43 @@ impl Fans {
     }
 
     /// Appends `v`'s ordered link to `link`; `Some(1)` closed, `Some(2)` open, `None` no fan.
-    fn chain(v: u32, es: &[(u32, u32)], link: &mut Vec<u32>, used: &mut Vec<bool>) -> Option<u8> {
+    fn chain(v: u32, es: &[(u32, u32)], link: &mut Vec<u32>) -> Option<u8> {
         let k = es.len();
         if k == 0 || k > Self::MAX_FAN {
             return None;
         }
-        if es.iter().any(|&(a, b)| a == v || b == v || a == b) {
-            return None;
-        }
+        // One pass over the pairs of edges: refuse a repeated start or end (so each edge has at
+        // most one successor, whose start is its end, and at most one predecessor), and record
+        // the successors and which edges have a predecessor.
+        const NONE: u8 = u8::MAX;
+        let mut succ = [NONE; Self::MAX_FAN];
+        let mut has_pred = 0u64;
         for (i, &(a, b)) in es.iter().enumerate() {
-            if es[i + 1..].iter().any(|&(c, d)| c == a || d == b) {
+            if a == v || b == v || a == b {
                 return None;
             }
+            for (j, &(c, d)) in es.iter().enumerate().skip(i + 1) {
+                if c == a || d == b {
+                    return None;
+                }
+                if c == b {
+                    succ[i] = j as u8;
+                    has_pred |= 1 << j;
+                }
+                if d == a {
+                    succ[j] = i as u8;
+                    has_pred |= 1 << i;
+                }
+            }
         }
-        // Open: start at the edge whose start is no edge's end; closed: anywhere.
-        let first = es
-            .iter()
-            .position(|&(a, _)| !es.iter().any(|&(_, d)| d == a));
+        // Open: start at the (first) edge without a predecessor; closed: at the first edge.
+        // Since predecessors are unique, the walk can only come back to where it started.
+        let first = (0..k).find(|&i| has_pred & (1 << i) == 0);
         let open = first.is_some();
-        let mut cur = first.unwrap_or(0);
-        used.clear();
-        used.resize(k, false);
+        let start = first.unwrap_or(0);
+        let mut cur = start;
         link.push(es[cur].0);
         for n in 0..k {
-            used[cur] = true;
             let b = es[cur].1;
             if n + 1 == k {
                 if open {
@@ -489,10 +526,11 @@ impl Fans {
                 return (b == link[link.len() - k] && k >= 3).then_some(1);
             }
             link.push(b);
-            cur = es.iter().position(|&(a, _)| a == b)?;
-            if used[cur] {
+            let next = succ[cur];
+            if next == NONE || usize::from(next) == start {
                 return None;
             }
+            cur = usize::from(next);
         }
         None
     }
@@ -551,6 +589,40 @@ fn fan_is_star(positions: &[[f64; 3]], pv: [f64; 3], l: &[u32], closed: bool) ->
         orient2d_projected(pv, at(i), r0, axis) == want
             && orient2d_projected(pv, r0, at(i + 1), axis) != want.flip()
     })
+}
+
+/// The exact test of the candidate at leaf positions `x` and `y` (with their faces `sx`, `sy`):
+/// the pair `(a, b)`, `a < b`, when the faces intersect. `cache` holds recently tested faces'
+/// [`Tri`]s (direct-mapped by face index, [`TRI_CACHE`] entries). Kept out of line, so that the
+/// traversal's loop, which calls it for a few per cent of the candidates, stays small.
+#[inline(never)]
+fn test_candidate(
+    order: &[u32],
+    positions: &[[f64; 3]],
+    cache: &mut [(u32, Tri)],
+    (x, sx): (usize, [u32; 3]),
+    (y, sy): (usize, [u32; 3]),
+) -> Option<(u32, u32)> {
+    let corners = |f: [u32; 3]| f.map(|v| positions[v as usize]);
+    let (ox, oy) = (order[x], order[y]);
+    let (a, fa, b, fb) = if ox < oy {
+        (ox, sx, oy, sy)
+    } else {
+        (oy, sy, ox, sx)
+    };
+    let (pa, pb) = (corners(fa), corners(fb));
+    if quickly_apart(fa, &pa, fb, &pb) {
+        return None;
+    }
+    let mut tri = |f: u32, p: [[f64; 3]; 3]| {
+        let e = &mut cache[f as usize % TRI_CACHE];
+        if e.0 != f {
+            *e = (f, Tri::new(p));
+        }
+        e.1
+    };
+    let (ta, tb) = (tri(a, pa), tri(b, pb));
+    faces_intersect_filtered::<false>(fa, &ta, fb, &tb).then_some((a, b))
 }
 
 /// Entries of the check's cache of [`Tri`]s (per thread).
@@ -812,12 +884,31 @@ fn vertex_adjacent_intersect<const FILTERS: bool>(ta: &Tri, tb: &Tri) -> bool {
     if sa[1] == sa[2] && sa[1] != Sign::Zero {
         return false;
     }
+    if sa[1] != Sign::Zero && sa[2] != Sign::Zero && sb[1] != Sign::Zero && sb[2] != Sign::Zero {
+        return straddling_at_corner(ta, tb, sb[2]);
+    }
     segment_meets(a1, b1, sa[1], sa[2], tb)
         || segment_meets(a2, b2, sb[1], sb[2], ta)
         || enters_corner(a1, sa[1], tb)
         || enters_corner(b1, sa[2], tb)
         || enters_corner(a2, sb[1], ta)
         || enters_corner(b2, sb[2], ta)
+}
+
+/// `P = (v, a₁, b₁)` and `Q = (v, a₂, b₂)` sharing corner `v`, each with its other two corners
+/// strictly on both sides of the other's plane (`side_b2`: the side of `b₂` of `P`'s plane, the
+/// sign of `n_P·(b₂ − v)`, `n_P = (a₁ − v) × (b₁ − v)`): do they meet other than at `v`? The
+/// planes meet in a line through `v`; `P` cuts it in `[v, i]` (`i` strictly inside `a₁b₁`) and
+/// `Q` in `[v, k]` (`k` strictly inside `a₂b₂`), and the faces meet elsewhere iff both go the
+/// same way from `v` — iff `k` is inside `P`'s corner at `v` rather than in the opposite
+/// direction, i.e. strictly left of the ray `v → a₁` in `P`'s plane. The directed line
+/// `a₂ → b₂` pierces that plane at `k` going towards `b₂`'s side, so
+/// `orient3d(v, a₁, a₂, b₂) = sign(λ)·side_b2` with `λ > 0` iff `k` is left of `v → a₁`
+/// (`(a₁ − v) × (k − v) = λ·n_P`): one `orient3d` instead of the edges' crossings.
+fn straddling_at_corner(ta: &Tri, tb: &Tri, side_b2: Sign) -> bool {
+    let [v, a1, _] = ta.p;
+    let [_, a2, b2] = tb.p;
+    o3(v, a1, a2, b2) == side_b2
 }
 
 /// Whether the segment from `t`'s first corner to `a` (with `a`'s side of `t`'s plane) contains
@@ -869,6 +960,9 @@ fn triangles_intersect_filtered<const FILTERS: bool>(ta: &Tri, tb: &Tri) -> bool
     if strictly_one_side(&sa) {
         return false;
     }
+    if !sa.contains(&Sign::Zero) && !sb.contains(&Sign::Zero) {
+        return straddling_overlap(ta, tb, sa, sb);
+    }
     if sb.iter().all(|&s| s == Sign::Zero) {
         let Some(k) = ta.drop else { return false };
         return (0..3).any(|i| segment_triangle_2d(tb.p[i], tb.p[(i + 1) % 3], ta, k))
@@ -881,6 +975,44 @@ fn triangles_intersect_filtered<const FILTERS: bool>(ta: &Tri, tb: &Tri) -> bool
         let j = (i + 1) % 3;
         segment_meets(ta.p[i], ta.p[j], sa[i], sa[j], tb)
     })
+}
+
+/// Two triangles `P = ta`, `Q = tb` that cross each other's planes with no corner on the other's
+/// plane (`sa`: the sides of `P`'s corners of `Q`'s plane, `sb`: of `Q`'s corners of `P`'s; all
+/// non-zero, neither all equal) meet iff the segments they cut on the planes' common line
+/// overlap — two more `orient3d` (the test of Guigue and Devillers, 2003) instead of the edges'
+/// crossings.
+///
+/// With `p₁` the corner of `P` alone on its side of `Q`'s plane, `q₁` that of `Q`, the corners
+/// cycled so (orientation kept) and then `q₂, q₃` swapped if `p₁` is on the negative side of `Q`
+/// and `p₂, p₃` if `q₁` is on the negative side of `P` (so `p₁` is on the side of
+/// `n_Q = (q₂ − q₁) × (q₃ − q₁)` and `q₁` on that of `n_P`): along `d = n_P × n_Q`, `P` cuts
+/// `[j, i]` (`i` on `p₁p₂`, `j` on `p₁p₃`) and `Q` cuts `[k, l]` (`k` on `q₁q₂`, `l` on `q₁q₃`),
+/// and `orient3d(p₁, p₂, q₁, q₂)` is the sign of `k − i` along `d`, `orient3d(p₁, p₃, q₁, q₃)`
+/// that of `l − j`. The closed segments overlap iff `k ≤ i` and `j ≤ l`.
+fn straddling_overlap(ta: &Tri, tb: &Tri, sa: [Sign; 3], sb: [Sign; 3]) -> bool {
+    // The corner whose side differs from the other two's.
+    let lone = |s: [Sign; 3]| {
+        if s[1] == s[2] {
+            0
+        } else if s[0] == s[2] {
+            1
+        } else {
+            2
+        }
+    };
+    let (ip, iq) = (lone(sa), lone(sb));
+    let p1 = ta.p[ip];
+    let (mut p2, mut p3) = (ta.p[(ip + 1) % 3], ta.p[(ip + 2) % 3]);
+    let q1 = tb.p[iq];
+    let (mut q2, mut q3) = (tb.p[(iq + 1) % 3], tb.p[(iq + 2) % 3]);
+    if sa[ip] == Sign::Negative {
+        std::mem::swap(&mut q2, &mut q3);
+    }
+    if sb[iq] == Sign::Negative {
+        std::mem::swap(&mut p2, &mut p3);
+    }
+    o3(p1, p2, q1, q2) != Sign::Positive && o3(p1, p3, q1, q3) != Sign::Negative
 }
 
 /// The closed segment `pq` (with the sides of `t`'s plane its ends are on) meets triangle `t`.

@@ -439,16 +439,40 @@ fn pair_build_gives_the_same_candidates_as_the_median_build() {
     pos.extend(far.iter().map(|p| p.map(|c| 1e6 + 1e-3 * c)));
     faces.extend(far_faces.iter().map(|f| f.map(|v| v + base)));
     cases.push((pos, faces));
+    // The Morton tree's candidates, as face pairs `(min, max)`, sorted; and its leaf order.
+    let morton = |tree: &PairTree, order: &[u32]| {
+        let mut c = Vec::new();
+        tree.traverse(&[(0, 0)], |x, y| {
+            let (f, g) = (order[x], order[y]);
+            c.push([f.min(g), f.max(g)]);
+        });
+        let n = c.len();
+        c.sort_unstable();
+        c.dedup();
+        assert_eq!(c.len(), n, "a pair was reported twice");
+        c
+    };
     for (pos, faces) in cases {
         let median = Bvh::new(&pos, &faces).expect("ok");
-        let pairs = Bvh::for_pairs(&pos, &faces).expect("ok");
-        let again = Bvh::for_pairs(&pos, &faces).expect("ok");
-        assert_eq!(pairs.order, again.order, "not deterministic");
-        let mut sorted = pairs.order.clone();
+        let (tree, order, leaf_faces) = PairTree::for_mesh(&pos, &faces).expect("ok");
+        let (_, again, _) = PairTree::for_mesh(&pos, &faces).expect("ok");
+        assert!((0..faces.len()).all(|x| leaf_faces[x] == faces[order[x] as usize]));
+        assert_eq!(order, again, "not deterministic");
+        let mut sorted = order.clone();
         sorted.sort_unstable();
         assert!(sorted.iter().copied().eq(0..faces.len() as u32));
-        assert_eq!(candidates(&pairs), candidates(&median));
-        assert_eq!(pairs.overlapping_pairs(), brute_pairs(&pos, &faces));
+        assert_eq!(morton(&tree, &order), candidates(&median));
+        // Moved vertices: the refitted tree gives the candidates of a tree built there.
+        let moved: Vec<[f64; 3]> = pos
+            .iter()
+            .enumerate()
+            .map(|(i, p)| [p[0] * 1.5 + (i % 7) as f64 * 0.01, p[2], -p[1]])
+            .collect();
+        let mut refitted = tree.clone();
+        refitted.refit(|x| faces[order[x] as usize].map(|v| moved[v as usize]));
+        let moved_median = Bvh::new(&moved, &faces).expect("ok");
+        assert_eq!(morton(&refitted, &order), candidates(&moved_median));
+        assert!(!candidates(&moved_median).is_empty() || faces.len() < 2);
     }
 }
 
@@ -473,4 +497,26 @@ fn filtered_closest_point_with_a_hint_equals_brute_force() {
             );
         }
     }
+}
+
+#[test]
+fn pair_build_refuses_bad_input_as_the_median_build() {
+    let pos = vec![
+        [0.0; 3],
+        [1.0, 0.0, 0.0],
+        [0.0, 1.0, 0.0],
+        [f64::NAN, 0.0, 0.0],
+    ];
+    for faces in [vec![[0, 1, 2], [0, 1, 3]], vec![[0, 1, 2], [0, 1, 9]]] {
+        // (Compared as text: the NaN of the error is not equal to itself.)
+        let err = PairTree::for_mesh(&pos, &faces)
+            .map(|_| ())
+            .expect_err("refused");
+        let want = Bvh::new(&pos, &faces).map(|_| ()).expect_err("refused");
+        assert_eq!(err.to_string(), want.to_string());
+    }
+    let (tree, order, _) = PairTree::for_mesh(&pos, &[]).expect("empty is fine");
+    assert!(order.is_empty());
+    tree.traverse(&[(0, 0)], |_, _| panic!("no faces, no pairs"));
+    assert!(tree.tasks(4).is_empty());
 }

@@ -748,3 +748,147 @@ fn threads_give_the_same_answer() {
         assert_eq!(checker.check(), one, "{t} threads");
     }
 }
+
+/// The edge-crossing test that `straddling_overlap` replaced for the generic straddling case:
+/// every edge of each triangle against the other (the plane sides first).
+fn triangles_intersect_by_edges(ta: &Tri, tb: &Tri) -> bool {
+    let sb = plane_sides(ta, tb);
+    let sa = plane_sides(tb, ta);
+    if strictly_one_side(&sb) || strictly_one_side(&sa) {
+        return false;
+    }
+    if sb.iter().all(|&s| s == Sign::Zero) {
+        let Some(k) = ta.drop else { return false };
+        return (0..3).any(|i| segment_triangle_2d(tb.p[i], tb.p[(i + 1) % 3], ta, k))
+            || point_in_triangle_2d(ta.p[0], tb, k);
+    }
+    (0..3).any(|i| {
+        let j = (i + 1) % 3;
+        segment_meets(tb.p[i], tb.p[j], sb[i], sb[j], ta)
+    }) || (0..3).any(|i| {
+        let j = (i + 1) % 3;
+        segment_meets(ta.p[i], ta.p[j], sa[i], sa[j], tb)
+    })
+}
+
+/// The two-`orient3d` test of straddling triangles against the edge crossings, on random pairs
+/// of both orientations: generic (unit cube), on coarse grids (touching at edges and corners,
+/// corners on the other plane: the other path) and crossing near-parallel; both answers occur.
+#[test]
+fn straddling_test_agrees_with_the_edge_crossings() {
+    let mut rng = Rng::new(17);
+    let (mut straddling, mut hits) = (0, 0);
+    for round in 0..60_000 {
+        let point = |rng: &mut Rng| -> P {
+            match round % 3 {
+                0 => [rng.unit(), rng.unit(), rng.unit()],
+                1 => [0; 3].map(|_| rng.int(3) as f64),
+                _ => [rng.unit(), rng.unit(), 1e-9 * rng.unit()],
+            }
+        };
+        let a = [point(&mut rng), point(&mut rng), point(&mut rng)];
+        let mut b = [point(&mut rng), point(&mut rng), point(&mut rng)];
+        if round % 2 == 1 {
+            b.swap(1, 2);
+        }
+        let (ta, tb) = (Tri::new(a), Tri::new(b));
+        if ta.drop.is_none() || tb.drop.is_none() {
+            continue;
+        }
+        let want = triangles_intersect_by_edges(&ta, &tb);
+        assert_eq!(triangles_intersect(&ta, &tb), want, "{a:?} {b:?}");
+        assert_eq!(triangles_intersect(&tb, &ta), want, "{b:?} {a:?}");
+        let (sb, sa) = (plane_sides(&ta, &tb), plane_sides(&tb, &ta));
+        if !sa.contains(&Sign::Zero)
+            && !sb.contains(&Sign::Zero)
+            && !strictly_one_side(&sa)
+            && !strictly_one_side(&sb)
+        {
+            straddling += 1;
+            hits += usize::from(want);
+        }
+    }
+    println!("{straddling} straddling, {hits} meeting");
+    assert!(
+        straddling > 5_000 && hits > 1_000 && straddling - hits > 1_000,
+        "{straddling} {hits}"
+    );
+}
+
+/// The shared-corner test before `straddling_at_corner`: the edges opposite the corner against
+/// the other face, and the corner's edges entering the other's corner.
+fn vertex_adjacent_by_edges(ta: &Tri, tb: &Tri) -> bool {
+    let [v, a1, b1] = ta.p;
+    let [_, a2, b2] = tb.p;
+    let sb = [Sign::Zero, o3(v, a1, b1, a2), o3(v, a1, b1, b2)];
+    let sa = [Sign::Zero, o3(v, a2, b2, a1), o3(v, a2, b2, b1)];
+    if (sb[1] == sb[2] && sb[1] != Sign::Zero) || (sa[1] == sa[2] && sa[1] != Sign::Zero) {
+        return false;
+    }
+    segment_meets(a1, b1, sa[1], sa[2], tb)
+        || segment_meets(a2, b2, sb[1], sb[2], ta)
+        || enters_corner(a1, sa[1], tb)
+        || enters_corner(b1, sa[2], tb)
+        || enters_corner(a2, sb[1], ta)
+        || enters_corner(b2, sb[2], ta)
+}
+
+/// The one-`orient3d` test of faces sharing a corner and straddling each other's planes against
+/// the edge tests, on random pairs around a shared corner (generic, on coarse grids, nearly
+/// flat), both orientations; both answers occur among the straddling ones.
+#[test]
+fn straddling_at_a_corner_agrees_with_the_edge_tests() {
+    let mut rng = Rng::new(19);
+    let (mut straddling, mut hits) = (0, 0);
+    for round in 0..60_000 {
+        let point = |rng: &mut Rng| -> P {
+            match round % 3 {
+                0 => [rng.unit(), rng.unit(), rng.unit()],
+                1 => [0; 3].map(|_| rng.int(3) as f64),
+                _ => [rng.unit(), rng.unit(), 1e-9 * rng.unit()],
+            }
+        };
+        let v = point(&mut rng);
+        let a = [v, point(&mut rng), point(&mut rng)];
+        let mut b = [v, point(&mut rng), point(&mut rng)];
+        if round % 2 == 1 {
+            b.swap(1, 2);
+        }
+        if round % 4 < 2 {
+            // Mirrored through the corner: crossing planes, pointing away from each other.
+            b = b.map(|p| [0, 1, 2].map(|k| 2.0 * v[k] - p[k]));
+        }
+        let (ta, tb) = (Tri::new(a), Tri::new(b));
+        if ta.drop.is_none() || tb.drop.is_none() {
+            continue;
+        }
+        let want = vertex_adjacent_by_edges(&ta, &tb);
+        assert_eq!(
+            vertex_adjacent_intersect::<true>(&ta, &tb),
+            want,
+            "{a:?} {b:?}"
+        );
+        assert_eq!(
+            vertex_adjacent_intersect::<false>(&tb, &ta),
+            want,
+            "{b:?} {a:?}"
+        );
+        let [p, a1, b1] = a;
+        let [_, a2, b2] = b;
+        let sides = [
+            o3(p, a1, b1, a2),
+            o3(p, a1, b1, b2),
+            o3(p, a2, b2, a1),
+            o3(p, a2, b2, b1),
+        ];
+        if !sides.contains(&Sign::Zero) && sides[0] != sides[1] && sides[2] != sides[3] {
+            straddling += 1;
+            hits += usize::from(want);
+        }
+    }
+    println!("{straddling} straddling, {hits} meeting");
+    assert!(
+        straddling > 5_000 && hits > 1_000 && straddling - hits > 1_000,
+        "{straddling} {hits}"
+    );
+}
