@@ -55,7 +55,7 @@
 //!    slid along its feature line, an edge of the pair flipped or collapsed (under the rounds'
 //!    rules; last, a collapse that waives the removed vertex's feature rules) — that lowers the
 //!    number of intersecting pairs among the faces within two edges of the pair, in up to ten
-//!    passes. Collapses can fold a new fan over faces that share one vertex with it (a fold no
+//!    passes and at most 20,000 tried candidates (2,000 flips and collapses) in all. Collapses can fold a new fan over faces that share one vertex with it (a fold no
 //!    per-face normal test sees); that is what this repairs.
 //!
 //! # Features and boundaries
@@ -1374,6 +1374,15 @@ impl<'a> Remesher<'a> {
     }
 }
 
+/// How to take back an [`Untangle`] that did not help.
+enum Undo {
+    /// Put the vertex back here.
+    Position(u32, [f64; 3]),
+    /// The whole connectivity before a flip or collapse (`O(F)`; bounded by
+    /// [`UNTANGLE_MAX_COPY_TRIALS`]).
+    Mesh(Box<HalfEdgeMesh>),
+}
+
 /// What [`Remesher::repair_new_intersections`] may do to remove one intersecting pair.
 #[derive(Clone, Copy, Debug)]
 enum Untangle {
@@ -1548,9 +1557,10 @@ impl Remesher<'_> {
 
     /// Applies `op` when it is legal (the rules of the rounds: a flip of a non-feature interior
     /// edge that folds neither new face and passes the surface-distance guard; a collapse that
-    /// [`Self::collapse_ok`] allows; a move that turns no face's normal by 90° or more). Returns
-    /// the state before, to restore, or `None` when `op` is not legal.
-    fn apply_untangle(&mut self, op: Untangle) -> Option<(HalfEdgeMesh, Vec<u32>)> {
+    /// [`Self::collapse_ok`] allows; a move after which every face around the vertex faces the
+    /// way the input does under it). Returns what restores the state before, or `None` when `op`
+    /// is not legal.
+    fn apply_untangle(&mut self, op: Untangle) -> Option<Undo> {
         let m = &*self.mesh;
         match op {
             Untangle::Move(v, q) => {
@@ -1573,7 +1583,7 @@ impl Remesher<'_> {
                         return None;
                     }
                 }
-                let saved = (m.clone(), self.hints.clone());
+                let saved = Undo::Position(v, m.pos[v as usize]);
                 self.mesh.pos[v as usize] = q;
                 Some(saved)
             }
@@ -1600,7 +1610,7 @@ impl Remesher<'_> {
                 if !self.flip_keeps_surface(a, [pa, pb, pc, pd]) {
                     return None;
                 }
-                let saved = (m.clone(), self.hints.clone());
+                let saved = Undo::Mesh(Box::new(m.clone()));
                 self.mesh.flip(e);
                 Some(saved)
             }
@@ -1625,7 +1635,7 @@ impl Remesher<'_> {
                 if !ok {
                     return None;
                 }
-                let saved = (self.mesh.clone(), self.hints.clone());
+                let saved = Undo::Mesh(Box::new(self.mesh.clone()));
                 let mut counts = counts;
                 self.collapse_and_recount(h, &mut counts);
                 Some(saved)
@@ -1640,7 +1650,8 @@ impl Remesher<'_> {
     /// repaired locally by the first candidate of [`Self::untangle_candidates`] that is legal
     /// ([`Self::apply_untangle`]) and lowers the number of intersecting pairs among the faces within
     /// [`UNTANGLE_RINGS`] edges of the pair, repeated (up to [`UNTANGLE_PASSES`] passes) until
-    /// no new pair is left or no candidate helps.
+    /// no new pair is left or no candidate helps, within [`UNTANGLE_MAX_TRIALS`] tried candidates
+    /// ([`UNTANGLE_MAX_COPY_TRIALS`] flips and collapses).
     fn repair_new_intersections(
         &mut self,
         input_positions: &[[f64; 3]],
@@ -1648,6 +1659,7 @@ impl Remesher<'_> {
         surface: &Bvh,
     ) -> Result<(), RemeshError> {
         let mut inherited_near: Option<Option<Bvh>> = None;
+        let (mut trials, mut copy_trials) = (0usize, 0usize);
         for _ in 0..UNTANGLE_PASSES {
             let (p, f) = self.mesh.compact();
             let slots = self.live_face_slots();
@@ -1707,15 +1719,25 @@ impl Remesher<'_> {
                     continue; // already repaired by a neighbour's repair
                 }
                 for op in self.untangle_candidates(fa, fb, surface) {
-                    let Some((saved_mesh, saved_hints)) = self.apply_untangle(op) else {
+                    let copies = !matches!(op, Untangle::Move(..));
+                    if trials >= UNTANGLE_MAX_TRIALS
+                        || (copies && copy_trials >= UNTANGLE_MAX_COPY_TRIALS)
+                    {
+                        continue;
+                    }
+                    let Some(undo) = self.apply_untangle(op) else {
                         continue;
                     };
+                    trials += 1;
+                    copy_trials += copies as usize;
                     if self.local_pairs(&seeds)? < before {
                         progress = true;
                         break;
                     }
-                    *self.mesh = saved_mesh;
-                    self.hints = saved_hints;
+                    match undo {
+                        Undo::Position(v, p) => self.mesh.pos[v as usize] = p,
+                        Undo::Mesh(m) => *self.mesh = *m,
+                    }
                 }
             }
             if !any_new || !progress {
@@ -1749,6 +1771,13 @@ const CLEANUP_PASSES: usize = 5;
 /// The repair of self-intersections the remeshing created
 /// (`Remesher::repair_new_intersections`) runs at most this many passes over the pairs.
 const UNTANGLE_PASSES: usize = 10;
+
+/// The repair tries at most this many legal candidates in all (each costs an exact check of the
+/// faces around the pair), so its time is bounded whatever the number of pairs.
+const UNTANGLE_MAX_TRIALS: usize = 20_000;
+
+/// Of those, at most this many flips and collapses (each also copies the connectivity, `O(F)`).
+const UNTANGLE_MAX_COPY_TRIALS: usize = 2_000;
 
 /// The repair judges a candidate by the intersecting pairs among the faces around the vertices
 /// within this many edges of the pair's vertices.
