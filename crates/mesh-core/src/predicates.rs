@@ -109,7 +109,7 @@ const CCW_HUGE: f64 = f64::from_bits((1023 + 500) << 52);
 const UNDERFLOW_SLACK: f64 = f64::from_bits(16); // 2^-1070 (a subnormal)
 
 /// Every `|x|` is 0 or in `[tiny, huge]` (branch-free, so it inlines and vectorizes).
-#[inline]
+#[inline(always)]
 fn all_in_range<const N: usize>(xs: [f64; N], tiny: f64, huge: f64) -> bool {
     let mut ok = true;
     for x in xs {
