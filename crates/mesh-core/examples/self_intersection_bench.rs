@@ -158,7 +158,7 @@ fn main() {
             writeln!(f, "{a} {b}").unwrap();
         }
         println!(
-            "{name}\t{}\t{}\t{}\t{}\t{build:.1}\t{check:.1}\t{refit:.1}\t{check_wall:.1}\t{traversal:.1}\t{check2_wall:.1}",
+            "{name}\t{}\t{}\t{}\t{}\t{build:.2}\t{check:.2}\t{refit:.2}\t{check_wall:.1}\t{traversal:.1}\t{check2_wall:.1}",
             mesh.faces.len(),
             r.pairs.len(),
             r.faces.len(),

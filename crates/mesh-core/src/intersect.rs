@@ -61,7 +61,7 @@
 //! mesh with no faces are refused with an [`IntersectError`].
 
 use crate::bvh::{BvhError, PairTree};
-use crate::predicates::{Sign, orient2d_projected, orient3d_unchecked};
+use crate::predicates::{PlaneFilter, Sign, orient2d_projected, orient3d_unchecked};
 
 /// What the self-intersection check refuses.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -603,14 +603,31 @@ fn test_candidate(
     (x, sx): (usize, [u32; 3]),
     (y, sy): (usize, [u32; 3]),
 ) -> Option<(u32, u32)> {
-    let corners = |f: [u32; 3]| f.map(|v| positions[v as usize]);
+    // The corners by reference: read where they are, never copied on this path.
+    let corners = |f: [u32; 3]| f.map(|v| &positions[v as usize]);
     let (ox, oy) = (order[x], order[y]);
-    let (a, fa, b, fb) = if ox < oy {
-        (ox, sx, oy, sy)
+    if let Some(hit) = decide_by_planes(sx, corners(sx), sy, corners(sy)) {
+        return hit.then_some(if ox < oy { (ox, oy) } else { (oy, ox) });
+    }
+    let corners = |f: [u32; 3]| f.map(|v| positions[v as usize]);
+    let (px, py) = (corners(sx), corners(sy));
+    if ox < oy {
+        test_in_full(cache, (ox, sx, &px), (oy, sy, &py))
     } else {
-        (oy, sy, ox, sx)
-    };
-    let (pa, pb) = (corners(fa), corners(fb));
+        test_in_full(cache, (oy, sy, &py), (ox, sx, &px))
+    }
+}
+
+/// The rest of [`test_candidate`] for faces `a < b` (with their indices and corners): the
+/// separating-plane filters, then the full exact test. Out of line, so that the planes' path
+/// stays small.
+#[inline(never)]
+fn test_in_full(
+    cache: &mut [(u32, Tri)],
+    (a, fa, pa): (u32, [u32; 3], &[[f64; 3]; 3]),
+    (b, fb, pb): (u32, [u32; 3], &[[f64; 3]; 3]),
+) -> Option<(u32, u32)> {
+    let (pa, pb) = (*pa, *pb);
     if quickly_apart(fa, &pa, fb, &pb) {
         return None;
     }
@@ -627,6 +644,99 @@ fn test_candidate(
 
 /// Entries of the check's cache of [`Tri`]s (per thread).
 const TRI_CACHE: usize = 1024;
+
+/// The sign of bit `k` of [`PlaneFilter::strict_sides`]'s sets (both clear: zero; only read
+/// where one is set).
+#[inline(always)]
+fn sign_bit((pos, _): (u8, u8), k: usize) -> Sign {
+    if pos & (1 << k) != 0 {
+        Sign::Positive
+    } else {
+        Sign::Negative
+    }
+}
+
+/// The decision of [`faces_intersect`] for the common configurations of faces `fa`, `fb` with
+/// corners `pa`, `pb`, from the planes' filtered sides ([`PlaneFilter`]: an answer only where it
+/// is the exact sign) and, for crossing faces, the exact `orient3d` of the straddling shortcuts;
+/// `None` leaves the pair to the full test. The same decisions as the full test's (its steps on
+/// exact signs, taken where the filtered signs are known): no shared vertex — a face strictly on
+/// one side of the other's plane, or both straddling with no corner on the other plane
+/// ([`straddling_overlap`]); one shared vertex — one face's other two corners strictly on one
+/// side of the other's plane, or both straddling ([`straddling_at_corner`]); a shared edge — the
+/// opposite corner strictly off the plane (no fold). A corner of `fb` with an undecided or zero
+/// side of `fa`'s plane (nearly coplanar faces, which the full test's separating-plane filter
+/// settles) hands the pair over before `fb`'s plane is made. Faces with a repeated index are left
+/// to the full test. A decided `true` has every relevant sign non-zero, so neither face is
+/// degenerate; a `false` is right for degenerate faces too (they are never paired).
+#[inline]
+fn decide_by_planes(
+    fa: [u32; 3],
+    pa: [&[f64; 3]; 3],
+    fb: [u32; 3],
+    pb: [&[f64; 3]; 3],
+) -> Option<bool> {
+    let repeats = |f: [u32; 3]| f[0] == f[1] || f[1] == f[2] || f[2] == f[0];
+    if repeats(fa) || repeats(fb) {
+        return None;
+    }
+    let (shared, n) = shared_corners(fa, fb);
+    let plane = |p: [&[f64; 3]; 3]| PlaneFilter::new(*p[0], *p[1], *p[2]);
+    let plane_a = plane(pa);
+    match n {
+        0 => {
+            let sb = plane_a.strict_sides(pb);
+            if sb.0 | sb.1 != 7 {
+                return None;
+            }
+            if sb.0 == 7 || sb.1 == 7 {
+                return Some(false);
+            }
+            let sa = plane(pb).strict_sides(pa);
+            if sa.0 == 7 || sa.1 == 7 {
+                return Some(false);
+            }
+            if sa.0 | sa.1 == 7 {
+                let known = |s: (u8, u8)| [0, 1, 2].map(|k| sign_bit(s, k));
+                let corners = |p: [&[f64; 3]; 3]| [*p[0], *p[1], *p[2]];
+                return Some(straddling_overlap(
+                    &corners(pa),
+                    &corners(pb),
+                    known(sa),
+                    known(sb),
+                ));
+            }
+            None
+        }
+        1 => {
+            let (i, j) = shared[0];
+            let [v, a1, b1] = [pa[i], pa[(i + 1) % 3], pa[(i + 2) % 3]];
+            let [a2, b2] = [pb[(j + 1) % 3], pb[(j + 2) % 3]];
+            // Cycling a face's corners keeps its orientation: these are the full test's signs.
+            let sb = plane_a.strict_sides([a2, b2]);
+            if sb.0 | sb.1 != 3 {
+                return None;
+            }
+            if sb.0 == 3 || sb.1 == 3 {
+                return Some(false);
+            }
+            let sa = plane(pb).strict_sides([a1, b1]);
+            if sa.0 == 3 || sa.1 == 3 {
+                return Some(false);
+            }
+            if sa.0 | sa.1 == 3 {
+                return Some(straddling_at_corner([*v, *a1], [*a2, *b2], sign_bit(sb, 1)));
+            }
+            None
+        }
+        2 => {
+            let ((_, j0), (_, j1)) = (shared[0], shared[1]);
+            let (pos, neg) = plane_a.strict_sides([pb[3 - j0 - j1]]);
+            (pos | neg != 0).then_some(false)
+        }
+        _ => None,
+    }
+}
 
 /// A face's corners and the axis its exact 2-D projection drops (`None`: degenerate).
 #[derive(Clone, Copy, Debug)]
@@ -885,7 +995,7 @@ fn vertex_adjacent_intersect<const FILTERS: bool>(ta: &Tri, tb: &Tri) -> bool {
         return false;
     }
     if sa[1] != Sign::Zero && sa[2] != Sign::Zero && sb[1] != Sign::Zero && sb[2] != Sign::Zero {
-        return straddling_at_corner(ta, tb, sb[2]);
+        return straddling_at_corner([v, a1], [a2, b2], sb[2]);
     }
     segment_meets(a1, b1, sa[1], sa[2], tb)
         || segment_meets(a2, b2, sb[1], sb[2], ta)
@@ -905,9 +1015,7 @@ fn vertex_adjacent_intersect<const FILTERS: bool>(ta: &Tri, tb: &Tri) -> bool {
 /// `a₂ → b₂` pierces that plane at `k` going towards `b₂`'s side, so
 /// `orient3d(v, a₁, a₂, b₂) = sign(λ)·side_b2` with `λ > 0` iff `k` is left of `v → a₁`
 /// (`(a₁ − v) × (k − v) = λ·n_P`): one `orient3d` instead of the edges' crossings.
-fn straddling_at_corner(ta: &Tri, tb: &Tri, side_b2: Sign) -> bool {
-    let [v, a1, _] = ta.p;
-    let [_, a2, b2] = tb.p;
+fn straddling_at_corner([v, a1]: [[f64; 3]; 2], [a2, b2]: [[f64; 3]; 2], side_b2: Sign) -> bool {
     o3(v, a1, a2, b2) == side_b2
 }
 
@@ -961,7 +1069,7 @@ fn triangles_intersect_filtered<const FILTERS: bool>(ta: &Tri, tb: &Tri) -> bool
         return false;
     }
     if !sa.contains(&Sign::Zero) && !sb.contains(&Sign::Zero) {
-        return straddling_overlap(ta, tb, sa, sb);
+        return straddling_overlap(&ta.p, &tb.p, sa, sb);
     }
     if sb.iter().all(|&s| s == Sign::Zero) {
         let Some(k) = ta.drop else { return false };
@@ -990,7 +1098,12 @@ fn triangles_intersect_filtered<const FILTERS: bool>(ta: &Tri, tb: &Tri) -> bool
 /// `[j, i]` (`i` on `p₁p₂`, `j` on `p₁p₃`) and `Q` cuts `[k, l]` (`k` on `q₁q₂`, `l` on `q₁q₃`),
 /// and `orient3d(p₁, p₂, q₁, q₂)` is the sign of `k − i` along `d`, `orient3d(p₁, p₃, q₁, q₃)`
 /// that of `l − j`. The closed segments overlap iff `k ≤ i` and `j ≤ l`.
-fn straddling_overlap(ta: &Tri, tb: &Tri, sa: [Sign; 3], sb: [Sign; 3]) -> bool {
+fn straddling_overlap(
+    pa: &[[f64; 3]; 3],
+    pb: &[[f64; 3]; 3],
+    sa: [Sign; 3],
+    sb: [Sign; 3],
+) -> bool {
     // The corner whose side differs from the other two's.
     let lone = |s: [Sign; 3]| {
         if s[1] == s[2] {
@@ -1002,10 +1115,10 @@ fn straddling_overlap(ta: &Tri, tb: &Tri, sa: [Sign; 3], sb: [Sign; 3]) -> bool 
         }
     };
     let (ip, iq) = (lone(sa), lone(sb));
-    let p1 = ta.p[ip];
-    let (mut p2, mut p3) = (ta.p[(ip + 1) % 3], ta.p[(ip + 2) % 3]);
-    let q1 = tb.p[iq];
-    let (mut q2, mut q3) = (tb.p[(iq + 1) % 3], tb.p[(iq + 2) % 3]);
+    let p1 = pa[ip];
+    let (mut p2, mut p3) = (pa[(ip + 1) % 3], pa[(ip + 2) % 3]);
+    let q1 = pb[iq];
+    let (mut q2, mut q3) = (pb[(iq + 1) % 3], pb[(iq + 2) % 3]);
     if sa[ip] == Sign::Negative {
         std::mem::swap(&mut q2, &mut q3);
     }

@@ -109,7 +109,7 @@ const CCW_HUGE: f64 = f64::from_bits((1023 + 500) << 52);
 const UNDERFLOW_SLACK: f64 = f64::from_bits(16); // 2^-1070 (a subnormal)
 
 /// Every `|x|` is 0 or in `[tiny, huge]` (branch-free, so it inlines and vectorizes).
-#[inline]
+#[inline(always)]
 fn all_in_range<const N: usize>(xs: [f64; N], tiny: f64, huge: f64) -> bool {
     let mut ok = true;
     for x in xs {
@@ -303,6 +303,105 @@ pub fn orient3d_filter(a: [f64; 3], b: [f64; 3], c: [f64; 3], d: [f64; 3]) -> Op
         Some(Sign::Positive)
     } else {
         None
+    }
+}
+
+/// The plane of a triangle `(a, b, c)` prepared for many [`orient3d`]`(a, b, c, d)` signs against
+/// it: the fast path of [`orient3d_filter`] with the triangle's half of the work done once.
+///
+/// With `u = fl(b − a)`, `v = fl(c − a)` and `w = fl(d − a)`, `orient3d(a, b, c, d)` is the sign
+/// of `det[u, v, w]` (exactly, before rounding), and [`side`](Self::side) evaluates it as
+/// `n·w` with the stored `n = fl(u × v)` (each component `u_y·v_z − u_z·v_y` etc.), summed
+/// `n_x·w_x + n_y·w_y + n_z·w_z` left to right, and its permanent as `m·|w|` with the stored
+/// `m_x = |fl(u_y·v_z)| + |fl(u_z·v_y)|` etc. That is Shewchuk's `orient3d` fast path term for
+/// term — three rounded differences per row, 2×2 minors of two rows, the third row's entries
+/// times those minors, summed in the same order — with rows `(u, v, w)` instead of
+/// `(a − d, b − d, c − d)`, so the same static bound holds: the sign of the computed value is
+/// exact when it exceeds `(7 + 56ε)ε·permanent + 2⁻¹⁰⁷⁰` (the slack covers the underflow of the
+/// last product), provided every non-zero entry of `u`, `v`, `w` lies in `[2⁻³³⁰, 2³³⁰]`. A zero
+/// permanent (all entries in range) means every term has an exactly zero factor: the sign is
+/// exactly zero. When `u` or `v` has an entry out of range, `m` is stored as NaN, so every
+/// comparison fails and [`side`](Self::side) answers `None` (leave it to [`orient3d_unchecked`]).
+/// The cost per side: three differences, two dot products of three terms, no branch but the
+/// answer's.
+#[derive(Clone, Copy, Debug)]
+pub struct PlaneFilter {
+    /// `a`, the corner the differences are taken from.
+    origin: [f64; 3],
+    /// `fl(u × v)`.
+    normal: [f64; 3],
+    /// The minors' permanents `m` (NaN: `u` or `v` out of the filter's range).
+    bound: [f64; 3],
+}
+
+impl PlaneFilter {
+    /// The plane of `(a, b, c)` (any finite corners; a degenerate triangle gives a plane whose
+    /// sides are all exactly zero or left undecided, as `orient3d` has them).
+    #[inline(always)]
+    pub fn new(a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> PlaneFilter {
+        let u = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
+        let v = [c[0] - a[0], c[1] - a[1], c[2] - a[2]];
+        let (uyvz, uzvy) = (u[1] * v[2], u[2] * v[1]);
+        let (uzvx, uxvz) = (u[2] * v[0], u[0] * v[2]);
+        let (uxvy, uyvx) = (u[0] * v[1], u[1] * v[0]);
+        let normal = [uyvz - uzvy, uzvx - uxvz, uxvy - uyvx];
+        let bound = if all_in_range([u[0], u[1], u[2], v[0], v[1], v[2]], O3D_TINY, O3D_HUGE) {
+            [
+                uyvz.abs() + uzvy.abs(),
+                uzvx.abs() + uxvz.abs(),
+                uxvy.abs() + uyvx.abs(),
+            ]
+        } else {
+            [f64::NAN; 3]
+        };
+        PlaneFilter {
+            origin: a,
+            normal,
+            bound,
+        }
+    }
+
+    /// [`side`](Self::side) of each of `d` as two bit sets: bit `k` of the first set when
+    /// `orient3d(a, b, c, d[k])` is certainly positive, of the second when certainly negative
+    /// (neither: zero or undecided). Branch-free over the points.
+    #[inline(always)]
+    pub fn strict_sides<const N: usize>(&self, d: [&[f64; 3]; N]) -> (u8, u8) {
+        let (o, n, m) = (self.origin, self.normal, self.bound);
+        let (mut pos, mut neg) = (0u8, 0u8);
+        for (k, dk) in d.iter().enumerate() {
+            let w = [dk[0] - o[0], dk[1] - o[1], dk[2] - o[2]];
+            let ok = all_in_range(w, O3D_TINY, O3D_HUGE);
+            let det = n[0] * w[0] + n[1] * w[1] + n[2] * w[2];
+            let permanent = m[0] * w[0].abs() + m[1] * w[1].abs() + m[2] * w[2].abs();
+            let err = O3D_ERRBOUND_A * permanent + UNDERFLOW_SLACK;
+            pos |= u8::from(ok & (det > err)) << k;
+            neg |= u8::from(ok & (-det > err)) << k;
+        }
+        (pos, neg)
+    }
+
+    /// `Some(orient3d(a, b, c, d))` when the filter decides it (see [`PlaneFilter`]), else
+    /// `None`.
+    #[inline(always)]
+    pub fn side(&self, d: [f64; 3]) -> Option<Sign> {
+        let (o, n, m) = (self.origin, self.normal, self.bound);
+        let w = [d[0] - o[0], d[1] - o[1], d[2] - o[2]];
+        if !all_in_range(w, O3D_TINY, O3D_HUGE) {
+            return None;
+        }
+        let det = n[0] * w[0] + n[1] * w[1] + n[2] * w[2];
+        let permanent = m[0] * w[0].abs() + m[1] * w[1].abs() + m[2] * w[2].abs();
+        if permanent == 0.0 {
+            return Some(Sign::Zero);
+        }
+        let err = O3D_ERRBOUND_A * permanent + UNDERFLOW_SLACK;
+        if det > err {
+            Some(Sign::Positive)
+        } else if -det > err {
+            Some(Sign::Negative)
+        } else {
+            None
+        }
     }
 }
 

@@ -892,3 +892,64 @@ fn straddling_at_a_corner_agrees_with_the_edge_tests() {
         "{straddling} {hits}"
     );
 }
+
+/// The planes' fast decisions (`decide_by_planes`) against the full exact test
+/// (`faces_intersect`) on random pairs of every adjacency — none, one shared corner (both
+/// orientations), a shared edge (both orientations: neighbours and folds), a repeated index, the
+/// same face — with corners generic (unit cube), on a coarse grid (touching, coplanar,
+/// degenerate, corners on the other plane), nearly flat, and scaled by 1e100 and 1e-100; both
+/// orders of each pair. Every decision is checked, and both answers must be decided often.
+#[test]
+fn plane_decisions_agree_with_the_full_test() {
+    let mut rng = Rng::new(29);
+    let patterns: [([u32; 3], [u32; 3]); 7] = [
+        ([0, 1, 2], [3, 4, 5]),
+        ([0, 1, 2], [0, 3, 4]),
+        ([0, 1, 2], [0, 4, 3]),
+        ([0, 1, 2], [1, 0, 3]),
+        ([0, 1, 2], [0, 1, 3]),
+        ([0, 0, 1], [2, 3, 4]),
+        ([0, 1, 2], [2, 1, 0]),
+    ];
+    let (mut decided, mut decided_true) = ([0usize; 7], [0usize; 7]);
+    for round in 0..120_000 {
+        let kind = round % 5;
+        let scale = match (round / 5) % 3 {
+            0 => 1.0,
+            1 => 1e100,
+            _ => 1e-100,
+        };
+        let mut point = |_| -> P {
+            let p = match kind {
+                0 | 1 => [rng.unit(), rng.unit(), rng.unit()],
+                2 | 3 => [0; 3].map(|_| rng.int(2) as f64),
+                _ => [rng.unit(), rng.unit(), 1e-9 * rng.unit()],
+            };
+            p.map(|x| x * scale)
+        };
+        let pts: [P; 6] = [0; 6].map(&mut point);
+        let which = (round / 15) % patterns.len();
+        let (fa, fb) = patterns[which];
+        let corners = |f: [u32; 3]| f.map(|v| pts[v as usize]);
+        let (pa, pb) = (corners(fa), corners(fb));
+        let want = faces_intersect(fa, &Tri::new(pa), fb, &Tri::new(pb));
+        let refs = |f: [u32; 3]| f.map(|v| &pts[v as usize]);
+        for (f1, f2) in [(fa, fb), (fb, fa)] {
+            if let Some(got) = decide_by_planes(f1, refs(f1), f2, refs(f2)) {
+                assert_eq!(got, want, "{f1:?} {f2:?} {pts:?}");
+                decided[which] += 1;
+                decided_true[which] += usize::from(got);
+            }
+        }
+    }
+    println!("decided {decided:?}, of which true {decided_true:?}");
+    // No pattern with a repeated index or the same face is decided here.
+    assert_eq!(decided[5] + decided[6], 0);
+    for w in 0..5 {
+        assert!(decided[w] > 5_000, "{w}: {decided:?}");
+    }
+    // Crossing pairs (no shared corner, one shared corner) are decided `true` too.
+    for w in 0..3 {
+        assert!(decided_true[w] > 1_000, "{w}: {decided_true:?}");
+    }
+}

@@ -345,3 +345,90 @@ fn expansion_stages_agree_with_the_exact_reference() {
     println!("orient2d expansion stage decided {decided2:?} of 12288 each");
     assert_eq!(decided2[1], 3 * 4096);
 }
+
+/// `PlaneFilter` on `(a, b, c, d)` against the exact sign `want`: when `side` answers, it is
+/// `want`, and `strict_sides` sets a bit exactly when `side` gives a non-zero sign. Returns
+/// whether `side` answered.
+fn plane_filter_case(a: [f64; 3], b: [f64; 3], c: [f64; 3], d: [f64; 3], want: Sign) -> bool {
+    let plane = PlaneFilter::new(a, b, c);
+    let got = plane.side(d);
+    if let Some(s) = got {
+        assert_eq!(s, want, "{a:?} {b:?} {c:?} {d:?}");
+    }
+    let (pos, neg) = plane.strict_sides([&d, &a]);
+    assert_eq!(
+        pos & 1 != 0,
+        got == Some(Sign::Positive),
+        "{a:?} {b:?} {c:?} {d:?}"
+    );
+    assert_eq!(
+        neg & 1 != 0,
+        got == Some(Sign::Negative),
+        "{a:?} {b:?} {c:?} {d:?}"
+    );
+    // `a` itself is on the plane: never a strict side.
+    assert_eq!((pos | neg) & 2, 0);
+    got.is_some()
+}
+
+/// The precomputed plane filter never contradicts the exact sign: random grid points (where it
+/// must decide almost always), points within an ulp of the plane and exactly on it (zero), the
+/// triangle's own corners, the same configurations scaled by `2^e` for `e` from −1000 to 600
+/// (1e±100 is about 2^±332, just outside the filter's range: it must defer), and mixed 1e100 /
+/// 1e-100 coordinates.
+#[test]
+fn plane_filter_agrees_with_the_exact_orient3d() {
+    let mut rng = Rng::new(23);
+    let mut decided = 0;
+    for _ in 0..20_000 {
+        let bound = 1i64 << 30;
+        let [a, b, c, d] = [0; 4].map(|_| grid_point(&mut rng, bound));
+        decided += usize::from(plane_filter_case(a, b, c, d, reference3(a, b, c, d)));
+        for p in [a, b, c] {
+            plane_filter_case(a, b, c, p, Sign::Zero);
+        }
+    }
+    assert!(decided > 19_900, "{decided} of 20000 generic cases decided");
+    let (mut near, mut zero) = (0, 0);
+    for _ in 0..20_000 {
+        let ([a, b, c, d], want) = near_coplanar(&mut rng);
+        near += usize::from(plane_filter_case(a, b, c, d, want));
+        zero += usize::from(want == Sign::Zero);
+    }
+    assert!(zero > 300, "{zero} exactly coplanar cases");
+    println!("{near} of 20000 near-coplanar cases decided");
+    let mut decided_scaled = 0;
+    for e in [-1000, -700, -332, -300, -100, 100, 300, 332, 600] {
+        for round in 0..2_000 {
+            let ([a, b, c, d], _) = if round % 2 == 0 {
+                let bound = 1i64 << 30;
+                let p = [0; 4].map(|_| grid_point(&mut rng, bound));
+                (p, Sign::Zero)
+            } else {
+                near_coplanar(&mut rng)
+            };
+            let [a, b, c, d] = [a, b, c, d].map(|p| scaled(p, e));
+            let got = plane_filter_case(a, b, c, d, orient3d_exact(a, b, c, d));
+            decided_scaled += usize::from(got);
+            if e.abs() >= 332 {
+                assert!(!got || e == -332, "2^{e}: decided outside the range");
+            }
+        }
+    }
+    // e = ±100, ±300 are inside the range: the generic half decides there.
+    assert!(decided_scaled > 3_900, "{decided_scaled}");
+    for _ in 0..5_000 {
+        let mixed = |rng: &mut Rng| {
+            [0; 3].map(|_| {
+                let x = rng.unit() - 0.5;
+                if rng.next_u64().is_multiple_of(2) {
+                    x * 1e100
+                } else {
+                    x * 1e-100
+                }
+            })
+        };
+        let [a, b, c, d] = [0; 4].map(|_| mixed(&mut rng));
+        plane_filter_case(a, b, c, d, orient3d_exact(a, b, c, d));
+    }
+}
