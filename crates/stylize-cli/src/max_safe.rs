@@ -56,10 +56,7 @@ pub fn search(
     };
     anyhow::ensure!(
         eval(0.0)?,
-        "max-safe: no λ is safe: even at λ = 0 (no normal term) the result fails the safety \
-         checks; under the `gis` rotation rule, vertices beside obtuse or needle triangles \
-         (negative cotangent weights) rotate without any target normal — remeshing the input \
-         (`--remesh on`) removes such triangles"
+        "max-safe: no λ is safe: even at λ = 0 (no normal term) the result fails the safety checks"
     );
     let grid: Vec<f64> = (1..=SCAN_STEPS)
         .map(|i| upper * i as f64 / SCAN_STEPS as f64)
@@ -102,6 +99,93 @@ pub fn search(
     })
 }
 
+/// [`search`] over each λ's sanity (`assess(λ)`), keeping the problems of every unsafe λ so that
+/// reports and errors say why. A result unsafe already at λ = 0 is refused with its problems and
+/// what causes them.
+pub fn search_assessed(
+    upper: f64,
+    mut assess: impl FnMut(f64) -> anyhow::Result<crate::sanity::LambdaSanity>,
+) -> anyhow::Result<Assessed> {
+    let mut unsafe_problems: Vec<(f64, Vec<String>)> = Vec::new();
+    let mut at_zero: Option<crate::sanity::LambdaSanity> = None;
+    let searched = search(upper, |lambda| {
+        let s = assess(lambda)?;
+        let problems = s.problems();
+        let safe = problems.is_empty();
+        if !safe {
+            unsafe_problems.push((lambda, problems));
+        }
+        if lambda == 0.0 {
+            at_zero = Some(s);
+        }
+        Ok(safe)
+    });
+    match (searched, at_zero) {
+        (Ok(found), _) => Ok(Assessed {
+            found,
+            unsafe_problems,
+        }),
+        (Err(_), Some(zero)) if !zero.is_safe() => Err(unsafe_at_zero(&zero)),
+        (Err(e), _) => Err(e),
+    }
+}
+
+/// The error for a result that is unsafe at λ = 0 (no normal term): the problems, and where each
+/// kind comes from (the source's own intersections; the `gis` rule's rotations beside obtuse
+/// triangles).
+fn unsafe_at_zero(zero: &crate::sanity::LambdaSanity) -> anyhow::Error {
+    let mut causes = Vec::new();
+    if zero.flipped > 0 {
+        causes.push(format!(
+            "{} vert{} rotate{} by more than 90° without any target normal: under the `gis` rule \
+             a vertex whose spokes and rims have negative cotangent weights (beside obtuse or \
+             needle triangles) can, so a λ = 0 result need not be the source; an input with \
+             better-shaped triangles (`--remesh on`, or a smaller `--remesh` edge length) has \
+             fewer such vertices",
+            zero.flipped,
+            if zero.flipped == 1 { "ex" } else { "ices" },
+            if zero.flipped == 1 { "s" } else { "" },
+        ));
+    }
+    let f = &zero.intersections;
+    if f.new_pairs > 0 && f.source_pairs > 0 {
+        causes.push(format!(
+            "the source intersects itself ({} pair{}): beside its own intersections a small \
+             movement can make pairs it does not have; repairing the source mesh removes them",
+            f.source_pairs,
+            if f.source_pairs == 1 { "" } else { "s" }
+        ));
+    }
+    let mut msg = format!(
+        "max-safe: no λ is safe: even at λ = 0 (no normal term) the result fails the safety \
+         checks: {}",
+        zero.problems().join("; ")
+    );
+    if !causes.is_empty() {
+        msg.push_str(&format!(". Why: {}", causes.join("; ")));
+    }
+    anyhow::anyhow!(msg)
+}
+
+/// What [`search_assessed`] found: the answer and the problems of every λ found unsafe.
+#[derive(Clone, Debug)]
+pub struct Assessed {
+    /// The answer.
+    pub found: SafeLambda,
+    /// Each unsafe λ evaluated, with its problems ([`crate::sanity::LambdaSanity::problems`]).
+    pub unsafe_problems: Vec<(f64, Vec<String>)>,
+}
+
+impl Assessed {
+    /// The problems at `lambda` (empty when it was not found unsafe).
+    pub fn problems_at(&self, lambda: f64) -> &[String] {
+        self.unsafe_problems
+            .iter()
+            .find(|(l, _)| *l == lambda)
+            .map_or(&[], |(_, p)| p.as_slice())
+    }
+}
+
 /// The end of a run: when the result at the run's λ is not safe, one line with the strongest safe
 /// λ below it (None when the result is safe — the common case costs one evaluation — or the run
 /// saved no usable λ). Reads the run's `deformation.npz` (with its saved region) as `apply` does.
@@ -116,14 +200,14 @@ pub fn end_of_run(run_dir: &std::path::Path) -> anyhow::Result<Option<String>> {
     }
     let mut ready = saved.ready_layer_as_saved(&npz)?;
     let mut source = stylize::intersections::SourceIntersections::new(&ready.rest)?;
-    let mut is_safe = |l: f64| -> anyhow::Result<bool> {
+    let mut assess = |l: f64| -> anyhow::Result<crate::sanity::LambdaSanity> {
         let d = ready.at_lambda(l)?;
-        Ok(crate::sanity::LambdaSanity::assess(&ready.rest, &mut source, &d, l)?.is_safe())
+        crate::sanity::LambdaSanity::assess(&ready.rest, &mut source, &d, l)
     };
-    if is_safe(lambda)? {
+    if assess(lambda)?.is_safe() {
         return Ok(None);
     }
-    let found = search(lambda, is_safe)?;
+    let found = search_assessed(lambda, assess)?.found;
     Ok(Some(format!(
         "the result at the run's λ = {lambda} is not safe (see the warnings); the strongest safe λ \
          up to it is {} — `stylize apply {} -o OUT.obj --lambda max-safe` writes it",
@@ -135,6 +219,7 @@ pub fn end_of_run(run_dir: &std::path::Path) -> anyhow::Result<Option<String>> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::sanity::LambdaSanity;
 
     fn ok(r: anyhow::Result<SafeLambda>) -> SafeLambda {
         r.unwrap_or_else(|e| panic!("{e:#}"))
@@ -190,6 +275,71 @@ mod tests {
         let e = refused(search(5.0, |l| {
             anyhow::ensure!(l < 2.0, "boom");
             Ok(true)
+        }));
+        assert_eq!(e, "boom");
+    }
+
+    /// A sanity with `flipped` of 100 vertices flipped, and `new_pairs` pairs the source (with
+    /// `source_pairs`) does not have.
+    fn sanity(lambda: f64, flipped: usize, new_pairs: usize, source_pairs: usize) -> LambdaSanity {
+        LambdaSanity {
+            lambda,
+            strength: None,
+            flipped,
+            flipped_fraction: flipped as f64 / 100.0,
+            volume_ratio: 1.0,
+            area_ratio_mean: 1.0,
+            area_ratio_std: 0.0,
+            intersections: stylize::intersections::IntersectionFigures {
+                source_pairs,
+                source_faces: source_pairs,
+                pairs: source_pairs + new_pairs,
+                faces: source_pairs + new_pairs,
+                new_pairs,
+                new_faces: 2 * new_pairs,
+            },
+            intersecting_faces: Vec::new(),
+            new_intersecting_faces: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn an_assessed_search_keeps_why_each_lambda_was_unsafe() {
+        let r = search_assessed(10.0, |l| Ok(sanity(l, usize::from(l >= 4.0) * 5, 0, 0)))
+            .unwrap_or_else(|e| panic!("{e:#}"));
+        let hi = r.found.first_unsafe.unwrap_or(f64::NAN);
+        assert!(hi >= 4.0 && r.found.lambda < 4.0, "{:?}", r.found);
+        let why = r.problems_at(hi);
+        assert!(why.len() == 1 && why[0].contains("5.0%"), "{why:?}");
+        assert!(r.problems_at(1.0).is_empty());
+    }
+
+    fn refused_assessed(r: anyhow::Result<Assessed>) -> String {
+        match r {
+            Ok(a) => panic!("accepted: {:?}", a.found),
+            Err(e) => format!("{e:#}"),
+        }
+    }
+
+    #[test]
+    fn unsafe_at_zero_says_what_and_why() {
+        // Flips at λ = 0: the `gis` rule beside obtuse triangles.
+        let e = refused_assessed(search_assessed(5.0, |l| Ok(sanity(l, 3, 0, 0))));
+        assert!(e.contains("λ = 0") && e.contains("3.0%"), "{e}");
+        assert!(
+            e.contains("3 vertices rotate") && e.contains("negative cotangent"),
+            "{e}"
+        );
+        assert!(!e.contains("intersects itself"), "{e}");
+        // New pairs at λ = 0 beside the source's own: no word of remeshing or flips.
+        let e = refused_assessed(search_assessed(5.0, |l| Ok(sanity(l, 0, 1, 95))));
+        assert!(e.contains("1 new self-intersecting face pair"), "{e}");
+        assert!(e.contains("the source intersects itself (95 pairs)"), "{e}");
+        assert!(!e.contains("rotate") && !e.contains("remesh on"), "{e}");
+        // An error of the evaluation itself is passed on as it is.
+        let e = refused_assessed(search_assessed(5.0, |l| {
+            anyhow::ensure!(l < 2.0, "boom");
+            Ok(sanity(l, 0, 0, 0))
         }));
         assert_eq!(e, "boom");
     }

@@ -104,7 +104,7 @@ impl LambdaSanity {
     /// Safe: no warning (no collapse, inflation, shrinking, flips over the limit, or new
     /// self-intersections).
     pub fn is_safe(&self) -> bool {
-        self.warnings().is_empty()
+        self.problems().is_empty()
     }
 
     /// The same diagnostics, labelled as a result of the strength control at `strength` (the
@@ -144,42 +144,43 @@ impl LambdaSanity {
         )
     }
 
-    /// The symptoms of a collapsing result, each as one sentence (empty when none).
+    /// The symptoms of a collapsing result, each as one sentence labelled with the setting and
+    /// ending in advice (empty when none): [`Self::problems`] as warning lines.
     pub fn warnings(&self) -> Vec<String> {
+        self.problems()
+            .into_iter()
+            .map(|p| format!("{}: {p}; {}", self.label(), self.advice()))
+            .collect()
+    }
+
+    /// The symptoms alone, without the setting's label or advice (empty when safe).
+    pub fn problems(&self) -> Vec<String> {
         let mut out = Vec::new();
         let v = self.volume_ratio;
         if v.is_finite() && v < COLLAPSE_VOLUME_RATIO {
             out.push(format!(
-                "{}: the result is collapsing: volume ratio {v:.3} (below {COLLAPSE_VOLUME_RATIO}); {}",
-                self.label(),
-                self.advice()
+                "the result is collapsing: volume ratio {v:.3} (below {COLLAPSE_VOLUME_RATIO})"
             ));
         } else if v.is_finite() && v > 1.0 / COLLAPSE_VOLUME_RATIO {
             out.push(format!(
-                "{}: the result is inflating: volume ratio {v:.3} (above {}); {}",
-                self.label(),
-                1.0 / COLLAPSE_VOLUME_RATIO,
-                self.advice()
+                "the result is inflating: volume ratio {v:.3} (above {})",
+                1.0 / COLLAPSE_VOLUME_RATIO
             ));
         }
         if self.area_ratio_mean < COLLAPSE_AREA_RATIO {
             out.push(format!(
-                "{}: faces are shrinking: mean face-area ratio {:.3} (below {COLLAPSE_AREA_RATIO}); {}",
-                self.label(),
-                self.area_ratio_mean,
-                self.advice()
+                "faces are shrinking: mean face-area ratio {:.3} (below {COLLAPSE_AREA_RATIO})",
+                self.area_ratio_mean
             ));
         }
         if self.flipped_fraction > FLIPPED_WARN_FRACTION {
             out.push(format!(
-                "{}: {:.1}% of the vertices' rotations flipped (> 90°; the reference rule's behaviour at large λ); {}",
-                self.label(),
-                100.0 * self.flipped_fraction,
-                self.advice()
+                "{:.1}% of the vertices' rotations flipped (> 90°; the reference rule's behaviour at large λ)",
+                100.0 * self.flipped_fraction
             ));
         }
         if let Some(w) = self.intersections.warning() {
-            out.push(format!("{}: {w}; {}", self.label(), self.advice()));
+            out.push(w);
         }
         out
     }

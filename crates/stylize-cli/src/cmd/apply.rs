@@ -638,44 +638,20 @@ fn max_safe(
     upper: f64,
 ) -> anyhow::Result<(f64, Vec<String>)> {
     let mut lines = Vec::new();
-    let mut unsafe_warnings: Vec<(f64, Vec<String>)> = Vec::new();
-    let searched = crate::max_safe::search(upper, |lambda| {
+    let assessed = crate::max_safe::search_assessed(upper, |lambda| {
         let deformed = ready
             .at_lambda(lambda)
             .with_context(|| format!("dARAP forward failed at λ = {lambda}"))?;
-        let s = crate::sanity::LambdaSanity::assess(&ready.rest, source, &deformed, lambda)?;
-        let safe = s.is_safe();
-        if !safe {
-            unsafe_warnings.push((lambda, s.warnings()));
-        }
-        Ok(safe)
-    });
-    let found = match searched {
-        Ok(f) => f,
-        Err(e) => {
-            // Unsafe at λ = 0 (e.g. a layer that does not reproduce the rest mesh): say why.
-            let why: Vec<String> = unsafe_warnings
-                .iter()
-                .filter(|(l, _)| *l == 0.0)
-                .flat_map(|(_, w)| w.iter().cloned())
-                .collect();
-            if why.is_empty() {
-                return Err(e);
-            }
-            bail!("{e}: {}", why.join("; "));
-        }
-    };
+        crate::sanity::LambdaSanity::assess(&ready.rest, source, &deformed, lambda)
+    })?;
+    let found = &assessed.found;
     match found.first_unsafe {
         None => lines.push(format!(
             "max-safe: every λ scanned up to {upper} is safe ({} evaluations): λ = {upper}",
             found.evaluations
         )),
         Some(hi) => {
-            let why = unsafe_warnings
-                .iter()
-                .find(|(l, _)| *l == hi)
-                .map(|(_, w)| w.join("; "))
-                .unwrap_or_default();
+            let why = assessed.problems_at(hi).join("; ");
             lines.push(format!(
                 "max-safe: λ = {} (within {}% of the first unsafe λ = {hi}; {} evaluations up to {upper})",
                 found.lambda,

@@ -422,13 +422,14 @@ impl RunItem {
                 return Ok(found.clone());
             }
             let LoadedRun { ready, source, .. } = l;
-            let found = crate::max_safe::search(upper, |lambda| {
+            let found = crate::max_safe::search_assessed(upper, |lambda| {
                 let d = ready
                     .at_lambda(lambda)
                     .with_context(|| format!("dARAP forward failed at λ = {lambda}"))?;
-                Ok(LambdaSanity::assess(&ready.rest, source, &d, lambda)?.is_safe())
+                LambdaSanity::assess(&ready.rest, source, &d, lambda)
             })
-            .map_err(ViewError::Failed)?;
+            .map_err(ViewError::Failed)?
+            .found;
             l.max_safe = Some((upper, found.clone()));
             Ok(found)
         })
