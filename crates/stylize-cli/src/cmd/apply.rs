@@ -563,16 +563,17 @@ fn max_safe_strength(
     lambda: f64,
     upper: f64,
 ) -> anyhow::Result<(f64, Vec<String>)> {
-    let mut unsafe_warnings: Vec<(f64, Vec<String>)> = Vec::new();
+    let mut unsafe_warnings: Vec<(f64, Vec<String>)> = Vec::new(); // the problems of each unsafe strength
     let searched = crate::max_safe::search(upper - 1.0, |t| {
         let setting = Setting::Strength {
             lambda,
             strength: 1.0 + t,
         };
         let (_, s) = setting.assess(ready, source)?;
-        let safe = s.is_safe();
+        let problems = s.problems();
+        let safe = problems.is_empty();
         if !safe {
-            unsafe_warnings.push((1.0 + t, s.warnings()));
+            unsafe_warnings.push((1.0 + t, problems));
         }
         Ok(safe)
     });
@@ -589,7 +590,7 @@ fn max_safe_strength(
             }
             bail!(
                 "max-safe: no strength is safe: the result at λ = {lambda} itself (strength 1) \
-                 is not: {}; find a safe λ first (--lambda max-safe)",
+                 is not safe: {}; find a safe λ first (--lambda max-safe)",
                 why.join("; ")
             );
         }
