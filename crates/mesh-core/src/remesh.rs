@@ -811,14 +811,7 @@ impl<'a> Remesher<'a> {
         let m = &*self.mesh;
         let mut fan: Vec<[[f64; 3]; 3]> = Vec::with_capacity(r0.len() + r1.len());
         for (ring, other) in [(r0, v1), (r1, v0)] {
-            for &g in ring {
-                if m.is_boundary_halfedge(g) {
-                    continue;
-                }
-                let (a, b) = (m.to(g), m.to(m.next(g)));
-                if a == other || b == other {
-                    continue;
-                }
+            for (a, b) in m.surviving_far_edges(ring, other) {
                 fan.push([target, m.pos[a as usize], m.pos[b as usize]]);
             }
         }
@@ -1974,14 +1967,7 @@ fn ring_ok(m: &HalfEdgeMesh, v: u32, other: u32, p1: [f64; 3], ring: &[u32], hi:
         worst_old = worst_old.min(min_angle(p0, pa, pb));
     }
     let ring_normal = normalized(ring_normal);
-    for &g in ring {
-        if m.is_boundary_halfedge(g) {
-            continue;
-        }
-        let (a, b) = (m.to(g), m.to(m.next(g)));
-        if a == other || b == other {
-            continue;
-        }
+    for (a, b) in m.surviving_far_edges(ring, other) {
         let (pa, pb) = (m.pos[a as usize], m.pos[b as usize]);
         let old = normalized(cross(sub(pa, p0), sub(pb, p0))).or(ring_normal);
         let Some(new) = normalized(cross(sub(pa, p1), sub(pb, p1))) else {

@@ -186,6 +186,20 @@ impl HalfEdgeMesh {
         self.face[h as usize] == NONE
     }
 
+    /// The far edges `(a, b)` of the faces around a vertex (its outgoing half-edges `ring`, as
+    /// [`Self::outgoing`] gives them; each face `(v, a, b)` counter-clockwise) that survive its
+    /// collapse with `other`: boundary half-edges and the faces containing `other` left out.
+    pub fn surviving_far_edges<'a>(
+        &'a self,
+        ring: &'a [u32],
+        other: u32,
+    ) -> impl Iterator<Item = (u32, u32)> + 'a {
+        ring.iter()
+            .filter(|&&g| !self.is_boundary_halfedge(g))
+            .map(|&g| (self.to(g), self.to(self.next(g))))
+            .filter(move |&(a, b)| a != other && b != other)
+    }
+
     pub fn is_boundary_edge(&self, e: usize) -> bool {
         self.is_boundary_halfedge(2 * e as u32) || self.is_boundary_halfedge(2 * e as u32 + 1)
     }
