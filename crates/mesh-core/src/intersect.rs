@@ -554,12 +554,25 @@ impl Fans {
 fn fan_is_star(positions: &[[f64; 3]], pv: [f64; 3], l: &[u32], closed: bool) -> bool {
     let faces = if closed { l.len() } else { l.len() - 1 };
     let at = |i: usize| positions[l[i % l.len()] as usize];
+    // The links' differences from `v` (read once), rounded as the 2-D filter rounds them.
+    const SMALL: usize = 16;
+    let small = l.len() <= SMALL;
+    let mut d3 = [[0.0f64; 3]; SMALL];
+    if small {
+        for (i, d) in d3.iter_mut().enumerate().take(l.len()) {
+            *d = crate::geometry::sub(at(i), pv);
+        }
+    }
+    let diff = |i: usize| {
+        if small {
+            d3[i % l.len()]
+        } else {
+            crate::geometry::sub(at(i), pv)
+        }
+    };
     let mut n = [0.0f64; 3];
     for i in 0..faces {
-        let c = crate::geometry::cross(
-            crate::geometry::sub(at(i), pv),
-            crate::geometry::sub(at(i + 1), pv),
-        );
+        let c = crate::geometry::cross(diff(i), diff(i + 1));
         for k in 0..3 {
             n[k] += c[k];
         }
@@ -578,17 +591,42 @@ fn fan_is_star(positions: &[[f64; 3]], pv: [f64; 3], l: &[u32], closed: bool) ->
     } else {
         return false;
     };
-    if (0..faces).any(|i| orient2d_projected(pv, at(i), at(i + 1), axis) != want) {
+    // Every sign below is an orientation around `v`, `orient2d(v, rᵢ, rⱼ) = orient2d(rᵢ, rⱼ, v)`:
+    // decided from the projected differences against one static bound for the whole fan
+    // (`orient2d_static_bound`: the same signs as the predicate's filter), the predicate itself
+    // where that bound cannot.
+    let (pi, pj) = match axis {
+        0 => (1, 2),
+        1 => (2, 0),
+        _ => (0, 1),
+    };
+    let mut d2 = [[0.0f64; 2]; SMALL];
+    let bound = if small {
+        for (e, d) in d2.iter_mut().zip(&d3).take(l.len()) {
+            *e = [d[pi], d[pj]];
+        }
+        crate::predicates::orient2d_static_bound(&d2[..l.len()])
+    } else {
+        f64::INFINITY
+    };
+    let orient = |i: usize, j: usize| {
+        let (a, b) = (d2[i % SMALL], d2[j % SMALL]);
+        let det = a[0] * b[1] - a[1] * b[0];
+        if det > bound {
+            Sign::Positive
+        } else if det < -bound {
+            Sign::Negative
+        } else {
+            orient2d_projected(pv, at(i), at(j), axis)
+        }
+    };
+    if (0..faces).any(|i| orient(i % l.len(), (i + 1) % l.len()) != want) {
         return false;
     }
     // The sweep passes the direction of r₀ during face i (i ≥ 1) when r₀ is strictly after rᵢ
     // and not strictly before rᵢ₊₁ (both turns are less than a half turn).
-    let r0 = at(0);
     let last = if closed { faces - 1 } else { faces };
-    !(1..last).any(|i| {
-        orient2d_projected(pv, at(i), r0, axis) == want
-            && orient2d_projected(pv, r0, at(i + 1), axis) != want.flip()
-    })
+    !(1..last).any(|i| orient(i, 0) == want && orient(0, i + 1) != want.flip())
 }
 
 /// The exact test of the candidate at leaf positions `x` and `y` (with their faces `sx`, `sy`):
