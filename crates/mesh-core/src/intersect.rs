@@ -413,10 +413,13 @@ impl SelfIntersectionChecker {
 /// A vertex `v` whose faces `(v, r₀, r₁), (v, r₁, r₂), …` form one consistently oriented chain —
 /// closed (`k ≥ 3` faces, back to `r₀`: an interior manifold vertex) or open (a boundary vertex) —
 /// has a fan. At given positions the fan is **certified** when, projected along one coordinate
-/// axis (dropping the axis where the fan's summed normal is largest), every face of the fan is a
-/// triangle of one and the same orientation (exact `orient2d`) and the directions `rᵢ − v` turn
-/// once around `v` at most: the sweep from `r₁` on never passes the direction of `r₀` again
-/// before a closed fan's last face returns to it (exact `orient2d` signs; a zero counts as
+/// axis (dropping the axis where the fan's summed normal is largest) or, failing that, along
+/// the summed normal `n` itself (a fan folded at a crease, which no coordinate axis sees as a
+/// star), every face of the fan is a triangle of one and the same orientation (exact
+/// `orient2d`; along `n`, exact `orient3d(v − w, v, rᵢ, rⱼ) = w·((rᵢ − v) × (rⱼ − v))` with
+/// `w = v − fl(v − n·s)`, the orientation in the projection along `w`) and the directions
+/// `rᵢ − v` turn once around `v` at most: the sweep from `r₁` on never passes the direction of
+/// `r₀` again before a closed fan's last face returns to it (exact signs; a zero counts as
 /// passing). Then the projected faces are disjoint angular sectors of a star around `v` —
 /// consecutive ones share a ray, others only `v` — and since the projection is injective on
 /// each face, two faces of the fan meet only at `v` (sharing one vertex) or only along their
@@ -620,11 +623,51 @@ fn fan_is_star(positions: &[[f64; 3]], pv: [f64; 3], l: &[u32], closed: bool) ->
             orient2d_projected(pv, at(i), at(j), axis)
         }
     };
-    if (0..faces).any(|i| orient(i % l.len(), (i + 1) % l.len()) != want) {
+    if star_signs(l.len(), faces, closed, want, orient) {
+        return true;
+    }
+    // No star along a coordinate axis (e.g. a fan folded at a crease of a CAD mesh): the same
+    // signs in the projection along `n` itself, `orient3d(v − w, v, rᵢ, rⱼ) = w·((rᵢ − v) × (rⱼ −
+    // v))` with `w = v − (v − w)` (exactly, whatever the rounding of `v − w`), `w` a multiple of
+    // `n` of about the links' size: exact `orient3d` signs, the same certificate.
+    let scale = {
+        let d0 = diff(0);
+        let m = |a: [f64; 3]| a[0].abs().max(a[1].abs()).max(a[2].abs());
+        m(d0) / m(n)
+    };
+    let q = [
+        pv[0] - n[0] * scale,
+        pv[1] - n[1] * scale,
+        pv[2] - n[2] * scale,
+    ];
+    if !q.iter().all(|c| c.is_finite()) || q == pv {
         return false;
     }
-    // The sweep passes the direction of r₀ during face i (i ≥ 1) when r₀ is strictly after rᵢ
-    // and not strictly before rᵢ₊₁ (both turns are less than a half turn).
+    star_signs(
+        l.len(),
+        faces,
+        closed,
+        Sign::Positive,
+        |i: usize, j: usize| crate::predicates::orient3d_unchecked(q, pv, at(i), at(j)),
+    )
+}
+
+/// The two conditions of [`Fans`]' certificate from the orientation signs `orient(i, j)` of
+/// the links `rᵢ`, `rⱼ` around `v` in some parallel projection (`len` links, `faces` faces):
+/// every face `(v, rᵢ, rᵢ₊₁)` has orientation `want`, and the sweep from `r₁` on never passes
+/// the direction of `r₀` again (it passes it during face i ≥ 1 when `r₀` is strictly after `rᵢ`
+/// and not strictly before `rᵢ₊₁`: both turns are less than a half turn).
+#[inline(always)]
+fn star_signs(
+    len: usize,
+    faces: usize,
+    closed: bool,
+    want: Sign,
+    orient: impl Fn(usize, usize) -> Sign,
+) -> bool {
+    if (0..faces).any(|i| orient(i % len, (i + 1) % len) != want) {
+        return false;
+    }
     let last = if closed { faces - 1 } else { faces };
     !(1..last).any(|i| orient(i, 0) == want && orient(0, i + 1) != want.flip())
 }
