@@ -630,6 +630,12 @@ fn fan_is_star(positions: &[[f64; 3]], pv: [f64; 3], l: &[u32], closed: bool) ->
     // signs in the projection along `n` itself, `orient3d(v − w, v, rᵢ, rⱼ) = w·((rᵢ − v) × (rⱼ −
     // v))` with `w = v − (v − w)` (exactly, whatever the rounding of `v − w`), `w` a multiple of
     // `n` of about the links' size: exact `orient3d` signs, the same certificate.
+    // A quick `f64` look first (a heuristic only: it can refuse, never certify): every face's
+    // normal on `n`'s side. A crumpled fan fails here, at its first folded face.
+    let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    if !(0..faces).all(|i| dot(crate::geometry::cross(diff(i), diff(i + 1)), n) > 0.0) {
+        return false;
+    }
     let scale = {
         let d0 = diff(0);
         let m = |a: [f64; 3]| a[0].abs().max(a[1].abs()).max(a[2].abs());
