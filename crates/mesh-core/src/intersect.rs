@@ -49,7 +49,8 @@
 //! # Cost and limits
 //!
 //! The check costs one BVH refit (`O(F)`), a certificate per vertex fan (`O(V)`: a vertex whose
-//! faces project to a simple star around it has no intersecting pair among them, so every
+//! faces project to a simple star around it — along a coordinate axis, or along the fan's summed
+//! normal for a fan folded at a crease — has no intersecting pair among them, so every
 //! candidate sharing such a vertex is skipped untested), the self-overlap traversal, and one exact
 //! test per remaining candidate ([`SelfIntersectionChecker::set_threads`] splits the traversal
 //! over threads; the answer does not change). The candidate set is every pair of faces whose bounding boxes overlap: on a clean
