@@ -49,7 +49,8 @@
 //! # Cost and limits
 //!
 //! The check costs one BVH refit (`O(F)`), a certificate per vertex fan (`O(V)`: a vertex whose
-//! faces project to a simple star around it has no intersecting pair among them, so every
+//! faces project to a simple star around it — along a coordinate axis, or along the fan's summed
+//! normal for a fan folded at a crease — has no intersecting pair among them, so every
 //! candidate sharing such a vertex is skipped untested), the self-overlap traversal, and one exact
 //! test per remaining candidate ([`SelfIntersectionChecker::set_threads`] splits the traversal
 //! over threads; the answer does not change). The candidate set is every pair of faces whose bounding boxes overlap: on a clean
@@ -413,10 +414,13 @@ impl SelfIntersectionChecker {
 /// A vertex `v` whose faces `(v, r₀, r₁), (v, r₁, r₂), …` form one consistently oriented chain —
 /// closed (`k ≥ 3` faces, back to `r₀`: an interior manifold vertex) or open (a boundary vertex) —
 /// has a fan. At given positions the fan is **certified** when, projected along one coordinate
-/// axis (dropping the axis where the fan's summed normal is largest), every face of the fan is a
-/// triangle of one and the same orientation (exact `orient2d`) and the directions `rᵢ − v` turn
-/// once around `v` at most: the sweep from `r₁` on never passes the direction of `r₀` again
-/// before a closed fan's last face returns to it (exact `orient2d` signs; a zero counts as
+/// axis (dropping the axis where the fan's summed normal is largest) or, failing that, along
+/// the summed normal `n` itself (a fan folded at a crease, which no coordinate axis sees as a
+/// star), every face of the fan is a triangle of one and the same orientation (exact
+/// `orient2d`; along `n`, exact `orient3d(v − w, v, rᵢ, rⱼ) = w·((rᵢ − v) × (rⱼ − v))` with
+/// `w = v − fl(v − n·s)`, the orientation in the projection along `w`) and the directions
+/// `rᵢ − v` turn once around `v` at most: the sweep from `r₁` on never passes the direction of
+/// `r₀` again before a closed fan's last face returns to it (exact signs; a zero counts as
 /// passing). Then the projected faces are disjoint angular sectors of a star around `v` —
 /// consecutive ones share a ray, others only `v` — and since the projection is injective on
 /// each face, two faces of the fan meet only at `v` (sharing one vertex) or only along their
@@ -554,12 +558,25 @@ impl Fans {
 fn fan_is_star(positions: &[[f64; 3]], pv: [f64; 3], l: &[u32], closed: bool) -> bool {
     let faces = if closed { l.len() } else { l.len() - 1 };
     let at = |i: usize| positions[l[i % l.len()] as usize];
+    // The links' differences from `v` (read once), rounded as the 2-D filter rounds them.
+    const SMALL: usize = 16;
+    let small = l.len() <= SMALL;
+    let mut d3 = [[0.0f64; 3]; SMALL];
+    if small {
+        for (i, d) in d3.iter_mut().enumerate().take(l.len()) {
+            *d = crate::geometry::sub(at(i), pv);
+        }
+    }
+    let diff = |i: usize| {
+        if small {
+            d3[i % l.len()]
+        } else {
+            crate::geometry::sub(at(i), pv)
+        }
+    };
     let mut n = [0.0f64; 3];
     for i in 0..faces {
-        let c = crate::geometry::cross(
-            crate::geometry::sub(at(i), pv),
-            crate::geometry::sub(at(i + 1), pv),
-        );
+        let c = crate::geometry::cross(diff(i), diff(i + 1));
         for k in 0..3 {
             n[k] += c[k];
         }
@@ -578,17 +595,88 @@ fn fan_is_star(positions: &[[f64; 3]], pv: [f64; 3], l: &[u32], closed: bool) ->
     } else {
         return false;
     };
-    if (0..faces).any(|i| orient2d_projected(pv, at(i), at(i + 1), axis) != want) {
+    // Every sign below is an orientation around `v`, `orient2d(v, rᵢ, rⱼ) = orient2d(rᵢ, rⱼ, v)`:
+    // decided from the projected differences against one static bound for the whole fan
+    // (`orient2d_static_bound`: the same signs as the predicate's filter), the predicate itself
+    // where that bound cannot.
+    let (pi, pj) = match axis {
+        0 => (1, 2),
+        1 => (2, 0),
+        _ => (0, 1),
+    };
+    let mut d2 = [[0.0f64; 2]; SMALL];
+    let bound = if small {
+        for (e, d) in d2.iter_mut().zip(&d3).take(l.len()) {
+            *e = [d[pi], d[pj]];
+        }
+        crate::predicates::orient2d_static_bound(&d2[..l.len()])
+    } else {
+        f64::INFINITY
+    };
+    let orient = |i: usize, j: usize| {
+        let (a, b) = (d2[i % SMALL], d2[j % SMALL]);
+        let det = a[0] * b[1] - a[1] * b[0];
+        if det > bound {
+            Sign::Positive
+        } else if det < -bound {
+            Sign::Negative
+        } else {
+            orient2d_projected(pv, at(i), at(j), axis)
+        }
+    };
+    if star_signs(l.len(), faces, closed, want, orient) {
+        return true;
+    }
+    // No star along a coordinate axis (e.g. a fan folded at a crease of a CAD mesh): the same
+    // signs in the projection along `n` itself, `orient3d(v − w, v, rᵢ, rⱼ) = w·((rᵢ − v) × (rⱼ −
+    // v))` with `w = v − (v − w)` (exactly, whatever the rounding of `v − w`), `w` a multiple of
+    // `n` of about the links' size: exact `orient3d` signs, the same certificate.
+    // A quick `f64` look first (a heuristic only: it can refuse, never certify): every face's
+    // normal on `n`'s side. A crumpled fan fails here, at its first folded face.
+    let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    if !(0..faces).all(|i| dot(crate::geometry::cross(diff(i), diff(i + 1)), n) > 0.0) {
         return false;
     }
-    // The sweep passes the direction of r₀ during face i (i ≥ 1) when r₀ is strictly after rᵢ
-    // and not strictly before rᵢ₊₁ (both turns are less than a half turn).
-    let r0 = at(0);
+    let scale = {
+        let d0 = diff(0);
+        let m = |a: [f64; 3]| a[0].abs().max(a[1].abs()).max(a[2].abs());
+        m(d0) / m(n)
+    };
+    let q = [
+        pv[0] - n[0] * scale,
+        pv[1] - n[1] * scale,
+        pv[2] - n[2] * scale,
+    ];
+    if !q.iter().all(|c| c.is_finite()) || q == pv {
+        return false;
+    }
+    star_signs(
+        l.len(),
+        faces,
+        closed,
+        Sign::Positive,
+        |i: usize, j: usize| crate::predicates::orient3d_unchecked(q, pv, at(i), at(j)),
+    )
+}
+
+/// The two conditions of [`Fans`]' certificate from the orientation signs `orient(i, j)` of
+/// the links `rᵢ`, `rⱼ` around `v` in some parallel projection (`len` links, `faces` faces):
+/// every face `(v, rᵢ, rᵢ₊₁)` has orientation `want`, and the sweep from `r₁` on never passes
+/// the direction of `r₀` again (it passes it during face i ≥ 1 when `r₀` is strictly after `rᵢ`
+/// and not strictly before `rᵢ₊₁`: both turns are less than a half turn).
+#[inline(always)]
+fn star_signs(
+    len: usize,
+    faces: usize,
+    closed: bool,
+    want: Sign,
+    orient: impl Fn(usize, usize) -> Sign,
+) -> bool {
+    if (0..faces).any(|i| orient(i % len, (i + 1) % len) != want) {
+        return false;
+    }
     let last = if closed { faces - 1 } else { faces };
-    !(1..last).any(|i| {
-        orient2d_projected(pv, at(i), r0, axis) == want
-            && orient2d_projected(pv, r0, at(i + 1), axis) != want.flip()
-    })
+    !(1..last).any(|i| orient(i, 0) == want && orient(0, i + 1) != want.flip())
 }
 
 /// The exact test of the candidate at leaf positions `x` and `y` (with their faces `sx`, `sy`):

@@ -453,6 +453,29 @@ pub fn orient2d_projected(a: [f64; 3], b: [f64; 3], c: [f64; 3], drop: usize) ->
     orient2d_unchecked([a[i], a[j]], [b[i], b[j]], [c[i], c[j]])
 }
 
+/// A static bound for many 2-D orientations around one point `c` (a static version of
+/// [`orient2d_filter`]): given the differences `p − c` of some points `p`, rounded in `f64` (as the
+/// filter rounds them), returns `E` such that for any two of them `ac = a − c`, `bc = b − c`, the
+/// `f64` value `det = ac₀·bc₁ − ac₁·bc₀` has the exact sign of `orient2d(a, b, c)` whenever
+/// `|det| > E`. `E` bounds the filter's own bound `CCW_ERRBOUND_A·(|ac₀·bc₁| + |ac₁·bc₀|)` (all
+/// rounding is monotone: each product is at most `fl(M²)`, `M` the largest component), so what
+/// it decides is what the filter decides; `f64::INFINITY` (decide nothing) when a component is
+/// outside the filter's range. A zero `det` is never decided (the caller asks the predicate).
+#[inline]
+pub fn orient2d_static_bound(diffs: &[[f64; 2]]) -> f64 {
+    let mut ok = true;
+    let mut m = 0.0f64;
+    for d in diffs {
+        ok &= all_in_range(*d, CCW_TINY, CCW_HUGE);
+        m = m.max(d[0].abs()).max(d[1].abs());
+    }
+    if ok {
+        CCW_ERRBOUND_A * (2.0 * (m * m))
+    } else {
+        f64::INFINITY
+    }
+}
+
 /// The 2×2 fast path alone (`None`: not provably right).
 #[inline]
 pub fn orient2d_filter(a: [f64; 2], b: [f64; 2], c: [f64; 2]) -> Option<Sign> {

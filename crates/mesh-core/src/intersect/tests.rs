@@ -733,6 +733,104 @@ fn random_fans_match_the_brute_force_oracle() {
 }
 
 #[test]
+fn fans_folded_at_a_crease_are_certified_along_their_normal() {
+    // A vertex in the middle of a cube's edge: three faces on the top (normal −z here), three on
+    // the side (−y). Along any coordinate axis one half projects to zero area, so only the
+    // projection along the fan's summed normal certifies it; no pair.
+    let links = [
+        [1.0, 0.0, 0.0],
+        [0.5, -1.0, 0.0],
+        [-0.5, -1.0, 0.0],
+        [-1.0, 0.0, 0.0],
+        [-0.5, 0.0, -1.0],
+        [0.5, 0.0, -1.0],
+    ];
+    let mut p = vec![[0.0; 3]];
+    p.extend_from_slice(&links);
+    let f: Vec<[u32; 3]> = (0..6).map(|i| [0, 1 + i, 1 + (i + 1) % 6]).collect();
+    let checker = SelfIntersectionChecker::new(&p, &f).expect("ok");
+    assert_eq!(checker.fans.kind[0], 1);
+    assert!(checker.fans.certify(&p)[0]);
+    assert!(checker.check().pairs.is_empty());
+    assert!(oracle(&p, &f).is_empty());
+    // Folded further (the side pushed under the top, a dihedral angle of 45°) still certified;
+    // folded onto itself (the side's links moved into the top's half-space, crossing it) not,
+    // and the pairs are the oracle's.
+    for (dy, want_cert) in [(0.5, true), (-1.5, false)] {
+        let mut q = p.clone();
+        for v in q.iter_mut().skip(5) {
+            v[1] = dy;
+        }
+        let checker = SelfIntersectionChecker::new(&q, &f).expect("ok");
+        let expected = oracle(&q, &f);
+        assert_eq!(checker.check().pairs, expected, "dy = {dy}");
+        assert_eq!(checker.fans.certify(&q)[0], want_cert, "dy = {dy}");
+        if want_cert {
+            assert!(expected.is_empty());
+        }
+    }
+}
+
+#[test]
+fn rotated_random_fans_match_the_brute_force_oracle() {
+    // The random fans of `random_fans_match_the_brute_force_oracle`, folded about a random line
+    // through the vertex and turned by a random rotation (so neither the coordinate axes nor
+    // the fan's plane line up): certified only without pairs, pairs always the oracle's.
+    let mut rng = Rng::new(0x5e1f_0006);
+    let (mut certified, mut not) = (0, 0);
+    for round in 0..600 {
+        let k = 3 + round % 8;
+        let grid = [4, 16, 1000][round % 3];
+        let mut angles: Vec<f64> = (0..k)
+            .map(|_| rng.int(grid) as f64 / grid as f64 * std::f64::consts::TAU)
+            .collect();
+        if round % 4 != 0 {
+            angles.sort_by(f64::total_cmp);
+        }
+        let r: Vec<f64> = (0..k).map(|_| 1.0 + rng.int(2) as f64 * 0.25).collect();
+        let z: Vec<f64> = (0..k)
+            .map(|_| rng.int(grid) as f64 / grid as f64 * 0.125)
+            .collect();
+        let (mut p, f) = fan(&angles, &r, &z, round % 2 == 0);
+        // Fold: links with y < 0 rotated about the x axis by up to ±120°.
+        let fold = (rng.unit() - 0.5) * 4.2;
+        let (fc, fs) = (fold.cos(), fold.sin());
+        for v in p.iter_mut().skip(1) {
+            if v[1] < 0.0 {
+                *v = [v[0], fc * v[1] - fs * v[2], fs * v[1] + fc * v[2]];
+            }
+        }
+        // Rotate: about z, then x, then z again, by random angles.
+        let rot = |v: [f64; 3], a: f64, axis: usize| {
+            let (c, s) = (a.cos(), a.sin());
+            let (i, j) = [(1, 2), (2, 0), (0, 1)][axis];
+            let mut w = v;
+            w[i] = c * v[i] - s * v[j];
+            w[j] = s * v[i] + c * v[j];
+            w
+        };
+        let (a1, a2, a3) = (rng.unit() * 6.3, rng.unit() * 6.3, rng.unit() * 6.3);
+        for v in p.iter_mut() {
+            *v = rot(rot(rot(*v, a1, 2), a2, 0), a3, 2);
+        }
+        let checker = SelfIntersectionChecker::new(&p, &f).expect("ok");
+        let cert = checker.fans.kind[0] != 0 && checker.fans.certify(&p)[0];
+        let expected = oracle(&p, &f);
+        assert_eq!(checker.check().pairs, expected, "round {round}");
+        if cert {
+            certified += 1;
+            assert!(
+                expected.is_empty(),
+                "round {round}: certified fan with pairs"
+            );
+        } else {
+            not += 1;
+        }
+    }
+    assert!(certified > 50 && not > 50, "{certified} {not}");
+}
+
+#[test]
 fn threads_give_the_same_answer() {
     // A torus with a band pushed through the opposite side (pairs), checked on 1, 2 and 3
     // threads: same pairs, same candidates.

@@ -432,3 +432,54 @@ fn plane_filter_agrees_with_the_exact_orient3d() {
         plane_filter_case(a, b, c, d, orient3d_exact(a, b, c, d));
     }
 }
+
+/// `orient2d_static_bound`: wherever the `f64` determinant of two differences around `c` is
+/// beyond the bound, its sign is the exact `orient2d` — on near-collinear points around `c` (the
+/// Shewchuk grid: most undecided), random ones, mixed magnitudes, and out-of-range differences
+/// (never decided).
+#[test]
+fn orient2d_static_bound_decides_only_exact_signs() {
+    let mut rng = Rng::new(0x5e1f_0005);
+    let (mut decided, mut total) = (0usize, 0usize);
+    for round in 0..4000 {
+        let c = [rng.unit() - 0.5, rng.unit() - 0.5];
+        let scale = pow2(round % 9 * 40 - 160);
+        let near = round % 3 == 0;
+        let dir = [rng.unit() - 0.5, rng.unit() - 0.5];
+        let pts: Vec<[f64; 2]> = (0..8)
+            .map(|_| {
+                if near {
+                    // Nearly on one line through c.
+                    let t = rng.unit() * 2.0 - 1.0;
+                    let u = pow2(-50) * (rng.unit() - 0.5);
+                    [c[0] + t * dir[0] + u, c[1] + t * dir[1] - u]
+                } else {
+                    [
+                        c[0] + scale * (rng.unit() - 0.5),
+                        c[1] + scale * (rng.unit() - 0.5),
+                    ]
+                }
+            })
+            .collect();
+        let diffs: Vec<[f64; 2]> = pts.iter().map(|p| [p[0] - c[0], p[1] - c[1]]).collect();
+        let bound = orient2d_static_bound(&diffs);
+        for i in 0..pts.len() {
+            for j in 0..pts.len() {
+                let (a, b) = (diffs[i], diffs[j]);
+                let det = a[0] * b[1] - a[1] * b[0];
+                total += 1;
+                if det > bound || det < -bound {
+                    decided += 1;
+                    assert_eq!(Sign::of_f64(det), orient2d_exact(pts[i], pts[j], c));
+                    assert_eq!(orient2d_filter(pts[i], pts[j], c), Some(Sign::of_f64(det)));
+                }
+            }
+        }
+    }
+    println!("static bound: {decided} of {total} decided");
+    assert!(decided > total / 4 && decided < total);
+    // A component outside the filter's range decides nothing.
+    assert_eq!(orient2d_static_bound(&[[1.0, pow2(-600)]]), f64::INFINITY);
+    assert_eq!(orient2d_static_bound(&[[pow2(600), 1.0]]), f64::INFINITY);
+    assert!(orient2d_static_bound(&[[0.0, 0.0]]) == 0.0);
+}
