@@ -1,7 +1,8 @@
 //! Exact self-intersection detection: every pair of triangles of a mesh that intersect.
 //!
-//! Candidates come from the [`Bvh`]'s self-overlap traversal (pairs of faces whose closed boxes
-//! overlap); each candidate is decided by an exact triangle–triangle test built only on the
+//! Candidates come from a bounding-volume hierarchy's self-overlap traversal (the checker's own
+//! pair tree of outward-rounded `f32` boxes in [`crate::bvh`], built from the vertices: pairs of
+//! faces whose closed boxes overlap); each candidate is decided by an exact triangle–triangle test built only on the
 //! [`predicates`](crate::predicates) (`orient3d`, and `orient2d` on a coordinate projection for
 //! coplanar configurations), so the answer is the exact answer for the given `f64` coordinates —
 //! no tolerance, no epsilon.
