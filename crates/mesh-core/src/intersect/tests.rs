@@ -684,6 +684,40 @@ fn fans_winding_twice_are_not_certified_and_their_pairs_are_found() {
     }
 }
 
+/// A random fan around vertex 0 for round `round`: `3 + round % 8` links at angles on a grid of
+/// `[4, 16, 1000][round % 3]` steps over `[0, arc)` (sorted unless `round % 4 == 0`, so some fans
+/// fold over themselves), radii 1 or 1.25, heights on the same grid times `zscale`; closed on
+/// even rounds.
+fn random_fan(rng: &mut Rng, round: usize, arc: f64, zscale: f64) -> (Vec<P>, Vec<[u32; 3]>) {
+    let k = 3 + round % 8;
+    let grid = [4, 16, 1000][round % 3];
+    let mut angles: Vec<f64> = (0..k)
+        .map(|_| rng.int(grid) as f64 / grid as f64 * arc)
+        .collect();
+    if !round.is_multiple_of(4) {
+        angles.sort_by(f64::total_cmp);
+    }
+    let r: Vec<f64> = (0..k).map(|_| 1.0 + rng.int(2) as f64 * 0.25).collect();
+    let z: Vec<f64> = (0..k)
+        .map(|_| rng.int(grid) as f64 / grid as f64 * zscale)
+        .collect();
+    fan(&angles, &r, &z, round.is_multiple_of(2))
+}
+
+/// Checks the fan `(p, f)` against the brute-force oracle (the same pairs; a certified fan has
+/// none) and returns whether its vertex 0 was certified, with the oracle's pairs.
+fn fan_against_the_oracle(p: &[P], f: &[[u32; 3]], round: usize) -> (bool, Vec<(u32, u32)>) {
+    let checker = SelfIntersectionChecker::new(p, f).expect("ok");
+    let cert = checker.fans.kind[0] != 0 && checker.fans.certify(p)[0];
+    let expected = oracle(p, f);
+    assert_eq!(checker.check().pairs, expected, "round {round}");
+    assert!(
+        !cert || expected.is_empty(),
+        "round {round}: certified fan with pairs"
+    );
+    (cert, expected)
+}
+
 #[test]
 fn random_fans_match_the_brute_force_oracle() {
     // Fans around one vertex with random (sorted or not) angles, radii and heights on coarse
@@ -692,31 +726,11 @@ fn random_fans_match_the_brute_force_oracle() {
     let mut rng = Rng::new(13);
     let (mut certified, mut not, mut with_pairs) = (0, 0, 0);
     for round in 0..600 {
-        let k = 3 + round % 8;
-        let grid = [4, 16, 1000][round % 3];
-        let mut angles: Vec<f64> = (0..k)
-            .map(|_| rng.int(grid) as f64 / grid as f64 * std::f64::consts::PI)
-            .collect();
-        if round % 4 != 0 {
-            angles.sort_by(f64::total_cmp);
-        }
-        let r: Vec<f64> = (0..k).map(|_| 1.0 + rng.int(2) as f64 * 0.25).collect();
         let zscale = [0.0, 0.125, 1.0][round % 3];
-        let z: Vec<f64> = (0..k)
-            .map(|_| rng.int(grid) as f64 / grid as f64 * zscale)
-            .collect();
-        let (p, f) = fan(&angles, &r, &z, round % 2 == 0);
-        let checker = SelfIntersectionChecker::new(&p, &f).expect("ok");
-        let cert = checker.fans.kind[0] != 0 && checker.fans.certify(&p)[0];
-        let res = checker.check();
-        let expected = oracle(&p, &f);
-        assert_eq!(res.pairs, expected, "round {round}");
+        let (p, f) = random_fan(&mut rng, round, std::f64::consts::PI, zscale);
+        let (cert, expected) = fan_against_the_oracle(&p, &f, round);
         if cert {
             certified += 1;
-            assert!(
-                expected.is_empty(),
-                "round {round}: certified fan with pairs"
-            );
         } else {
             not += 1;
         }
@@ -779,19 +793,7 @@ fn rotated_random_fans_match_the_brute_force_oracle() {
     let mut rng = Rng::new(0x5e1f_0006);
     let (mut certified, mut not) = (0, 0);
     for round in 0..600 {
-        let k = 3 + round % 8;
-        let grid = [4, 16, 1000][round % 3];
-        let mut angles: Vec<f64> = (0..k)
-            .map(|_| rng.int(grid) as f64 / grid as f64 * std::f64::consts::TAU)
-            .collect();
-        if round % 4 != 0 {
-            angles.sort_by(f64::total_cmp);
-        }
-        let r: Vec<f64> = (0..k).map(|_| 1.0 + rng.int(2) as f64 * 0.25).collect();
-        let z: Vec<f64> = (0..k)
-            .map(|_| rng.int(grid) as f64 / grid as f64 * 0.125)
-            .collect();
-        let (mut p, f) = fan(&angles, &r, &z, round % 2 == 0);
+        let (mut p, f) = random_fan(&mut rng, round, std::f64::consts::TAU, 0.125);
         // Fold: links with y < 0 rotated about the x axis by up to ±120°.
         let fold = (rng.unit() - 0.5) * 4.2;
         let (fc, fs) = (fold.cos(), fold.sin());
@@ -813,16 +815,8 @@ fn rotated_random_fans_match_the_brute_force_oracle() {
         for v in p.iter_mut() {
             *v = rot(rot(rot(*v, a1, 2), a2, 0), a3, 2);
         }
-        let checker = SelfIntersectionChecker::new(&p, &f).expect("ok");
-        let cert = checker.fans.kind[0] != 0 && checker.fans.certify(&p)[0];
-        let expected = oracle(&p, &f);
-        assert_eq!(checker.check().pairs, expected, "round {round}");
-        if cert {
+        if fan_against_the_oracle(&p, &f, round).0 {
             certified += 1;
-            assert!(
-                expected.is_empty(),
-                "round {round}: certified fan with pairs"
-            );
         } else {
             not += 1;
         }
