@@ -30,6 +30,19 @@ fn chair() -> PathBuf {
     p
 }
 
+/// `stylize apply CHAIR -o OUT ARGS…`: (success, stdout, stderr).
+fn apply_chair(out: &std::path::Path, args: &[&str]) -> (bool, String, String) {
+    let saved = chair();
+    let mut all = vec![
+        "apply",
+        saved.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+    ];
+    all.extend_from_slice(args);
+    stylize(&all)
+}
+
 /// The number after `key` in `line` (`"volume ratio 0.906,"` → 0.906).
 fn figure(line: &str, key: &str) -> f64 {
     let at = line
@@ -47,19 +60,12 @@ fn figure(line: &str, key: &str) -> f64 {
 #[test]
 #[ignore = "needs the authors' chair: GIS_AUTHORS_CHAIR_NPZ=… (see the file's doc comment)"]
 fn the_issue_table_under_the_reference_rule() {
-    let saved = chair();
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("chair.obj");
-    let (ok, stdout, stderr) = stylize(&[
-        "apply",
-        saved.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "--lambda",
-        "5,8,10,12,15,20",
-        "--rotation-rule",
-        "gis",
-    ]);
+    let (ok, stdout, stderr) = apply_chair(
+        &out,
+        &["--lambda", "5,8,10,12,15,20", "--rotation-rule", "gis"],
+    );
     assert!(ok, "{stderr}");
     // (λ, volume ratio, % flipped, faces in intersecting pairs): the issue's table.
     let table = [
@@ -99,17 +105,9 @@ fn the_issue_table_under_the_reference_rule() {
 #[test]
 #[ignore = "needs the authors' chair: GIS_AUTHORS_CHAIR_NPZ=… (see the file's doc comment)"]
 fn max_safe_stops_between_the_saved_lambda_and_the_first_intersection() {
-    let saved = chair();
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("safe.obj");
-    let (ok, stdout, stderr) = stylize(&[
-        "apply",
-        saved.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "--lambda",
-        "max-safe:20",
-    ]);
+    let (ok, stdout, stderr) = apply_chair(&out, &["--lambda", "max-safe:20"]);
     assert!(ok, "{stderr}");
     let line = stdout
         .lines()
@@ -120,14 +118,7 @@ fn max_safe_stops_between_the_saved_lambda_and_the_first_intersection() {
     assert!((8.0..10.0).contains(&lambda), "{line}");
     for (l, safe) in [(lambda, true), (lambda * 1.01, false)] {
         let o = dir.path().join(format!("at{l}.obj"));
-        let (ok, so, se) = stylize(&[
-            "apply",
-            saved.to_str().unwrap(),
-            "-o",
-            o.to_str().unwrap(),
-            "--lambda",
-            &format!("{l}"),
-        ]);
+        let (ok, so, se) = apply_chair(&o, &["--lambda", &format!("{l}")]);
         assert!(ok, "{se}");
         assert_eq!(!se.contains("warning"), safe, "λ = {l}: {so}{se}");
     }
