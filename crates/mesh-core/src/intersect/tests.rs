@@ -863,6 +863,16 @@ fn triangles_intersect_by_edges(ta: &Tri, tb: &Tri) -> bool {
     })
 }
 
+/// A random corner for round `round` of the straddling tests: in the unit cube, on a 3 × 3 × 3
+/// grid (touching at edges and corners, corners on the other plane), or nearly flat (z < 1e-9).
+fn straddle_test_point(rng: &mut Rng, round: usize) -> P {
+    match round % 3 {
+        0 => [rng.unit(), rng.unit(), rng.unit()],
+        1 => [0; 3].map(|_| rng.int(3) as f64),
+        _ => [rng.unit(), rng.unit(), 1e-9 * rng.unit()],
+    }
+}
+
 /// The two-`orient3d` test of straddling triangles against the edge crossings, on random pairs
 /// of both orientations: generic (unit cube), on coarse grids (touching at edges and corners,
 /// corners on the other plane: the other path) and crossing near-parallel; both answers occur.
@@ -871,13 +881,7 @@ fn straddling_test_agrees_with_the_edge_crossings() {
     let mut rng = Rng::new(17);
     let (mut straddling, mut hits) = (0, 0);
     for round in 0..60_000 {
-        let point = |rng: &mut Rng| -> P {
-            match round % 3 {
-                0 => [rng.unit(), rng.unit(), rng.unit()],
-                1 => [0; 3].map(|_| rng.int(3) as f64),
-                _ => [rng.unit(), rng.unit(), 1e-9 * rng.unit()],
-            }
-        };
+        let point = |rng: &mut Rng| straddle_test_point(rng, round);
         let a = [point(&mut rng), point(&mut rng), point(&mut rng)];
         let mut b = [point(&mut rng), point(&mut rng), point(&mut rng)];
         if round % 2 == 1 {
@@ -933,13 +937,7 @@ fn straddling_at_a_corner_agrees_with_the_edge_tests() {
     let mut rng = Rng::new(19);
     let (mut straddling, mut hits) = (0, 0);
     for round in 0..60_000 {
-        let point = |rng: &mut Rng| -> P {
-            match round % 3 {
-                0 => [rng.unit(), rng.unit(), rng.unit()],
-                1 => [0; 3].map(|_| rng.int(3) as f64),
-                _ => [rng.unit(), rng.unit(), 1e-9 * rng.unit()],
-            }
-        };
+        let point = |rng: &mut Rng| straddle_test_point(rng, round);
         let v = point(&mut rng);
         let a = [v, point(&mut rng), point(&mut rng)];
         let mut b = [v, point(&mut rng), point(&mut rng)];

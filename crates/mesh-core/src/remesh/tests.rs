@@ -459,6 +459,15 @@ fn stress_jittered_and_degenerate_meshes() {
     }
 }
 
+/// The index of the edge from `a` to `b`, if they are joined.
+fn edge_between(m: &HalfEdgeMesh, a: u32, b: u32) -> Option<usize> {
+    let mut ring = Vec::new();
+    m.outgoing(a, &mut ring);
+    ring.iter()
+        .find(|&&g| m.to(g) == b)
+        .map(|&g| (g / 2) as usize)
+}
+
 #[test]
 fn short_open_crease_chains_are_dropped_and_others_kept() {
     // A 20 × 20 grid (edge 0.05) with crease flags set by hand along rows of horizontal edges.
@@ -466,12 +475,7 @@ fn short_open_crease_chains_are_dropped_and_others_kept() {
     let (p, f) = grid(k);
     let mut m = HalfEdgeMesh::new(&p, &f).expect("grid");
     let id = |i: usize, j: usize| (j * (k + 1) + i) as u32;
-    let edge = |m: &HalfEdgeMesh, a: u32, b: u32| {
-        let mut ring = Vec::new();
-        m.outgoing(a, &mut ring);
-        let g = ring.iter().find(|&&g| m.to(g) == b).expect("an edge");
-        (g / 2) as usize
-    };
+    let edge = |m: &HalfEdgeMesh, a: u32, b: u32| edge_between(m, a, b).expect("an edge");
     let row = |m: &mut HalfEdgeMesh, j: usize, from: usize, to: usize| {
         for i in from..to {
             let e = edge(m, id(i, j), id(i + 1, j));
@@ -524,12 +528,7 @@ fn hairpins_of_crease_triangles_are_unmarked_and_others_kept() {
     }
     let mut m = HalfEdgeMesh::new(&p, &f).expect("grid");
     let id = |i: usize, j: usize| (j * (k + 1) + i) as u32;
-    let edge = |m: &HalfEdgeMesh, a: u32, b: u32| {
-        let mut ring = Vec::new();
-        m.outgoing(a, &mut ring);
-        let g = ring.iter().find(|&&g| m.to(g) == b).expect("an edge");
-        (g / 2) as usize
-    };
+    let edge = |m: &HalfEdgeMesh, a: u32, b: u32| edge_between(m, a, b).expect("an edge");
     for e in 0..m.num_edges() {
         m.feature[e] = false;
     }
@@ -572,31 +571,27 @@ fn a_corner_next_to_a_feature_edge_joins_the_line() {
     let id = |i: usize, j: usize| (j * (k + 1) + i) as u32;
     let s = 0.01 / 2f64.sqrt();
     p[id(1, 2) as usize] = [0.375 - s, 0.375 + s, 0.0];
-    let edge = |m: &HalfEdgeMesh, a: u32, b: u32| {
-        let mut ring = Vec::new();
-        m.outgoing(a, &mut ring);
-        ring.iter()
-            .find(|&&g| m.to(g) == b)
-            .map(|&g| (g / 2) as usize)
-    };
     let mut mesh = HalfEdgeMesh::new(&p, &f).expect("grid");
     let surface = Bvh::new(&p, &f).expect("bvh");
     // L = 0.25: the corner is 0.04·L from the line.
     let mut r = Remesher::new(&mut mesh, &p, &f, &RemeshOptions::new(0.25), &surface).expect("r");
     let (a, b, v) = (id(1, 1), id(2, 2), id(1, 2));
-    let e = edge(r.mesh, a, b).expect("the diagonal");
+    let e = edge_between(r.mesh, a, b).expect("the diagonal");
     r.mesh.feature[e] = true;
     r.mesh.locked[v as usize] = true;
     assert!(r.merge_corners_onto_lines());
     r.mesh.check().expect("consistent");
     let m = &*r.mesh;
     assert_eq!(
-        edge(m, a, b),
+        edge_between(m, a, b),
         None,
         "the crease edge past the corner is gone"
     );
-    assert!(m.feature[edge(m, a, v).expect("a–v")] && m.feature[edge(m, v, b).expect("v–b")]);
-    let new = edge(m, v, id(2, 1)).expect("the flipped edge");
+    assert!(
+        m.feature[edge_between(m, a, v).expect("a–v")]
+            && m.feature[edge_between(m, v, b).expect("v–b")]
+    );
+    let new = edge_between(m, v, id(2, 1)).expect("the flipped edge");
     assert!(!m.feature[new]);
     assert_eq!(m.pos[v as usize], p[v as usize], "the corner stays");
     // Far from the line (0.2·L), nothing happens.
@@ -607,7 +602,7 @@ fn a_corner_next_to_a_feature_edge_joins_the_line() {
     let surface2 = Bvh::new(&p2, &f).expect("bvh");
     let mut r2 =
         Remesher::new(&mut mesh2, &p2, &f, &RemeshOptions::new(0.25), &surface2).expect("r");
-    let e2 = edge(r2.mesh, a, b).expect("the diagonal");
+    let e2 = edge_between(r2.mesh, a, b).expect("the diagonal");
     r2.mesh.feature[e2] = true;
     r2.mesh.locked[v as usize] = true;
     assert!(!r2.merge_corners_onto_lines());
