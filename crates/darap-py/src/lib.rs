@@ -357,6 +357,29 @@ impl PyDarap {
         py.detach(|| f(&self.inner.read().unwrap_or_else(PoisonError::into_inner)))
     }
 
+    /// A Deformation of raw target normals `x` (`n` rows, read and checked here) made by `pass`
+    /// on the layer under the shared lock with the GIL released (`forward` or
+    /// `forward_at_strength`), with the layer's λ.
+    fn deformation(
+        &self,
+        py: Python<'_>,
+        x: &Bound<'_, PyAny>,
+        pass: impl FnOnce(&Darap, &[[f64; 3]]) -> Result<Deformation, darap::DarapError> + Send,
+    ) -> PyResult<PyDeformation> {
+        let n = self.read(py, Darap::num_vertices);
+        let targets = read_rows3(x, "x", Some(n))?;
+        let (state, lambda) =
+            self.read(py, |layer| (pass(layer, &targets), layer.options().lambda));
+        let state = state.map_err(layer_error)?;
+        let positions = rows3_to_numpy(py, &state.positions)?.unbind();
+        Ok(PyDeformation {
+            state,
+            layer_id: self.id,
+            lambda,
+            positions,
+        })
+    }
+
     /// `f` on the layer under the exclusive lock, waited for and run with the GIL released.
     fn write<T: Send>(&self, py: Python<'_>, f: impl FnOnce(&mut Darap) -> T + Send) -> T {
         py.detach(|| f(&mut self.inner.write().unwrap_or_else(PoisonError::into_inner)))
@@ -410,19 +433,7 @@ impl PyDarap {
     /// Deformed positions for raw target normals x (V, 3) float64/float32; only directions
     /// matter. Returns a Deformation (GIL released). Raises DarapError for non-finite targets.
     fn forward(&self, py: Python<'_>, x: &Bound<'_, PyAny>) -> PyResult<PyDeformation> {
-        let n = self.read(py, Darap::num_vertices);
-        let targets = read_rows3(x, "x", Some(n))?;
-        let (state, lambda) = self.read(py, |layer| {
-            (layer.forward(&targets), layer.options().lambda)
-        });
-        let state = state.map_err(layer_error)?;
-        let positions = rows3_to_numpy(py, &state.positions)?.unbind();
-        Ok(PyDeformation {
-            state,
-            layer_id: self.id,
-            lambda,
-            positions,
-        })
+        self.deformation(py, x, |layer, targets| layer.forward(targets))
     }
 
     /// The strength control (docs/strength.md): the deformation for x at this layer's λ, pushed
@@ -437,21 +448,8 @@ impl PyDarap {
         x: &Bound<'_, PyAny>,
         strength: f64,
     ) -> PyResult<PyDeformation> {
-        let n = self.read(py, Darap::num_vertices);
-        let targets = read_rows3(x, "x", Some(n))?;
-        let (state, lambda) = self.read(py, |layer| {
-            (
-                layer.forward_at_strength(&targets, strength),
-                layer.options().lambda,
-            )
-        });
-        let state = state.map_err(layer_error)?;
-        let positions = rows3_to_numpy(py, &state.positions)?.unbind();
-        Ok(PyDeformation {
-            state,
-            layer_id: self.id,
-            lambda,
-            positions,
+        self.deformation(py, x, |layer, targets| {
+            layer.forward_at_strength(targets, strength)
         })
     }
 
