@@ -1682,15 +1682,23 @@ impl Remesher<'_> {
                     Some(Bvh::new(input_positions, &involved)?)
                 });
             }
-            let near = inherited_near.as_ref().and_then(|b| b.as_ref());
+            // A face is near the input's intersections when its centroid is within L of an
+            // input face in an intersecting pair; each face of a pair is asked once per pass
+            // (a crumpled mesh has many pairs per face).
             let reach = self.hi * 0.75; // L
-            let is_new = |i: u32, j: u32| match near {
-                None => true,
-                Some(b) => ![i, j].iter().any(|&k| {
-                    b.closest_point(centroid(&p, f[k as usize]))
-                        .is_some_and(|c| c.distance_squared.sqrt() <= reach)
-                }),
-            };
+            let mut near_input_pairs = vec![false; f.len()];
+            if let Some(b) = inherited_near.as_ref().and_then(|b| b.as_ref()) {
+                let mut asked = vec![false; f.len()];
+                for k in pairs.iter().flat_map(|&(i, j)| [i as usize, j as usize]) {
+                    if !std::mem::replace(&mut asked[k], true) {
+                        near_input_pairs[k] = b
+                            .closest_point(centroid(&p, f[k]))
+                            .is_some_and(|c| c.distance_squared.sqrt() <= reach);
+                    }
+                }
+            }
+            let is_new =
+                |i: u32, j: u32| !(near_input_pairs[i as usize] || near_input_pairs[j as usize]);
             let mut progress = false;
             let mut any_new = false;
             for &(i, j) in &pairs {
