@@ -520,3 +520,73 @@ fn pair_build_refuses_bad_input_as_the_median_build() {
     tree.traverse(&[(0, 0)], |_, _| panic!("no faces, no pairs"));
     assert!(tree.tasks(4).is_empty());
 }
+
+#[test]
+fn outward_rounding_is_the_nearest_f32_on_the_far_side() {
+    // The reference: round to nearest, then one step with the standard library's neighbours.
+    let down = |x: f64| {
+        let y = x as f32;
+        if f64::from(y) > x { y.next_down() } else { y }
+    };
+    let up = |x: f64| {
+        let y = x as f32;
+        if f64::from(y) < x { y.next_up() } else { y }
+    };
+    let same = |a: f32, b: f32| a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan());
+    let tiny = f64::from(f32::from_bits(1));
+    let max = f64::from(f32::MAX);
+    let mut xs = vec![
+        0.0,
+        -0.0,
+        tiny,
+        -tiny,
+        tiny / 2.0,
+        -tiny / 2.0,
+        tiny / 3.0,
+        -tiny / 3.0,
+        1e-300,
+        -1e-300,
+        f64::from(f32::MIN_POSITIVE),
+        f64::from(f32::MIN_POSITIVE) * (1.0 - 1e-12),
+        1.0,
+        -1.0,
+        1.0 + f64::EPSILON,
+        -1.0 - f64::EPSILON,
+        1.0 - f64::EPSILON,
+        0.1,
+        -0.1,
+        max,
+        -max,
+        max * (1.0 + 1e-12),
+        -max * (1.0 + 1e-12),
+        1e300,
+        -1e300,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::NAN,
+        f64::MAX,
+        f64::MIN,
+    ];
+    // Random bit patterns (every exponent, both signs) and random values near f32 grid points.
+    let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
+    for _ in 0..20_000 {
+        xs.push(f64::from_bits(rng.next()));
+        let g = f64::from(f32::from_bits(rng.next() as u32));
+        let nudge = [-1i64, 0, 1][(rng.next() % 3) as usize];
+        xs.push(f64::from_bits(g.to_bits().wrapping_add(nudge as u64)));
+    }
+    for &x in &xs {
+        let (lo, hi) = (f32_outward(x, true), f32_outward(x, false));
+        assert!(same(lo, down(x)), "down({x:e}): {lo:e} vs {:e}", down(x));
+        assert!(same(hi, up(x)), "up({x:e}): {hi:e} vs {:e}", up(x));
+        if !x.is_nan() {
+            // On the far side of x, and the nearest f32 there.
+            assert!(f64::from(lo) <= x && x <= f64::from(hi), "{x:e}");
+            assert!(lo == f32::INFINITY || f64::from(lo.next_up()) > x, "{x:e}");
+            assert!(
+                hi == f32::NEG_INFINITY || f64::from(hi.next_down()) < x,
+                "{x:e}"
+            );
+        }
+    }
+}
