@@ -313,6 +313,9 @@ impl SelfIntersectionChecker {
                     let first = sx[mask.trailing_zeros() as usize];
                     Some([0, 1, 2].map(|i| if mask & (1 << i) != 0 { sx[i] } else { first }))
                 };
+                // The plane of `x`, made for its first tested candidate and kept for the rest
+                // (a crumpled mesh tests three or four of a leaf's faces against `x`).
+                let mut plane_x = None;
                 while overlaps != 0 {
                     let y = start + overlaps.trailing_zeros() as usize;
                     overlaps &= overlaps - 1;
@@ -324,7 +327,7 @@ impl SelfIntersectionChecker {
                         }
                     }
                     if let Some(pair) =
-                        test_candidate(order, positions, &mut cache, (x, sx), (y, sy))
+                        test_candidate(order, positions, &mut cache, &mut plane_x, (x, sx), (y, sy))
                     {
                         pairs.push(pair);
                     }
@@ -682,20 +685,24 @@ fn star_signs(
 
 /// The exact test of the candidate at leaf positions `x` and `y` (with their faces `sx`, `sy`):
 /// the pair `(a, b)`, `a < b`, when the faces intersect. `cache` holds recently tested faces'
-/// [`Tri`]s (direct-mapped by face index, [`TRI_CACHE`] entries). Kept out of line, so that the
-/// traversal's loop, which calls it for a few per cent of the candidates, stays small.
+/// [`Tri`]s (direct-mapped by face index, [`TRI_CACHE`] entries); `plane_x` is the plane of `x`
+/// (its corners in `sx`'s order), made here if `None`. Kept out of line, so that the traversal's
+/// loop, which calls it for a few per cent of the candidates, stays small.
 #[inline(never)]
 fn test_candidate(
     order: &[u32],
     positions: &[[f64; 3]],
     cache: &mut [(u32, Tri)],
+    plane_x: &mut Option<PlaneFilter>,
     (x, sx): (usize, [u32; 3]),
     (y, sy): (usize, [u32; 3]),
 ) -> Option<(u32, u32)> {
     // The corners by reference: read where they are, never copied on this path.
     let corners = |f: [u32; 3]| f.map(|v| &positions[v as usize]);
     let (ox, oy) = (order[x], order[y]);
-    if let Some(hit) = decide_by_planes(sx, corners(sx), sy, corners(sy)) {
+    let (cx, cy) = (corners(sx), corners(sy));
+    let plane = *plane_x.get_or_insert_with(|| PlaneFilter::new(*cx[0], *cx[1], *cx[2]));
+    if let Some(hit) = decide_by_planes(sx, cx, &plane, sy, cy) {
         return hit.then_some(if ox < oy { (ox, oy) } else { (oy, ox) });
     }
     let corners = |f: [u32; 3]| f.map(|v| positions[v as usize]);
@@ -757,11 +764,13 @@ fn sign_bit((pos, _): (u8, u8), k: usize) -> Sign {
 /// side of `fa`'s plane (nearly coplanar faces, which the full test's separating-plane filter
 /// settles) hands the pair over before `fb`'s plane is made. Faces with a repeated index are left
 /// to the full test. A decided `true` has every relevant sign non-zero, so neither face is
-/// degenerate; a `false` is right for degenerate faces too (they are never paired).
+/// degenerate; a `false` is right for degenerate faces too (they are never paired). `plane_a` is
+/// `PlaneFilter::new(pa[0], pa[1], pa[2])` (made by the caller, who may reuse it).
 #[inline]
 fn decide_by_planes(
     fa: [u32; 3],
     pa: [&[f64; 3]; 3],
+    plane_a: &PlaneFilter,
     fb: [u32; 3],
     pb: [&[f64; 3]; 3],
 ) -> Option<bool> {
@@ -771,7 +780,6 @@ fn decide_by_planes(
     }
     let (shared, n) = shared_corners(fa, fb);
     let plane = |p: [&[f64; 3]; 3]| PlaneFilter::new(*p[0], *p[1], *p[2]);
-    let plane_a = plane(pa);
     match n {
         0 => {
             let sb = plane_a.strict_sides(pb);

@@ -1025,7 +1025,9 @@ fn plane_decisions_agree_with_the_full_test() {
         let want = faces_intersect(fa, &Tri::new(pa), fb, &Tri::new(pb));
         let refs = |f: [u32; 3]| f.map(|v| &pts[v as usize]);
         for (f1, f2) in [(fa, fb), (fb, fa)] {
-            if let Some(got) = decide_by_planes(f1, refs(f1), f2, refs(f2)) {
+            let (p1, p2) = (refs(f1), refs(f2));
+            let plane = PlaneFilter::new(*p1[0], *p1[1], *p1[2]);
+            if let Some(got) = decide_by_planes(f1, p1, &plane, f2, p2) {
                 assert_eq!(got, want, "{f1:?} {f2:?} {pts:?}");
                 decided[which] += 1;
                 decided_true[which] += usize::from(got);
