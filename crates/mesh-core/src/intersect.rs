@@ -166,7 +166,9 @@ pub struct SelfIntersectionChecker {
     order: Vec<u32>,
     /// The faces in leaf order.
     slots: Vec<[u32; 3]>,
+    /// Face → component (empty when there is one: every face's is 0).
     face_component: Vec<u32>,
+    /// Faces per component.
     component_faces: Vec<usize>,
     /// The current positions (the fans' certificates read them).
     positions: Vec<[f64; 3]>,
@@ -202,14 +204,20 @@ impl SelfIntersectionChecker {
             *r = num_used;
             num_used += 1;
         }
-        let face_component: Vec<u32> = faces
-            .iter()
-            .map(|f| remap[labels[f[0] as usize] as usize])
-            .collect();
-        let mut component_faces = vec![0usize; num_used as usize];
-        for &c in &face_component {
-            component_faces[c as usize] += 1;
-        }
+        // One component (the usual case) needs no per-face table.
+        let (face_component, component_faces) = if num_used == 1 {
+            (Vec::new(), vec![faces.len()])
+        } else {
+            let face_component: Vec<u32> = faces
+                .iter()
+                .map(|f| remap[labels[f[0] as usize] as usize])
+                .collect();
+            let mut component_faces = vec![0usize; num_used as usize];
+            for &c in &face_component {
+                component_faces[c as usize] += 1;
+            }
+            (face_component, component_faces)
+        };
         Ok(SelfIntersectionChecker {
             tree,
             order,
@@ -227,6 +235,13 @@ impl SelfIntersectionChecker {
     /// speed setting only: the answer is the same for any number.
     pub fn set_threads(&mut self, threads: usize) {
         self.threads = threads.max(1);
+    }
+
+    /// The component of face `f`.
+    fn component_of(&self, f: u32) -> usize {
+        self.face_component
+            .get(f as usize)
+            .map_or(0, |&c| c as usize)
     }
 
     /// Number of faces.
@@ -387,13 +402,10 @@ impl SelfIntersectionChecker {
             })
             .collect();
         for &f in &involved {
-            per_component[self.face_component[f as usize] as usize].involved_faces += 1;
+            per_component[self.component_of(f)].involved_faces += 1;
         }
         for &(a, b) in &pairs {
-            let (ca, cb) = (
-                self.face_component[a as usize] as usize,
-                self.face_component[b as usize] as usize,
-            );
+            let (ca, cb) = (self.component_of(a), self.component_of(b));
             if ca == cb {
                 per_component[ca].pairs_within += 1;
             } else {
@@ -447,7 +459,8 @@ impl Fans {
     const MAX_FAN: usize = 64;
 
     fn new(num_vertices: usize, faces: &[[u32; 3]]) -> Fans {
-        // Vertex → (a, b) for each face (v, a, b) around it (corners cycled so that v is first).
+        // Vertex → its corners `3f + i` (face `f`, corner `i`), in face order (a counting sort;
+        // half the memory of storing each face's link edge here).
         let mut count = vec![0u32; num_vertices + 1];
         for f in faces {
             for &v in f {
@@ -458,22 +471,30 @@ impl Fans {
             count[v + 1] += count[v];
         }
         let mut fill = count.clone();
-        let mut edges = vec![(0u32, 0u32); count[num_vertices] as usize];
-        for f in faces {
-            for i in 0..3 {
-                let v = f[i] as usize;
-                edges[fill[v] as usize] = (f[(i + 1) % 3], f[(i + 2) % 3]);
-                fill[v] += 1;
+        let mut corners = vec![0u32; count[num_vertices] as usize];
+        for (fi, f) in faces.iter().enumerate() {
+            for (i, &v) in f.iter().enumerate() {
+                corners[fill[v as usize] as usize] = 3 * fi as u32 + i as u32;
+                fill[v as usize] += 1;
             }
         }
+        drop(fill);
         let mut offsets = Vec::with_capacity(num_vertices + 1);
-        let mut link = Vec::with_capacity(edges.len() + num_vertices);
+        let mut link = Vec::with_capacity(corners.len() + num_vertices);
         let mut kind = vec![0u8; num_vertices];
+        let mut edges = [(0u32, 0u32); Self::MAX_FAN + 1];
         offsets.push(0u32);
         for v in 0..num_vertices {
-            let es = &edges[count[v] as usize..count[v + 1] as usize];
+            let cs = &corners[count[v] as usize..count[v + 1] as usize];
+            // (a, b) for each face (v, a, b) around `v` (corners cycled so that v is first); a
+            // fan too large is refused by `chain` on its length alone.
+            let k = cs.len().min(Self::MAX_FAN + 1);
+            for (e, &c) in edges.iter_mut().zip(&cs[..k]) {
+                let (f, i) = (&faces[(c / 3) as usize], (c % 3) as usize);
+                *e = (f[(i + 1) % 3], f[(i + 2) % 3]);
+            }
             let start = link.len();
-            if let Some(k) = Self::chain(v as u32, es, &mut link) {
+            if let Some(k) = Self::chain(v as u32, &edges[..k], &mut link) {
                 kind[v] = k;
             } else {
                 link.truncate(start);

@@ -656,6 +656,35 @@ fn fans_are_built_only_for_simple_consistent_chains() {
 }
 
 #[test]
+fn fans_up_to_the_size_limit_are_built_and_larger_ones_are_left_to_the_pairs() {
+    // A flat closed fan of MAX_FAN faces has a fan (certified); one more face and it has none,
+    // and its pairs are still the oracle's: none when flat, the crossings when it winds twice.
+    for (k, turns) in [
+        (Fans::MAX_FAN, 1.0),
+        (Fans::MAX_FAN + 1, 1.0),
+        (Fans::MAX_FAN + 1, 2.0),
+    ] {
+        let angles: Vec<f64> = (0..k)
+            .map(|i| turns * std::f64::consts::TAU * i as f64 / k as f64)
+            .collect();
+        let z: Vec<f64> = (0..k).map(|i| (turns - 1.0) * 0.01 * i as f64).collect();
+        let (p, f) = fan(&angles, &vec![1.0; k], &z, true);
+        let checker = SelfIntersectionChecker::new(&p, &f).expect("ok");
+        assert_eq!(checker.fans.kind[0] != 0, k <= Fans::MAX_FAN, "k = {k}");
+        if k <= Fans::MAX_FAN {
+            assert_eq!(
+                &checker.fans.link[..k],
+                &(1..=k as u32).collect::<Vec<_>>()[..]
+            );
+            assert!(checker.fans.certify(&p)[0]);
+        }
+        let r = checker.check();
+        assert_eq!(r.pairs, oracle(&p, &f), "k = {k}, turns = {turns}");
+        assert_eq!(r.pairs.is_empty(), turns == 1.0, "k = {k}, turns = {turns}");
+    }
+}
+
+#[test]
 fn fans_winding_twice_are_not_certified_and_their_pairs_are_found() {
     // A spiral staircase around the vertex: 7 link vertices, each face turning 2·(2π/7), so the
     // closed fan winds twice around it and must cross itself to close. And an open fan turning
