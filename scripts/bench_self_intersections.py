@@ -7,15 +7,20 @@ the repository:
 
     python3 -m venv /work/venvs/pymeshlab && /work/venvs/pymeshlab/bin/pip install pymeshlab numpy
     cargo build --release -p mesh-core --features io --example self_intersection_bench
-    /work/venvs/pymeshlab/bin/python scripts/bench_self_intersections.py OUT_DIR [MESH...]
+    /work/venvs/pymeshlab/bin/python scripts/bench_self_intersections.py OUT_DIR [--rounds N] [MESH...]
 
-It runs our example (which writes OUT_DIR/NAME.obj and NAME.faces.txt and prints our timings),
-then times pymeshlab on each NAME.obj in this process's CPU time (the machine may be shared:
-descheduled time does not count; repeated until >= 0.3 s of CPU), and prints a Markdown table:
-faces, our pairs/faces, pymeshlab's faces, faces only we report / only pymeshlab reports, and
-the CPU ms per check of each (ours: one full check on a built tree; the BVH build and the
-refit + check are in the example's output), and the ratio both for our check alone and for our
-BVH build + check (pymeshlab builds its grid in every call). Both run on one core (`taskset -c 0`).
+Each of N rounds (default 3) runs our example once (which writes OUT_DIR/NAME.obj and
+NAME.faces.txt and prints our timings for every mesh), then times pymeshlab on each NAME.obj in
+this process's CPU time (descheduled time does not count; repeated until >= 0.3 s of CPU). The
+rounds alternate the two tools, so a slow spell of the (shared, virtual) machine falls on both.
+Both run on one core (`taskset -c 0`).
+
+It prints a Markdown table: faces, our pairs/faces, pymeshlab's faces, faces only we report /
+only pymeshlab reports, then the CPU ms per call of each, each the **minimum over the rounds**
+(the least disturbed measurement; ours: one full check on a built tree, the BVH build, and the
+refit + check; pymeshlab builds its grid in every call), the ratios of those minima for our
+check alone and for our BVH build + check, and the range of the build + check ratio over the
+rounds (each round's own pymeshlab / ours), which shows how far one run can move it.
 """
 
 import os
@@ -36,45 +41,73 @@ def timed(f, min_reps=1, min_cpu=0.3):
 
 
 def main():
-    out = sys.argv[1]
-    extra = sys.argv[2:]
+    args = sys.argv[1:]
+    rounds = 3
+    if "--rounds" in args:
+        i = args.index("--rounds")
+        rounds = int(args[i + 1])
+        del args[i:i + 2]
+    if not args or rounds < 1:
+        sys.exit(__doc__)
+    out, extra = args[0], args[1:]
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     exe = os.path.join(root, "target/release/examples/self_intersection_bench")
-    ours = subprocess.run(["taskset", "-c", "0", exe, out, *extra], check=True,
-                          capture_output=True, text=True).stdout
     os.sched_setaffinity(0, {0})
-    rows = [l.split("\t") for l in ours.strip().splitlines()]
-    head, rows = rows[0], rows[1:]
+    # Per mesh: lists over the rounds of our (check, build, refit + check) and pymeshlab's ms.
+    ours, theirs, info, names = {}, {}, {}, []
+    for r in range(rounds):
+        text = subprocess.run(["taskset", "-c", "0", exe, out, *extra], check=True,
+                              capture_output=True, text=True).stdout
+        lines = [l.split("\t") for l in text.strip().splitlines()]
+        head = lines[0]
+        for row in lines[1:]:
+            d = dict(zip(head, row))
+            name = d["mesh"]
+            if r == 0:
+                names.append(name)
+                info[name] = d
+            ours.setdefault(name, []).append(
+                (float(d["check_cpu_ms"]), float(d["build_cpu_ms"]),
+                 float(d["refit_check_cpu_ms"])))
+        for name in names:
+            ms = pymeshlab.MeshSet()
+            ms.load_new_mesh(os.path.join(out, name + ".obj"))
+            m = ms.current_mesh()
+            assert m.face_number() == int(info[name]["faces"]), name
+
+            def run():
+                ms.compute_selection_by_self_intersections_per_face()
+
+            theirs.setdefault(name, []).append(timed(run))
+            if r == 0:
+                sel = ms.current_mesh().face_selection_array()
+                info[name]["theirs"] = {i for i, s in enumerate(sel) if s}
+        print("round %d of %d done" % (r + 1, rounds), file=sys.stderr)
     print("| mesh | faces | our pairs | our faces | pymeshlab faces | only ours | only pymeshlab "
           "| ours: check CPU ms | ours: build CPU ms | ours: refit + check CPU ms "
-          "| pymeshlab CPU ms | pymeshlab / ours (check) | pymeshlab / ours (build + check) |")
-    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
-    for r in rows:
-        d = dict(zip(head, r))
-        name = d["mesh"]
-        ms = pymeshlab.MeshSet()
-        ms.load_new_mesh(os.path.join(out, name + ".obj"))
-        m = ms.current_mesh()
-        assert m.face_number() == int(d["faces"]), (name, m.face_number(), d["faces"])
-
-        def run():
-            ms.compute_selection_by_self_intersections_per_face()
-
-        theirs_ms = timed(run)
-        sel = ms.current_mesh().face_selection_array()
-        theirs = {i for i, s in enumerate(sel) if s}
+          "| pymeshlab CPU ms | pymeshlab / ours (check) | pymeshlab / ours (build + check) "
+          "| build + check ratio, range over rounds |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    for name in names:
+        d = info[name]
+        theirs_faces = d["theirs"]
         with open(os.path.join(out, name + ".faces.txt")) as f:
             mine = {int(l) for l in f if l.strip()}
-        only_ours = sorted(mine - theirs)
-        only_theirs = sorted(theirs - mine)
+        only_ours = sorted(mine - theirs_faces)
+        only_theirs = sorted(theirs_faces - mine)
         with open(os.path.join(out, name + ".diff.txt"), "w") as f:
             f.write("only ours: %s\nonly pymeshlab: %s\n" % (only_ours, only_theirs))
-        check = float(d["check_cpu_ms"])
-        build = float(d["build_cpu_ms"])
-        print("| %s | %s | %s | %s | %d | %d | %d | %.1f | %.1f | %.1f | %.1f | %.1f× | %.1f× |" % (
-            name, d["faces"], d["pairs"], d["faces_involved"], len(theirs), len(only_ours),
-            len(only_theirs), check, build, float(d["refit_check_cpu_ms"]),
-            theirs_ms, theirs_ms / max(check, 1e-9), theirs_ms / max(build + check, 1e-9)))
+        check = min(o[0] for o in ours[name])
+        build = min(o[1] for o in ours[name])
+        refit = min(o[2] for o in ours[name])
+        t = min(theirs[name])
+        per_round = [p / max(o[1] + o[0], 1e-9) for o, p in zip(ours[name], theirs[name])]
+        print("| %s | %s | %s | %s | %d | %d | %d | %.2f | %.2f | %.2f | %.1f | %.1f× | %.1f× "
+              "| %.1f–%.1f× |" % (
+                  name, d["faces"], d["pairs"], d["faces_involved"], len(theirs_faces),
+                  len(only_ours), len(only_theirs), check, build, refit, t,
+                  t / max(check, 1e-9), t / max(build + check, 1e-9),
+                  min(per_round), max(per_round)))
 
 
 if __name__ == "__main__":

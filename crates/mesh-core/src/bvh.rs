@@ -1068,7 +1068,7 @@ impl LeafBoxes {
     /// Branch-free over a fixed window of [`WINDOW`] boxes from `range.start` (the padding keeps
     /// it in bounds), which the compiler turns into packed compares; bits past the range are
     /// cleared.
-    #[inline]
+    #[inline(always)]
     fn overlap_mask(&self, b: &Box32, range: std::ops::Range<usize>) -> u32 {
         fn window(v: &[f32], start: usize) -> &[f32; WINDOW] {
             v[start..start + WINDOW]
