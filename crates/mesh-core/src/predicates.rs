@@ -464,11 +464,16 @@ pub fn orient2d_projected(a: [f64; 3], b: [f64; 3], c: [f64; 3], drop: usize) ->
 #[inline]
 pub fn orient2d_static_bound(diffs: &[[f64; 2]]) -> f64 {
     let mut ok = true;
-    let mut m = 0.0f64;
+    // Two running maxima (independent chains), by comparison: a NaN fails the range check, so
+    // `f64::max`'s NaN handling would only lengthen the chain.
+    let (mut m0, mut m1) = (0.0f64, 0.0f64);
     for d in diffs {
         ok &= all_in_range(*d, CCW_TINY, CCW_HUGE);
-        m = m.max(d[0].abs()).max(d[1].abs());
+        let (a0, a1) = (d[0].abs(), d[1].abs());
+        m0 = if a0 > m0 { a0 } else { m0 };
+        m1 = if a1 > m1 { a1 } else { m1 };
     }
+    let m = if m1 > m0 { m1 } else { m0 };
     if ok {
         CCW_ERRBOUND_A * (2.0 * (m * m))
     } else {
