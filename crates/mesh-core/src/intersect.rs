@@ -86,6 +86,16 @@ pub enum IntersectError {
         /// Faces of the deformed mesh.
         deformed_faces: usize,
     },
+    /// More faces than the check indexes (its corner indices are `u32`: `3·faces < 2³²`).
+    #[error(
+        "self-intersection check: the mesh has {faces} faces, more than the {max} it can index"
+    )]
+    TooLarge {
+        /// Faces given.
+        faces: usize,
+        /// The most faces the check takes.
+        max: usize,
+    },
 }
 
 /// The self-intersection figures of one connected component (faces joined through shared
@@ -178,14 +188,24 @@ pub struct SelfIntersectionChecker {
 }
 
 impl SelfIntersectionChecker {
-    /// Builds the tree over the mesh. Refuses an empty face list, an out-of-range index and a
-    /// non-finite vertex used by a face.
+    /// The most faces the check takes: its corner indices `3·face + corner` are `u32`.
+    pub const MAX_FACES: usize = (u32::MAX / 3) as usize;
+
+    /// Builds the tree over the mesh. Refuses an empty face list, more than
+    /// [`MAX_FACES`](Self::MAX_FACES) faces, an out-of-range index and a non-finite vertex used
+    /// by a face.
     pub fn new(
         positions: &[[f64; 3]],
         faces: &[[u32; 3]],
     ) -> Result<SelfIntersectionChecker, IntersectError> {
         if faces.is_empty() {
             return Err(IntersectError::Empty);
+        }
+        if faces.len() > Self::MAX_FACES {
+            return Err(IntersectError::TooLarge {
+                faces: faces.len(),
+                max: Self::MAX_FACES,
+            });
         }
         let (tree, order, slots) = PairTree::for_mesh(positions, faces)?;
         // Two edges per face join its three corners (the third edge adds nothing); the indices
