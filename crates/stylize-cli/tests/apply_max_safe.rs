@@ -381,14 +381,7 @@ fn bad_strength_arguments_are_clear_errors() {
         (&["--strength", "2", "--lambda", "max-safe"][..], "one λ"),
         (&["--strength", "fast"][..], "neither a number"),
     ] {
-        let mut args = vec![
-            "apply",
-            saved.to_str().unwrap(),
-            "-o",
-            out.to_str().unwrap(),
-        ];
-        args.extend_from_slice(extra);
-        let (ok, _, stderr) = stylize(&args);
+        let (ok, _, stderr) = common::apply_text(&saved, &out, extra);
         assert!(!ok, "{extra:?} accepted");
         assert!(stderr.contains(says), "{extra:?}: {stderr}");
         assert!(!out.exists(), "{extra:?} wrote a file");

@@ -32,15 +32,7 @@ fn chair() -> PathBuf {
 
 /// `stylize apply CHAIR -o OUT ARGS…`: (success, stdout, stderr).
 fn apply_chair(out: &std::path::Path, args: &[&str]) -> (bool, String, String) {
-    let saved = chair();
-    let mut all = vec![
-        "apply",
-        saved.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-    ];
-    all.extend_from_slice(args);
-    stylize(&all)
+    common::apply_text(&chair(), out, args)
 }
 
 /// The number after `key` in `line` (`"volume ratio 0.906,"` → 0.906).

@@ -37,3 +37,10 @@ pub fn stylize_text(args: &[&str]) -> (bool, String, String) {
         stderr(&o),
     )
 }
+
+/// `stylize apply SAVED -o OUT EXTRA…` as [`stylize_text`]: (success, stdout, stderr).
+pub fn apply_text(saved: &Path, out: &Path, extra: &[&str]) -> (bool, String, String) {
+    let mut args = vec!["apply", s(saved), "-o", s(out)];
+    args.extend_from_slice(extra);
+    stylize_text(&args)
+}
