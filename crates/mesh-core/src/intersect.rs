@@ -86,7 +86,7 @@ pub enum IntersectError {
         /// Faces of the deformed mesh.
         deformed_faces: usize,
     },
-    /// More faces than the check indexes (its corner indices are `u32`: `3·faces < 2³²`).
+    /// More faces than the check indexes (its per-corner counts are `u32`: `3·faces < 2³²`).
     #[error(
         "self-intersection check: the mesh has {faces} faces, more than the {max} it can index"
     )]
@@ -188,7 +188,7 @@ pub struct SelfIntersectionChecker {
 }
 
 impl SelfIntersectionChecker {
-    /// The most faces the check takes: its corner indices `3·face + corner` are `u32`.
+    /// The most faces the check takes: its counts of corners (`3·faces`) are `u32`.
     pub const MAX_FACES: usize = (u32::MAX / 3) as usize;
 
     /// Builds the tree over the mesh. Refuses an empty face list, more than
@@ -479,38 +479,23 @@ impl Fans {
     const MAX_FAN: usize = 64;
 
     fn new(num_vertices: usize, faces: &[[u32; 3]]) -> Fans {
-        // Vertex → its corners `3f + i` (face `f`, corner `i`), in face order (a counting sort;
-        // half the memory of storing each face's link edge here).
-        let mut count = vec![0u32; num_vertices + 1];
-        for f in faces {
-            for &v in f {
-                count[v as usize + 1] += 1;
-            }
-        }
-        for v in 0..num_vertices {
-            count[v + 1] += count[v];
-        }
-        let mut fill = count.clone();
-        let mut corners = vec![0u32; count[num_vertices] as usize];
-        for (fi, f) in faces.iter().enumerate() {
-            for (i, &v) in f.iter().enumerate() {
-                corners[fill[v as usize] as usize] = 3 * fi as u32 + i as u32;
-                fill[v as usize] += 1;
-            }
-        }
-        drop(fill);
+        // Vertex → its faces, in face order (a face using the vertex twice is listed twice).
+        let around = crate::topology::vertex_faces(num_vertices, faces);
         let mut offsets = Vec::with_capacity(num_vertices + 1);
-        let mut link = Vec::with_capacity(corners.len() + num_vertices);
+        let mut link = Vec::with_capacity(around.faces.len() + num_vertices);
         let mut kind = vec![0u8; num_vertices];
         let mut edges = [(0u32, 0u32); Self::MAX_FAN + 1];
         offsets.push(0u32);
         for v in 0..num_vertices {
-            let cs = &corners[count[v] as usize..count[v + 1] as usize];
-            // (a, b) for each face (v, a, b) around `v` (corners cycled so that v is first); a
-            // fan too large is refused by `chain` on its length alone.
-            let k = cs.len().min(Self::MAX_FAN + 1);
-            for (e, &c) in edges.iter_mut().zip(&cs[..k]) {
-                let (f, i) = (&faces[(c / 3) as usize], (c % 3) as usize);
+            let fs = around.of(v);
+            // (a, b) for each face (v, a, b) around `v` (corners cycled so that v is first: at
+            // its first corner that is `v`, so a face using `v` twice gives an edge holding
+            // `v`, which `chain` refuses, as it must); a fan too large is refused by `chain` on
+            // its length alone.
+            let k = fs.len().min(Self::MAX_FAN + 1);
+            for (e, &fi) in edges.iter_mut().zip(&fs[..k]) {
+                let f = &faces[fi as usize];
+                let i = f.iter().position(|&w| w as usize == v).unwrap_or(0);
                 *e = (f[(i + 1) % 3], f[(i + 2) % 3]);
             }
             let start = link.len();
